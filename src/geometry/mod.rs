@@ -1,0 +1,173 @@
+//! Rigid-body poses: SE(2) and SE(3), their group operations, exp/log maps,
+//! and the relative-pose error of a pose-graph edge with its analytic
+//! Jacobians.
+//!
+//! # Conventions
+//!
+//! * A pose `X` maps points from its local frame to the world frame.
+//! * An edge from `i` to `j` with measurement `Z` predicts `Xᵢ⁻¹·Xⱼ ≈ Z`. Its
+//!   error is read off `E = Z⁻¹·(Xᵢ⁻¹·Xⱼ)` exactly as g2o does:
+//!   * SE(2): `e = (tₓ, t_y, wrap(θ))` of `E`;
+//!   * SE(3): `e = (t, q_v)` where `q_v` is the vector part of the unit
+//!     quaternion of `E` taken with `w ≥ 0`.
+//!
+//!   With this error, the information matrices stored in g2o files mean what
+//!   their authors meant and `Σ eᵀΩe` equals g2o's χ².
+//! * The optimiser updates a pose on the right: `X ⊞ δ = X·Δ(δ)`, where
+//!   `Δ(δ)` is the pose with translation `δ_t` and rotation `Exp(δ_r)`
+//!   (SE(2): angle `δ_θ`). The Jacobians returned by
+//!   [`Pose::error_and_jacobians`] are derivatives with respect to these
+//!   increments at `δ = 0`.
+
+mod se2;
+mod se3;
+
+pub use se2::Se2;
+pub use se3::Se3;
+
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+
+/// A rigid-body pose usable as a pose-graph vertex, with `D` degrees of
+/// freedom (3 for [`Se2`], 6 for [`Se3`]).
+pub trait Pose<const D: usize>: Copy + Clone + std::fmt::Debug + PartialEq + Send + Sync + 'static {
+    /// `"SE2"` or `"SE3"`, for messages.
+    const NAME: &'static str;
+
+    /// The identity pose.
+    fn identity() -> Self;
+
+    /// Group composition `self · other`.
+    fn compose(&self, other: &Self) -> Self;
+
+    /// Group inverse.
+    fn inverse(&self) -> Self;
+
+    /// Exponential map from the Lie algebra (translation part first).
+    fn exp(xi: &SVector<f64, D>) -> Self;
+
+    /// Logarithm map, the inverse of [`Pose::exp`] (translation part first).
+    fn log(&self) -> SVector<f64, D>;
+
+    /// The right update used by the optimiser: `self · Δ(delta)`.
+    fn retract(&self, delta: &SVector<f64, D>) -> Self;
+
+    /// Whether every number in the pose is finite.
+    fn is_finite(&self) -> bool;
+
+    /// The position of the pose (z = 0 for SE(2)).
+    fn position(&self) -> Vector3<f64>;
+
+    /// Relative-pose error of the edge `xi → xj` with measurement `z`
+    /// (see the module documentation).
+    fn error(xi: &Self, xj: &Self, z: &Self) -> SVector<f64, D>;
+
+    /// The error and its Jacobians with respect to the right updates of `xi`
+    /// and `xj`.
+    fn error_and_jacobians(xi: &Self, xj: &Self, z: &Self) -> EdgeLinearization<D>;
+}
+
+/// The error of one edge and its Jacobians, `∂e/∂δᵢ` and `∂e/∂δⱼ`.
+#[derive(Clone, Copy, Debug)]
+pub struct EdgeLinearization<const D: usize> {
+    /// The error `e`.
+    pub error: SVector<f64, D>,
+    /// `∂e/∂δᵢ`.
+    pub jac_i: SMatrix<f64, D, D>,
+    /// `∂e/∂δⱼ`.
+    pub jac_j: SMatrix<f64, D, D>,
+}
+
+/// The skew-symmetric matrix `[v]×` with `[v]× w = v × w`.
+#[inline]
+pub fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+/// Wraps an angle to `(-π, π]`.
+///
+/// ```
+/// use pgo::geometry::wrap_angle;
+/// use std::f64::consts::PI;
+/// assert!((wrap_angle(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-12);
+/// assert_eq!(wrap_angle(PI), PI);
+/// ```
+#[inline]
+pub fn wrap_angle(theta: f64) -> f64 {
+    use std::f64::consts::PI;
+    if theta > -PI && theta <= PI {
+        return theta;
+    }
+    let w = theta.rem_euclid(2.0 * PI);
+    if w > PI { w - 2.0 * PI } else { w }
+}
+
+#[cfg(test)]
+pub(crate) mod testing {
+    //! Central finite differences of the edge error, shared by the SE(2) and
+    //! SE(3) tests.
+    use super::*;
+
+    /// Numerical Jacobians of `Pose::error` with respect to right updates of
+    /// `xi` and `xj` (central differences, step `h`).
+    pub fn numerical_jacobians<P: Pose<D>, const D: usize>(
+        xi: &P,
+        xj: &P,
+        z: &P,
+        h: f64,
+    ) -> (SMatrix<f64, D, D>, SMatrix<f64, D, D>) {
+        let mut ji = SMatrix::<f64, D, D>::zeros();
+        let mut jj = SMatrix::<f64, D, D>::zeros();
+        for k in 0..D {
+            let mut d = SVector::<f64, D>::zeros();
+            d[k] = h;
+            let ep = P::error(&xi.retract(&d), xj, z);
+            let em = P::error(&xi.retract(&(-d)), xj, z);
+            ji.set_column(k, &((ep - em) / (2.0 * h)));
+            let ep = P::error(xi, &xj.retract(&d), z);
+            let em = P::error(xi, &xj.retract(&(-d)), z);
+            jj.set_column(k, &((ep - em) / (2.0 * h)));
+        }
+        (ji, jj)
+    }
+
+    /// Asserts that the analytic Jacobians match central differences.
+    pub fn check_jacobians<P: Pose<D>, const D: usize>(xi: &P, xj: &P, z: &P, tol: f64) {
+        let lin = P::error_and_jacobians(xi, xj, z);
+        let e = P::error(xi, xj, z);
+        assert!((lin.error - e).norm() < 1e-12, "error mismatch: {} vs {}", lin.error, e);
+        let (ni, nj) = numerical_jacobians(xi, xj, z, 1e-6);
+        let di = (lin.jac_i - ni).abs().max();
+        let dj = (lin.jac_j - nj).abs().max();
+        assert!(
+            di < tol && dj < tol,
+            "Jacobian mismatch (|ΔJi| = {di:e}, |ΔJj| = {dj:e})\nanalytic Ji {}\nnumeric Ji {}\nanalytic Jj {}\nnumeric Jj {}",
+            lin.jac_i,
+            ni,
+            lin.jac_j,
+            nj
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    #[test]
+    fn wrap_angle_maps_into_half_open_interval() {
+        for k in -5..=5 {
+            let t = 0.3 + 2.0 * PI * k as f64;
+            assert!((wrap_angle(t) - 0.3).abs() < 1e-12);
+        }
+        assert_eq!(wrap_angle(-PI), PI);
+        assert!((wrap_angle(4.786) - (4.786 - 2.0 * PI)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn skew_is_cross_product() {
+        let a = Vector3::new(0.3, -1.2, 2.0);
+        let b = Vector3::new(-0.7, 0.4, 1.1);
+        assert!((skew(&a) * b - a.cross(&b)).norm() < 1e-15);
+    }
+}

@@ -1,0 +1,274 @@
+//! SE(3): rigid-body motion in space.
+
+use super::{EdgeLinearization, Pose, skew};
+use nalgebra::{Matrix3, Matrix6, Quaternion, UnitQuaternion, Vector3, Vector6};
+
+/// A spatial pose: a unit quaternion and a translation.
+///
+/// ```
+/// use pgo::geometry::{Pose, Se3};
+/// use nalgebra::Vector6;
+/// let xi = Vector6::new(1.0, 2.0, 3.0, 0.1, -0.2, 0.3);
+/// let x = Se3::exp(&xi);
+/// assert!((x.log() - xi).norm() < 1e-12);
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Se3 {
+    /// Rotation.
+    pub rotation: UnitQuaternion<f64>,
+    /// Translation.
+    pub translation: Vector3<f64>,
+}
+
+/// Quaternions whose squared norm is this close to 1 are taken as unit
+/// quaternions unchanged, so that normalising twice gives the same bits.
+const UNIT_NORM_TOLERANCE: f64 = 8.0 * f64::EPSILON;
+
+impl Se3 {
+    /// A pose from a rotation and a translation.
+    pub fn new(rotation: UnitQuaternion<f64>, translation: Vector3<f64>) -> Self {
+        Self { rotation, translation }
+    }
+
+    /// A pose from a translation and a quaternion `(qx, qy, qz, qw)` as
+    /// stored in g2o files. The quaternion is normalised unless it is
+    /// already of unit norm to machine precision (so that reading what was
+    /// written gives the same bits). Returns `None` for a quaternion of zero
+    /// or non-finite norm.
+    pub fn from_translation_quaternion(t: [f64; 3], q: [f64; 4]) -> Option<Self> {
+        let quat = Quaternion::new(q[3], q[0], q[1], q[2]);
+        let n2 = quat.norm_squared();
+        if !n2.is_finite() || n2 <= f64::MIN_POSITIVE || t.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        let quat = if (n2 - 1.0).abs() <= UNIT_NORM_TOLERANCE { quat } else { quat / n2.sqrt() };
+        Some(Self::new(UnitQuaternion::new_unchecked(quat), Vector3::from(t)))
+    }
+
+    /// `(qx, qy, qz, qw)`, the order used in g2o files.
+    pub fn quaternion_xyzw(&self) -> [f64; 4] {
+        let q = self.rotation.quaternion();
+        [q.i, q.j, q.k, q.w]
+    }
+
+    /// The rotation matrix.
+    pub fn rotation_matrix(&self) -> Matrix3<f64> {
+        self.rotation.to_rotation_matrix().into_inner()
+    }
+
+    /// The left Jacobian `V(φ)` of SO(3), used by exp/log.
+    fn v_matrix(phi: &Vector3<f64>) -> Matrix3<f64> {
+        let theta2 = phi.norm_squared();
+        let k = skew(phi);
+        let (a, b) = if theta2 < 1e-10 {
+            (0.5 - theta2 / 24.0, 1.0 / 6.0 - theta2 / 120.0)
+        } else {
+            let theta = theta2.sqrt();
+            ((1.0 - theta.cos()) / theta2, (theta - theta.sin()) / (theta2 * theta))
+        };
+        Matrix3::identity() + k * a + k * k * b
+    }
+}
+
+impl Pose<6> for Se3 {
+    const NAME: &'static str = "SE3";
+
+    fn identity() -> Self {
+        Self::new(UnitQuaternion::identity(), Vector3::zeros())
+    }
+
+    fn compose(&self, other: &Self) -> Self {
+        Self::new(
+            renormalize(self.rotation * other.rotation),
+            self.translation + self.rotation * other.translation,
+        )
+    }
+
+    fn inverse(&self) -> Self {
+        let r = self.rotation.inverse();
+        Self::new(r, -(r * self.translation))
+    }
+
+    fn exp(xi: &Vector6<f64>) -> Self {
+        let rho = xi.fixed_rows::<3>(0).into_owned();
+        let phi = xi.fixed_rows::<3>(3).into_owned();
+        Self::new(UnitQuaternion::from_scaled_axis(phi), Self::v_matrix(&phi) * rho)
+    }
+
+    fn log(&self) -> Vector6<f64> {
+        let phi = self.rotation.scaled_axis();
+        let rho = Self::v_matrix(&phi)
+            .try_inverse()
+            .map(|vi| vi * self.translation)
+            // V(φ) is singular only at |φ| = 2π·k (k ≥ 1), which scaled_axis never returns.
+            .unwrap_or(self.translation);
+        let mut out = Vector6::zeros();
+        out.fixed_rows_mut::<3>(0).copy_from(&rho);
+        out.fixed_rows_mut::<3>(3).copy_from(&phi);
+        out
+    }
+
+    fn retract(&self, delta: &Vector6<f64>) -> Self {
+        let rho = Vector3::new(delta[0], delta[1], delta[2]);
+        let phi = Vector3::new(delta[3], delta[4], delta[5]);
+        Self::new(
+            renormalize(self.rotation * UnitQuaternion::from_scaled_axis(phi)),
+            self.translation + self.rotation * rho,
+        )
+    }
+
+    fn is_finite(&self) -> bool {
+        self.translation.iter().all(|v| v.is_finite()) && self.rotation.coords.iter().all(|v| v.is_finite())
+    }
+
+    fn position(&self) -> Vector3<f64> {
+        self.translation
+    }
+
+    fn error(xi: &Self, xj: &Self, z: &Self) -> Vector6<f64> {
+        let qi_inv = xi.rotation.inverse();
+        let t_a = qi_inv * (xj.translation - xi.translation);
+        let qz_inv = z.rotation.inverse();
+        let t_e = qz_inv * (t_a - z.translation);
+        let q_e = positive_w(qz_inv.quaternion() * qi_inv.quaternion() * xj.rotation.quaternion());
+        Vector6::new(t_e.x, t_e.y, t_e.z, q_e.i, q_e.j, q_e.k)
+    }
+
+    fn error_and_jacobians(xi: &Self, xj: &Self, z: &Self) -> EdgeLinearization<6> {
+        let ri_t = xi.rotation_matrix().transpose();
+        let rz_t = z.rotation_matrix().transpose();
+        let rj = xj.rotation_matrix();
+        let r_a = ri_t * rj;
+        let r_e = rz_t * r_a;
+        let t_a = ri_t * (xj.translation - xi.translation);
+        let t_e = rz_t * (t_a - z.translation);
+        let q_e = positive_w(z.rotation.inverse().quaternion() * xi.rotation.inverse().quaternion() * xj.rotation.quaternion());
+        let error = Vector6::new(t_e.x, t_e.y, t_e.z, q_e.i, q_e.j, q_e.k);
+
+        // d vec(q_E ⊗ (1, φ/2)) / dφ = ½ (w I + [v]×), with q_E taken with w ≥ 0.
+        let v = Vector3::new(q_e.i, q_e.j, q_e.k);
+        let dq = (Matrix3::identity() * q_e.w + skew(&v)) * 0.5;
+
+        let mut jac_i = Matrix6::zeros();
+        jac_i.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-rz_t));
+        jac_i.fixed_view_mut::<3, 3>(0, 3).copy_from(&(rz_t * skew(&t_a)));
+        jac_i.fixed_view_mut::<3, 3>(3, 3).copy_from(&(-(dq * r_a.transpose())));
+        let mut jac_j = Matrix6::zeros();
+        jac_j.fixed_view_mut::<3, 3>(0, 0).copy_from(&r_e);
+        jac_j.fixed_view_mut::<3, 3>(3, 3).copy_from(&dq);
+        EdgeLinearization { error, jac_i, jac_j }
+    }
+}
+
+/// The same rotation with `w ≥ 0`.
+#[inline]
+fn positive_w(q: Quaternion<f64>) -> Quaternion<f64> {
+    if q.w < 0.0 { -q } else { q }
+}
+
+/// Removes the drift of repeated quaternion products.
+#[inline]
+fn renormalize(q: UnitQuaternion<f64>) -> UnitQuaternion<f64> {
+    UnitQuaternion::new_normalize(q.into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::testing::check_jacobians;
+    use rand::{Rng, SeedableRng, rngs::StdRng};
+    use std::f64::consts::PI;
+
+    fn random_rotation(rng: &mut StdRng, max_angle: f64) -> UnitQuaternion<f64> {
+        let axis = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+        let axis = if axis.norm() < 1e-3 { Vector3::x() } else { axis.normalize() };
+        UnitQuaternion::from_scaled_axis(axis * rng.random_range(-max_angle..max_angle))
+    }
+
+    fn random_pose(rng: &mut StdRng, scale: f64) -> Se3 {
+        let t = Vector3::new(rng.random_range(-scale..scale), rng.random_range(-scale..scale), rng.random_range(-scale..scale));
+        Se3::new(random_rotation(rng, PI), t)
+    }
+
+    fn close(a: &Se3, b: &Se3, tol: f64) -> bool {
+        (a.translation - b.translation).norm() < tol && a.rotation.angle_to(&b.rotation) < tol
+    }
+
+    #[test]
+    fn compose_inverse_is_identity() {
+        let mut rng = StdRng::seed_from_u64(11);
+        for _ in 0..100 {
+            let a = random_pose(&mut rng, 10.0);
+            assert!(close(&a.compose(&a.inverse()), &Se3::identity(), 1e-12));
+        }
+    }
+
+    #[test]
+    fn compose_is_associative() {
+        let mut rng = StdRng::seed_from_u64(12);
+        for _ in 0..100 {
+            let (a, b, c) = (random_pose(&mut rng, 5.0), random_pose(&mut rng, 5.0), random_pose(&mut rng, 5.0));
+            assert!(close(&a.compose(&b).compose(&c), &a.compose(&b.compose(&c)), 1e-12));
+        }
+    }
+
+    #[test]
+    fn exp_log_round_trip() {
+        let mut rng = StdRng::seed_from_u64(13);
+        for _ in 0..100 {
+            let a = random_pose(&mut rng, 10.0);
+            assert!(close(&Se3::exp(&a.log()), &a, 1e-10));
+        }
+        let tiny = Vector6::new(1e-3, 2e-3, -1e-3, 1e-9, -2e-9, 3e-9);
+        assert!((Se3::exp(&tiny).log() - tiny).norm() < 1e-15);
+    }
+
+    #[test]
+    fn jacobians_match_finite_differences_on_random_poses() {
+        let mut rng = StdRng::seed_from_u64(14);
+        for _ in 0..200 {
+            let xi = random_pose(&mut rng, 20.0);
+            let xj = random_pose(&mut rng, 20.0);
+            let z = random_pose(&mut rng, 5.0);
+            check_jacobians(&xi, &xj, &z, 2e-6);
+        }
+    }
+
+    #[test]
+    fn jacobians_match_near_identity_and_near_pi() {
+        let mut rng = StdRng::seed_from_u64(15);
+        // Residual rotation E near identity, and near (but not at) π, on both
+        // sides of the w = 0 flip.
+        for &angle in &[0.0, 1e-8, 1e-4, PI - 1e-2, -(PI - 1e-2)] {
+            let xi = random_pose(&mut rng, 3.0);
+            let z = random_pose(&mut rng, 2.0);
+            let e = Se3::new(UnitQuaternion::from_scaled_axis(Vector3::new(0.3, -0.5, 0.8).normalize() * angle), Vector3::new(0.01, 0.02, -0.01));
+            let xj = xi.compose(&z).compose(&e);
+            check_jacobians(&xi, &xj, &z, 2e-6);
+        }
+    }
+
+    #[test]
+    fn error_matches_g2o_definition() {
+        let mut rng = StdRng::seed_from_u64(16);
+        for _ in 0..50 {
+            let xi = random_pose(&mut rng, 10.0);
+            let xj = random_pose(&mut rng, 10.0);
+            let z = random_pose(&mut rng, 3.0);
+            let e = z.inverse().compose(&xi.inverse().compose(&xj));
+            let q = positive_w(*e.rotation.quaternion());
+            let expected = Vector6::new(e.translation.x, e.translation.y, e.translation.z, q.i, q.j, q.k);
+            assert!((Se3::error(&xi, &xj, &z) - expected).norm() < 1e-10);
+            assert!((Se3::error_and_jacobians(&xi, &xj, &z).error - expected).norm() < 1e-10);
+        }
+    }
+
+    #[test]
+    fn quaternion_normalisation_is_idempotent() {
+        let a = Se3::from_translation_quaternion([1.0, 2.0, 3.0], [0.1, 0.2, 0.3, 0.9]).unwrap();
+        let b = Se3::from_translation_quaternion([1.0, 2.0, 3.0], a.quaternion_xyzw()).unwrap();
+        assert_eq!(a, b);
+        assert!(Se3::from_translation_quaternion([0.0; 3], [0.0; 4]).is_none());
+        assert!(Se3::from_translation_quaternion([0.0; 3], [f64::NAN, 0.0, 0.0, 1.0]).is_none());
+    }
+}

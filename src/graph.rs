@@ -1,0 +1,349 @@
+//! The pose graph: vertices (poses with external ids), edges (relative-pose
+//! measurements with information matrices), which edges are trusted and
+//! which are loop-closure candidates, and the gauge.
+
+use crate::geometry::{Pose, Se2, Se3};
+use nalgebra::{SMatrix, SymmetricEigen};
+use std::collections::HashMap;
+
+/// The id of a vertex as written in the file.
+pub type VertexId = u64;
+
+/// A loop-closure candidate: an edge whose correctness is in doubt, with the
+/// RANSAC inlier count of its geometric verification when one is known.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LoopCandidate {
+    /// Inlier count of the geometric verification, if the front end gave one.
+    pub inliers: Option<u64>,
+}
+
+/// A relative-pose measurement between two vertices.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Edge<P, const D: usize> {
+    /// Index (not id) of the first vertex.
+    pub from: usize,
+    /// Index (not id) of the second vertex.
+    pub to: usize,
+    /// The measured pose of `to` in the frame of `from`.
+    pub measurement: P,
+    /// Information matrix (inverse covariance), in the error's coordinates.
+    pub information: SMatrix<f64, D, D>,
+    /// `Some` for a loop-closure candidate, `None` for a trusted edge
+    /// (odometry, prior, verified loop).
+    pub candidate: Option<LoopCandidate>,
+}
+
+impl<P: Pose<D>, const D: usize> Edge<P, D> {
+    /// Whether this edge is a loop-closure candidate.
+    pub fn is_candidate(&self) -> bool {
+        self.candidate.is_some()
+    }
+}
+
+/// Errors from building a graph.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum GraphError {
+    /// Two vertices with the same id.
+    #[error("duplicate vertex id {0}")]
+    DuplicateVertex(VertexId),
+    /// An edge or a FIX names a vertex that does not exist.
+    #[error("unknown vertex id {0}")]
+    UnknownVertex(VertexId),
+    /// An edge from a vertex to itself.
+    #[error("edge from vertex {0} to itself")]
+    SelfLoop(VertexId),
+}
+
+/// A pose graph over poses `P` with `D` degrees of freedom.
+///
+/// ```
+/// use pgo::geometry::{Pose, Se2};
+/// use pgo::graph::PoseGraph;
+/// use nalgebra::Matrix3;
+/// let mut g = PoseGraph::<Se2, 3>::new();
+/// g.add_vertex(0, Se2::identity()).unwrap();
+/// g.add_vertex(1, Se2::new(1.0, 0.0, 0.0)).unwrap();
+/// g.add_edge(0, 1, Se2::new(1.0, 0.0, 0.0), Matrix3::identity(), None).unwrap();
+/// assert_eq!(g.chi2(), 0.0);
+/// ```
+#[derive(Clone, Debug, Default)]
+pub struct PoseGraph<P, const D: usize> {
+    ids: Vec<VertexId>,
+    /// The current estimate of every vertex, by index.
+    pub poses: Vec<P>,
+    index: HashMap<VertexId, usize>,
+    /// All edges, in insertion (file) order.
+    pub edges: Vec<Edge<P, D>>,
+    fixed: Vec<bool>,
+}
+
+/// A planar pose graph.
+pub type PoseGraph2 = PoseGraph<Se2, 3>;
+/// A spatial pose graph.
+pub type PoseGraph3 = PoseGraph<Se3, 6>;
+
+impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
+    /// An empty graph.
+    pub fn new() -> Self {
+        Self { ids: Vec::new(), poses: Vec::new(), index: HashMap::new(), edges: Vec::new(), fixed: Vec::new() }
+    }
+
+    /// Adds a vertex and returns its index.
+    pub fn add_vertex(&mut self, id: VertexId, pose: P) -> Result<usize, GraphError> {
+        if self.index.contains_key(&id) {
+            return Err(GraphError::DuplicateVertex(id));
+        }
+        let k = self.ids.len();
+        self.ids.push(id);
+        self.poses.push(pose);
+        self.fixed.push(false);
+        self.index.insert(id, k);
+        Ok(k)
+    }
+
+    /// Adds an edge between two existing vertices (by id) and returns its index.
+    pub fn add_edge(
+        &mut self,
+        from: VertexId,
+        to: VertexId,
+        measurement: P,
+        information: SMatrix<f64, D, D>,
+        candidate: Option<LoopCandidate>,
+    ) -> Result<usize, GraphError> {
+        if from == to {
+            return Err(GraphError::SelfLoop(from));
+        }
+        let f = self.index_of(from).ok_or(GraphError::UnknownVertex(from))?;
+        let t = self.index_of(to).ok_or(GraphError::UnknownVertex(to))?;
+        self.edges.push(Edge { from: f, to: t, measurement, information, candidate });
+        Ok(self.edges.len() - 1)
+    }
+
+    /// Number of vertices.
+    pub fn num_vertices(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// The index of the vertex with this id.
+    pub fn index_of(&self, id: VertexId) -> Option<usize> {
+        self.index.get(&id).copied()
+    }
+
+    /// The id of the vertex at this index.
+    pub fn id(&self, index: usize) -> VertexId {
+        self.ids[index]
+    }
+
+    /// All vertex ids, by index.
+    pub fn ids(&self) -> &[VertexId] {
+        &self.ids
+    }
+
+    /// Holds a vertex fixed (part of the gauge).
+    pub fn fix(&mut self, id: VertexId) -> Result<(), GraphError> {
+        let k = self.index_of(id).ok_or(GraphError::UnknownVertex(id))?;
+        self.fixed[k] = true;
+        Ok(())
+    }
+
+    /// Whether the vertex at this index was fixed explicitly.
+    pub fn is_fixed(&self, index: usize) -> bool {
+        self.fixed[index]
+    }
+
+    /// The vertices held fixed while optimising: those fixed explicitly, or
+    /// else the first vertex. Empty only for an empty graph.
+    pub fn gauge(&self) -> Vec<usize> {
+        let fixed: Vec<usize> = (0..self.ids.len()).filter(|&k| self.fixed[k]).collect();
+        if fixed.is_empty() && !self.ids.is_empty() { vec![0] } else { fixed }
+    }
+
+    /// Number of loop-closure candidates.
+    pub fn num_candidates(&self) -> usize {
+        self.edges.iter().filter(|e| e.is_candidate()).count()
+    }
+
+    /// The error of one edge at the current estimate.
+    pub fn edge_error(&self, edge: &Edge<P, D>) -> nalgebra::SVector<f64, D> {
+        P::error(&self.poses[edge.from], &self.poses[edge.to], &edge.measurement)
+    }
+
+    /// `eᵀΩe` of one edge at the current estimate.
+    pub fn edge_chi2(&self, edge: &Edge<P, D>) -> f64 {
+        let e = self.edge_error(edge);
+        e.dot(&(edge.information * e))
+    }
+
+    /// `Σ eᵀΩe` over all edges (g2o's χ²).
+    pub fn chi2(&self) -> f64 {
+        self.edges.iter().map(|e| self.edge_chi2(e)).sum()
+    }
+
+    /// The vertices that no chain of edges connects to the gauge, by index,
+    /// in increasing order. A non-empty result means the problem has no
+    /// unique solution.
+    pub fn unconstrained_vertices(&self) -> Vec<usize> {
+        let n = self.ids.len();
+        let mut adjacency: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for e in &self.edges {
+            adjacency[e.from].push(e.to);
+            adjacency[e.to].push(e.from);
+        }
+        let mut seen = vec![false; n];
+        let mut queue: Vec<usize> = self.gauge();
+        for &g in &queue {
+            seen[g] = true;
+        }
+        while let Some(v) = queue.pop() {
+            for &w in &adjacency[v] {
+                if !seen[w] {
+                    seen[w] = true;
+                    queue.push(w);
+                }
+            }
+        }
+        (0..n).filter(|&k| !seen[k]).collect()
+    }
+}
+
+/// A pose graph of either dimension, as read from a file.
+#[derive(Clone, Debug)]
+pub enum AnyPoseGraph {
+    /// SE(2).
+    Planar(PoseGraph2),
+    /// SE(3).
+    Spatial(PoseGraph3),
+}
+
+impl AnyPoseGraph {
+    /// 2 or 3.
+    pub fn dimension(&self) -> usize {
+        match self {
+            Self::Planar(_) => 2,
+            Self::Spatial(_) => 3,
+        }
+    }
+
+    /// Number of vertices.
+    pub fn num_vertices(&self) -> usize {
+        match self {
+            Self::Planar(g) => g.num_vertices(),
+            Self::Spatial(g) => g.num_vertices(),
+        }
+    }
+
+    /// Number of edges.
+    pub fn num_edges(&self) -> usize {
+        match self {
+            Self::Planar(g) => g.edges.len(),
+            Self::Spatial(g) => g.edges.len(),
+        }
+    }
+
+    /// Number of loop-closure candidates.
+    pub fn num_candidates(&self) -> usize {
+        match self {
+            Self::Planar(g) => g.num_candidates(),
+            Self::Spatial(g) => g.num_candidates(),
+        }
+    }
+
+    /// `Σ eᵀΩe` over all edges.
+    pub fn chi2(&self) -> f64 {
+        match self {
+            Self::Planar(g) => g.chi2(),
+            Self::Spatial(g) => g.chi2(),
+        }
+    }
+}
+
+/// Whether a symmetric matrix is positive definite (Cholesky succeeds and
+/// every entry is finite).
+pub fn is_positive_definite<const D: usize>(m: &SMatrix<f64, D, D>) -> bool {
+    m.iter().all(|v| v.is_finite()) && m.cholesky().is_some()
+}
+
+/// The nearest positive-definite matrix in the spectral sense: eigenvalues
+/// below `1e-6 · max|λ|` are raised to it (as `repair_info.py` of the
+/// baseline does). Returns `None` when every eigenvalue is zero or the matrix
+/// is not finite.
+pub fn nearest_positive_definite<const D: usize>(m: &SMatrix<f64, D, D>) -> Option<SMatrix<f64, D, D>> {
+    if !m.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let sym = (m + m.transpose()) * 0.5;
+    let eig = SymmetricEigen::new(sym);
+    let max_abs = eig.eigenvalues.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    if max_abs == 0.0 {
+        return None;
+    }
+    let floor = 1e-6 * max_abs;
+    let clamped = eig.eigenvalues.map(|v| v.max(floor));
+    let out = eig.eigenvectors * SMatrix::<f64, D, D>::from_diagonal(&clamped) * eig.eigenvectors.transpose();
+    let out = (out + out.transpose()) * 0.5;
+    is_positive_definite(&out).then_some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Matrix3;
+
+    fn line_graph(n: u64) -> PoseGraph2 {
+        let mut g = PoseGraph2::new();
+        for k in 0..n {
+            g.add_vertex(k, Se2::new(k as f64, 0.0, 0.0)).unwrap();
+        }
+        for k in 1..n {
+            g.add_edge(k - 1, k, Se2::new(1.0, 0.0, 0.0), Matrix3::identity(), None).unwrap();
+        }
+        g
+    }
+
+    #[test]
+    fn rejects_duplicates_self_loops_and_unknown_ids() {
+        let mut g = line_graph(3);
+        assert_eq!(g.add_vertex(1, Se2::identity()), Err(GraphError::DuplicateVertex(1)));
+        let i = Matrix3::identity();
+        assert_eq!(g.add_edge(2, 2, Se2::identity(), i, None), Err(GraphError::SelfLoop(2)));
+        assert_eq!(g.add_edge(2, 9, Se2::identity(), i, None), Err(GraphError::UnknownVertex(9)));
+        assert_eq!(g.fix(7), Err(GraphError::UnknownVertex(7)));
+    }
+
+    #[test]
+    fn gauge_is_first_vertex_unless_fixed() {
+        let mut g = line_graph(4);
+        assert_eq!(g.gauge(), vec![0]);
+        g.fix(2).unwrap();
+        assert_eq!(g.gauge(), vec![2]);
+    }
+
+    #[test]
+    fn finds_vertices_disconnected_from_the_gauge() {
+        let mut g = line_graph(3);
+        g.add_vertex(10, Se2::identity()).unwrap();
+        g.add_vertex(11, Se2::identity()).unwrap();
+        g.add_edge(10, 11, Se2::identity(), Matrix3::identity(), None).unwrap();
+        g.add_vertex(12, Se2::identity()).unwrap();
+        let ids: Vec<_> = g.unconstrained_vertices().iter().map(|&k| g.id(k)).collect();
+        assert_eq!(ids, vec![10, 11, 12]);
+    }
+
+    #[test]
+    fn chi2_counts_every_edge() {
+        let mut g = line_graph(3);
+        g.poses[2] = Se2::new(3.0, 0.0, 0.0);
+        assert!((g.chi2() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn projects_indefinite_information_to_positive_definite() {
+        let m = Matrix3::new(10.0, 0.0, 84022.0, 0.0, 10.0, 0.0, 84022.0, 0.0, 10.0);
+        assert!(!is_positive_definite(&m));
+        let p = nearest_positive_definite(&m).unwrap();
+        assert!(is_positive_definite(&p));
+        // The positive eigen-direction is kept.
+        assert!((p[(0, 2)] - 42016.0).abs() < 1.0);
+        assert!(nearest_positive_definite(&Matrix3::zeros()).is_none());
+    }
+}

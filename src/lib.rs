@@ -1,0 +1,3 @@
+//! pgo: pose-graph SLAM back end with unsupervised loop-closure gating.
+pub mod geometry;
+pub mod graph;
