@@ -3,7 +3,7 @@
 //! which are loop-closure candidates, and the gauge.
 
 use crate::geometry::{Pose, Se2, Se3};
-use nalgebra::{SMatrix, SymmetricEigen};
+use nalgebra::{DMatrix, SMatrix, SymmetricEigen};
 use std::collections::HashMap;
 
 /// The id of a vertex as written in the file.
@@ -272,14 +272,16 @@ pub fn nearest_positive_definite<const D: usize>(m: &SMatrix<f64, D, D>) -> Opti
         return None;
     }
     let sym = (m + m.transpose()) * 0.5;
-    let eig = SymmetricEigen::new(sym);
+    // Dynamic storage: nalgebra's eigen-solver is not generic over `Const<D>`.
+    let eig = SymmetricEigen::new(DMatrix::from_column_slice(D, D, sym.as_slice()));
     let max_abs = eig.eigenvalues.iter().fold(0.0f64, |a, v| a.max(v.abs()));
     if max_abs == 0.0 {
         return None;
     }
     let floor = 1e-6 * max_abs;
     let clamped = eig.eigenvalues.map(|v| v.max(floor));
-    let out = eig.eigenvectors * SMatrix::<f64, D, D>::from_diagonal(&clamped) * eig.eigenvectors.transpose();
+    let out = &eig.eigenvectors * DMatrix::from_diagonal(&clamped) * eig.eigenvectors.transpose();
+    let out = SMatrix::<f64, D, D>::from_column_slice(out.as_slice());
     let out = (out + out.transpose()) * 0.5;
     is_positive_definite(&out).then_some(out)
 }
