@@ -90,15 +90,49 @@ impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
 
     /// Adds a vertex and returns its index.
     pub fn add_vertex(&mut self, id: VertexId, pose: P) -> Result<usize, GraphError> {
-        if self.index.contains_key(&id) {
-            return Err(GraphError::DuplicateVertex(id));
+        match self.vertex_or_insert(id, pose) {
+            (k, true) => Ok(k),
+            (_, false) => Err(GraphError::DuplicateVertex(id)),
         }
-        let k = self.ids.len();
-        self.ids.push(id);
-        self.poses.push(pose);
-        self.fixed.push(false);
-        self.index.insert(id, k);
-        Ok(k)
+    }
+
+    /// The index of vertex `id`, adding it with `pose` if it is new; the flag
+    /// says whether it was added.
+    pub fn vertex_or_insert(&mut self, id: VertexId, pose: P) -> (usize, bool) {
+        match self.index.get(&id) {
+            Some(&k) => (k, false),
+            None => {
+                let k = self.ids.len();
+                self.ids.push(id);
+                self.poses.push(pose);
+                self.fixed.push(false);
+                self.index.insert(id, k);
+                (k, true)
+            }
+        }
+    }
+
+    /// Renumbers the vertices: the vertex at index `order[k]` moves to index
+    /// `k`. `order` must be a permutation of `0..num_vertices()`. Returns the
+    /// map from old to new index.
+    pub fn reorder_vertices(&mut self, order: &[usize]) -> Vec<usize> {
+        let n = self.ids.len();
+        debug_assert_eq!(order.len(), n);
+        let mut new_index = vec![0usize; n];
+        for (k, &old) in order.iter().enumerate() {
+            new_index[old] = k;
+        }
+        self.ids = order.iter().map(|&o| self.ids[o]).collect();
+        self.poses = order.iter().map(|&o| self.poses[o]).collect();
+        self.fixed = order.iter().map(|&o| self.fixed[o]).collect();
+        for (k, id) in self.ids.iter().enumerate() {
+            self.index.insert(*id, k);
+        }
+        for e in &mut self.edges {
+            e.from = new_index[e.from];
+            e.to = new_index[e.to];
+        }
+        new_index
     }
 
     /// Adds an edge between two existing vertices (by id) and returns its index.
@@ -329,6 +363,19 @@ mod tests {
         g.add_vertex(12, Se2::identity()).unwrap();
         let ids: Vec<_> = g.unconstrained_vertices().iter().map(|&k| g.id(k)).collect();
         assert_eq!(ids, vec![10, 11, 12]);
+    }
+
+    #[test]
+    fn reorder_keeps_edges_attached_to_their_ids() {
+        let mut g = line_graph(4);
+        let before: Vec<(u64, u64)> = g.edges.iter().map(|e| (g.id(e.from), g.id(e.to))).collect();
+        let map = g.reorder_vertices(&[3, 1, 0, 2]);
+        assert_eq!(map, vec![2, 1, 3, 0]);
+        assert_eq!(g.ids(), &[3, 1, 0, 2]);
+        assert_eq!(g.poses[0].x, 3.0);
+        assert_eq!(g.index_of(2), Some(3));
+        let after: Vec<(u64, u64)> = g.edges.iter().map(|e| (g.id(e.from), g.id(e.to))).collect();
+        assert_eq!(before, after);
     }
 
     #[test]
