@@ -2,3 +2,7 @@
 pub mod geometry;
 pub mod graph;
 pub mod io;
+pub mod linear;
+pub mod solve;
+pub mod pipeline;
+pub mod report;

@@ -1,0 +1,629 @@
+//! Nonlinear least squares on the pose graph: Gauss–Newton and
+//! Levenberg–Marquardt over the sparse normal equations of
+//! [`crate::linear`], plus initial guesses ([`init`]).
+//!
+//! The objective is `Σ wₖ·eₖᵀΩₖeₖ` with the g2o edge error of
+//! [`crate::geometry`] and per-edge weights `wₖ` (1 unless a robust method
+//! sets them). The gauge vertices are held fixed.
+
+pub mod init;
+
+use crate::geometry::Pose;
+use crate::graph::{PoseGraph, VertexId};
+use crate::linear::{BlockSystem, LinearError};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::time::{Duration, Instant};
+
+/// The nonlinear least-squares method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Levenberg–Marquardt with Marquardt's diagonal scaling and Nielsen's
+    /// damping update.
+    #[default]
+    LevenbergMarquardt,
+    /// Gauss–Newton: the undamped step, always taken.
+    GaussNewton,
+}
+
+impl Method {
+    /// `"lm"` or `"gn"`.
+    pub fn short_name(self) -> &'static str {
+        match self {
+            Self::LevenbergMarquardt => "lm",
+            Self::GaussNewton => "gn",
+        }
+    }
+}
+
+/// Options of the optimiser.
+#[derive(Clone, Debug)]
+pub struct SolverOptions {
+    /// GN or LM.
+    pub method: Method,
+    /// Most outer iterations (accepted or final steps).
+    pub max_iterations: usize,
+    /// Stop when the relative decrease of the objective in one iteration is
+    /// below this.
+    pub relative_tolerance: f64,
+    /// Stop when the step's largest component is below this (radians /
+    /// metres-ish: the units of the tangent space).
+    pub step_tolerance: f64,
+    /// Stop when this much time has passed; the best estimate so far is kept.
+    pub time_limit: Option<Duration>,
+    /// Initial LM damping `λ` (relative to the diagonal of `H`).
+    pub initial_lambda: f64,
+    /// Threads for the factorisation (0: all cores; 1: sequential). The
+    /// linearisation uses rayon's global pool.
+    pub threads: usize,
+}
+
+impl Default for SolverOptions {
+    fn default() -> Self {
+        Self {
+            method: Method::LevenbergMarquardt,
+            max_iterations: 100,
+            relative_tolerance: 1e-9,
+            step_tolerance: 1e-12,
+            time_limit: None,
+            initial_lambda: 1e-6,
+            threads: 0,
+        }
+    }
+}
+
+/// Why the optimiser stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopReason {
+    /// The objective's relative decrease fell below the tolerance.
+    RelativeDecrease,
+    /// The step became negligible.
+    SmallStep,
+    /// The objective is zero.
+    ZeroError,
+    /// LM could not find a decreasing step however much it damped.
+    NoDecrease,
+    /// The iteration limit was reached.
+    MaxIterations,
+    /// The time limit was reached.
+    TimeLimit,
+    /// There was nothing to optimise (no free vertex).
+    NothingToOptimize,
+}
+
+impl StopReason {
+    /// Whether this reason means convergence.
+    pub fn converged(self) -> bool {
+        matches!(self, Self::RelativeDecrease | Self::SmallStep | Self::ZeroError | Self::NothingToOptimize)
+    }
+}
+
+/// One outer iteration, for observers and the report.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct IterationRecord {
+    /// 1-based iteration number.
+    pub iteration: usize,
+    /// Objective after the iteration.
+    pub objective: f64,
+    /// LM damping used for the accepted step (0 for GN).
+    pub lambda: f64,
+    /// Rejected LM trials before the accepted step.
+    pub rejected: usize,
+    /// Largest absolute component of the step.
+    pub step_max: f64,
+}
+
+/// What an optimisation did.
+#[derive(Clone, Debug, Serialize)]
+pub struct Summary {
+    /// The method.
+    pub method: Method,
+    /// Outer iterations.
+    pub iterations: usize,
+    /// Objective at the start.
+    pub initial_objective: f64,
+    /// Objective at the end (the best seen).
+    pub final_objective: f64,
+    /// Why it stopped.
+    pub stop_reason: StopReason,
+    /// Numeric factorisations (LM retries included).
+    pub factorizations: usize,
+    /// Wall time.
+    #[serde(serialize_with = "serialize_seconds")]
+    pub time: Duration,
+    /// Per-iteration history.
+    pub history: Vec<IterationRecord>,
+}
+
+impl Summary {
+    /// Whether the optimiser converged.
+    pub fn converged(&self) -> bool {
+        self.stop_reason.converged()
+    }
+}
+
+fn serialize_seconds<S: serde::Serializer>(d: &Duration, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_f64(d.as_secs_f64())
+}
+
+/// Errors of the optimiser.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum SolveError {
+    /// Some vertices are not connected to the gauge by any chain of edges,
+    /// so their poses are undetermined.
+    #[error(
+        "{} vertices are not connected to the gauge vertex {gauge} by any edge chain, e.g. {}",
+        .vertices.len(),
+        list_ids(.vertices)
+    )]
+    Unconstrained {
+        /// The gauge vertex (first fixed vertex).
+        gauge: VertexId,
+        /// The unconstrained vertex ids.
+        vertices: Vec<VertexId>,
+    },
+    /// The normal equations are singular or indefinite at a vertex.
+    #[error("the normal equations are not positive definite at vertex {vertex}: its edges do not determine its pose")]
+    NotPositiveDefinite {
+        /// The vertex id.
+        vertex: VertexId,
+    },
+    /// The initial estimate gives a non-finite objective.
+    #[error("the initial objective is not finite (NaN or infinite poses or information)")]
+    NonFiniteStart,
+    /// The linear solver failed otherwise.
+    #[error(transparent)]
+    Linear(#[from] LinearError),
+    /// The edge weights do not match the edges.
+    #[error("{weights} edge weights for {edges} edges")]
+    WeightCount {
+        /// Weights given.
+        weights: usize,
+        /// Edges in the graph.
+        edges: usize,
+    },
+}
+
+fn list_ids(ids: &[VertexId]) -> String {
+    let shown: Vec<String> = ids.iter().take(10).map(|i| i.to_string()).collect();
+    if ids.len() > 10 { format!("{} …", shown.join(", ")) } else { shown.join(", ") }
+}
+
+/// Receives progress from the optimiser.
+pub trait Observer {
+    /// Called after every outer iteration.
+    fn iteration(&mut self, record: &IterationRecord);
+}
+
+impl<F: FnMut(&IterationRecord)> Observer for F {
+    fn iteration(&mut self, record: &IterationRecord) {
+        self(record)
+    }
+}
+
+/// An optimiser bound to one graph structure: the sparsity pattern, its
+/// ordering and symbolic factorisation are built once here and reused by
+/// every [`Optimizer::run`] (e.g. across robust reweighting rounds).
+pub struct Optimizer<P, const D: usize> {
+    system: BlockSystem<D>,
+    /// Vertex of each variable block.
+    vertex_of: Vec<usize>,
+    options: SolverOptions,
+    trial: Vec<P>,
+    best: Vec<P>,
+    step: Vec<f64>,
+}
+
+impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
+    /// Prepares to optimise `graph` (its structure, not its values).
+    /// Fails if some vertex is not connected to the gauge.
+    pub fn new(graph: &PoseGraph<P, D>, options: SolverOptions) -> Result<Self, SolveError> {
+        let unconstrained = graph.unconstrained_vertices();
+        let gauge = graph.gauge();
+        if !unconstrained.is_empty() {
+            return Err(SolveError::Unconstrained {
+                gauge: gauge.first().map(|&g| graph.id(g)).unwrap_or(0),
+                vertices: unconstrained.iter().map(|&k| graph.id(k)).collect(),
+            });
+        }
+        let n = graph.num_vertices();
+        let mut variable = vec![None; n];
+        let mut vertex_of = Vec::with_capacity(n);
+        let mut is_gauge = vec![false; n];
+        for &g in &gauge {
+            is_gauge[g] = true;
+        }
+        for k in 0..n {
+            if !is_gauge[k] {
+                variable[k] = Some(vertex_of.len());
+                vertex_of.push(k);
+            }
+        }
+        let pairs: Vec<(Option<usize>, Option<usize>)> =
+            graph.edges.iter().map(|e| (variable[e.from], variable[e.to])).collect();
+        let system = BlockSystem::new(vertex_of.len(), &pairs, options.threads)?;
+        Ok(Self {
+            system,
+            step: vec![0.0; vertex_of.len() * D],
+            vertex_of,
+            trial: graph.poses.clone(),
+            best: graph.poses.clone(),
+            options,
+        })
+    }
+
+    /// The linear system (for statistics such as the factor's size).
+    pub fn system(&self) -> &BlockSystem<D> {
+        &self.system
+    }
+
+    /// Minimises `Σ wₖ eₖᵀΩₖeₖ` from the graph's current poses and leaves the
+    /// best poses found in the graph. `weights` (one per edge) default to 1.
+    pub fn run(
+        &mut self,
+        graph: &mut PoseGraph<P, D>,
+        weights: Option<&[f64]>,
+        observer: &mut dyn Observer,
+    ) -> Result<Summary, SolveError> {
+        if let Some(w) = weights {
+            if w.len() != graph.edges.len() {
+                return Err(SolveError::WeightCount { weights: w.len(), edges: graph.edges.len() });
+            }
+        }
+        let start = Instant::now();
+        let opts = self.options.clone();
+        let mut summary = Summary {
+            method: opts.method,
+            iterations: 0,
+            initial_objective: 0.0,
+            final_objective: 0.0,
+            stop_reason: StopReason::MaxIterations,
+            factorizations: 0,
+            time: Duration::ZERO,
+            history: Vec::new(),
+        };
+        let mut objective = self.linearize(graph, weights);
+        summary.initial_objective = objective;
+        summary.final_objective = objective;
+        if !objective.is_finite() {
+            return Err(SolveError::NonFiniteStart);
+        }
+        if self.vertex_of.is_empty() {
+            summary.stop_reason = StopReason::NothingToOptimize;
+            summary.time = start.elapsed();
+            return Ok(summary);
+        }
+        let mut lambda = opts.initial_lambda;
+        let mut nu = 2.0;
+        self.best.clone_from(&graph.poses);
+        let mut best_objective = objective;
+        let stop = loop {
+            if objective == 0.0 && summary.iterations > 0 {
+                break StopReason::ZeroError;
+            }
+            if summary.iterations >= opts.max_iterations {
+                break StopReason::MaxIterations;
+            }
+            if opts.time_limit.is_some_and(|t| start.elapsed() >= t) {
+                break StopReason::TimeLimit;
+            }
+            // Find a step: GN takes the first; LM raises λ until the step
+            // decreases the objective. The very first trial of a run is
+            // undamped in both, so that a singular system (an undetermined
+            // vertex) is reported rather than hidden by the damping.
+            let mut rejected = 0;
+            let outcome = loop {
+                let structural_check = summary.factorizations == 0;
+                let damping = if opts.method == Method::GaussNewton || structural_check { 0.0 } else { lambda };
+                summary.factorizations += 1;
+                match self.system.factorize(damping) {
+                    Ok(()) => {}
+                    Err(LinearError::NotPositiveDefinite { block }) => {
+                        if damping == 0.0 || lambda > 1e16 {
+                            return Err(SolveError::NotPositiveDefinite { vertex: graph.id(self.vertex_of[block]) });
+                        }
+                        lambda *= nu;
+                        nu *= 2.0;
+                        rejected += 1;
+                        continue;
+                    }
+                    Err(e) => return Err(e.into()),
+                }
+                self.system.solve(&mut self.step);
+                let step_max = self.step.iter().fold(0.0f64, |m, s| m.max(s.abs()));
+                if !step_max.is_finite() {
+                    if opts.method == Method::GaussNewton || lambda > 1e16 {
+                        break None;
+                    }
+                    if !structural_check {
+                        lambda *= nu;
+                        nu *= 2.0;
+                    }
+                    rejected += 1;
+                    continue;
+                }
+                if step_max < opts.step_tolerance {
+                    break Some((step_max, objective, true));
+                }
+                self.apply_step(graph);
+                let new_objective = self.objective(&self.trial, graph, weights);
+                if opts.method == Method::GaussNewton {
+                    if new_objective.is_finite() {
+                        break Some((step_max, new_objective, false));
+                    }
+                    break None;
+                }
+                let predicted = self.system.predicted_decrease(&self.step);
+                let rho = (objective - new_objective) / predicted;
+                if new_objective.is_finite() && new_objective <= objective && rho > 0.0 {
+                    if !structural_check {
+                        lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
+                        lambda = lambda.max(1e-12);
+                    }
+                    nu = 2.0;
+                    break Some((step_max, new_objective, false));
+                }
+                if !structural_check {
+                    lambda *= nu;
+                    nu *= 2.0;
+                }
+                rejected += 1;
+                if lambda > 1e16 {
+                    break None;
+                }
+            };
+            let Some((step_max, new_objective, negligible)) = outcome else {
+                break StopReason::NoDecrease;
+            };
+            if negligible {
+                break StopReason::SmallStep;
+            }
+            summary.iterations += 1;
+            std::mem::swap(&mut graph.poses, &mut self.trial);
+            let decrease = (objective - new_objective) / objective;
+            objective = new_objective;
+            if objective < best_objective {
+                best_objective = objective;
+                self.best.clone_from(&graph.poses);
+            }
+            let record = IterationRecord {
+                iteration: summary.iterations,
+                objective,
+                lambda: if opts.method == Method::GaussNewton { 0.0 } else { lambda },
+                rejected,
+                step_max,
+            };
+            summary.history.push(record);
+            observer.iteration(&record);
+            if decrease.abs() < opts.relative_tolerance {
+                break StopReason::RelativeDecrease;
+            }
+            self.linearize(graph, weights);
+        };
+        if objective > best_objective {
+            graph.poses.clone_from(&self.best);
+            objective = best_objective;
+        }
+        summary.final_objective = objective;
+        summary.stop_reason = stop;
+        summary.time = start.elapsed();
+        Ok(summary)
+    }
+
+    /// `trial = poses ⊞ step`.
+    fn apply_step(&mut self, graph: &PoseGraph<P, D>) {
+        self.trial.clone_from(&graph.poses);
+        for (block, &v) in self.vertex_of.iter().enumerate() {
+            let delta = nalgebra::SVector::<f64, D>::from_column_slice(&self.step[block * D..block * D + D]);
+            self.trial[v] = graph.poses[v].retract(&delta);
+        }
+    }
+
+    /// The weighted objective at `poses`.
+    fn objective(&self, poses: &[P], graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
+        graph
+            .edges
+            .par_iter()
+            .enumerate()
+            .map(|(k, e)| {
+                let w = weights.map_or(1.0, |w| w[k]);
+                if w == 0.0 {
+                    return 0.0;
+                }
+                let r = P::error(&poses[e.from], &poses[e.to], &e.measurement);
+                w * r.dot(&(e.information * r))
+            })
+            .sum()
+    }
+
+    /// Builds `H` and `b` at the graph's poses and returns the objective.
+    fn linearize(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
+        self.system.clear();
+        let mut objective = 0.0;
+        for (k, e) in graph.edges.iter().enumerate() {
+            let w = weights.map_or(1.0, |w| w[k]);
+            if w == 0.0 {
+                continue;
+            }
+            let lin = P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
+            let omega = e.information * w;
+            let oi = omega * lin.jac_i;
+            let oj = omega * lin.jac_j;
+            let oe = omega * lin.error;
+            objective += lin.error.dot(&oe);
+            let h_ii = lin.jac_i.transpose() * oi;
+            let h_ij = lin.jac_i.transpose() * oj;
+            let h_jj = lin.jac_j.transpose() * oj;
+            let b_i = lin.jac_i.transpose() * oe;
+            let b_j = lin.jac_j.transpose() * oe;
+            self.system.add_edge(k, &h_ii, &h_ij, &h_jj, &b_i, &b_j);
+        }
+        objective
+    }
+}
+
+/// Optimises `graph` in place with unit weights: a convenience over
+/// [`Optimizer`].
+///
+/// ```
+/// use nalgebra::Matrix3;
+/// use pgo::geometry::{Pose, Se2};
+/// use pgo::graph::PoseGraph;
+/// use pgo::solve::{optimize, SolverOptions};
+/// let mut g = PoseGraph::<Se2, 3>::new();
+/// for k in 0..3 {
+///     g.add_vertex(k, Se2::new(0.3 * k as f64, 0.0, 0.0)).unwrap();
+/// }
+/// let step = Se2::new(1.0, 0.0, 0.0);
+/// g.add_edge(0, 1, step, Matrix3::identity(), None).unwrap();
+/// g.add_edge(1, 2, step, Matrix3::identity(), None).unwrap();
+/// let summary = optimize(&mut g, &SolverOptions::default()).unwrap();
+/// assert!(summary.final_objective < 1e-20);
+/// assert!((g.poses[2].x - 2.0).abs() < 1e-9);
+/// ```
+pub fn optimize<P: Pose<D>, const D: usize>(
+    graph: &mut PoseGraph<P, D>,
+    options: &SolverOptions,
+) -> Result<Summary, SolveError> {
+    let mut optimizer = Optimizer::new(graph, options.clone())?;
+    optimizer.run(graph, None, &mut |_: &IterationRecord| {})
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{Se2, Se3};
+    use nalgebra::{Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
+    use rand::{Rng, SeedableRng, rngs::StdRng};
+
+    /// A square loop of 4 poses with one loop closure whose measurements are
+    /// consistent: the optimum has zero error.
+    fn square(noise: f64, seed: u64) -> PoseGraph<Se2, 3> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let truth = [Se2::new(0.0, 0.0, 0.0), Se2::new(1.0, 0.0, 1.5708), Se2::new(1.0, 1.0, 3.1416), Se2::new(0.0, 1.0, -1.5708)];
+        let mut g = PoseGraph::new();
+        for (k, t) in truth.iter().enumerate() {
+            let p = if k == 0 { *t } else { Se2::new(t.x + noise * rng.random_range(-1.0..1.0), t.y + noise * rng.random_range(-1.0..1.0), t.theta + noise * rng.random_range(-1.0..1.0)) };
+            g.add_vertex(k as u64, p).unwrap();
+        }
+        for (i, j) in [(0, 1), (1, 2), (2, 3), (3, 0)] {
+            let z = truth[i].inverse().compose(&truth[j]);
+            g.add_edge(i as u64, j as u64, z, Matrix3::identity(), None).unwrap();
+        }
+        g
+    }
+
+    #[test]
+    fn lm_and_gn_reach_the_exact_optimum_of_a_consistent_loop() {
+        for method in [Method::LevenbergMarquardt, Method::GaussNewton] {
+            let mut g = square(0.3, 1);
+            let s = optimize(&mut g, &SolverOptions { method, ..Default::default() }).unwrap();
+            assert!(s.final_objective < 1e-16, "{method:?}: {}", s.final_objective);
+            assert!(s.converged());
+            assert!((g.poses[2].x - 1.0).abs() < 1e-8 && (g.poses[2].y - 1.0).abs() < 1e-8);
+        }
+    }
+
+    #[test]
+    fn inconsistent_loop_matches_the_closed_form_optimum() {
+        // Four collinear-free translations around a loop that does not close
+        // by 0.4 in x, all rotations zero: the optimum spreads the error
+        // equally, objective = 0.4² / 4.
+        let mut g = PoseGraph::<Se2, 3>::new();
+        for k in 0..4 {
+            g.add_vertex(k, Se2::identity()).unwrap();
+        }
+        // Rotations pinned by a huge information: the problem is linear.
+        let i = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 1e8));
+        g.add_edge(0, 1, Se2::new(1.0, 0.0, 0.0), i, None).unwrap();
+        g.add_edge(1, 2, Se2::new(0.0, 1.0, 0.0), i, None).unwrap();
+        g.add_edge(2, 3, Se2::new(-1.0, 0.0, 0.0), i, None).unwrap();
+        g.add_edge(3, 0, Se2::new(0.4, -1.0, 0.0), i, None).unwrap();
+        let s = optimize(&mut g, &SolverOptions::default()).unwrap();
+        assert!((s.final_objective - 0.04).abs() < 1e-8, "{}", s.final_objective);
+    }
+
+    #[test]
+    fn spatial_chain_with_loop_converges() {
+        let mut rng = StdRng::seed_from_u64(3);
+        let mut truth = vec![Se3::identity()];
+        for k in 1..20 {
+            let step = Se3::exp(&Vector6::new(1.0, 0.0, 0.1, 0.0, 0.05, 0.3));
+            let prev: Se3 = truth[k - 1];
+            truth.push(prev.compose(&step));
+        }
+        let mut g = PoseGraph::<Se3, 6>::new();
+        for (k, t) in truth.iter().enumerate() {
+            let noise = Se3::new(
+                UnitQuaternion::from_scaled_axis(Vector3::new(rng.random_range(-0.1..0.1), rng.random_range(-0.1..0.1), rng.random_range(-0.1..0.1))),
+                Vector3::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3)),
+            );
+            g.add_vertex(k as u64, if k == 0 { *t } else { t.compose(&noise) }).unwrap();
+        }
+        for k in 1..20 {
+            g.add_edge(k as u64 - 1, k as u64, truth[k - 1].inverse().compose(&truth[k]), Matrix6::identity(), None).unwrap();
+        }
+        g.add_edge(0, 19, truth[0].inverse().compose(&truth[19]), Matrix6::identity() * 10.0, None).unwrap();
+        let s = optimize(&mut g, &SolverOptions::default()).unwrap();
+        assert!(s.final_objective < 1e-14, "{}", s.final_objective);
+        assert!((g.poses[19].translation - truth[19].translation).norm() < 1e-6);
+    }
+
+    #[test]
+    fn weights_switch_edges_off() {
+        let mut g = square(0.0, 2);
+        // A wrong edge 0→2 that would pull pose 2.
+        g.add_edge(0, 2, Se2::new(5.0, 5.0, 0.0), Matrix3::identity() * 100.0, None).unwrap();
+        let mut opt = Optimizer::new(&g, SolverOptions::default()).unwrap();
+        let w = [1.0, 1.0, 1.0, 1.0, 0.0];
+        let s = opt.run(&mut g, Some(&w), &mut |_: &IterationRecord| {}).unwrap();
+        assert!(s.final_objective < 1e-16);
+        assert!(opt.run(&mut g, Some(&w[..3]), &mut |_: &IterationRecord| {}).is_err());
+    }
+
+    #[test]
+    fn disconnected_vertices_are_named() {
+        let mut g = square(0.0, 3);
+        g.add_vertex(40, Se2::identity()).unwrap();
+        g.add_vertex(41, Se2::identity()).unwrap();
+        g.add_edge(40, 41, Se2::identity(), Matrix3::identity(), None).unwrap();
+        let err = optimize(&mut g, &SolverOptions::default()).unwrap_err();
+        assert_eq!(err, SolveError::Unconstrained { gauge: 0, vertices: vec![40, 41] });
+        assert!(err.to_string().contains("40, 41"));
+    }
+
+    #[test]
+    fn rank_deficient_edges_are_a_named_error() {
+        // Vertex 1 is tied to the gauge only through an edge whose
+        // information ignores rotation: its heading is undetermined.
+        let mut g = PoseGraph::<Se2, 3>::new();
+        g.add_vertex(0, Se2::identity()).unwrap();
+        g.add_vertex(1, Se2::new(1.0, 0.0, 0.0)).unwrap();
+        let info = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 0.0));
+        g.add_edge(0, 1, Se2::new(1.5, 0.0, 0.0), info, None).unwrap();
+        for method in [Method::GaussNewton, Method::LevenbergMarquardt] {
+            let err = optimize(&mut g.clone(), &SolverOptions { method, ..Default::default() }).unwrap_err();
+            assert_eq!(err, SolveError::NotPositiveDefinite { vertex: 1 });
+        }
+    }
+
+    #[test]
+    fn iteration_and_time_limits_are_honoured_and_keep_the_best() {
+        let mut g = square(0.5, 4);
+        let start = g.chi2();
+        let s = optimize(&mut g, &SolverOptions { max_iterations: 1, ..Default::default() }).unwrap();
+        assert_eq!((s.iterations, s.stop_reason), (1, StopReason::MaxIterations));
+        assert!(s.final_objective <= start && (g.chi2() - s.final_objective).abs() < 1e-12);
+        let s = optimize(&mut g, &SolverOptions { time_limit: Some(Duration::ZERO), ..Default::default() }).unwrap();
+        assert_eq!((s.iterations, s.stop_reason), (0, StopReason::TimeLimit));
+    }
+
+    #[test]
+    fn non_finite_start_is_an_error_not_a_nan_result() {
+        let mut g = square(0.0, 5);
+        g.poses[1].x = f64::NAN;
+        assert_eq!(optimize(&mut g, &SolverOptions::default()).unwrap_err(), SolveError::NonFiniteStart);
+    }
+}
