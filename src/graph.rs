@@ -85,7 +85,13 @@ pub type PoseGraph3 = PoseGraph<Se3, 6>;
 impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
     /// An empty graph.
     pub fn new() -> Self {
-        Self { ids: Vec::new(), poses: Vec::new(), index: HashMap::new(), edges: Vec::new(), fixed: Vec::new() }
+        Self {
+            ids: Vec::new(),
+            poses: Vec::new(),
+            index: HashMap::new(),
+            edges: Vec::new(),
+            fixed: Vec::new(),
+        }
     }
 
     /// Adds a vertex and returns its index.
@@ -149,7 +155,13 @@ impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
         }
         let f = self.index_of(from).ok_or(GraphError::UnknownVertex(from))?;
         let t = self.index_of(to).ok_or(GraphError::UnknownVertex(to))?;
-        self.edges.push(Edge { from: f, to: t, measurement, information, candidate });
+        self.edges.push(Edge {
+            from: f,
+            to: t,
+            measurement,
+            information,
+            candidate,
+        });
         Ok(self.edges.len() - 1)
     }
 
@@ -189,7 +201,11 @@ impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
     /// else the first vertex. Empty only for an empty graph.
     pub fn gauge(&self) -> Vec<usize> {
         let fixed: Vec<usize> = (0..self.ids.len()).filter(|&k| self.fixed[k]).collect();
-        if fixed.is_empty() && !self.ids.is_empty() { vec![0] } else { fixed }
+        if fixed.is_empty() && !self.ids.is_empty() {
+            vec![0]
+        } else {
+            fixed
+        }
     }
 
     /// Number of loop-closure candidates.
@@ -199,7 +215,11 @@ impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
 
     /// The error of one edge at the current estimate.
     pub fn edge_error(&self, edge: &Edge<P, D>) -> nalgebra::SVector<f64, D> {
-        P::error(&self.poses[edge.from], &self.poses[edge.to], &edge.measurement)
+        P::error(
+            &self.poses[edge.from],
+            &self.poses[edge.to],
+            &edge.measurement,
+        )
     }
 
     /// `eᵀΩe` of one edge at the current estimate.
@@ -301,7 +321,9 @@ pub fn is_positive_definite<const D: usize>(m: &SMatrix<f64, D, D>) -> bool {
 /// below `1e-6 · max|λ|` are raised to it (as `repair_info.py` of the
 /// baseline does). Returns `None` when every eigenvalue is zero or the matrix
 /// is not finite.
-pub fn nearest_positive_definite<const D: usize>(m: &SMatrix<f64, D, D>) -> Option<SMatrix<f64, D, D>> {
+pub fn nearest_positive_definite<const D: usize>(
+    m: &SMatrix<f64, D, D>,
+) -> Option<SMatrix<f64, D, D>> {
     if !m.iter().all(|v| v.is_finite()) {
         return None;
     }
@@ -331,7 +353,8 @@ mod tests {
             g.add_vertex(k, Se2::new(k as f64, 0.0, 0.0)).unwrap();
         }
         for k in 1..n {
-            g.add_edge(k - 1, k, Se2::new(1.0, 0.0, 0.0), Matrix3::identity(), None).unwrap();
+            g.add_edge(k - 1, k, Se2::new(1.0, 0.0, 0.0), Matrix3::identity(), None)
+                .unwrap();
         }
         g
     }
@@ -339,10 +362,19 @@ mod tests {
     #[test]
     fn rejects_duplicates_self_loops_and_unknown_ids() {
         let mut g = line_graph(3);
-        assert_eq!(g.add_vertex(1, Se2::identity()), Err(GraphError::DuplicateVertex(1)));
+        assert_eq!(
+            g.add_vertex(1, Se2::identity()),
+            Err(GraphError::DuplicateVertex(1))
+        );
         let i = Matrix3::identity();
-        assert_eq!(g.add_edge(2, 2, Se2::identity(), i, None), Err(GraphError::SelfLoop(2)));
-        assert_eq!(g.add_edge(2, 9, Se2::identity(), i, None), Err(GraphError::UnknownVertex(9)));
+        assert_eq!(
+            g.add_edge(2, 2, Se2::identity(), i, None),
+            Err(GraphError::SelfLoop(2))
+        );
+        assert_eq!(
+            g.add_edge(2, 9, Se2::identity(), i, None),
+            Err(GraphError::UnknownVertex(9))
+        );
         assert_eq!(g.fix(7), Err(GraphError::UnknownVertex(7)));
     }
 
@@ -359,9 +391,14 @@ mod tests {
         let mut g = line_graph(3);
         g.add_vertex(10, Se2::identity()).unwrap();
         g.add_vertex(11, Se2::identity()).unwrap();
-        g.add_edge(10, 11, Se2::identity(), Matrix3::identity(), None).unwrap();
+        g.add_edge(10, 11, Se2::identity(), Matrix3::identity(), None)
+            .unwrap();
         g.add_vertex(12, Se2::identity()).unwrap();
-        let ids: Vec<_> = g.unconstrained_vertices().iter().map(|&k| g.id(k)).collect();
+        let ids: Vec<_> = g
+            .unconstrained_vertices()
+            .iter()
+            .map(|&k| g.id(k))
+            .collect();
         assert_eq!(ids, vec![10, 11, 12]);
     }
 

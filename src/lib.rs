@@ -1,8 +1,11 @@
 //! pgo: pose-graph SLAM back end with unsupervised loop-closure gating.
+
+// Index loops over small fixed-size blocks read like the maths they implement.
+#![allow(clippy::needless_range_loop)]
 pub mod geometry;
 pub mod graph;
 pub mod io;
 pub mod linear;
-pub mod solve;
 pub mod pipeline;
 pub mod report;
+pub mod solve;

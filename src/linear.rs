@@ -20,7 +20,8 @@
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::{LltError, LltRegularization};
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky,
 };
 use faer::sparse::linalg::{SupernodalThreshold, amd};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
@@ -66,7 +67,8 @@ struct EdgeSlot<const D: usize> {
 /// ```
 /// use nalgebra::{Matrix1, Vector1};
 /// use pgo::linear::BlockSystem;
-/// // Two scalar variables tied by one edge, plus a prior on the first.
+/// // Two scalar variables tied by one edge, plus a prior on the first:
+/// // H = [[2, −1], [−1, 1]], b = [0, −1], so δ = −H⁻¹b = [1, 2].
 /// let mut sys = BlockSystem::<1>::new(2, &[(Some(0), Some(1)), (Some(0), None)], 0).unwrap();
 /// sys.clear();
 /// let one = Matrix1::new(1.0);
@@ -75,7 +77,7 @@ struct EdgeSlot<const D: usize> {
 /// sys.factorize(0.0).unwrap();
 /// let mut step = vec![0.0; 2];
 /// sys.solve(&mut step);
-/// assert!((step[0] - 0.0).abs() < 1e-12 && (step[1] - 1.0).abs() < 1e-12);
+/// assert!((step[0] - 1.0).abs() < 1e-12 && (step[1] - 2.0).abs() < 1e-12);
 /// ```
 pub struct BlockSystem<const D: usize> {
     n_blocks: usize,
@@ -104,7 +106,11 @@ impl<const D: usize> BlockSystem<D> {
     /// each as the variable blocks `(i, j)` it joins (`None` for a fixed
     /// vertex). `threads` > 1 lets faer factorise in parallel; 0 means all
     /// available cores.
-    pub fn new(n_blocks: usize, edges: &[(Option<usize>, Option<usize>)], threads: usize) -> Result<Self, LinearError> {
+    pub fn new(
+        n_blocks: usize,
+        edges: &[(Option<usize>, Option<usize>)],
+        threads: usize,
+    ) -> Result<Self, LinearError> {
         let position = fill_reducing_order(n_blocks, edges)?;
 
         // Neighbours of each block that come later in the elimination order,
@@ -128,7 +134,10 @@ impl<const D: usize> BlockSystem<D> {
         // later neighbour in order.
         let n = n_blocks * D;
         let mut col_ptr = Vec::with_capacity(n + 1);
-        let nnz: usize = later.iter().map(|l| D * (D + 1) / 2 + l.len() * D * D).sum();
+        let nnz: usize = later
+            .iter()
+            .map(|l| D * (D + 1) / 2 + l.len() * D * D)
+            .sum();
         let mut row_idx = Vec::with_capacity(nnz);
         col_ptr.push(0);
         for (p, l) in later.iter().enumerate() {
@@ -141,8 +150,9 @@ impl<const D: usize> BlockSystem<D> {
             }
         }
 
-        let diagonal: Vec<[usize; D]> =
-            (0..n_blocks).map(|b| std::array::from_fn(|a| col_ptr[position[b] * D + a])).collect();
+        let diagonal: Vec<[usize; D]> = (0..n_blocks)
+            .map(|b| std::array::from_fn(|a| col_ptr[position[b] * D + a]))
+            .collect();
         let edges = edges
             .iter()
             .map(|&(i, j)| {
@@ -152,8 +162,12 @@ impl<const D: usize> BlockSystem<D> {
                         let (col, row) = (pi.min(pj), pi.max(pj));
                         // Cannot fail: `row` was recorded as a later neighbour of `col`.
                         let rank = later[col].binary_search(&row).unwrap_or(0);
-                        let cols = std::array::from_fn(|a| col_ptr[col * D + a] + (D - a) + rank * D);
-                        Some(OffDiagonal { cols, i_is_row: pi > pj })
+                        let cols =
+                            std::array::from_fn(|a| col_ptr[col * D + a] + (D - a) + rank * D);
+                        Some(OffDiagonal {
+                            cols,
+                            i_is_row: pi > pj,
+                        })
                     }
                     _ => None,
                 };
@@ -169,14 +183,16 @@ impl<const D: usize> BlockSystem<D> {
             supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
             ..Default::default()
         };
-        let symbolic = factorize_symbolic_cholesky(pattern, Side::Upper, SymmetricOrdering::Identity, params)
-            .map_err(|e| LinearError::Factorization(format!("{e:?}")))?;
+        let symbolic =
+            factorize_symbolic_cholesky(pattern, Side::Upper, SymmetricOrdering::Identity, params)
+                .map_err(|e| LinearError::Factorization(format!("{e:?}")))?;
         let par = parallelism(threads);
         let req = StackReq::any_of(&[
             symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
             symbolic.solve_in_place_scratch::<f64>(1, par),
         ]);
-        let scratch = MemBuffer::try_new(req).map_err(|_| LinearError::Factorization("out of memory".into()))?;
+        let scratch = MemBuffer::try_new(req)
+            .map_err(|_| LinearError::Factorization("out of memory".into()))?;
         let factor = vec![0.0; symbolic.len_val()];
         Ok(Self {
             n_blocks,
@@ -240,7 +256,11 @@ impl<const D: usize> BlockSystem<D> {
             for a in 0..D {
                 let col = &mut self.values[off.cols[a]..off.cols[a] + D];
                 for (b, v) in col.iter_mut().enumerate() {
-                    *v += if off.i_is_row { h_ij[(b, a)] } else { h_ij[(a, b)] };
+                    *v += if off.i_is_row {
+                        h_ij[(b, a)]
+                    } else {
+                        h_ij[(a, b)]
+                    };
                 }
             }
         }
@@ -287,7 +307,8 @@ impl<const D: usize> BlockSystem<D> {
             }
         }
         let n = self.n_blocks * D;
-        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
+        let pattern =
+            SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
         let a = SparseColMatRef::new(pattern, &self.values);
         let par = parallelism(self.threads);
         let result = self.symbolic.factorize_numeric_llt::<f64>(
@@ -392,7 +413,10 @@ fn parallelism(threads: usize) -> Par {
 }
 
 /// AMD on the block graph: the elimination position of each block.
-fn fill_reducing_order(n_blocks: usize, edges: &[(Option<usize>, Option<usize>)]) -> Result<Vec<usize>, LinearError> {
+fn fill_reducing_order(
+    n_blocks: usize,
+    edges: &[(Option<usize>, Option<usize>)],
+) -> Result<Vec<usize>, LinearError> {
     if n_blocks == 0 {
         return Ok(Vec::new());
     }
@@ -415,13 +439,20 @@ fn fill_reducing_order(n_blocks: usize, edges: &[(Option<usize>, Option<usize>)]
         row_idx.extend_from_slice(list);
         col_ptr.push(row_idx.len());
     }
-    let pattern = SymbolicSparseColMatRef::new_checked(n_blocks, n_blocks, &col_ptr, None, &row_idx);
+    let pattern =
+        SymbolicSparseColMatRef::new_checked(n_blocks, n_blocks, &col_ptr, None, &row_idx);
     let mut perm = vec![0usize; n_blocks];
     let mut perm_inv = vec![0usize; n_blocks];
     let mut mem = MemBuffer::try_new(amd::order_scratch::<usize>(n_blocks, row_idx.len()))
         .map_err(|_| LinearError::Factorization("out of memory for the ordering".into()))?;
-    amd::order(&mut perm, &mut perm_inv, pattern, amd::Control::default(), MemStack::new(&mut mem))
-        .map_err(|e| LinearError::Factorization(format!("{e:?}")))?;
+    amd::order(
+        &mut perm,
+        &mut perm_inv,
+        pattern,
+        amd::Control::default(),
+        MemStack::new(&mut mem),
+    )
+    .map_err(|e| LinearError::Factorization(format!("{e:?}")))?;
     // perm[k] = block eliminated k-th, so perm_inv[block] = its position.
     Ok(perm_inv)
 }
@@ -436,7 +467,8 @@ mod tests {
     fn random_system(seed: u64) -> (BlockSystem<2>, DMatrix<f64>, DVector<f64>) {
         let mut rng = StdRng::seed_from_u64(seed);
         let n = 12;
-        let mut pairs: Vec<(Option<usize>, Option<usize>)> = (1..n).map(|k| (Some(k - 1), Some(k))).collect();
+        let mut pairs: Vec<(Option<usize>, Option<usize>)> =
+            (1..n).map(|k| (Some(k - 1), Some(k))).collect();
         for _ in 0..10 {
             let i = rng.random_range(0..n);
             let j = rng.random_range(0..n);
@@ -454,7 +486,11 @@ mod tests {
             let ji = Matrix2::new(rng.random(), rng.random(), rng.random(), rng.random());
             let jj = Matrix2::new(rng.random(), rng.random(), rng.random(), rng.random());
             let e = Vector2::new(rng.random(), rng.random());
-            let (hii, hij, hjj) = (ji.transpose() * ji + Matrix2::identity(), ji.transpose() * jj, jj.transpose() * jj);
+            let (hii, hij, hjj) = (
+                ji.transpose() * ji + Matrix2::identity(),
+                ji.transpose() * jj,
+                jj.transpose() * jj,
+            );
             let (bi, bj) = (ji.transpose() * e, jj.transpose() * e);
             sys.add_edge(k, &hii, &hij, &hjj, &bi, &bj);
             if let Some(i) = i {
@@ -466,7 +502,8 @@ mod tests {
                 b.rows_mut(2 * j, 2).add_assign(&bj);
                 if let Some(i) = i {
                     h.view_mut((2 * i, 2 * j), (2, 2)).add_assign(&hij);
-                    h.view_mut((2 * j, 2 * i), (2, 2)).add_assign(&hij.transpose());
+                    h.view_mut((2 * j, 2 * i), (2, 2))
+                        .add_assign(&hij.transpose());
                 }
             }
         }
@@ -484,7 +521,10 @@ mod tests {
             sys.solve(&mut step);
             let expected = h.clone().cholesky().unwrap().solve(&(-&b));
             let got = DVector::from_vec(step.clone());
-            assert!((&got - &expected).norm() < 1e-9 * expected.norm().max(1.0), "seed {seed}");
+            assert!(
+                (&got - &expected).norm() < 1e-9 * expected.norm().max(1.0),
+                "seed {seed}"
+            );
             // Predicted decrease of the undamped model: −2δᵀb − δᵀHδ.
             let model = -2.0 * got.dot(&b) - got.dot(&(&h * &got));
             assert!((sys.predicted_decrease(&step) - model).abs() < 1e-9 * model.abs().max(1.0));
@@ -518,6 +558,9 @@ mod tests {
         let z = nalgebra::Vector1::new(0.0);
         sys.add_edge(0, &one, &(-one), &one, &z, &z);
         sys.add_edge(1, &one, &(-one), &one, &z, &z);
-        assert_eq!(sys.factorize(0.0), Err(LinearError::NotPositiveDefinite { block: 2 }));
+        assert_eq!(
+            sys.factorize(0.0),
+            Err(LinearError::NotPositiveDefinite { block: 2 })
+        );
     }
 }

@@ -98,10 +98,16 @@ fn main() -> ExitCode {
 
 fn optimize(args: OptimizeArgs) -> ExitCode {
     if args.threads > 0 {
-        let _ = rayon::ThreadPoolBuilder::new().num_threads(args.threads).build_global();
+        let _ = rayon::ThreadPoolBuilder::new()
+            .num_threads(args.threads)
+            .build_global();
     }
     let mut config = OptimizeConfig::new(&args.input);
-    config.output = if args.in_place { Some(args.input.clone()) } else { args.output.clone() };
+    config.output = if args.in_place {
+        Some(args.input.clone())
+    } else {
+        args.output.clone()
+    };
     config.inliers = args.inliers.clone();
     config.fix_information = args.fix_information;
     config.initialization = match args.init {
@@ -125,7 +131,10 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
     let verbose = args.verbose && !args.quiet;
     let mut observer = |r: &IterationRecord| {
         if verbose {
-            eprintln!("iteration {:>3}: χ² {:.10e}  λ {:.1e}  rejected {}  |δ|∞ {:.2e}", r.iteration, r.objective, r.lambda, r.rejected, r.step_max);
+            eprintln!(
+                "iteration {:>3}: χ² {:.10e}  λ {:.1e}  rejected {}  |δ|∞ {:.2e}",
+                r.iteration, r.objective, r.lambda, r.rejected, r.step_max
+            );
         }
     };
     match pipeline::run(&config, &mut observer) {

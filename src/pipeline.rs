@@ -80,8 +80,14 @@ impl PipelineError {
         match self {
             Self::Read(ReadError::Io { .. }) | Self::Inliers(InlierCsvError::Io { .. }) => 2,
             Self::Read(_) | Self::Inliers(_) => 2,
-            Self::Solve { source: SolveError::Unconstrained { .. } | SolveError::NotPositiveDefinite { .. }, .. } => 2,
-            Self::Solve { source: SolveError::NonFiniteStart, .. } => 2,
+            Self::Solve {
+                source: SolveError::Unconstrained { .. } | SolveError::NotPositiveDefinite { .. },
+                ..
+            } => 2,
+            Self::Solve {
+                source: SolveError::NonFiniteStart,
+                ..
+            } => 2,
             Self::Solve { .. } | Self::Write { .. } | Self::NonFiniteResult { .. } => 1,
         }
     }
@@ -89,12 +95,22 @@ impl PipelineError {
 
 /// Runs `pgo optimize`: returns the report (and writes the output file if
 /// asked). `observer` sees every iteration.
-pub fn run(config: &OptimizeConfig, observer: &mut dyn FnMut(&IterationRecord)) -> Result<Report, PipelineError> {
-    let mut file = g2o::read(&config.input, ReadOptions { fix_information: config.fix_information })?;
+pub fn run(
+    config: &OptimizeConfig,
+    observer: &mut dyn FnMut(&IterationRecord),
+) -> Result<Report, PipelineError> {
+    let mut file = g2o::read(
+        &config.input,
+        ReadOptions {
+            fix_information: config.fix_information,
+        },
+    )?;
     let mut report = Report::new(&config.input, &file);
     match &mut file.graph {
         AnyPoseGraph::Planar(g) => optimize_graph(g, &file.missing, config, &mut report, observer)?,
-        AnyPoseGraph::Spatial(g) => optimize_graph(g, &file.missing, config, &mut report, observer)?,
+        AnyPoseGraph::Spatial(g) => {
+            optimize_graph(g, &file.missing, config, &mut report, observer)?
+        }
     }
     report.loop_candidates = file.graph.num_candidates();
     if let Some(out) = &config.output {
@@ -111,12 +127,18 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     report: &mut Report,
     observer: &mut dyn FnMut(&IterationRecord),
 ) -> Result<(), PipelineError> {
-    let solve_error = |source| PipelineError::Solve { path: config.input.clone(), source };
+    let solve_error = |source| PipelineError::Solve {
+        path: config.input.clone(),
+        source,
+    };
     if let Some(csv) = &config.inliers {
         let rows = inliers::read_csv(csv)?;
         let replaced = inliers::apply(graph, &rows, csv)?;
         if replaced > 0 {
-            report.warnings.push(format!("{}: replaced the inlier counts of {replaced} edges", csv.display()));
+            report.warnings.push(format!(
+                "{}: replaced the inlier counts of {replaced} edges",
+                csv.display()
+            ));
         }
     }
     // An unconstrained vertex makes every later step meaningless: say so first.
@@ -138,15 +160,21 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         vertices_without_line: missing.len(),
     };
 
-    let summary = optimizer.run(graph, None, &mut |r: &IterationRecord| observer(r)).map_err(solve_error)?;
+    let summary = optimizer
+        .run(graph, None, &mut |r: &IterationRecord| observer(r))
+        .map_err(solve_error)?;
     if graph.poses.iter().any(|p| !p.is_finite()) {
-        return Err(PipelineError::NonFiniteResult { path: config.input.clone() });
+        return Err(PipelineError::NonFiniteResult {
+            path: config.input.clone(),
+        });
     }
     report.optimizer = OptimizerReport::new(&summary, graph.chi2(), optimizer.system());
     Ok(())
 }
 
 fn write_output(file: &G2oFile, out: &Path) -> Result<(), PipelineError> {
-    crate::io::write_atomically(out, |w| file.write(w))
-        .map_err(|source| PipelineError::Write { path: out.to_owned(), source })
+    crate::io::write_atomically(out, |w| file.write(w)).map_err(|source| PipelineError::Write {
+        path: out.to_owned(),
+        source,
+    })
 }

@@ -84,7 +84,11 @@ pub struct OptimizerReport {
 
 impl OptimizerReport {
     /// From a solver summary, the final unweighted χ² and the linear system.
-    pub fn new<const D: usize>(summary: &Summary, final_chi2: f64, system: &BlockSystem<D>) -> Self {
+    pub fn new<const D: usize>(
+        summary: &Summary,
+        final_chi2: f64,
+        system: &BlockSystem<D>,
+    ) -> Self {
         Self {
             solver: summary.method.short_name(),
             iterations: summary.iterations,
@@ -157,7 +161,11 @@ impl Report {
             o.iterations,
             o.initial_chi2,
             o.final_chi2,
-            if o.converged { "converged" } else { "not converged" },
+            if o.converged {
+                "converged"
+            } else {
+                "not converged"
+            },
             o.stop_reason,
             o.time_s + self.initialization.time_s
         );

@@ -29,7 +29,9 @@ use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 /// A rigid-body pose usable as a pose-graph vertex, with `D` degrees of
 /// freedom (3 for [`Se2`], 6 for [`Se3`]).
-pub trait Pose<const D: usize>: Copy + Clone + std::fmt::Debug + PartialEq + Send + Sync + 'static {
+pub trait Pose<const D: usize>:
+    Copy + Clone + std::fmt::Debug + PartialEq + Send + Sync + 'static
+{
     /// `"SE2"` or `"SE3"`, for messages.
     const NAME: &'static str;
 
@@ -134,7 +136,12 @@ pub(crate) mod testing {
     pub fn check_jacobians<P: Pose<D>, const D: usize>(xi: &P, xj: &P, z: &P, tol: f64) {
         let lin = P::error_and_jacobians(xi, xj, z);
         let e = P::error(xi, xj, z);
-        assert!((lin.error - e).norm() < 1e-12, "error mismatch: {} vs {}", lin.error, e);
+        assert!(
+            (lin.error - e).norm() < 1e-12,
+            "error mismatch: {} vs {}",
+            lin.error,
+            e
+        );
         let (ni, nj) = numerical_jacobians(xi, xj, z, 1e-6);
         let di = (lin.jac_i - ni).abs().max();
         let dj = (lin.jac_j - nj).abs().max();

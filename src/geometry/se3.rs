@@ -27,7 +27,10 @@ const UNIT_NORM_TOLERANCE: f64 = 8.0 * f64::EPSILON;
 impl Se3 {
     /// A pose from a rotation and a translation.
     pub fn new(rotation: UnitQuaternion<f64>, translation: Vector3<f64>) -> Self {
-        Self { rotation, translation }
+        Self {
+            rotation,
+            translation,
+        }
     }
 
     /// A pose from a translation and a quaternion `(qx, qy, qz, qw)` as
@@ -41,8 +44,15 @@ impl Se3 {
         if !n2.is_finite() || n2 <= f64::MIN_POSITIVE || t.iter().any(|v| !v.is_finite()) {
             return None;
         }
-        let quat = if (n2 - 1.0).abs() <= UNIT_NORM_TOLERANCE { quat } else { quat / n2.sqrt() };
-        Some(Self::new(UnitQuaternion::new_unchecked(quat), Vector3::from(t)))
+        let quat = if (n2 - 1.0).abs() <= UNIT_NORM_TOLERANCE {
+            quat
+        } else {
+            quat / n2.sqrt()
+        };
+        Some(Self::new(
+            UnitQuaternion::new_unchecked(quat),
+            Vector3::from(t),
+        ))
     }
 
     /// `(qx, qy, qz, qw)`, the order used in g2o files.
@@ -64,7 +74,10 @@ impl Se3 {
             (0.5 - theta2 / 24.0, 1.0 / 6.0 - theta2 / 120.0)
         } else {
             let theta = theta2.sqrt();
-            ((1.0 - theta.cos()) / theta2, (theta - theta.sin()) / (theta2 * theta))
+            (
+                (1.0 - theta.cos()) / theta2,
+                (theta - theta.sin()) / (theta2 * theta),
+            )
         };
         Matrix3::identity() + k * a + k * k * b
     }
@@ -92,7 +105,10 @@ impl Pose<6> for Se3 {
     fn exp(xi: &Vector6<f64>) -> Self {
         let rho = xi.fixed_rows::<3>(0).into_owned();
         let phi = xi.fixed_rows::<3>(3).into_owned();
-        Self::new(UnitQuaternion::from_scaled_axis(phi), Self::v_matrix(&phi) * rho)
+        Self::new(
+            UnitQuaternion::from_scaled_axis(phi),
+            Self::v_matrix(&phi) * rho,
+        )
     }
 
     fn log(&self) -> Vector6<f64> {
@@ -118,7 +134,8 @@ impl Pose<6> for Se3 {
     }
 
     fn is_finite(&self) -> bool {
-        self.translation.iter().all(|v| v.is_finite()) && self.rotation.coords.iter().all(|v| v.is_finite())
+        self.translation.iter().all(|v| v.is_finite())
+            && self.rotation.coords.iter().all(|v| v.is_finite())
     }
 
     fn position(&self) -> Vector3<f64> {
@@ -142,7 +159,11 @@ impl Pose<6> for Se3 {
         let r_e = rz_t * r_a;
         let t_a = ri_t * (xj.translation - xi.translation);
         let t_e = rz_t * (t_a - z.translation);
-        let q_e = positive_w(z.rotation.inverse().quaternion() * xi.rotation.inverse().quaternion() * xj.rotation.quaternion());
+        let q_e = positive_w(
+            z.rotation.inverse().quaternion()
+                * xi.rotation.inverse().quaternion()
+                * xj.rotation.quaternion(),
+        );
         let error = Vector6::new(t_e.x, t_e.y, t_e.z, q_e.i, q_e.j, q_e.k);
 
         // d vec(q_E ⊗ (1, φ/2)) / dφ = ½ (w I + [v]×), with q_E taken with w ≥ 0.
@@ -151,12 +172,20 @@ impl Pose<6> for Se3 {
 
         let mut jac_i = Matrix6::zeros();
         jac_i.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-rz_t));
-        jac_i.fixed_view_mut::<3, 3>(0, 3).copy_from(&(rz_t * skew(&t_a)));
-        jac_i.fixed_view_mut::<3, 3>(3, 3).copy_from(&(-(dq * r_a.transpose())));
+        jac_i
+            .fixed_view_mut::<3, 3>(0, 3)
+            .copy_from(&(rz_t * skew(&t_a)));
+        jac_i
+            .fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(&(-(dq * r_a.transpose())));
         let mut jac_j = Matrix6::zeros();
         jac_j.fixed_view_mut::<3, 3>(0, 0).copy_from(&r_e);
         jac_j.fixed_view_mut::<3, 3>(3, 3).copy_from(&dq);
-        EdgeLinearization { error, jac_i, jac_j }
+        EdgeLinearization {
+            error,
+            jac_i,
+            jac_j,
+        }
     }
 }
 
@@ -180,13 +209,25 @@ mod tests {
     use std::f64::consts::PI;
 
     fn random_rotation(rng: &mut StdRng, max_angle: f64) -> UnitQuaternion<f64> {
-        let axis = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
-        let axis = if axis.norm() < 1e-3 { Vector3::x() } else { axis.normalize() };
+        let axis = Vector3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        );
+        let axis = if axis.norm() < 1e-3 {
+            Vector3::x()
+        } else {
+            axis.normalize()
+        };
         UnitQuaternion::from_scaled_axis(axis * rng.random_range(-max_angle..max_angle))
     }
 
     fn random_pose(rng: &mut StdRng, scale: f64) -> Se3 {
-        let t = Vector3::new(rng.random_range(-scale..scale), rng.random_range(-scale..scale), rng.random_range(-scale..scale));
+        let t = Vector3::new(
+            rng.random_range(-scale..scale),
+            rng.random_range(-scale..scale),
+            rng.random_range(-scale..scale),
+        );
         Se3::new(random_rotation(rng, PI), t)
     }
 
@@ -207,8 +248,16 @@ mod tests {
     fn compose_is_associative() {
         let mut rng = StdRng::seed_from_u64(12);
         for _ in 0..100 {
-            let (a, b, c) = (random_pose(&mut rng, 5.0), random_pose(&mut rng, 5.0), random_pose(&mut rng, 5.0));
-            assert!(close(&a.compose(&b).compose(&c), &a.compose(&b.compose(&c)), 1e-12));
+            let (a, b, c) = (
+                random_pose(&mut rng, 5.0),
+                random_pose(&mut rng, 5.0),
+                random_pose(&mut rng, 5.0),
+            );
+            assert!(close(
+                &a.compose(&b).compose(&c),
+                &a.compose(&b.compose(&c)),
+                1e-12
+            ));
         }
     }
 
@@ -242,7 +291,10 @@ mod tests {
         for &angle in &[0.0, 1e-8, 1e-4, PI - 1e-2, -(PI - 1e-2)] {
             let xi = random_pose(&mut rng, 3.0);
             let z = random_pose(&mut rng, 2.0);
-            let e = Se3::new(UnitQuaternion::from_scaled_axis(Vector3::new(0.3, -0.5, 0.8).normalize() * angle), Vector3::new(0.01, 0.02, -0.01));
+            let e = Se3::new(
+                UnitQuaternion::from_scaled_axis(Vector3::new(0.3, -0.5, 0.8).normalize() * angle),
+                Vector3::new(0.01, 0.02, -0.01),
+            );
             let xj = xi.compose(&z).compose(&e);
             check_jacobians(&xi, &xj, &z, 2e-6);
         }
@@ -257,7 +309,14 @@ mod tests {
             let z = random_pose(&mut rng, 3.0);
             let e = z.inverse().compose(&xi.inverse().compose(&xj));
             let q = positive_w(*e.rotation.quaternion());
-            let expected = Vector6::new(e.translation.x, e.translation.y, e.translation.z, q.i, q.j, q.k);
+            let expected = Vector6::new(
+                e.translation.x,
+                e.translation.y,
+                e.translation.z,
+                q.i,
+                q.j,
+                q.k,
+            );
             assert!((Se3::error(&xi, &xj, &z) - expected).norm() < 1e-10);
             assert!((Se3::error_and_jacobians(&xi, &xj, &z).error - expected).norm() < 1e-10);
         }

@@ -31,7 +31,8 @@
 
 use crate::geometry::{Pose, Se2, Se3};
 use crate::graph::{
-    AnyPoseGraph, GraphError, LoopCandidate, PoseGraph, VertexId, is_positive_definite, nearest_positive_definite,
+    AnyPoseGraph, GraphError, LoopCandidate, PoseGraph, VertexId, is_positive_definite,
+    nearest_positive_definite,
 };
 use nalgebra::SMatrix;
 use std::collections::{BTreeMap, HashMap};
@@ -264,7 +265,8 @@ impl G2oPose<6> for Se3 {
     const MIXTURE_TAG: &'static str = "EDGE_SE3:QUAT_MIXTURE";
     const POSE_NUMBERS: usize = 7;
     fn from_numbers(v: &[f64]) -> Result<Self, LineProblem> {
-        Se3::from_translation_quaternion([v[0], v[1], v[2]], [v[3], v[4], v[5], v[6]]).ok_or(LineProblem::ZeroQuaternion)
+        Se3::from_translation_quaternion([v[0], v[1], v[2]], [v[3], v[4], v[5], v[6]])
+            .ok_or(LineProblem::ZeroQuaternion)
     }
     fn write_numbers(&self, out: &mut String) {
         let t = self.translation;
@@ -287,13 +289,25 @@ fn push_numbers(out: &mut String, values: &[f64]) {
 
 /// Reads a g2o file.
 pub fn read(path: &Path, options: ReadOptions) -> Result<G2oFile, ReadError> {
-    let file = std::fs::File::open(path).map_err(|source| ReadError::Io { path: path.to_owned(), source })?;
+    let file = std::fs::File::open(path).map_err(|source| ReadError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
     read_from(file, path, options)
 }
 
 /// Reads g2o text from any reader; `path` is only used in messages.
-pub fn read_from<R: Read>(reader: R, path: &Path, options: ReadOptions) -> Result<G2oFile, ReadError> {
-    let mut parser = Parser { path, options, state: State::Undecided { fixes: Vec::new() }, summary: ReadSummary::default() };
+pub fn read_from<R: Read>(
+    reader: R,
+    path: &Path,
+    options: ReadOptions,
+) -> Result<G2oFile, ReadError> {
+    let mut parser = Parser {
+        path,
+        options,
+        state: State::Undecided { fixes: Vec::new() },
+        summary: ReadSummary::default(),
+    };
     let mut reader = BufReader::with_capacity(1 << 16, reader);
     let mut buf = Vec::with_capacity(256);
     let mut line_no = 0usize;
@@ -303,14 +317,23 @@ pub fn read_from<R: Read>(reader: R, path: &Path, options: ReadOptions) -> Resul
         let n = (&mut reader)
             .take(MAX_LINE_BYTES as u64 + 1)
             .read_until(b'\n', &mut buf)
-            .map_err(|source| ReadError::Io { path: path.to_owned(), source })?;
+            .map_err(|source| ReadError::Io {
+                path: path.to_owned(),
+                source,
+            })?;
         if n == 0 {
             break;
         }
         if buf.len() > MAX_LINE_BYTES && buf.last() != Some(&b'\n') {
-            return Err(parser.error(line_no, LineProblem::LineTooLong { limit: MAX_LINE_BYTES }));
+            return Err(parser.error(
+                line_no,
+                LineProblem::LineTooLong {
+                    limit: MAX_LINE_BYTES,
+                },
+            ));
         }
-        let text = std::str::from_utf8(&buf).map_err(|_| parser.error(line_no, LineProblem::NotText))?;
+        let text =
+            std::str::from_utf8(&buf).map_err(|_| parser.error(line_no, LineProblem::NotText))?;
         parser.line(line_no, text)?;
     }
     parser.finish()
@@ -331,18 +354,26 @@ struct Parser<'a> {
 
 impl Parser<'_> {
     fn error(&self, line: usize, problem: LineProblem) -> ReadError {
-        ReadError::Line { path: self.path.to_owned(), line, problem }
+        ReadError::Line {
+            path: self.path.to_owned(),
+            line,
+            problem,
+        }
     }
 
     fn line(&mut self, line_no: usize, text: &str) -> Result<(), ReadError> {
         let mut tokens = text.split_whitespace();
-        let Some(tag) = tokens.next() else { return Ok(()) };
+        let Some(tag) = tokens.next() else {
+            return Ok(());
+        };
         if tag.starts_with('#') {
             return Ok(());
         }
         let rest: Vec<&str> = tokens.collect();
         let result = match tag {
-            "VERTEX_SE2" | "EDGE_SE2" | "EDGE_SE2_MIXTURE" => self.planar(line_no, tag)?.line(tag, &rest, line_no),
+            "VERTEX_SE2" | "EDGE_SE2" | "EDGE_SE2_MIXTURE" => {
+                self.planar(line_no, tag)?.line(tag, &rest, line_no)
+            }
             "VERTEX_SE3:QUAT" | "EDGE_SE3:QUAT" | "EDGE_SE3:QUAT_MIXTURE" => {
                 self.spatial(line_no, tag)?.line(tag, &rest, line_no)
             }
@@ -357,9 +388,16 @@ impl Parser<'_> {
 
     fn fix(&mut self, rest: &[&str], line_no: usize) -> Result<(), LineProblem> {
         if rest.is_empty() {
-            return Err(LineProblem::TokenCount { tag: "FIX".into(), expected: "at least 2 tokens".into(), found: 1 });
+            return Err(LineProblem::TokenCount {
+                tag: "FIX".into(),
+                expected: "at least 2 tokens".into(),
+                found: 1,
+            });
         }
-        let ids = rest.iter().map(|t| parse_id(t)).collect::<Result<Vec<_>, _>>()?;
+        let ids = rest
+            .iter()
+            .map(|t| parse_id(t))
+            .collect::<Result<Vec<_>, _>>()?;
         match &mut self.state {
             State::Undecided { fixes } => fixes.push((line_no, ids)),
             State::Planar(b) => b.fix(ids, line_no),
@@ -378,7 +416,10 @@ impl Parser<'_> {
             _ => Err(ReadError::Line {
                 path: self.path.to_owned(),
                 line: line_no,
-                problem: LineProblem::MixedDimensions { tag: tag.to_owned(), dimension: 3 },
+                problem: LineProblem::MixedDimensions {
+                    tag: tag.to_owned(),
+                    dimension: 3,
+                },
             }),
         }
     }
@@ -393,7 +434,10 @@ impl Parser<'_> {
             _ => Err(ReadError::Line {
                 path: self.path.to_owned(),
                 line: line_no,
-                problem: LineProblem::MixedDimensions { tag: tag.to_owned(), dimension: 2 },
+                problem: LineProblem::MixedDimensions {
+                    tag: tag.to_owned(),
+                    dimension: 2,
+                },
             }),
         }
     }
@@ -405,16 +449,32 @@ impl Parser<'_> {
                 let skipped = if self.summary.skipped_tags.is_empty() {
                     String::new()
                 } else {
-                    let tags: Vec<String> = self.summary.skipped_tags.iter().map(|(t, n)| format!("{t} ×{n}")).collect();
-                    format!(" (skipped: {})", tags.join(", "))
+                    let mut by_count: Vec<(&String, &usize)> =
+                        self.summary.skipped_tags.iter().collect();
+                    by_count.sort_by(|a, b| b.1.cmp(a.1).then(a.0.cmp(b.0)));
+                    let shown: Vec<String> = by_count
+                        .iter()
+                        .take(5)
+                        .map(|(t, n)| format!("{t} ×{n}"))
+                        .collect();
+                    let more = match by_count.len().saturating_sub(5) {
+                        0 => String::new(),
+                        k => format!(" and {k} other tags"),
+                    };
+                    format!(" (skipped: {}{more})", shown.join(", "))
                 };
-                return Err(ReadError::NoPoseGraph { path: self.path.to_owned(), skipped });
+                return Err(ReadError::NoPoseGraph {
+                    path: self.path.to_owned(),
+                    skipped,
+                });
             }
             State::Planar(b) => b.finish().map_err(|(line, p)| self.error(line, p))?,
             State::Spatial(b) => b.finish().map_err(|(line, p)| self.error(line, p))?,
         };
         for (tag, count) in &self.summary.skipped_tags {
-            self.summary.warnings.push(format!("skipped {count} line(s) with unsupported tag {tag}"));
+            self.summary.warnings.push(format!(
+                "skipped {count} line(s) with unsupported tag {tag}"
+            ));
         }
         file.summary.skipped_tags = std::mem::take(&mut self.summary.skipped_tags);
         file.summary.warnings.splice(0..0, self.summary.warnings);
@@ -487,7 +547,11 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
     fn edge(&mut self, tag: &str, rest: &[&str]) -> Result<(), LineProblem> {
         let n = 2 + P::POSE_NUMBERS + D * (D + 1) / 2;
         if rest.len() != n && rest.len() != n + 1 {
-            return Err(token_count(tag, &format!("{} tokens ({} with an inlier count)", n + 1, n + 2), rest.len()));
+            return Err(token_count(
+                tag,
+                &format!("{} tokens ({} with an inlier count)", n + 1, n + 2),
+                rest.len(),
+            ));
         }
         let from = parse_id(rest[0])?;
         let to = parse_id(rest[1])?;
@@ -506,30 +570,45 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
         }
         let from = parse_id(rest[0])?;
         let to = parse_id(rest[1])?;
-        let components: usize = rest[2]
-            .parse()
-            .map_err(|_| LineProblem::BadMixture(format!("'{}' is not a component count", rest[2])))?;
-        let body = components.checked_mul(per).and_then(|b| b.checked_add(3)).unwrap_or(usize::MAX);
+        let components: usize = rest[2].parse().map_err(|_| {
+            LineProblem::BadMixture(format!("'{}' is not a component count", rest[2]))
+        })?;
+        let body = components
+            .checked_mul(per)
+            .and_then(|b| b.checked_add(3))
+            .unwrap_or(usize::MAX);
         if components == 0 || (rest.len() != body && rest.len() != body + 1) {
             return Err(token_count(tag, &expected, rest.len() + 1));
         }
         let first = &rest[3..3 + per];
         if first[0] != P::EDGE_TAG {
-            return Err(LineProblem::BadMixture(format!("component starts with '{}', expected {}", first[0], P::EDGE_TAG)));
+            return Err(LineProblem::BadMixture(format!(
+                "component starts with '{}', expected {}",
+                first[0],
+                P::EDGE_TAG
+            )));
         }
         let inliers = rest.get(body).map(|t| parse_count(t)).transpose()?;
         let numbers = parse_numbers(&first[4..])?;
         self.push_edge(from, to, &numbers, inliers)?;
         let k = self.graph.edges.len() - 1;
         // Keep the line as read, without the count (the writer appends it).
-        let keep: Vec<&str> = std::iter::once(tag).chain(rest[..body].iter().copied()).collect();
+        let keep: Vec<&str> = std::iter::once(tag)
+            .chain(rest[..body].iter().copied())
+            .collect();
         self.mixture_lines.insert(k, keep.join(" "));
         Ok(())
     }
 
     /// Adds an edge from `numbers` = pose numbers followed by the upper
     /// triangle of the information matrix.
-    fn push_edge(&mut self, from: VertexId, to: VertexId, numbers: &[f64], inliers: Option<u64>) -> Result<(), LineProblem> {
+    fn push_edge(
+        &mut self,
+        from: VertexId,
+        to: VertexId,
+        numbers: &[f64],
+        inliers: Option<u64>,
+    ) -> Result<(), LineProblem> {
         if from == to {
             return Err(LineProblem::SelfLoop { id: from });
         }
@@ -537,20 +616,26 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
         let mut information = upper_triangle_to_matrix::<D>(&numbers[P::POSE_NUMBERS..]);
         if !is_positive_definite(&information) {
             if !self.options.fix_information {
-                return Err(LineProblem::InformationNotPositiveDefinite { min_eigenvalue: min_eigenvalue(&information) });
+                return Err(LineProblem::InformationNotPositiveDefinite {
+                    min_eigenvalue: min_eigenvalue(&information),
+                });
             }
-            information = nearest_positive_definite(&information).ok_or(LineProblem::InformationZero)?;
+            information =
+                nearest_positive_definite(&information).ok_or(LineProblem::InformationZero)?;
             self.information_fixed += 1;
         }
         self.vertex_index(from);
         self.vertex_index(to);
         let candidate = inliers.map(|n| LoopCandidate { inliers: Some(n) });
-        let k = self.graph.add_edge(from, to, measurement, information, candidate).map_err(|e| match e {
-            // Both vertices exist by now, so a self-loop is all add_edge can report.
-            GraphError::SelfLoop(id) | GraphError::DuplicateVertex(id) | GraphError::UnknownVertex(id) => {
-                LineProblem::SelfLoop { id }
-            }
-        })?;
+        let k = self
+            .graph
+            .add_edge(from, to, measurement, information, candidate)
+            .map_err(|e| match e {
+                // Both vertices exist by now, so a self-loop is all add_edge can report.
+                GraphError::SelfLoop(id)
+                | GraphError::DuplicateVertex(id)
+                | GraphError::UnknownVertex(id) => LineProblem::SelfLoop { id },
+            })?;
         self.records.push(Record::Edge(k));
         Ok(())
     }
@@ -571,7 +656,9 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
                 }
             }
         }
-        let mut order: Vec<usize> = (0..self.graph.num_vertices()).filter(|&k| self.defined_on[k].is_some()).collect();
+        let mut order: Vec<usize> = (0..self.graph.num_vertices())
+            .filter(|&k| self.defined_on[k].is_some())
+            .collect();
         order.sort_by_key(|&k| self.defined_on[k]);
         let defined = order.len();
         order.extend((0..self.graph.num_vertices()).filter(|&k| self.defined_on[k].is_none()));
@@ -581,7 +668,10 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
                 *k = new_index[*k];
             }
         }
-        let mut summary = ReadSummary { information_fixed: self.information_fixed, ..Default::default() };
+        let mut summary = ReadSummary {
+            information_fixed: self.information_fixed,
+            ..Default::default()
+        };
         if self.information_fixed > 0 {
             summary.warnings.push(format!(
                 "projected {} information matrices that were not positive definite to the nearest positive-definite ones",
@@ -600,15 +690,25 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
 }
 
 fn token_count(tag: &str, expected: &str, found_after_tag: usize) -> LineProblem {
-    LineProblem::TokenCount { tag: tag.to_owned(), expected: expected.to_owned(), found: found_after_tag + 1 }
+    LineProblem::TokenCount {
+        tag: tag.to_owned(),
+        expected: expected.to_owned(),
+        found: found_after_tag + 1,
+    }
 }
 
 fn parse_id(token: &str) -> Result<VertexId, LineProblem> {
-    token.parse::<u64>().map_err(|_| LineProblem::BadId { token: token.to_owned() })
+    token.parse::<u64>().map_err(|_| LineProblem::BadId {
+        token: token.to_owned(),
+    })
 }
 
 fn parse_count(token: &str) -> Result<u64, LineProblem> {
-    token.parse::<u64>().map_err(|_| LineProblem::BadInlierCount { token: token.to_owned() })
+    token
+        .parse::<u64>()
+        .map_err(|_| LineProblem::BadInlierCount {
+            token: token.to_owned(),
+        })
 }
 
 fn parse_numbers(tokens: &[&str]) -> Result<Vec<f64>, LineProblem> {
@@ -616,8 +716,12 @@ fn parse_numbers(tokens: &[&str]) -> Result<Vec<f64>, LineProblem> {
         .iter()
         .map(|t| match t.parse::<f64>() {
             Ok(v) if v.is_finite() => Ok(v),
-            Ok(_) => Err(LineProblem::NotFinite { token: (*t).to_owned() }),
-            Err(_) => Err(LineProblem::NotANumber { token: (*t).to_owned() }),
+            Ok(_) => Err(LineProblem::NotFinite {
+                token: (*t).to_owned(),
+            }),
+            Err(_) => Err(LineProblem::NotANumber {
+                token: (*t).to_owned(),
+            }),
         })
         .collect()
 }
@@ -638,7 +742,10 @@ fn upper_triangle_to_matrix<const D: usize>(v: &[f64]) -> SMatrix<f64, D, D> {
 
 fn min_eigenvalue<const D: usize>(m: &SMatrix<f64, D, D>) -> f64 {
     let d = nalgebra::DMatrix::from_column_slice(D, D, m.as_slice());
-    d.symmetric_eigenvalues().iter().copied().fold(f64::INFINITY, f64::min)
+    d.symmetric_eigenvalues()
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min)
 }
 
 impl G2oFile {
@@ -654,7 +761,11 @@ impl G2oFile {
         }
     }
 
-    fn write_graph<P: G2oPose<D>, const D: usize>(&self, g: &PoseGraph<P, D>, out: &mut impl Write) -> io::Result<()> {
+    fn write_graph<P: G2oPose<D>, const D: usize>(
+        &self,
+        g: &PoseGraph<P, D>,
+        out: &mut impl Write,
+    ) -> io::Result<()> {
         let mut line = String::with_capacity(512);
         for &k in &self.missing {
             line.clear();
@@ -715,7 +826,10 @@ fn edge_line<P: G2oPose<D>, const D: usize>(g: &PoseGraph<P, D>, k: usize, line:
 /// Writes a graph that was not read from a file (e.g. a simulated one):
 /// vertices in index order, then edges, then a `FIX` line for explicitly
 /// fixed vertices.
-pub fn write_graph<P: G2oPose<D>, const D: usize>(g: &PoseGraph<P, D>, out: &mut impl Write) -> io::Result<()> {
+pub fn write_graph<P: G2oPose<D>, const D: usize>(
+    g: &PoseGraph<P, D>,
+    out: &mut impl Write,
+) -> io::Result<()> {
     let mut line = String::with_capacity(512);
     for k in 0..g.num_vertices() {
         line.clear();
@@ -727,7 +841,10 @@ pub fn write_graph<P: G2oPose<D>, const D: usize>(g: &PoseGraph<P, D>, out: &mut
         edge_line(g, k, &mut line);
         out.write_all(line.as_bytes())?;
     }
-    let fixed: Vec<String> = (0..g.num_vertices()).filter(|&k| g.is_fixed(k)).map(|k| g.id(k).to_string()).collect();
+    let fixed: Vec<String> = (0..g.num_vertices())
+        .filter(|&k| g.is_fixed(k))
+        .map(|k| g.id(k).to_string())
+        .collect();
     if !fixed.is_empty() {
         writeln!(out, "FIX {}", fixed.join(" "))?;
     }
@@ -739,7 +856,11 @@ mod tests {
     use super::*;
 
     fn parse(text: &str) -> Result<G2oFile, ReadError> {
-        read_from(text.as_bytes(), Path::new("test.g2o"), ReadOptions::default())
+        read_from(
+            text.as_bytes(),
+            Path::new("test.g2o"),
+            ReadOptions::default(),
+        )
     }
 
     fn planar(f: &G2oFile) -> &PoseGraph<Se2, 3> {
@@ -763,17 +884,28 @@ mod tests {
     fn reads_vertices_edges_and_inlier_counts() {
         let f = parse(SE2).unwrap();
         let g = planar(&f);
-        assert_eq!((g.num_vertices(), g.edges.len(), g.num_candidates()), (3, 3, 1));
-        assert_eq!(g.edges[2].candidate, Some(LoopCandidate { inliers: Some(61) }));
+        assert_eq!(
+            (g.num_vertices(), g.edges.len(), g.num_candidates()),
+            (3, 3, 1)
+        );
+        assert_eq!(
+            g.edges[2].candidate,
+            Some(LoopCandidate { inliers: Some(61) })
+        );
         assert!(f.missing.is_empty());
         assert_eq!(g.chi2(), 0.0);
     }
 
     #[test]
     fn information_is_the_upper_triangle_row_by_row() {
-        let f = parse("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0 0\nEDGE_SE2 0 1 0 0 0 10 1 2 20 3 30\n").unwrap();
+        let f =
+            parse("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0 0\nEDGE_SE2 0 1 0 0 0 10 1 2 20 3 30\n")
+                .unwrap();
         let i = planar(&f).edges[0].information;
-        assert_eq!(i, nalgebra::Matrix3::new(10.0, 1.0, 2.0, 1.0, 20.0, 3.0, 2.0, 3.0, 30.0));
+        assert_eq!(
+            i,
+            nalgebra::Matrix3::new(10.0, 1.0, 2.0, 1.0, 20.0, 3.0, 2.0, 3.0, 30.0)
+        );
     }
 
     #[test]
@@ -850,7 +982,10 @@ mod tests {
     #[test]
     fn mixture_edges_read_their_first_component_and_write_back_unchanged() {
         let mix = "EDGE_SE2_MIXTURE 0 2 2 EDGE_SE2 1 0 2 2 0 0 1 0 0 1 0 1 EDGE_SE2 0.01 0 2 2 0 0 1e-11 0 0 1e-11 0 1e-11";
-        let f = parse(&format!("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_SE2 2 2 0 0\n{mix}\n")).unwrap();
+        let f = parse(&format!(
+            "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_SE2 2 2 0 0\n{mix}\n"
+        ))
+        .unwrap();
         let g = planar(&f);
         assert_eq!(g.edges[0].measurement, Se2::new(2.0, 0.0, 0.0));
         assert_eq!(g.edges[0].information, nalgebra::Matrix3::identity());
@@ -863,35 +998,102 @@ mod tests {
     fn errors_name_the_line_and_the_problem() {
         let v = "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n";
         let cases: Vec<(String, usize, &str)> = vec![
-            (format!("{v}EDGE_SE2 0 1 1 0 0 1 0 0 1 0\n"), 3, "EDGE_SE2 needs 12 tokens (13 with an inlier count), found 11"),
-            (format!("{v}EDGE_SE2 0 1 1 x 0 1 0 0 1 0 1\n"), 3, "'x' is not a number"),
-            (format!("{v}EDGE_SE2 0 1 1 nan 0 1 0 0 1 0 1\n"), 3, "'nan' is not finite"),
-            (format!("{v}EDGE_SE2 0 1 1 0 inf 1 0 0 1 0 1\n"), 3, "'inf' is not finite"),
-            (format!("{v}EDGE_SE2 0 -1 1 0 0 1 0 0 1 0 1\n"), 3, "'-1' is not a vertex id"),
-            (format!("{v}EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1 6.5\n"), 3, "inlier count '6.5'"),
-            (format!("{v}EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1 18446744073709551616\n"), 3, "inlier count '18446744073709551616'"),
-            (format!("{v}EDGE_SE2 1 1 1 0 0 1 0 0 1 0 1\n"), 3, "edge from vertex 1 to itself"),
-            (format!("{v}EDGE_SE2 0 1 1 0 0 -1 0 0 1 0 1\n"), 3, "not positive definite"),
-            (format!("{v}VERTEX_SE2 1 5 5 5\n"), 3, "vertex 1 is defined twice (first on line 2)"),
-            (format!("{v}VERTEX_SE3:QUAT 2 0 0 0 0 0 0 1\n"), 3, "VERTEX_SE3:QUAT in a file of 2D poses"),
-            ("VERTEX_SE3:QUAT 2 0 0 0 0 0 0 0\n".to_string(), 1, "quaternion has zero norm"),
-            ("VERTEX_SE2 0 0 0 0 7\n".to_string(), 1, "VERTEX_SE2 needs 5 tokens, found 6"),
-            ("FIX\n".to_string(), 1, "FIX needs at least 2 tokens, found 1"),
+            (
+                format!("{v}EDGE_SE2 0 1 1 0 0 1 0 0 1 0\n"),
+                3,
+                "EDGE_SE2 needs 12 tokens (13 with an inlier count), found 11",
+            ),
+            (
+                format!("{v}EDGE_SE2 0 1 1 x 0 1 0 0 1 0 1\n"),
+                3,
+                "'x' is not a number",
+            ),
+            (
+                format!("{v}EDGE_SE2 0 1 1 nan 0 1 0 0 1 0 1\n"),
+                3,
+                "'nan' is not finite",
+            ),
+            (
+                format!("{v}EDGE_SE2 0 1 1 0 inf 1 0 0 1 0 1\n"),
+                3,
+                "'inf' is not finite",
+            ),
+            (
+                format!("{v}EDGE_SE2 0 -1 1 0 0 1 0 0 1 0 1\n"),
+                3,
+                "'-1' is not a vertex id",
+            ),
+            (
+                format!("{v}EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1 6.5\n"),
+                3,
+                "inlier count '6.5'",
+            ),
+            (
+                format!("{v}EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1 18446744073709551616\n"),
+                3,
+                "inlier count '18446744073709551616'",
+            ),
+            (
+                format!("{v}EDGE_SE2 1 1 1 0 0 1 0 0 1 0 1\n"),
+                3,
+                "edge from vertex 1 to itself",
+            ),
+            (
+                format!("{v}EDGE_SE2 0 1 1 0 0 -1 0 0 1 0 1\n"),
+                3,
+                "not positive definite",
+            ),
+            (
+                format!("{v}VERTEX_SE2 1 5 5 5\n"),
+                3,
+                "vertex 1 is defined twice (first on line 2)",
+            ),
+            (
+                format!("{v}VERTEX_SE3:QUAT 2 0 0 0 0 0 0 1\n"),
+                3,
+                "VERTEX_SE3:QUAT in a file of 2D poses",
+            ),
+            (
+                "VERTEX_SE3:QUAT 2 0 0 0 0 0 0 0\n".to_string(),
+                1,
+                "quaternion has zero norm",
+            ),
+            (
+                "VERTEX_SE2 0 0 0 0 7\n".to_string(),
+                1,
+                "VERTEX_SE2 needs 5 tokens, found 6",
+            ),
+            (
+                "FIX\n".to_string(),
+                1,
+                "FIX needs at least 2 tokens, found 1",
+            ),
         ];
         for (text, line, message) in cases {
             let err = parse(&text).unwrap_err();
             assert_eq!(err.line(), Some(line), "{text}");
             let shown = err.to_string();
             assert!(shown.starts_with(&format!("test.g2o:{line}: ")), "{shown}");
-            assert!(shown.contains(message), "{shown} does not contain {message}");
+            assert!(
+                shown.contains(message),
+                "{shown} does not contain {message}"
+            );
         }
     }
 
     #[test]
     fn indefinite_information_is_projected_on_request_and_counted() {
-        let text = "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 10 0 84022 10 0 10\n";
+        let text =
+            "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 10 0 84022 10 0 10\n";
         assert!(parse(text).is_err());
-        let f = read_from(text.as_bytes(), Path::new("t"), ReadOptions { fix_information: true }).unwrap();
+        let f = read_from(
+            text.as_bytes(),
+            Path::new("t"),
+            ReadOptions {
+                fix_information: true,
+            },
+        )
+        .unwrap();
         assert_eq!(f.summary.information_fixed, 1);
         assert!(is_positive_definite(&planar(&f).edges[0].information));
         assert_eq!(f.summary.warnings.len(), 1);
@@ -900,7 +1102,10 @@ mod tests {
     #[test]
     fn empty_comment_only_and_binary_inputs_are_errors() {
         for text in ["", "# nothing\n\n", "EQUIV 0 1\n"] {
-            assert!(matches!(parse(text), Err(ReadError::NoPoseGraph { .. })), "{text:?}");
+            assert!(
+                matches!(parse(text), Err(ReadError::NoPoseGraph { .. })),
+                "{text:?}"
+            );
         }
         let garbage: &[u8] = &[0x56, 0xff, 0xfe, 0x00, 0x0a];
         let err = read_from(garbage, Path::new("bin"), ReadOptions::default()).unwrap_err();
@@ -911,6 +1116,14 @@ mod tests {
     fn over_long_lines_are_rejected_without_reading_them_whole() {
         let long = format!("# {}\n", "x".repeat(MAX_LINE_BYTES + 10));
         let (line, p) = line_error(&long);
-        assert_eq!((line, p), (1, LineProblem::LineTooLong { limit: MAX_LINE_BYTES }));
+        assert_eq!(
+            (line, p),
+            (
+                1,
+                LineProblem::LineTooLong {
+                    limit: MAX_LINE_BYTES
+                }
+            )
+        );
     }
 }

@@ -51,7 +51,10 @@ pub enum InlierCsvError {
 /// Reads `from,to,inliers` rows. Blank lines and `#` lines are skipped; a
 /// first line that does not start with a number is taken as a header.
 pub fn read_csv(path: &Path) -> Result<Vec<InlierRow>, InlierCsvError> {
-    let io_err = |source| InlierCsvError::Io { path: path.to_owned(), source };
+    let io_err = |source| InlierCsvError::Io {
+        path: path.to_owned(),
+        source,
+    };
     let reader = BufReader::new(std::fs::File::open(path).map_err(io_err)?);
     let mut rows = Vec::new();
     for (k, line) in reader.lines().enumerate() {
@@ -62,16 +65,29 @@ pub fn read_csv(path: &Path) -> Result<Vec<InlierRow>, InlierCsvError> {
             continue;
         }
         let fields: Vec<&str> = text.split(',').map(str::trim).collect();
-        let starts_numeric = fields.first().is_some_and(|f| f.chars().next().is_some_and(|c| c.is_ascii_digit()));
+        let starts_numeric = fields
+            .first()
+            .is_some_and(|f| f.chars().next().is_some_and(|c| c.is_ascii_digit()));
         if line_no == 1 && !starts_numeric {
             continue;
         }
-        let row_err = |problem: String| InlierCsvError::Row { path: path.to_owned(), line: line_no, problem };
+        let row_err = |problem: String| InlierCsvError::Row {
+            path: path.to_owned(),
+            line: line_no,
+            problem,
+        };
         if fields.len() != 3 {
-            return Err(row_err(format!("expected 3 fields (from,to,inliers), found {}", fields.len())));
+            return Err(row_err(format!(
+                "expected 3 fields (from,to,inliers), found {}",
+                fields.len()
+            )));
         }
         let int = |f: &str, what: &str| {
-            f.parse::<u64>().map_err(|_| row_err(format!("{what} '{f}' is not a non-negative integer below 2^64")))
+            f.parse::<u64>().map_err(|_| {
+                row_err(format!(
+                    "{what} '{f}' is not a non-negative integer below 2^64"
+                ))
+            })
         };
         rows.push(InlierRow {
             from: int(fields[0], "vertex id")?,
@@ -92,7 +108,10 @@ pub fn apply<P: Pose<D>, const D: usize>(
 ) -> Result<usize, InlierCsvError> {
     let mut by_pair: HashMap<(VertexId, VertexId), Vec<usize>> = HashMap::new();
     for (k, e) in graph.edges.iter().enumerate() {
-        by_pair.entry((graph.id(e.from), graph.id(e.to))).or_default().push(k);
+        by_pair
+            .entry((graph.id(e.from), graph.id(e.to)))
+            .or_default()
+            .push(k);
     }
     // Consume matches in file order.
     for list in by_pair.values_mut() {
@@ -107,13 +126,18 @@ pub fn apply<P: Pose<D>, const D: usize>(
             .ok_or_else(|| InlierCsvError::Row {
                 path: path.to_owned(),
                 line: row.line,
-                problem: format!("no (further) edge between vertices {} and {}", row.from, row.to),
+                problem: format!(
+                    "no (further) edge between vertices {} and {}",
+                    row.from, row.to
+                ),
             })?;
         let e = &mut graph.edges[edge];
         if e.candidate.is_some_and(|c| c.inliers.is_some()) {
             replaced += 1;
         }
-        e.candidate = Some(LoopCandidate { inliers: Some(row.inliers) });
+        e.candidate = Some(LoopCandidate {
+            inliers: Some(row.inliers),
+        });
     }
     Ok(replaced)
 }
@@ -151,8 +175,14 @@ mod tests {
         assert_eq!(apply(&mut g, &rows, &p).unwrap(), 0);
         assert_eq!(g.edges[0].candidate, None);
         // The k-th row of a pair goes to the k-th edge of that pair.
-        assert_eq!(g.edges[1].candidate, Some(LoopCandidate { inliers: Some(61) }));
-        assert_eq!(g.edges[2].candidate, Some(LoopCandidate { inliers: Some(7) }));
+        assert_eq!(
+            g.edges[1].candidate,
+            Some(LoopCandidate { inliers: Some(61) })
+        );
+        assert_eq!(
+            g.edges[2].candidate,
+            Some(LoopCandidate { inliers: Some(7) })
+        );
         std::fs::remove_file(p).unwrap();
     }
 
@@ -161,10 +191,16 @@ mod tests {
         let p = temp_csv("bad", "0,1,5\n1,2,5\n");
         let rows = read_csv(&p).unwrap();
         let err = apply(&mut graph(), &rows, &p).unwrap_err().to_string();
-        assert!(err.contains(":2:") && err.contains("vertices 1 and 2"), "{err}");
+        assert!(
+            err.contains(":2:") && err.contains("vertices 1 and 2"),
+            "{err}"
+        );
         let p2 = temp_csv("bad2", "0,1,-5\n");
         let err = read_csv(&p2).unwrap_err().to_string();
-        assert!(err.contains(":1:") && err.contains("inlier count '-5'"), "{err}");
+        assert!(
+            err.contains(":1:") && err.contains("inlier count '-5'"),
+            "{err}"
+        );
         std::fs::remove_file(p).unwrap();
         std::fs::remove_file(p2).unwrap();
     }

@@ -57,7 +57,10 @@ where
 
 /// `dir/.name.pgo-tmp-<pid>` beside `path`.
 fn temporary_path(path: &Path) -> PathBuf {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
     path.with_file_name(format!(".{name}.pgo-tmp-{}", std::process::id()))
 }
 

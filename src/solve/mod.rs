@@ -96,7 +96,10 @@ pub enum StopReason {
 impl StopReason {
     /// Whether this reason means convergence.
     pub fn converged(self) -> bool {
-        matches!(self, Self::RelativeDecrease | Self::SmallStep | Self::ZeroError | Self::NothingToOptimize)
+        matches!(
+            self,
+            Self::RelativeDecrease | Self::SmallStep | Self::ZeroError | Self::NothingToOptimize
+        )
     }
 }
 
@@ -165,7 +168,9 @@ pub enum SolveError {
         vertices: Vec<VertexId>,
     },
     /// The normal equations are singular or indefinite at a vertex.
-    #[error("the normal equations are not positive definite at vertex {vertex}: its edges do not determine its pose")]
+    #[error(
+        "the normal equations are not positive definite at vertex {vertex}: its edges do not determine its pose"
+    )]
     NotPositiveDefinite {
         /// The vertex id.
         vertex: VertexId,
@@ -188,7 +193,11 @@ pub enum SolveError {
 
 fn list_ids(ids: &[VertexId]) -> String {
     let shown: Vec<String> = ids.iter().take(10).map(|i| i.to_string()).collect();
-    if ids.len() > 10 { format!("{} …", shown.join(", ")) } else { shown.join(", ") }
+    if ids.len() > 10 {
+        format!("{} …", shown.join(", "))
+    } else {
+        shown.join(", ")
+    }
 }
 
 /// Receives progress from the optimiser.
@@ -241,8 +250,11 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 vertex_of.push(k);
             }
         }
-        let pairs: Vec<(Option<usize>, Option<usize>)> =
-            graph.edges.iter().map(|e| (variable[e.from], variable[e.to])).collect();
+        let pairs: Vec<(Option<usize>, Option<usize>)> = graph
+            .edges
+            .iter()
+            .map(|e| (variable[e.from], variable[e.to]))
+            .collect();
         let system = BlockSystem::new(vertex_of.len(), &pairs, options.threads)?;
         Ok(Self {
             system,
@@ -269,7 +281,10 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     ) -> Result<Summary, SolveError> {
         if let Some(w) = weights {
             if w.len() != graph.edges.len() {
-                return Err(SolveError::WeightCount { weights: w.len(), edges: graph.edges.len() });
+                return Err(SolveError::WeightCount {
+                    weights: w.len(),
+                    edges: graph.edges.len(),
+                });
             }
         }
         let start = Instant::now();
@@ -316,13 +331,19 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             let mut rejected = 0;
             let outcome = loop {
                 let structural_check = summary.factorizations == 0;
-                let damping = if opts.method == Method::GaussNewton || structural_check { 0.0 } else { lambda };
+                let damping = if opts.method == Method::GaussNewton || structural_check {
+                    0.0
+                } else {
+                    lambda
+                };
                 summary.factorizations += 1;
                 match self.system.factorize(damping) {
                     Ok(()) => {}
                     Err(LinearError::NotPositiveDefinite { block }) => {
                         if damping == 0.0 || lambda > 1e16 {
-                            return Err(SolveError::NotPositiveDefinite { vertex: graph.id(self.vertex_of[block]) });
+                            return Err(SolveError::NotPositiveDefinite {
+                                vertex: graph.id(self.vertex_of[block]),
+                            });
                         }
                         lambda *= nu;
                         nu *= 2.0;
@@ -391,7 +412,11 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             let record = IterationRecord {
                 iteration: summary.iterations,
                 objective,
-                lambda: if opts.method == Method::GaussNewton { 0.0 } else { lambda },
+                lambda: if opts.method == Method::GaussNewton {
+                    0.0
+                } else {
+                    lambda
+                },
                 rejected,
                 step_max,
             };
@@ -416,7 +441,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     fn apply_step(&mut self, graph: &PoseGraph<P, D>) {
         self.trial.clone_from(&graph.poses);
         for (block, &v) in self.vertex_of.iter().enumerate() {
-            let delta = nalgebra::SVector::<f64, D>::from_column_slice(&self.step[block * D..block * D + D]);
+            let delta = nalgebra::SVector::<f64, D>::from_column_slice(
+                &self.step[block * D..block * D + D],
+            );
             self.trial[v] = graph.poses[v].retract(&delta);
         }
     }
@@ -447,7 +474,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             if w == 0.0 {
                 continue;
             }
-            let lin = P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
+            let lin =
+                P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
             let omega = e.information * w;
             let oi = omega * lin.jac_i;
             let oj = omega * lin.jac_j;
@@ -497,20 +525,35 @@ mod tests {
     use crate::geometry::{Se2, Se3};
     use nalgebra::{Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
     use rand::{Rng, SeedableRng, rngs::StdRng};
+    use std::f64::consts::{FRAC_PI_2, PI};
 
     /// A square loop of 4 poses with one loop closure whose measurements are
     /// consistent: the optimum has zero error.
     fn square(noise: f64, seed: u64) -> PoseGraph<Se2, 3> {
         let mut rng = StdRng::seed_from_u64(seed);
-        let truth = [Se2::new(0.0, 0.0, 0.0), Se2::new(1.0, 0.0, 1.5708), Se2::new(1.0, 1.0, 3.1416), Se2::new(0.0, 1.0, -1.5708)];
+        let truth = [
+            Se2::new(0.0, 0.0, 0.0),
+            Se2::new(1.0, 0.0, FRAC_PI_2),
+            Se2::new(1.0, 1.0, PI),
+            Se2::new(0.0, 1.0, -FRAC_PI_2),
+        ];
         let mut g = PoseGraph::new();
         for (k, t) in truth.iter().enumerate() {
-            let p = if k == 0 { *t } else { Se2::new(t.x + noise * rng.random_range(-1.0..1.0), t.y + noise * rng.random_range(-1.0..1.0), t.theta + noise * rng.random_range(-1.0..1.0)) };
+            let p = if k == 0 {
+                *t
+            } else {
+                Se2::new(
+                    t.x + noise * rng.random_range(-1.0..1.0),
+                    t.y + noise * rng.random_range(-1.0..1.0),
+                    t.theta + noise * rng.random_range(-1.0..1.0),
+                )
+            };
             g.add_vertex(k as u64, p).unwrap();
         }
         for (i, j) in [(0, 1), (1, 2), (2, 3), (3, 0)] {
             let z = truth[i].inverse().compose(&truth[j]);
-            g.add_edge(i as u64, j as u64, z, Matrix3::identity(), None).unwrap();
+            g.add_edge(i as u64, j as u64, z, Matrix3::identity(), None)
+                .unwrap();
         }
         g
     }
@@ -519,8 +562,19 @@ mod tests {
     fn lm_and_gn_reach_the_exact_optimum_of_a_consistent_loop() {
         for method in [Method::LevenbergMarquardt, Method::GaussNewton] {
             let mut g = square(0.3, 1);
-            let s = optimize(&mut g, &SolverOptions { method, ..Default::default() }).unwrap();
-            assert!(s.final_objective < 1e-16, "{method:?}: {}", s.final_objective);
+            let s = optimize(
+                &mut g,
+                &SolverOptions {
+                    method,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            assert!(
+                s.final_objective < 1e-16,
+                "{method:?}: {}",
+                s.final_objective
+            );
             assert!(s.converged());
             assert!((g.poses[2].x - 1.0).abs() < 1e-8 && (g.poses[2].y - 1.0).abs() < 1e-8);
         }
@@ -542,7 +596,11 @@ mod tests {
         g.add_edge(2, 3, Se2::new(-1.0, 0.0, 0.0), i, None).unwrap();
         g.add_edge(3, 0, Se2::new(0.4, -1.0, 0.0), i, None).unwrap();
         let s = optimize(&mut g, &SolverOptions::default()).unwrap();
-        assert!((s.final_objective - 0.04).abs() < 1e-8, "{}", s.final_objective);
+        assert!(
+            (s.final_objective - 0.04).abs() < 1e-8,
+            "{}",
+            s.final_objective
+        );
     }
 
     #[test]
@@ -557,15 +615,38 @@ mod tests {
         let mut g = PoseGraph::<Se3, 6>::new();
         for (k, t) in truth.iter().enumerate() {
             let noise = Se3::new(
-                UnitQuaternion::from_scaled_axis(Vector3::new(rng.random_range(-0.1..0.1), rng.random_range(-0.1..0.1), rng.random_range(-0.1..0.1))),
-                Vector3::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3)),
+                UnitQuaternion::from_scaled_axis(Vector3::new(
+                    rng.random_range(-0.1..0.1),
+                    rng.random_range(-0.1..0.1),
+                    rng.random_range(-0.1..0.1),
+                )),
+                Vector3::new(
+                    rng.random_range(-0.3..0.3),
+                    rng.random_range(-0.3..0.3),
+                    rng.random_range(-0.3..0.3),
+                ),
             );
-            g.add_vertex(k as u64, if k == 0 { *t } else { t.compose(&noise) }).unwrap();
+            g.add_vertex(k as u64, if k == 0 { *t } else { t.compose(&noise) })
+                .unwrap();
         }
         for k in 1..20 {
-            g.add_edge(k as u64 - 1, k as u64, truth[k - 1].inverse().compose(&truth[k]), Matrix6::identity(), None).unwrap();
+            g.add_edge(
+                k as u64 - 1,
+                k as u64,
+                truth[k - 1].inverse().compose(&truth[k]),
+                Matrix6::identity(),
+                None,
+            )
+            .unwrap();
         }
-        g.add_edge(0, 19, truth[0].inverse().compose(&truth[19]), Matrix6::identity() * 10.0, None).unwrap();
+        g.add_edge(
+            0,
+            19,
+            truth[0].inverse().compose(&truth[19]),
+            Matrix6::identity() * 10.0,
+            None,
+        )
+        .unwrap();
         let s = optimize(&mut g, &SolverOptions::default()).unwrap();
         assert!(s.final_objective < 1e-14, "{}", s.final_objective);
         assert!((g.poses[19].translation - truth[19].translation).norm() < 1e-6);
@@ -575,12 +656,24 @@ mod tests {
     fn weights_switch_edges_off() {
         let mut g = square(0.0, 2);
         // A wrong edge 0→2 that would pull pose 2.
-        g.add_edge(0, 2, Se2::new(5.0, 5.0, 0.0), Matrix3::identity() * 100.0, None).unwrap();
+        g.add_edge(
+            0,
+            2,
+            Se2::new(5.0, 5.0, 0.0),
+            Matrix3::identity() * 100.0,
+            None,
+        )
+        .unwrap();
         let mut opt = Optimizer::new(&g, SolverOptions::default()).unwrap();
         let w = [1.0, 1.0, 1.0, 1.0, 0.0];
-        let s = opt.run(&mut g, Some(&w), &mut |_: &IterationRecord| {}).unwrap();
+        let s = opt
+            .run(&mut g, Some(&w), &mut |_: &IterationRecord| {})
+            .unwrap();
         assert!(s.final_objective < 1e-16);
-        assert!(opt.run(&mut g, Some(&w[..3]), &mut |_: &IterationRecord| {}).is_err());
+        assert!(
+            opt.run(&mut g, Some(&w[..3]), &mut |_: &IterationRecord| {})
+                .is_err()
+        );
     }
 
     #[test]
@@ -588,9 +681,16 @@ mod tests {
         let mut g = square(0.0, 3);
         g.add_vertex(40, Se2::identity()).unwrap();
         g.add_vertex(41, Se2::identity()).unwrap();
-        g.add_edge(40, 41, Se2::identity(), Matrix3::identity(), None).unwrap();
+        g.add_edge(40, 41, Se2::identity(), Matrix3::identity(), None)
+            .unwrap();
         let err = optimize(&mut g, &SolverOptions::default()).unwrap_err();
-        assert_eq!(err, SolveError::Unconstrained { gauge: 0, vertices: vec![40, 41] });
+        assert_eq!(
+            err,
+            SolveError::Unconstrained {
+                gauge: 0,
+                vertices: vec![40, 41]
+            }
+        );
         assert!(err.to_string().contains("40, 41"));
     }
 
@@ -602,9 +702,17 @@ mod tests {
         g.add_vertex(0, Se2::identity()).unwrap();
         g.add_vertex(1, Se2::new(1.0, 0.0, 0.0)).unwrap();
         let info = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 0.0));
-        g.add_edge(0, 1, Se2::new(1.5, 0.0, 0.0), info, None).unwrap();
+        g.add_edge(0, 1, Se2::new(1.5, 0.0, 0.0), info, None)
+            .unwrap();
         for method in [Method::GaussNewton, Method::LevenbergMarquardt] {
-            let err = optimize(&mut g.clone(), &SolverOptions { method, ..Default::default() }).unwrap_err();
+            let err = optimize(
+                &mut g.clone(),
+                &SolverOptions {
+                    method,
+                    ..Default::default()
+                },
+            )
+            .unwrap_err();
             assert_eq!(err, SolveError::NotPositiveDefinite { vertex: 1 });
         }
     }
@@ -613,10 +721,27 @@ mod tests {
     fn iteration_and_time_limits_are_honoured_and_keep_the_best() {
         let mut g = square(0.5, 4);
         let start = g.chi2();
-        let s = optimize(&mut g, &SolverOptions { max_iterations: 1, ..Default::default() }).unwrap();
-        assert_eq!((s.iterations, s.stop_reason), (1, StopReason::MaxIterations));
+        let s = optimize(
+            &mut g,
+            &SolverOptions {
+                max_iterations: 1,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(
+            (s.iterations, s.stop_reason),
+            (1, StopReason::MaxIterations)
+        );
         assert!(s.final_objective <= start && (g.chi2() - s.final_objective).abs() < 1e-12);
-        let s = optimize(&mut g, &SolverOptions { time_limit: Some(Duration::ZERO), ..Default::default() }).unwrap();
+        let s = optimize(
+            &mut g,
+            &SolverOptions {
+                time_limit: Some(Duration::ZERO),
+                ..Default::default()
+            },
+        )
+        .unwrap();
         assert_eq!((s.iterations, s.stop_reason), (0, StopReason::TimeLimit));
     }
 
@@ -624,6 +749,9 @@ mod tests {
     fn non_finite_start_is_an_error_not_a_nan_result() {
         let mut g = square(0.0, 5);
         g.poses[1].x = f64::NAN;
-        assert_eq!(optimize(&mut g, &SolverOptions::default()).unwrap_err(), SolveError::NonFiniteStart);
+        assert_eq!(
+            optimize(&mut g, &SolverOptions::default()).unwrap_err(),
+            SolveError::NonFiniteStart
+        );
     }
 }

@@ -1,0 +1,167 @@
+//! The `pgo` binary: exit codes, messages, the JSON report, output files.
+
+use crate::common::{pgo, stderr, temp_dir, write};
+
+/// A small consistent 2D graph: a square with a loop closure, noisy guess.
+const SQUARE: &str = "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1.1 0.1 1.5\nVERTEX_SE2 2 0.9 1.2 3.1\nVERTEX_SE2 3 0.1 0.9 -1.6\n\
+EDGE_SE2 0 1 1 0 1.5707963267948966 100 0 0 100 0 1000\n\
+EDGE_SE2 1 2 1 0 1.5707963267948966 100 0 0 100 0 1000\n\
+EDGE_SE2 2 3 1 0 1.5707963267948966 100 0 0 100 0 1000\n\
+EDGE_SE2 3 0 1 0 1.5707963267948966 100 0 0 100 0 1000 57\n";
+
+#[test]
+fn optimize_prints_a_json_report_with_the_required_keys() {
+    let dir = temp_dir("json");
+    let input = write(&dir, "square.g2o", SQUARE);
+    let out = pgo(&["optimize", input.to_str().unwrap(), "--json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in [
+        "input",
+        "dimension",
+        "poses",
+        "edges",
+        "loop_candidates",
+        "warnings",
+    ] {
+        assert!(r.get(key).is_some(), "missing {key}");
+    }
+    for key in [
+        "solver",
+        "iterations",
+        "initial_chi2",
+        "final_chi2",
+        "converged",
+        "stop_reason",
+        "time_s",
+    ] {
+        assert!(r["optimizer"].get(key).is_some(), "missing optimizer.{key}");
+    }
+    assert_eq!(r["dimension"], 2);
+    assert_eq!(r["loop_candidates"], 1);
+    assert!(r["optimizer"]["final_chi2"].as_f64().unwrap() < 1e-12);
+    // The human summary goes to stderr.
+    assert!(
+        stderr(&out).contains("4 poses, 4 edges, 1 loop candidates"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn output_is_written_and_reads_back_with_the_counts_kept() {
+    let dir = temp_dir("output");
+    let input = write(&dir, "square.g2o", SQUARE);
+    let output = dir.join("out.g2o");
+    let out = pgo(&[
+        "optimize",
+        input.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let text = std::fs::read_to_string(&output).unwrap();
+    assert!(text.lines().last().unwrap().ends_with(" 57"), "{text}");
+    // Optimising the output again changes nothing.
+    let again = pgo(&[
+        "optimize",
+        output.to_str().unwrap(),
+        "--init",
+        "file",
+        "--json",
+        "-q",
+    ]);
+    let r: serde_json::Value = serde_json::from_slice(&again.stdout).unwrap();
+    assert!(r["input_chi2"].as_f64().unwrap() < 1e-12);
+    // No temporary file is left beside it.
+    let names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names.len(), 2, "{names:?}");
+}
+
+#[test]
+fn in_place_is_needed_to_overwrite_the_input() {
+    let dir = temp_dir("inplace");
+    let input = write(&dir, "square.g2o", SQUARE);
+    let out = pgo(&["optimize", input.to_str().unwrap(), "-q"]);
+    assert_eq!(out.status.code(), Some(0));
+    assert_eq!(std::fs::read_to_string(&input).unwrap(), SQUARE);
+    let out = pgo(&["optimize", input.to_str().unwrap(), "--in-place", "-q"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert_ne!(std::fs::read_to_string(&input).unwrap(), SQUARE);
+}
+
+#[test]
+fn bad_input_exits_2_naming_file_and_line_and_writes_nothing() {
+    let dir = temp_dir("bad");
+    let input = write(
+        &dir,
+        "bad.g2o",
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 zero 1 0 0 1 0 1\n",
+    );
+    let output = dir.join("out.g2o");
+    let out = pgo(&[
+        "optimize",
+        input.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let message = stderr(&out);
+    assert!(
+        message.contains("bad.g2o:3: 'zero' is not a number"),
+        "{message}"
+    );
+    assert!(!output.exists());
+}
+
+#[test]
+fn missing_file_and_usage_errors_exit_2() {
+    let out = pgo(&["optimize", "/nonexistent/graph.g2o"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("/nonexistent/graph.g2o"));
+    let out = pgo(&["optimize"]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = pgo(&["optimize", "x.g2o", "--solver", "newton"]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = pgo(&["--help"]);
+    assert_eq!(out.status.code(), Some(0));
+}
+
+#[test]
+fn disconnected_graph_names_the_unconstrained_vertices() {
+    let dir = temp_dir("disconnected");
+    let text =
+        format!("{SQUARE}VERTEX_SE2 7 0 0 0\nVERTEX_SE2 8 0 0 0\nEDGE_SE2 7 8 1 0 0 1 0 0 1 0 1\n");
+    let input = write(&dir, "two.g2o", &text);
+    let out = pgo(&["optimize", input.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("not connected to the gauge vertex 0")
+            && stderr(&out).contains("7, 8"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn inliers_csv_turns_edges_into_candidates() {
+    let dir = temp_dir("csv");
+    let plain = SQUARE.replace(" 57\n", "\n");
+    let input = write(&dir, "square.g2o", &plain);
+    let csv = write(&dir, "counts.csv", "from,to,inliers\n3,0,99\n");
+    let out = pgo(&[
+        "optimize",
+        input.to_str().unwrap(),
+        "--inliers",
+        csv.to_str().unwrap(),
+        "--json",
+        "-q",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r["loop_candidates"], 1);
+}

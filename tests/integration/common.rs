@@ -1,0 +1,50 @@
+//! Shared helpers: the binary, temporary files, the public datasets.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// Runs the `pgo` binary with `args`.
+pub fn pgo(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_pgo"))
+        .args(args)
+        .output()
+        .expect("run pgo")
+}
+
+/// stderr as text.
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A fresh temporary directory for one test.
+pub fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pgo-it-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("create temp dir");
+    d
+}
+
+/// Writes `text` to `dir/name` and returns the path.
+pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).expect("write test file");
+    p
+}
+
+/// The public benchmark datasets: `$PGO_DATASETS`, else `../shared/datasets`
+/// beside the crate. `None` (with a printed reason) when absent, so the
+/// tests that need them skip.
+pub fn datasets() -> Option<PathBuf> {
+    let dir = std::env::var_os("PGO_DATASETS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets"));
+    if dir.join("intel.g2o").is_file() {
+        Some(dir)
+    } else {
+        eprintln!(
+            "skipped: public datasets not found at {} (set PGO_DATASETS)",
+            dir.display()
+        );
+        None
+    }
+}

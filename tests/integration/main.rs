@@ -1,0 +1,6 @@
+//! Integration tests: one test binary (as nalgebra does), one module per
+//! concern.
+
+mod cli;
+mod common;
+mod datasets;
