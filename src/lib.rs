@@ -1,4 +1,5 @@
 //! pgo: pose-graph SLAM back end with unsupervised loop-closure gating.
+pub mod gate;
 pub mod geometry;
 pub mod graph;
 pub mod stats;
