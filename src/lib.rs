@@ -2,6 +2,7 @@
 
 // Index loops over small fixed-size blocks read like the maths they implement.
 #![allow(clippy::needless_range_loop)]
+pub mod gate;
 pub mod geometry;
 pub mod graph;
 pub mod io;
@@ -9,3 +10,4 @@ pub mod linear;
 pub mod pipeline;
 pub mod report;
 pub mod solve;
+pub mod stats;
