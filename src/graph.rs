@@ -235,11 +235,15 @@ impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
 
     /// The vertices that no chain of edges connects to the gauge, by index,
     /// in increasing order. A non-empty result means the problem has no
-    /// unique solution.
-    pub fn unconstrained_vertices(&self) -> Vec<usize> {
+    /// unique solution. Edges whose weight (one per edge) is zero do not
+    /// count.
+    pub fn unconstrained_vertices(&self, weights: Option<&[f64]>) -> Vec<usize> {
         let n = self.ids.len();
         let mut adjacency: Vec<Vec<usize>> = vec![Vec::new(); n];
-        for e in &self.edges {
+        for (k, e) in self.edges.iter().enumerate() {
+            if weights.is_some_and(|w| w[k] == 0.0) {
+                continue;
+            }
             adjacency[e.from].push(e.to);
             adjacency[e.to].push(e.from);
         }
@@ -395,7 +399,7 @@ mod tests {
             .unwrap();
         g.add_vertex(12, Se2::identity()).unwrap();
         let ids: Vec<_> = g
-            .unconstrained_vertices()
+            .unconstrained_vertices(None)
             .iter()
             .map(|&k| g.id(k))
             .collect();

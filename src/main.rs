@@ -1,7 +1,9 @@
 //! `pgo`: the command-line interface, a thin clap layer over the library.
 
 use clap::{Parser, Subcommand, ValueEnum};
+use pgo::gate::{DegeneratePolicy, GateMode};
 use pgo::pipeline::{self, OptimizeConfig};
+use pgo::stats::DofConvention;
 use pgo::solve::init::Initialization;
 use pgo::solve::{IterationRecord, Method};
 use std::path::PathBuf;
@@ -51,6 +53,20 @@ struct OptimizeArgs {
     /// nearest positive-definite ones instead of failing.
     #[arg(long)]
     fix_information: bool,
+    /// Loop-candidate gate: `auto` learns T_GV from the inlier counts, `off`
+    /// keeps every candidate, a number N keeps candidates with count ≥ N.
+    #[arg(long, value_name = "auto|off|N", default_value = "auto", value_parser = parse_gate)]
+    gate: GateMode,
+    /// What the learned gate does when the counts do not show two components.
+    #[arg(long, value_enum, default_value_t = DegenerateArg::DropAll)]
+    degenerate: DegenerateArg,
+    /// Significance level of the χ² test of the result.
+    #[arg(long, default_value_t = 0.05, value_parser = parse_alpha)]
+    alpha: f64,
+    /// Degrees of freedom of the χ² test: residual (Σ edge dimensions − free
+    /// pose parameters) or constraints (number of edges, as in the paper).
+    #[arg(long, value_enum, default_value_t = DofArg::Residual)]
+    dof: DofArg,
     /// Threads (0: all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -71,6 +87,39 @@ enum SolverArg {
     Lm,
     /// Gauss–Newton.
     Gn,
+}
+
+#[derive(Copy, Clone, Debug, ValueEnum)]
+enum DegenerateArg {
+    /// Keep every candidate.
+    KeepAll,
+    /// Drop every counted candidate: no wrong loop gets in silently.
+    DropAll,
+    /// Use the crossing anyway when there is one.
+    Threshold,
+}
+
+#[derive(Copy, Clone, Debug, ValueEnum)]
+enum DofArg {
+    /// Σ edge dimensions − free pose parameters (the textbook value).
+    Residual,
+    /// The number of constraints (the paper's K).
+    Constraints,
+}
+
+fn parse_gate(s: &str) -> Result<GateMode, String> {
+    match s {
+        "auto" => Ok(GateMode::Auto),
+        "off" => Ok(GateMode::Off),
+        n => n.parse::<u64>().map(GateMode::Fixed).map_err(|_| format!("expected auto, off or a non-negative integer, got '{n}'")),
+    }
+}
+
+fn parse_alpha(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(a) if a > 0.0 && a < 1.0 => Ok(a),
+        _ => Err(format!("expected a number in (0, 1), got '{s}'")),
+    }
 }
 
 #[derive(Copy, Clone, Debug, ValueEnum)]
@@ -120,6 +169,17 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
         SolverArg::Gn => Method::GaussNewton,
     };
     config.solver.max_iterations = args.max_iters;
+    config.gate = args.gate;
+    config.degenerate = match args.degenerate {
+        DegenerateArg::KeepAll => DegeneratePolicy::KeepAll,
+        DegenerateArg::DropAll => DegeneratePolicy::DropAll,
+        DegenerateArg::Threshold => DegeneratePolicy::Threshold,
+    };
+    config.alpha = args.alpha;
+    config.dof = match args.dof {
+        DofArg::Residual => DofConvention::Residual,
+        DofArg::Constraints => DofConvention::Constraints,
+    };
     config.solver.threads = args.threads;
     if let Some(t) = args.time_limit {
         if !(t >= 0.0 && t.is_finite()) {

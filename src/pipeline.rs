@@ -1,12 +1,14 @@
 //! The whole job of `pgo optimize`, as a library call: read → initialise →
 //! optimise → report → write. The CLI is a thin layer over [`run`].
 
+use crate::gate::{self, DegeneratePolicy, GateMode, MixtureOptions};
 use crate::graph::{AnyPoseGraph, PoseGraph};
 use crate::io::g2o::{self, G2oFile, G2oPose, ReadError, ReadOptions};
 use crate::io::inliers::{self, InlierCsvError};
-use crate::report::{InitializationReport, OptimizerReport, Report};
+use crate::report::{GateReport, InitializationReport, LoopReport, OptimizerReport, Report};
 use crate::solve::init::{ChordalInit, Initialization, initialize};
 use crate::solve::{IterationRecord, Optimizer, SolveError, SolverOptions};
+use crate::stats::{Chi2Test, DofConvention};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -25,6 +27,16 @@ pub struct OptimizeConfig {
     pub initialization: Initialization,
     /// Solver options.
     pub solver: SolverOptions,
+    /// How loop candidates are gated by their inlier counts.
+    pub gate: GateMode,
+    /// What the learned gate does when the counts are degenerate.
+    pub degenerate: DegeneratePolicy,
+    /// Options of the mixture fit.
+    pub mixture: MixtureOptions,
+    /// Significance level of the χ² test.
+    pub alpha: f64,
+    /// Degrees of freedom of the χ² test.
+    pub dof: DofConvention,
 }
 
 impl OptimizeConfig {
@@ -37,6 +49,11 @@ impl OptimizeConfig {
             fix_information: false,
             initialization: Initialization::default(),
             solver: SolverOptions::default(),
+            gate: GateMode::default(),
+            degenerate: DegeneratePolicy::default(),
+            mixture: MixtureOptions::default(),
+            alpha: 0.05,
+            dof: DofConvention::default(),
         }
     }
 }
@@ -127,31 +144,40 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     report: &mut Report,
     observer: &mut dyn FnMut(&IterationRecord),
 ) -> Result<(), PipelineError> {
-    let solve_error = |source| PipelineError::Solve {
-        path: config.input.clone(),
-        source,
-    };
+    let solve_error = |source| PipelineError::Solve { path: config.input.clone(), source };
     if let Some(csv) = &config.inliers {
         let rows = inliers::read_csv(csv)?;
         let replaced = inliers::apply(graph, &rows, csv)?;
         if replaced > 0 {
-            report.warnings.push(format!(
-                "{}: replaced the inlier counts of {replaced} edges",
-                csv.display()
-            ));
+            report.warnings.push(format!("{}: replaced the inlier counts of {replaced} edges", csv.display()));
         }
     }
+
+    // Gate: learn T_GV from the candidates' counts and drop those below it.
+    let candidates: Vec<usize> = (0..graph.edges.len()).filter(|&k| graph.edges[k].is_candidate()).collect();
+    let counts: Vec<Option<u64>> = candidates.iter().map(|&k| graph.edges[k].candidate.and_then(|c| c.inliers)).collect();
+    let decision = gate::gate(&counts, config.gate, config.degenerate, &config.mixture);
+    let mut weights = vec![1.0; graph.edges.len()];
+    for (&k, &kept) in candidates.iter().zip(&decision.kept) {
+        weights[k] = if kept { 1.0 } else { 0.0 };
+    }
+    report.gate = GateReport::new(&decision, &counts);
+    if decision.degenerate && report.gate.counted > 0 {
+        if let Some(reason) = &decision.reason {
+            report.warnings.push(format!("the inlier counts are degenerate: {reason}; policy {:?}", config.degenerate));
+        }
+    }
+
     // An unconstrained vertex makes every later step meaningless: say so first.
-    let optimizer = Optimizer::new(graph, config.solver.clone());
-    let mut optimizer = optimizer.map_err(solve_error)?;
+    let mut optimizer = Optimizer::new(graph, Some(&weights), config.solver.clone()).map_err(solve_error)?;
 
     let start = Instant::now();
     // The file's own guess first (vertices without a line by spanning tree),
     // so that its χ² can be reported whatever the initialisation.
-    initialize(graph, missing, Initialization::File, None).map_err(solve_error)?;
+    initialize(graph, missing, Initialization::File, Some(&weights)).map_err(solve_error)?;
     report.input_chi2 = graph.chi2();
     if config.initialization != Initialization::File {
-        initialize(graph, missing, config.initialization, None).map_err(solve_error)?;
+        initialize(graph, missing, config.initialization, Some(&weights)).map_err(solve_error)?;
     }
     report.initialization = InitializationReport {
         method: config.initialization,
@@ -161,14 +187,37 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     };
 
     let summary = optimizer
-        .run(graph, None, &mut |r: &IterationRecord| observer(r))
+        .run(graph, Some(&weights), &mut |r: &IterationRecord| observer(r))
         .map_err(solve_error)?;
     if graph.poses.iter().any(|p| !p.is_finite()) {
-        return Err(PipelineError::NonFiniteResult {
-            path: config.input.clone(),
-        });
+        return Err(PipelineError::NonFiniteResult { path: config.input.clone() });
     }
     report.optimizer = OptimizerReport::new(&summary, graph.chi2(), optimizer.system());
+
+    // The χ² test over the edges that were optimised (weight ≥ ½), each at
+    // its plain cost.
+    let used: Vec<usize> = (0..graph.edges.len()).filter(|&k| weights[k] >= 0.5).collect();
+    let d2: f64 = used.iter().map(|&k| graph.edge_chi2(&graph.edges[k])).sum();
+    let free = graph.num_vertices() - graph.gauge().len();
+    let dof_residual = (used.len() * D) as i64 - (free * D) as i64;
+    match Chi2Test::new(d2, used.len() as u64, dof_residual, config.dof, config.alpha) {
+        Ok(test) => report.chi2_test = Some(test),
+        Err(e) => report.warnings.push(format!("no χ² test: {e}")),
+    }
+    report.loops = candidates
+        .iter()
+        .zip(&decision.kept)
+        .map(|(&k, &kept)| {
+            let e = &graph.edges[k];
+            LoopReport {
+                from: graph.id(e.from),
+                to: graph.id(e.to),
+                inliers: e.candidate.and_then(|c| c.inliers),
+                kept,
+                weight: weights[k],
+            }
+        })
+        .collect();
     Ok(())
 }
 

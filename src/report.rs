@@ -1,7 +1,10 @@
 //! The report of a run: what was read, how it was initialised and
 //! optimised, serialised to JSON with `--json` and summarised for humans.
 
+use crate::gate::{DegeneratePolicy, GateDecision, GateMode, LogNormalMixture, Separation};
+use crate::graph::VertexId;
 use crate::io::g2o::G2oFile;
+use crate::stats::Chi2Test;
 use crate::linear::BlockSystem;
 use crate::solve::init::Initialization;
 use crate::solve::{Method, StopReason, Summary};
@@ -35,8 +38,103 @@ pub struct Report {
     pub initialization: InitializationReport,
     /// The optimisation.
     pub optimizer: OptimizerReport,
+    /// The geometric-verification gate.
+    pub gate: GateReport,
+    /// The χ² goodness-of-fit test of the result (absent when it cannot be
+    /// computed, with a warning saying why).
+    pub chi2_test: Option<Chi2Test>,
+    /// One entry per loop candidate, in file order.
+    pub loops: Vec<LoopReport>,
     /// Warnings, one line each.
     pub warnings: Vec<String>,
+}
+
+/// What the gate did.
+#[derive(Clone, Debug, Serialize, Default)]
+pub struct GateReport {
+    /// Whether a gate was applied (mode other than `off`).
+    pub enabled: bool,
+    /// `auto`, `off` or `{"fixed": N}`.
+    pub mode: GateMode,
+    /// The degenerate policy.
+    pub policy: DegeneratePolicy,
+    /// `T_GV` in inlier counts (`count < T_GV` is dropped), when one was applied.
+    pub threshold: Option<f64>,
+    /// `T_GV / max_inliers`.
+    pub normalized_threshold: Option<f64>,
+    /// The largest inlier count.
+    pub max_inliers: u64,
+    /// Candidates with a count of zero (never fitted; "not a loop").
+    pub zero_counts: usize,
+    /// Candidates with a count.
+    pub counted: usize,
+    /// The fitted log-normal mixture (`mode = auto`).
+    pub mixture: Option<LogNormalMixture>,
+    /// BIC, Ashman's D and the loop component's size.
+    pub separation: Option<Separation>,
+    /// Candidates kept.
+    pub kept: usize,
+    /// Candidates dropped.
+    pub dropped: usize,
+    /// Whether the counts were found degenerate.
+    pub degenerate: bool,
+    /// Why, in plain words.
+    pub reason: Option<String>,
+}
+
+impl GateReport {
+    /// From the gate's decision and the candidates' counts.
+    pub fn new(decision: &GateDecision, counts: &[Option<u64>]) -> Self {
+        let max_inliers = counts.iter().flatten().copied().max().unwrap_or(0);
+        let fit = decision.fit.as_ref();
+        Self {
+            enabled: decision.mode != GateMode::Off,
+            mode: decision.mode,
+            policy: decision.policy,
+            threshold: decision.threshold,
+            normalized_threshold: decision.threshold.filter(|_| max_inliers > 0).map(|t| t / max_inliers as f64),
+            max_inliers,
+            zero_counts: counts.iter().filter(|c| **c == Some(0)).count(),
+            counted: counts.iter().flatten().count(),
+            mixture: fit.and_then(|f| f.mixture.clone()),
+            separation: fit.and_then(|f| f.separation.clone()),
+            kept: decision.kept_count(),
+            dropped: decision.dropped_count(),
+            degenerate: decision.degenerate,
+            reason: decision.reason.as_ref().map(|r| r.to_string()),
+        }
+    }
+
+    /// One line for humans.
+    pub fn summary(&self) -> String {
+        let total = self.kept + self.dropped;
+        if total == 0 {
+            return "gate: no loop candidates".into();
+        }
+        let rule = match (self.mode, self.threshold) {
+            (GateMode::Off, _) => "off".to_string(),
+            (_, Some(t)) if !self.degenerate => format!("T_GV = {t:.1} inliers"),
+            (_, Some(t)) => format!("T_GV = {t:.1} inliers despite degenerate counts"),
+            (_, None) if self.degenerate => format!("degenerate counts, {:?}", self.policy),
+            (_, None) => "no threshold".to_string(),
+        };
+        format!("gate: {rule}; kept {} of {total} loop candidates", self.kept)
+    }
+}
+
+/// One loop candidate's fate.
+#[derive(Clone, Debug, Serialize)]
+pub struct LoopReport {
+    /// First vertex id.
+    pub from: VertexId,
+    /// Second vertex id.
+    pub to: VertexId,
+    /// Its inlier count, if it has one.
+    pub inliers: Option<u64>,
+    /// Whether it passed the gate.
+    pub kept: bool,
+    /// Its final weight in the optimisation, in [0, 1].
+    pub weight: f64,
 }
 
 /// How the initial guess was made.
@@ -140,6 +238,9 @@ impl Report {
             input_chi2: 0.0,
             initialization: InitializationReport::default(),
             optimizer: OptimizerReport::default(),
+            gate: GateReport::default(),
+            chi2_test: None,
+            loops: Vec::new(),
             warnings: file.summary.warnings.clone(),
         }
     }
@@ -169,6 +270,26 @@ impl Report {
             o.stop_reason,
             o.time_s + self.initialization.time_s
         );
+        // One line: the threshold, what was kept, and the χ² verdict.
+        let mut verdict = Vec::new();
+        if self.loop_candidates > 0 {
+            verdict.push(self.gate.summary());
+        }
+        if let Some(t) = &self.chi2_test {
+            verdict.push(format!(
+                "χ² test {}: D² = {:.4e} {} χ²({}, {}) = {:.4e}",
+                if t.passed { "passed" } else { "FAILED" },
+                t.d2,
+                if t.passed { "≤" } else { ">" },
+                t.dof,
+                1.0 - t.alpha,
+                t.critical,
+            ));
+        }
+        if !verdict.is_empty() {
+            s += &verdict.join("; ");
+            s.push('\n');
+        }
         for w in &self.warnings {
             s += &format!("warning: {w}\n");
         }

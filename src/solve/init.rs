@@ -144,8 +144,8 @@ struct LinearProblem<const D: usize> {
 }
 
 impl<const D: usize> LinearProblem<D> {
-    fn new<P: Pose<D2>, const D2: usize>(graph: &PoseGraph<P, D2>) -> Result<Self, SolveError> {
-        let unconstrained = graph.unconstrained_vertices();
+    fn new<P: Pose<D2>, const D2: usize>(graph: &PoseGraph<P, D2>, weights: Option<&[f64]>) -> Result<Self, SolveError> {
+        let unconstrained = graph.unconstrained_vertices(weights);
         if !unconstrained.is_empty() {
             let gauge = graph.gauge().first().map(|&g| graph.id(g)).unwrap_or(0);
             return Err(SolveError::Unconstrained {
@@ -247,7 +247,7 @@ fn rotation_precision<const D: usize>(
 
 impl ChordalInit<3> for Se2 {
     fn chordal(graph: &mut PoseGraph<Self, 3>, weights: Option<&[f64]>) -> Result<(), SolveError> {
-        let mut lp = LinearProblem::<2>::new(graph)?;
+        let mut lp = LinearProblem::<2>::new(graph, weights)?;
         // Rotations: r = (cos θ, sin θ), r_j − M(θ_ij) r_i = 0.
         lp.system.clear();
         for (k, e) in graph.edges.iter().enumerate() {
@@ -314,7 +314,7 @@ impl ChordalInit<3> for Se2 {
 
 impl ChordalInit<6> for Se3 {
     fn chordal(graph: &mut PoseGraph<Self, 6>, weights: Option<&[f64]>) -> Result<(), SolveError> {
-        let mut lp = LinearProblem::<3>::new(graph)?;
+        let mut lp = LinearProblem::<3>::new(graph, weights)?;
         let n = graph.num_vertices();
         // Rotations, one row at a time: row_k(R_j) = row_k(R_i)·R_ij, i.e.
         // ρ_j − R_ijᵀ ρ_i = 0 for the row vectors ρ.

@@ -227,9 +227,15 @@ pub struct Optimizer<P, const D: usize> {
 
 impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// Prepares to optimise `graph` (its structure, not its values).
-    /// Fails if some vertex is not connected to the gauge.
-    pub fn new(graph: &PoseGraph<P, D>, options: SolverOptions) -> Result<Self, SolveError> {
-        let unconstrained = graph.unconstrained_vertices();
+    /// Fails if some vertex is not connected to the gauge by edges of
+    /// non-zero weight (`weights`: one per edge, default 1).
+    pub fn new(graph: &PoseGraph<P, D>, weights: Option<&[f64]>, options: SolverOptions) -> Result<Self, SolveError> {
+        if let Some(w) = weights {
+            if w.len() != graph.edges.len() {
+                return Err(SolveError::WeightCount { weights: w.len(), edges: graph.edges.len() });
+            }
+        }
+        let unconstrained = graph.unconstrained_vertices(weights);
         let gauge = graph.gauge();
         if !unconstrained.is_empty() {
             return Err(SolveError::Unconstrained {
@@ -515,7 +521,7 @@ pub fn optimize<P: Pose<D>, const D: usize>(
     graph: &mut PoseGraph<P, D>,
     options: &SolverOptions,
 ) -> Result<Summary, SolveError> {
-    let mut optimizer = Optimizer::new(graph, options.clone())?;
+    let mut optimizer = Optimizer::new(graph, None, options.clone())?;
     optimizer.run(graph, None, &mut |_: &IterationRecord| {})
 }
 
@@ -664,7 +670,7 @@ mod tests {
             None,
         )
         .unwrap();
-        let mut opt = Optimizer::new(&g, SolverOptions::default()).unwrap();
+        let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
         let w = [1.0, 1.0, 1.0, 1.0, 0.0];
         let s = opt
             .run(&mut g, Some(&w), &mut |_: &IterationRecord| {})
