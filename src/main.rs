@@ -3,9 +3,9 @@
 use clap::{Parser, Subcommand, ValueEnum};
 use pgo::gate::{DegeneratePolicy, GateMode};
 use pgo::pipeline::{self, OptimizeConfig};
-use pgo::stats::DofConvention;
 use pgo::solve::init::Initialization;
 use pgo::solve::{IterationRecord, Method};
+use pgo::stats::DofConvention;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -22,6 +22,19 @@ struct Cli {
 enum Command {
     /// Optimise a pose graph read from a g2o file.
     Optimize(OptimizeArgs),
+    /// Learn the geometric-verification threshold T_GV from inlier counts
+    /// alone and print it (exit status 1 when the counts are degenerate).
+    Gate(GateArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct GateArgs {
+    /// A g2o file (the counts of its loop candidates), a CSV whose last field
+    /// is the count, or one count per line; `-` or nothing reads stdin.
+    counts: Option<PathBuf>,
+    /// Print the whole fit as JSON on stdout instead of the number.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -111,7 +124,10 @@ fn parse_gate(s: &str) -> Result<GateMode, String> {
     match s {
         "auto" => Ok(GateMode::Auto),
         "off" => Ok(GateMode::Off),
-        n => n.parse::<u64>().map(GateMode::Fixed).map_err(|_| format!("expected auto, off or a non-negative integer, got '{n}'")),
+        n => n
+            .parse::<u64>()
+            .map(GateMode::Fixed)
+            .map_err(|_| format!("expected auto, off or a non-negative integer, got '{n}'")),
     }
 }
 
@@ -142,6 +158,82 @@ fn main() -> ExitCode {
     };
     match cli.command {
         Command::Optimize(args) => optimize(args),
+        Command::Gate(args) => gate(args),
+    }
+}
+
+fn gate(args: GateArgs) -> ExitCode {
+    let counts = match read_counts(args.counts.as_deref()) {
+        Ok(c) => c,
+        Err(message) => {
+            eprintln!("error: {message}");
+            return ExitCode::from(2);
+        }
+    };
+    let fit = pgo::gate::learn_threshold(&counts, &pgo::gate::MixtureOptions::default());
+    if args.json {
+        match serde_json::to_string_pretty(&fit) {
+            Ok(text) => println!("{text}"),
+            Err(e) => {
+                eprintln!("error: cannot serialise the fit: {e}");
+                return ExitCode::from(1);
+            }
+        }
+    }
+    match (&fit.degeneracy, &fit.threshold) {
+        (None, Some(t)) => {
+            if !args.json {
+                println!("{}", t.count);
+            }
+            eprintln!(
+                "T_GV = {:.3} inliers (v_T = {:.4} of max {}); {} counts, {} zero",
+                t.count, t.normalized, t.max_count, fit.total_counts, fit.zero_counts
+            );
+            ExitCode::SUCCESS
+        }
+        (Some(reason), _) => {
+            eprintln!("degenerate: {reason}");
+            ExitCode::from(1)
+        }
+        (None, None) => {
+            eprintln!("degenerate: no threshold");
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// Counts from a g2o file (its candidates), a CSV or plain list, or stdin.
+fn read_counts(path: Option<&std::path::Path>) -> Result<Vec<u64>, String> {
+    use pgo::graph::AnyPoseGraph;
+    match path {
+        None => {
+            pgo::io::inliers::read_counts(std::io::stdin().lock(), std::path::Path::new("<stdin>"))
+                .map_err(|e| e.to_string())
+        }
+        Some(p) if p.as_os_str() == "-" => {
+            pgo::io::inliers::read_counts(std::io::stdin().lock(), std::path::Path::new("<stdin>"))
+                .map_err(|e| e.to_string())
+        }
+        Some(p) if p.extension().is_some_and(|e| e == "g2o") => {
+            let file = pgo::io::g2o::read(p, Default::default()).map_err(|e| e.to_string())?;
+            let counts: Vec<u64> = match &file.graph {
+                AnyPoseGraph::Planar(g) => g
+                    .edges
+                    .iter()
+                    .filter_map(|e| e.candidate.and_then(|c| c.inliers))
+                    .collect(),
+                AnyPoseGraph::Spatial(g) => g
+                    .edges
+                    .iter()
+                    .filter_map(|e| e.candidate.and_then(|c| c.inliers))
+                    .collect(),
+            };
+            Ok(counts)
+        }
+        Some(p) => {
+            let f = std::fs::File::open(p).map_err(|e| format!("{}: {e}", p.display()))?;
+            pgo::io::inliers::read_counts(f, p).map_err(|e| e.to_string())
+        }
     }
 }
 

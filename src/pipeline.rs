@@ -144,18 +144,29 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     report: &mut Report,
     observer: &mut dyn FnMut(&IterationRecord),
 ) -> Result<(), PipelineError> {
-    let solve_error = |source| PipelineError::Solve { path: config.input.clone(), source };
+    let solve_error = |source| PipelineError::Solve {
+        path: config.input.clone(),
+        source,
+    };
     if let Some(csv) = &config.inliers {
         let rows = inliers::read_csv(csv)?;
         let replaced = inliers::apply(graph, &rows, csv)?;
         if replaced > 0 {
-            report.warnings.push(format!("{}: replaced the inlier counts of {replaced} edges", csv.display()));
+            report.warnings.push(format!(
+                "{}: replaced the inlier counts of {replaced} edges",
+                csv.display()
+            ));
         }
     }
 
     // Gate: learn T_GV from the candidates' counts and drop those below it.
-    let candidates: Vec<usize> = (0..graph.edges.len()).filter(|&k| graph.edges[k].is_candidate()).collect();
-    let counts: Vec<Option<u64>> = candidates.iter().map(|&k| graph.edges[k].candidate.and_then(|c| c.inliers)).collect();
+    let candidates: Vec<usize> = (0..graph.edges.len())
+        .filter(|&k| graph.edges[k].is_candidate())
+        .collect();
+    let counts: Vec<Option<u64>> = candidates
+        .iter()
+        .map(|&k| graph.edges[k].candidate.and_then(|c| c.inliers))
+        .collect();
     let decision = gate::gate(&counts, config.gate, config.degenerate, &config.mixture);
     let mut weights = vec![1.0; graph.edges.len()];
     for (&k, &kept) in candidates.iter().zip(&decision.kept) {
@@ -164,12 +175,16 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     report.gate = GateReport::new(&decision, &counts);
     if decision.degenerate && report.gate.counted > 0 {
         if let Some(reason) = &decision.reason {
-            report.warnings.push(format!("the inlier counts are degenerate: {reason}; policy {:?}", config.degenerate));
+            report.warnings.push(format!(
+                "the inlier counts are degenerate: {reason}; policy {:?}",
+                config.degenerate
+            ));
         }
     }
 
     // An unconstrained vertex makes every later step meaningless: say so first.
-    let mut optimizer = Optimizer::new(graph, Some(&weights), config.solver.clone()).map_err(solve_error)?;
+    let mut optimizer =
+        Optimizer::new(graph, Some(&weights), config.solver.clone()).map_err(solve_error)?;
 
     let start = Instant::now();
     // The file's own guess first (vertices without a line by spanning tree),
@@ -187,20 +202,32 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     };
 
     let summary = optimizer
-        .run(graph, Some(&weights), &mut |r: &IterationRecord| observer(r))
+        .run(graph, Some(&weights), &mut |r: &IterationRecord| {
+            observer(r)
+        })
         .map_err(solve_error)?;
     if graph.poses.iter().any(|p| !p.is_finite()) {
-        return Err(PipelineError::NonFiniteResult { path: config.input.clone() });
+        return Err(PipelineError::NonFiniteResult {
+            path: config.input.clone(),
+        });
     }
     report.optimizer = OptimizerReport::new(&summary, graph.chi2(), optimizer.system());
 
     // The χ² test over the edges that were optimised (weight ≥ ½), each at
     // its plain cost.
-    let used: Vec<usize> = (0..graph.edges.len()).filter(|&k| weights[k] >= 0.5).collect();
+    let used: Vec<usize> = (0..graph.edges.len())
+        .filter(|&k| weights[k] >= 0.5)
+        .collect();
     let d2: f64 = used.iter().map(|&k| graph.edge_chi2(&graph.edges[k])).sum();
     let free = graph.num_vertices() - graph.gauge().len();
     let dof_residual = (used.len() * D) as i64 - (free * D) as i64;
-    match Chi2Test::new(d2, used.len() as u64, dof_residual, config.dof, config.alpha) {
+    match Chi2Test::new(
+        d2,
+        used.len() as u64,
+        dof_residual,
+        config.dof,
+        config.alpha,
+    ) {
         Ok(test) => report.chi2_test = Some(test),
         Err(e) => report.warnings.push(format!("no χ² test: {e}")),
     }

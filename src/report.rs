@@ -4,10 +4,10 @@
 use crate::gate::{DegeneratePolicy, GateDecision, GateMode, LogNormalMixture, Separation};
 use crate::graph::VertexId;
 use crate::io::g2o::G2oFile;
-use crate::stats::Chi2Test;
 use crate::linear::BlockSystem;
 use crate::solve::init::Initialization;
 use crate::solve::{Method, StopReason, Summary};
+use crate::stats::Chi2Test;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -92,7 +92,10 @@ impl GateReport {
             mode: decision.mode,
             policy: decision.policy,
             threshold: decision.threshold,
-            normalized_threshold: decision.threshold.filter(|_| max_inliers > 0).map(|t| t / max_inliers as f64),
+            normalized_threshold: decision
+                .threshold
+                .filter(|_| max_inliers > 0)
+                .map(|t| t / max_inliers as f64),
             max_inliers,
             zero_counts: counts.iter().filter(|c| **c == Some(0)).count(),
             counted: counts.iter().flatten().count(),
@@ -118,7 +121,10 @@ impl GateReport {
             (_, None) if self.degenerate => format!("degenerate counts, {:?}", self.policy),
             (_, None) => "no threshold".to_string(),
         };
-        format!("gate: {rule}; kept {} of {total} loop candidates", self.kept)
+        format!(
+            "gate: {rule}; kept {} of {total} loop candidates",
+            self.kept
+        )
     }
 }
 

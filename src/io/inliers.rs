@@ -99,6 +99,47 @@ pub fn read_csv(path: &Path) -> Result<Vec<InlierRow>, InlierCsvError> {
     Ok(rows)
 }
 
+/// Reads bare inlier counts, for `pgo gate`: one count per line, or CSV
+/// rows whose last field is the count (e.g. `from,to,inliers`). Blank lines
+/// and `#` lines are skipped; a first line whose last field is not a number
+/// is taken as a header.
+pub fn read_counts<R: std::io::Read>(reader: R, path: &Path) -> Result<Vec<u64>, InlierCsvError> {
+    let mut counts = Vec::new();
+    for (k, line) in BufReader::new(reader).lines().enumerate() {
+        let line_no = k + 1;
+        let line = line.map_err(|source| InlierCsvError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let text = line.trim();
+        if text.is_empty() || text.starts_with('#') {
+            continue;
+        }
+        let field = text
+            .rsplit([',', ' ', '\t', ';'])
+            .next()
+            .unwrap_or(text)
+            .trim();
+        match field.parse::<u64>() {
+            Ok(n) => counts.push(n),
+            Err(_)
+                if line_no == 1
+                    && !field.starts_with(|c: char| c.is_ascii_digit() || c == '-' || c == '+') => {
+            }
+            Err(_) => {
+                return Err(InlierCsvError::Row {
+                    path: path.to_owned(),
+                    line: line_no,
+                    problem: format!(
+                        "inlier count '{field}' is not a non-negative integer below 2^64"
+                    ),
+                });
+            }
+        }
+    }
+    Ok(counts)
+}
+
 /// Gives each row's count to its edge (see the module documentation).
 /// Returns how many edges already had a count that the CSV replaced.
 pub fn apply<P: Pose<D>, const D: usize>(
@@ -184,6 +225,27 @@ mod tests {
             Some(LoopCandidate { inliers: Some(7) })
         );
         std::fs::remove_file(p).unwrap();
+    }
+
+    #[test]
+    fn bare_counts_one_per_line_or_as_the_last_csv_field() {
+        let p = Path::new("stdin");
+        assert_eq!(
+            read_counts("12\n\n# c\n7\n0\n".as_bytes(), p).unwrap(),
+            vec![12, 7, 0]
+        );
+        assert_eq!(
+            read_counts("from,to,inliers\n1,5,30\n2,9,4\n".as_bytes(), p).unwrap(),
+            vec![30, 4]
+        );
+        let err = read_counts("5\n-3\n".as_bytes(), p)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("stdin:2:") && err.contains("'-3'"), "{err}");
+        let err = read_counts("5\n1e3\n".as_bytes(), p)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("stdin:2:"), "{err}");
     }
 
     #[test]

@@ -144,7 +144,10 @@ struct LinearProblem<const D: usize> {
 }
 
 impl<const D: usize> LinearProblem<D> {
-    fn new<P: Pose<D2>, const D2: usize>(graph: &PoseGraph<P, D2>, weights: Option<&[f64]>) -> Result<Self, SolveError> {
+    fn new<P: Pose<D2>, const D2: usize>(
+        graph: &PoseGraph<P, D2>,
+        weights: Option<&[f64]>,
+    ) -> Result<Self, SolveError> {
         let unconstrained = graph.unconstrained_vertices(weights);
         if !unconstrained.is_empty() {
             let gauge = graph.gauge().first().map(|&g| graph.id(g)).unwrap_or(0);

@@ -229,10 +229,17 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// Prepares to optimise `graph` (its structure, not its values).
     /// Fails if some vertex is not connected to the gauge by edges of
     /// non-zero weight (`weights`: one per edge, default 1).
-    pub fn new(graph: &PoseGraph<P, D>, weights: Option<&[f64]>, options: SolverOptions) -> Result<Self, SolveError> {
+    pub fn new(
+        graph: &PoseGraph<P, D>,
+        weights: Option<&[f64]>,
+        options: SolverOptions,
+    ) -> Result<Self, SolveError> {
         if let Some(w) = weights {
             if w.len() != graph.edges.len() {
-                return Err(SolveError::WeightCount { weights: w.len(), edges: graph.edges.len() });
+                return Err(SolveError::WeightCount {
+                    weights: w.len(),
+                    edges: graph.edges.len(),
+                });
             }
         }
         let unconstrained = graph.unconstrained_vertices(weights);
