@@ -9,5 +9,6 @@ pub mod io;
 pub mod linear;
 pub mod pipeline;
 pub mod report;
+pub mod robust;
 pub mod solve;
 pub mod stats;
