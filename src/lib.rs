@@ -10,5 +10,6 @@ pub mod linear;
 pub mod pipeline;
 pub mod report;
 pub mod robust;
+pub mod simulate;
 pub mod solve;
 pub mod stats;

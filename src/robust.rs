@@ -73,13 +73,22 @@ pub struct RobustOptions {
 impl RobustOptions {
     /// Defaults for edges of dimension `dim` (3 or 6).
     pub fn new(method: RobustMethod, dim: usize) -> Self {
-        Self { method, c: default_c(dim), switch_off: 0.01, remove: 1e-4, tolerance: 1e-3, max_rounds: 100 }
+        Self {
+            method,
+            c: default_c(dim),
+            switch_off: 0.01,
+            remove: 1e-4,
+            tolerance: 1e-3,
+            max_rounds: 100,
+        }
     }
 }
 
 /// `√χ²_dim(0.95)`, the default kernel width (see the module docs).
 pub fn default_c(dim: usize) -> f64 {
-    crate::stats::chi2_critical(dim.max(1) as u64, 0.05).map(f64::sqrt).unwrap_or(3.0)
+    crate::stats::chi2_critical(dim.max(1) as u64, 0.05)
+        .map(f64::sqrt)
+        .unwrap_or(3.0)
 }
 
 /// The Cauchy (EM) weight `c²/(c² + r²)`.
@@ -197,7 +206,10 @@ impl Reweighter {
 
     /// Candidates removed for good.
     pub fn removed(&self) -> usize {
-        self.states.iter().filter(|s| **s == CandidateState::Removed).count()
+        self.states
+            .iter()
+            .filter(|s| **s == CandidateState::Removed)
+            .count()
     }
 
     /// Whether the method reweights at all.
@@ -254,7 +266,9 @@ impl Reweighter {
         // The EM process converged: remove the lowest for good.
         let mut removed = 0;
         for k in 0..self.weights.len() {
-            if self.states[k] == CandidateState::Off && em_weight(r2[k], o.c, self.priors[k]) < o.remove {
+            if self.states[k] == CandidateState::Off
+                && em_weight(r2[k], o.c, self.priors[k]) < o.remove
+            {
                 self.states[k] = CandidateState::Removed;
                 removed += 1;
             }
@@ -289,7 +303,10 @@ impl Reweighter {
 }
 
 fn max_change(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
 }
 
 #[cfg(test)]
@@ -333,7 +350,14 @@ mod tests {
         let mut rw = Reweighter::new(opts, vec![0.5; 3]);
         // Candidate 1 looks wrong, candidate 2 borderline.
         assert!(rw.update(&[1.0, 1e5, 30.0]));
-        assert_eq!(rw.states(), &[CandidateState::Active, CandidateState::Off, CandidateState::Active]);
+        assert_eq!(
+            rw.states(),
+            &[
+                CandidateState::Active,
+                CandidateState::Off,
+                CandidateState::Active
+            ]
+        );
         assert_eq!(rw.weights()[1], 0.0);
         // Next round the solution moved: candidate 1 fits now and comes back.
         assert!(rw.update(&[1.0, 2.0, 30.0]));
