@@ -1425,7 +1425,7 @@ mod tests {
         }
         assert_eq!(sim.noisy.ids(), sim.truth.ids());
         assert!(sim.noisy.ids().iter().copied().eq(0..400));
-        assert!(sim.noisy.unconstrained_vertices().is_empty());
+        assert!(sim.noisy.unconstrained_vertices(None).is_empty());
     }
 
     #[test]

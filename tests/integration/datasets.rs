@@ -219,7 +219,7 @@ fn q9_graphs_missing_some_odometry_links_stay_connected() {
     let AnyPoseGraph::Planar(g) = &f.unwrap().graph else {
         panic!("2D")
     };
-    assert!(g.unconstrained_vertices().is_empty());
+    assert!(g.unconstrained_vertices(None).is_empty());
 }
 
 #[test]
