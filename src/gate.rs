@@ -979,6 +979,11 @@ pub enum GateMode {
     Off,
     /// A fixed threshold: keep a candidate when `count ≥ N`.
     Fixed(u64),
+    /// Learn the mixture as [`GateMode::Auto`] does but drop nothing: every
+    /// candidate goes on with its posterior `P(true loop | count)` as the
+    /// prior of a robust back end ([`LogNormalMixture::posterior_true_loop`]).
+    /// Degenerate counts are handled by the policy as for `Auto`.
+    Soft,
 }
 
 /// What [`GateMode::Auto`] does when the counts are degenerate.
@@ -1069,6 +1074,8 @@ impl Rule {
 /// * [`GateMode::Auto`]: `T_GV` is learned from the counts (zeros included,
 ///   see [`learn_threshold`]); kept when `count ≥ T_GV`. When the counts are
 ///   degenerate, `policy` decides.
+/// * [`GateMode::Soft`]: learned as `Auto`, all kept unless degenerate (then
+///   as `Auto`).
 ///
 /// ```
 /// use pgo::gate::{gate, DegeneratePolicy, GateMode, MixtureOptions};
@@ -1093,10 +1100,14 @@ pub fn gate(
     let (rule, fit) = match mode {
         GateMode::Off => (Rule::KeepAll, None),
         GateMode::Fixed(n) => (Rule::AtLeast(n), None),
-        GateMode::Auto => {
+        GateMode::Auto | GateMode::Soft => {
             let known: Vec<u64> = counts.iter().flatten().copied().collect();
             let fit = learn_threshold(&known, options);
-            (auto_rule(&fit, policy), Some(fit))
+            let rule = match (mode, fit.is_degenerate()) {
+                (GateMode::Soft, false) => Rule::KeepAll,
+                _ => auto_rule(&fit, policy),
+            };
+            (rule, Some(fit))
         }
     };
     let kept = counts
@@ -1208,6 +1219,28 @@ mod tests {
             crossing = Some(0.5 * (lo + hi));
         }
         crossing
+    }
+
+    #[test]
+    fn soft_mode_keeps_everything_unless_degenerate() {
+        let counts: Vec<Option<u64>> = two_population_counts(3).into_iter().map(Some).collect();
+        let d = gate(
+            &counts,
+            GateMode::Soft,
+            DegeneratePolicy::DropAll,
+            &MixtureOptions::default(),
+        );
+        assert!(!d.degenerate && d.fit.is_some());
+        assert_eq!(d.kept_count(), counts.len());
+        assert_eq!(d.threshold, None);
+        let equal = vec![Some(9u64); 40];
+        let d = gate(
+            &equal,
+            GateMode::Soft,
+            DegeneratePolicy::DropAll,
+            &MixtureOptions::default(),
+        );
+        assert!(d.degenerate && d.kept_count() == 0);
     }
 
     #[test]

@@ -2,7 +2,8 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use pgo::gate::{DegeneratePolicy, GateMode};
-use pgo::pipeline::{self, OptimizeConfig};
+use pgo::pipeline::{self, CandidateRule, OptimizeConfig};
+use pgo::robust::RobustMethod;
 use pgo::solve::init::Initialization;
 use pgo::solve::{IterationRecord, Method};
 use pgo::stats::DofConvention;
@@ -25,6 +26,80 @@ enum Command {
     /// Learn the geometric-verification threshold T_GV from inlier counts
     /// alone and print it (exit status 1 when the counts are degenerate).
     Gate(GateArgs),
+    /// Make a synthetic pose graph with ground truth (and, on request, wrong
+    /// loop candidates and inlier counts).
+    Simulate(SimulateArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct SimulateArgs {
+    /// Shape of the trajectory.
+    #[arg(long, value_enum, default_value_t = WorldArg::Grid2d)]
+    world: WorldArg,
+    /// Number of poses.
+    #[arg(long, default_value_t = 1000)]
+    poses: usize,
+    /// Standard deviation of the translation noise per axis (metres).
+    #[arg(long, default_value_t = 0.05)]
+    noise: f64,
+    /// Standard deviation of the rotation noise per axis (radians).
+    #[arg(long, default_value_t = 0.01)]
+    rotation_noise: f64,
+    /// Most true loop closures.
+    #[arg(long, default_value_t = 300)]
+    loops: usize,
+    /// Wrong loop candidates to plant.
+    #[arg(long, default_value_t = 0)]
+    outliers: usize,
+    /// How wrong candidates are placed.
+    #[arg(long, value_enum, default_value_t = PolicyArg::Random)]
+    outlier_policy: PolicyArg,
+    /// Size of the groups of grouped wrong candidates.
+    #[arg(long, default_value_t = 10)]
+    group_size: usize,
+    /// Give every loop candidate an inlier count (true loops: median 150,
+    /// wrong ones: median 25, log-normal).
+    #[arg(long)]
+    inliers: bool,
+    /// Median inlier count of true loops.
+    #[arg(long, default_value_t = 150.0)]
+    true_median: f64,
+    /// Median inlier count of wrong candidates.
+    #[arg(long, default_value_t = 25.0)]
+    wrong_median: f64,
+    /// Random seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Where to write the noisy graph (with the dead-reckoning guess).
+    #[arg(short, long, value_name = "OUT.g2o")]
+    output: PathBuf,
+    /// Where to write the ground truth (true poses, noise-free measurements
+    /// of the edges that are not wrong).
+    #[arg(long, value_name = "TRUTH.g2o")]
+    truth: Option<PathBuf>,
+    /// Where to write which edges are wrong (CSV: edge,from,to,wrong).
+    #[arg(long, value_name = "LABELS.csv")]
+    labels: Option<PathBuf>,
+}
+
+#[derive(Copy, Clone, Debug, ValueEnum)]
+enum WorldArg {
+    /// Manhattan-style grid walk (2D).
+    Grid2d,
+    /// Rings climbing a sphere (3D).
+    Sphere3d,
+    /// Rings around a torus (3D).
+    Torus3d,
+}
+
+#[derive(Copy, Clone, Debug, ValueEnum)]
+enum PolicyArg {
+    /// Random pairs of poses.
+    Random,
+    /// Pairs close in time.
+    Local,
+    /// Groups of consecutive pairs sharing one wrong transform.
+    Grouped,
 }
 
 #[derive(clap::Args, Debug)]
@@ -66,9 +141,11 @@ struct OptimizeArgs {
     /// nearest positive-definite ones instead of failing.
     #[arg(long)]
     fix_information: bool,
-    /// Loop-candidate gate: `auto` learns T_GV from the inlier counts, `off`
-    /// keeps every candidate, a number N keeps candidates with count ≥ N.
-    #[arg(long, value_name = "auto|off|N", default_value = "auto", value_parser = parse_gate)]
+    /// Loop-candidate gate: `auto` learns T_GV from the inlier counts and drops
+    /// candidates below it; `soft` drops nothing but gives each candidate its
+    /// posterior P(true loop | count) as the robust prior; `off` keeps every
+    /// candidate; a number N keeps candidates with count ≥ N.
+    #[arg(long, value_name = "auto|soft|off|N", default_value = "auto", value_parser = parse_gate)]
     gate: GateMode,
     /// What the learned gate does when the counts do not show two components.
     #[arg(long, value_enum, default_value_t = DegenerateArg::DropAll)]
@@ -80,6 +157,17 @@ struct OptimizeArgs {
     /// pose parameters) or constraints (number of edges, as in the paper).
     #[arg(long, value_enum, default_value_t = DofArg::Residual)]
     dof: DofArg,
+    /// Robust weighting of the loop candidates that pass the gate.
+    #[arg(long, value_enum, default_value_t = RobustArg::Em)]
+    robust: RobustArg,
+    /// Kernel width c on the whitened residual norm (default √χ²_D(0.95):
+    /// 2.796 in 2D, 3.548 in 3D).
+    #[arg(long, value_name = "C")]
+    robust_c: Option<f64>,
+    /// Which edges are loop candidates: those with an inlier count, or also
+    /// every edge between non-consecutive ids.
+    #[arg(long, value_enum, default_value_t = CandidatesArg::Counted)]
+    candidates: CandidatesArg,
     /// Threads (0: all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -100,6 +188,30 @@ enum SolverArg {
     Lm,
     /// Gauss–Newton.
     Gn,
+}
+
+#[derive(Copy, Clone, Debug, ValueEnum)]
+enum RobustArg {
+    /// Plain least squares.
+    None,
+    /// EM-weighted loop edges (Lee et al., IROS 2013).
+    Em,
+    /// Huber kernel.
+    Huber,
+    /// Cauchy kernel.
+    Cauchy,
+    /// Dynamic covariance scaling.
+    Dcs,
+    /// Graduated non-convexity (truncated least squares).
+    Gnc,
+}
+
+#[derive(Copy, Clone, Debug, ValueEnum)]
+enum CandidatesArg {
+    /// Edges with an inlier count.
+    Counted,
+    /// Also every edge with |i − j| ≠ 1.
+    NonSequential,
 }
 
 #[derive(Copy, Clone, Debug, ValueEnum)]
@@ -124,6 +236,7 @@ fn parse_gate(s: &str) -> Result<GateMode, String> {
     match s {
         "auto" => Ok(GateMode::Auto),
         "off" => Ok(GateMode::Off),
+        "soft" => Ok(GateMode::Soft),
         n => n
             .parse::<u64>()
             .map(GateMode::Fixed)
@@ -159,7 +272,97 @@ fn main() -> ExitCode {
     match cli.command {
         Command::Optimize(args) => optimize(args),
         Command::Gate(args) => gate(args),
+        Command::Simulate(args) => simulate(args),
     }
+}
+
+fn simulate(args: SimulateArgs) -> ExitCode {
+    use pgo::simulate::{
+        self, AnySimulation, InlierModel, OutlierPolicy, SimulationOptions, World,
+    };
+    let options = SimulationOptions {
+        world: match args.world {
+            WorldArg::Grid2d => World::Grid2d,
+            WorldArg::Sphere3d => World::Sphere3d,
+            WorldArg::Torus3d => World::Torus3d,
+        },
+        poses: args.poses,
+        translation_noise: args.noise,
+        rotation_noise: args.rotation_noise,
+        loops: args.loops,
+        seed: args.seed,
+        outliers: args.outliers,
+        outlier_policy: match args.outlier_policy {
+            PolicyArg::Random => OutlierPolicy::Random,
+            PolicyArg::Local => OutlierPolicy::Local,
+            PolicyArg::Grouped => OutlierPolicy::Grouped,
+        },
+        group_size: args.group_size,
+        inliers: args.inliers.then(|| InlierModel {
+            true_median: args.true_median,
+            wrong_median: args.wrong_median,
+            ..InlierModel::default()
+        }),
+    };
+    let result = match simulate::simulate(&options) {
+        Ok(AnySimulation::Planar(s)) => write_simulation(&s, &args),
+        Ok(AnySimulation::Spatial(s)) => write_simulation(&s, &args),
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    match result {
+        Ok(summary) => {
+            eprintln!("{summary}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn write_simulation<P: pgo::io::g2o::G2oPose<D>, const D: usize>(
+    sim: &pgo::simulate::Simulation<P, D>,
+    args: &SimulateArgs,
+) -> Result<String, String> {
+    use pgo::io::{g2o::write_graph, write_atomically};
+    use std::io::Write as _;
+    let write = |path: &PathBuf, g: &pgo::graph::PoseGraph<P, D>| {
+        write_atomically(path, |w| write_graph(g, w))
+            .map_err(|e| format!("{}: {e}", path.display()))
+    };
+    write(&args.output, &sim.noisy)?;
+    if let Some(t) = &args.truth {
+        write(t, &sim.truth)?;
+    }
+    if let Some(l) = &args.labels {
+        let g = &sim.noisy;
+        write_atomically(l, |w| {
+            writeln!(w, "edge,from,to,wrong")?;
+            for (k, (e, wrong)) in g.edges.iter().zip(&sim.wrong).enumerate() {
+                writeln!(
+                    w,
+                    "{k},{},{},{}",
+                    g.id(e.from),
+                    g.id(e.to),
+                    u8::from(*wrong)
+                )?;
+            }
+            Ok(())
+        })
+        .map_err(|e| format!("{}: {e}", l.display()))?;
+    }
+    Ok(format!(
+        "wrote {}: {} poses, {} edges, {} loop candidates ({} wrong)",
+        args.output.display(),
+        sim.noisy.num_vertices(),
+        sim.noisy.edges.len(),
+        sim.noisy.num_candidates(),
+        sim.num_wrong()
+    ))
 }
 
 fn gate(args: GateArgs) -> ExitCode {
@@ -268,6 +471,19 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
         DegenerateArg::Threshold => DegeneratePolicy::Threshold,
     };
     config.alpha = args.alpha;
+    config.robust = match args.robust {
+        RobustArg::None => RobustMethod::None,
+        RobustArg::Em => RobustMethod::Em,
+        RobustArg::Huber => RobustMethod::Huber,
+        RobustArg::Cauchy => RobustMethod::Cauchy,
+        RobustArg::Dcs => RobustMethod::Dcs,
+        RobustArg::Gnc => RobustMethod::Gnc,
+    };
+    config.robust_c = args.robust_c;
+    config.candidates = match args.candidates {
+        CandidatesArg::Counted => CandidateRule::Counted,
+        CandidatesArg::NonSequential => CandidateRule::NonSequential,
+    };
     config.dof = match args.dof {
         DofArg::Residual => DofConvention::Residual,
         DofArg::Constraints => DofConvention::Constraints,

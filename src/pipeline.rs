@@ -1,11 +1,15 @@
-//! The whole job of `pgo optimize`, as a library call: read → initialise →
-//! optimise → report → write. The CLI is a thin layer over [`run`].
+//! The whole job of `pgo optimize`, as a library call, in the order the data
+//! flows: read → gate → initialise → optimise (robustly) → test → report →
+//! write. The CLI is a thin layer over [`run`].
 
 use crate::gate::{self, DegeneratePolicy, GateMode, MixtureOptions};
 use crate::graph::{AnyPoseGraph, PoseGraph};
 use crate::io::g2o::{self, G2oFile, G2oPose, ReadError, ReadOptions};
 use crate::io::inliers::{self, InlierCsvError};
-use crate::report::{GateReport, InitializationReport, LoopReport, OptimizerReport, Report};
+use crate::report::{
+    GateReport, InitializationReport, LoopReport, OptimizerReport, Report, RobustReport,
+};
+use crate::robust::{CandidateState, Reweighter, RobustMethod, RobustOptions};
 use crate::solve::init::{ChordalInit, Initialization, initialize};
 use crate::solve::{IterationRecord, Optimizer, SolveError, SolverOptions};
 use crate::stats::{Chi2Test, DofConvention};
@@ -37,6 +41,26 @@ pub struct OptimizeConfig {
     pub alpha: f64,
     /// Degrees of freedom of the χ² test.
     pub dof: DofConvention,
+    /// Which edges are loop candidates.
+    pub candidates: CandidateRule,
+    /// The robust method for loop candidates and its kernel width (`None`:
+    /// the default width for the edge dimension).
+    pub robust: RobustMethod,
+    /// Kernel width override.
+    pub robust_c: Option<f64>,
+}
+
+/// Which edges are loop-closure candidates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CandidateRule {
+    /// Edges with an inlier count (in the file or the `--inliers` CSV).
+    #[default]
+    Counted,
+    /// Also every edge between non-consecutive ids (|i − j| ≠ 1), with or
+    /// without a count: robust weighting applies to them, gating only to
+    /// those with a count.
+    NonSequential,
 }
 
 impl OptimizeConfig {
@@ -54,6 +78,9 @@ impl OptimizeConfig {
             mixture: MixtureOptions::default(),
             alpha: 0.05,
             dof: DofConvention::default(),
+            candidates: CandidateRule::default(),
+            robust: RobustMethod::default(),
+            robust_c: None,
         }
     }
 }
@@ -129,12 +156,23 @@ pub fn run(
             optimize_graph(g, &file.missing, config, &mut report, observer)?
         }
     }
-    report.loop_candidates = file.graph.num_candidates();
     if let Some(out) = &config.output {
         write_output(&file, out)?;
         report.output = Some(out.display().to_string());
     }
     Ok(report)
+}
+
+/// The loop candidates of a graph and how the gate treated them.
+struct Candidates {
+    /// Edge index of each candidate, in file order.
+    edges: Vec<usize>,
+    /// Its inlier count, if any.
+    counts: Vec<Option<u64>>,
+    /// Whether the gate kept it.
+    kept: Vec<bool>,
+    /// Its prior inlier probability for the robust back end.
+    priors: Vec<f64>,
 }
 
 fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
@@ -158,20 +196,165 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             ));
         }
     }
+    if config.candidates == CandidateRule::NonSequential {
+        let ids: Vec<u64> = graph.ids().to_vec();
+        for e in graph.edges.iter_mut() {
+            if e.candidate.is_none() && ids[e.from].abs_diff(ids[e.to]) != 1 {
+                e.candidate = Some(crate::graph::LoopCandidate { inliers: None });
+            }
+        }
+    }
+    report.loop_candidates = graph.num_candidates();
 
-    // Gate: learn T_GV from the candidates' counts and drop those below it.
-    let candidates: Vec<usize> = (0..graph.edges.len())
+    let candidates = gate_candidates(graph, config, report);
+    let mut weights = vec![1.0; graph.edges.len()];
+    for (i, &k) in candidates.edges.iter().enumerate() {
+        weights[k] = if candidates.kept[i] { 1.0 } else { 0.0 };
+    }
+
+    // An unconstrained vertex makes every later step meaningless: say so first.
+    let mut optimizer =
+        Optimizer::new(graph, Some(&weights), config.solver.clone()).map_err(solve_error)?;
+
+    // The robust method decides how much the initial guess may trust the
+    // candidates: not at all when they are to be reweighted, since a wrong
+    // loop in the chordal problem bends the whole map.
+    let kept: Vec<usize> = (0..candidates.edges.len())
+        .filter(|&i| candidates.kept[i])
+        .collect();
+    let method = if kept.is_empty() {
+        RobustMethod::None
+    } else {
+        config.robust
+    };
+    let mut init_weights = weights.clone();
+    if method != RobustMethod::None {
+        for &k in &candidates.edges {
+            init_weights[k] = 0.0;
+        }
+    }
+
+    let start = Instant::now();
+    // The file's own guess first (vertices without a line by spanning tree),
+    // so that its χ² can be reported whatever the initialisation.
+    initialize(graph, missing, Initialization::File, Some(&init_weights)).map_err(solve_error)?;
+    report.input_chi2 = graph.chi2();
+    if config.initialization != Initialization::File {
+        initialize(graph, missing, config.initialization, Some(&init_weights))
+            .map_err(solve_error)?;
+    }
+    report.initialization = InitializationReport {
+        method: config.initialization,
+        chi2: graph.chi2(),
+        time_s: start.elapsed().as_secs_f64(),
+        vertices_without_line: missing.len(),
+    };
+
+    // Optimise; with a robust method, reweight the kept candidates from
+    // their residuals and solve again until the weights settle.
+    let initial_chi2 = graph.chi2();
+    let mut robust_options = RobustOptions::new(method, D);
+    if let Some(c) = config.robust_c {
+        robust_options.c = c;
+    }
+    let mut reweighter = Reweighter::new(
+        robust_options,
+        kept.iter().map(|&i| candidates.priors[i]).collect(),
+    );
+    for (j, &i) in kept.iter().enumerate() {
+        weights[candidates.edges[i]] = reweighter.weights()[j];
+    }
+    let mut total = None::<crate::solve::Summary>;
+    loop {
+        let summary = optimizer
+            .run(graph, Some(&weights), &mut |r: &IterationRecord| {
+                observer(r)
+            })
+            .map_err(solve_error)?;
+        total = Some(match total {
+            None => summary,
+            Some(mut t) => {
+                t.iterations += summary.iterations;
+                t.factorizations += summary.factorizations;
+                t.time += summary.time;
+                t.history.extend(summary.history);
+                t.final_objective = summary.final_objective;
+                t.stop_reason = summary.stop_reason;
+                t
+            }
+        });
+        let r2: Vec<f64> = kept
+            .iter()
+            .map(|&i| graph.edge_chi2(&graph.edges[candidates.edges[i]]))
+            .collect();
+        if !reweighter.update(&r2) {
+            break;
+        }
+        for (j, &i) in kept.iter().enumerate() {
+            weights[candidates.edges[i]] = reweighter.weights()[j];
+        }
+    }
+    if graph.poses.iter().any(|p| !p.is_finite()) {
+        return Err(PipelineError::NonFiniteResult {
+            path: config.input.clone(),
+        });
+    }
+    if let Some(summary) = &total {
+        report.optimizer =
+            OptimizerReport::new(summary, initial_chi2, graph.chi2(), optimizer.system());
+    }
+    let accepted = kept
+        .iter()
+        .filter(|&&i| weights[candidates.edges[i]] >= 0.5)
+        .count();
+    report.robust = RobustReport {
+        method,
+        c: robust_options.c,
+        rounds: reweighter.rounds(),
+        active_loops: accepted,
+        rejected_loops: candidates.edges.len() - accepted,
+        removed_loops: reweighter.removed(),
+        switched_off_loops: reweighter
+            .states()
+            .iter()
+            .filter(|s| **s == CandidateState::Off)
+            .count(),
+    };
+
+    chi2_test(graph, &weights, config, report);
+    report.loops = candidates
+        .edges
+        .iter()
+        .zip(&candidates.kept)
+        .zip(&candidates.counts)
+        .map(|((&k, &kept), &inliers)| {
+            let e = &graph.edges[k];
+            LoopReport {
+                from: graph.id(e.from),
+                to: graph.id(e.to),
+                inliers,
+                kept,
+                weight: weights[k],
+            }
+        })
+        .collect();
+    Ok(())
+}
+
+/// Gate: learn `T_GV` from the candidates' counts and decide which go on.
+fn gate_candidates<P: G2oPose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    config: &OptimizeConfig,
+    report: &mut Report,
+) -> Candidates {
+    let edges: Vec<usize> = (0..graph.edges.len())
         .filter(|&k| graph.edges[k].is_candidate())
         .collect();
-    let counts: Vec<Option<u64>> = candidates
+    let counts: Vec<Option<u64>> = edges
         .iter()
         .map(|&k| graph.edges[k].candidate.and_then(|c| c.inliers))
         .collect();
     let decision = gate::gate(&counts, config.gate, config.degenerate, &config.mixture);
-    let mut weights = vec![1.0; graph.edges.len()];
-    for (&k, &kept) in candidates.iter().zip(&decision.kept) {
-        weights[k] = if kept { 1.0 } else { 0.0 };
-    }
     report.gate = GateReport::new(&decision, &counts);
     if decision.degenerate && report.gate.counted > 0 {
         if let Some(reason) = &decision.reason {
@@ -181,40 +364,36 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             ));
         }
     }
-
-    // An unconstrained vertex makes every later step meaningless: say so first.
-    let mut optimizer =
-        Optimizer::new(graph, Some(&weights), config.solver.clone()).map_err(solve_error)?;
-
-    let start = Instant::now();
-    // The file's own guess first (vertices without a line by spanning tree),
-    // so that its χ² can be reported whatever the initialisation.
-    initialize(graph, missing, Initialization::File, Some(&weights)).map_err(solve_error)?;
-    report.input_chi2 = graph.chi2();
-    if config.initialization != Initialization::File {
-        initialize(graph, missing, config.initialization, Some(&weights)).map_err(solve_error)?;
-    }
-    report.initialization = InitializationReport {
-        method: config.initialization,
-        chi2: graph.chi2(),
-        time_s: start.elapsed().as_secs_f64(),
-        vertices_without_line: missing.len(),
-    };
-
-    let summary = optimizer
-        .run(graph, Some(&weights), &mut |r: &IterationRecord| {
-            observer(r)
+    // The soft gate hands the mixture's posterior on as a prior; otherwise
+    // nothing is known beyond the gate (½).
+    let max = report.gate.max_inliers;
+    let priors = counts
+        .iter()
+        .map(|c| match (config.gate, &decision.fit, c) {
+            (GateMode::Soft, Some(fit), Some(n)) if !decision.degenerate => {
+                fit.mixture.as_ref().map_or(0.5, |m| {
+                    m.posterior_true_loop(*n, max).clamp(1e-6, 1.0 - 1e-6)
+                })
+            }
+            _ => 0.5,
         })
-        .map_err(solve_error)?;
-    if graph.poses.iter().any(|p| !p.is_finite()) {
-        return Err(PipelineError::NonFiniteResult {
-            path: config.input.clone(),
-        });
+        .collect();
+    Candidates {
+        edges,
+        counts,
+        kept: decision.kept,
+        priors,
     }
-    report.optimizer = OptimizerReport::new(&summary, graph.chi2(), optimizer.system());
+}
 
-    // The χ² test over the edges that were optimised (weight ≥ ½), each at
-    // its plain cost.
+/// The χ² test over the edges that were optimised (weight ≥ ½), each at its
+/// plain cost (paper §II-C).
+fn chi2_test<P: G2oPose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    weights: &[f64],
+    config: &OptimizeConfig,
+    report: &mut Report,
+) {
     let used: Vec<usize> = (0..graph.edges.len())
         .filter(|&k| weights[k] >= 0.5)
         .collect();
@@ -231,21 +410,6 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         Ok(test) => report.chi2_test = Some(test),
         Err(e) => report.warnings.push(format!("no χ² test: {e}")),
     }
-    report.loops = candidates
-        .iter()
-        .zip(&decision.kept)
-        .map(|(&k, &kept)| {
-            let e = &graph.edges[k];
-            LoopReport {
-                from: graph.id(e.from),
-                to: graph.id(e.to),
-                inliers: e.candidate.and_then(|c| c.inliers),
-                kept,
-                weight: weights[k],
-            }
-        })
-        .collect();
-    Ok(())
 }
 
 fn write_output(file: &G2oFile, out: &Path) -> Result<(), PipelineError> {

@@ -5,6 +5,7 @@ use crate::gate::{DegeneratePolicy, GateDecision, GateMode, LogNormalMixture, Se
 use crate::graph::VertexId;
 use crate::io::g2o::G2oFile;
 use crate::linear::BlockSystem;
+use crate::robust::RobustMethod;
 use crate::solve::init::Initialization;
 use crate::solve::{Method, StopReason, Summary};
 use crate::stats::Chi2Test;
@@ -43,6 +44,8 @@ pub struct Report {
     /// The χ² goodness-of-fit test of the result (absent when it cannot be
     /// computed, with a warning saying why).
     pub chi2_test: Option<Chi2Test>,
+    /// The robust back end.
+    pub robust: RobustReport,
     /// One entry per loop candidate, in file order.
     pub loops: Vec<LoopReport>,
     /// Warnings, one line each.
@@ -128,6 +131,25 @@ impl GateReport {
     }
 }
 
+/// What the robust back end did.
+#[derive(Clone, Debug, Serialize, Default)]
+pub struct RobustReport {
+    /// The method (`none` when there were no candidates to weigh).
+    pub method: RobustMethod,
+    /// Kernel width on the whitened-residual-norm scale.
+    pub c: f64,
+    /// Reweighting rounds (E-steps).
+    pub rounds: usize,
+    /// Candidates accepted at the end (weight ≥ ½).
+    pub active_loops: usize,
+    /// Candidates not accepted (dropped by the gate or weight < ½).
+    pub rejected_loops: usize,
+    /// EM: candidates removed for good.
+    pub removed_loops: usize,
+    /// EM: candidates switched off at the end (may have come back later).
+    pub switched_off_loops: usize,
+}
+
 /// One loop candidate's fate.
 #[derive(Clone, Debug, Serialize)]
 pub struct LoopReport {
@@ -163,12 +185,16 @@ pub struct OptimizerReport {
     pub solver: &'static str,
     /// Outer iterations.
     pub iterations: usize,
-    /// χ² at the start (after initialisation).
+    /// χ² at the start (after initialisation): `Σ eᵀΩe` over all edges,
+    /// g2o's error definition.
     pub initial_chi2: f64,
-    /// χ² at the end: `Σ eᵀΩe` over all edges, g2o's error definition.
+    /// χ² at the end, over all edges (dropped or down-weighted candidates
+    /// included).
     pub final_chi2: f64,
-    /// The objective minimised at the end (equals `final_chi2` without robust
-    /// weights).
+    /// The objective minimised, `Σ wₖ eₖᵀΩₖeₖ`, at the start (equals
+    /// `initial_chi2` when every weight is 1).
+    pub initial_objective: f64,
+    /// The objective at the end.
     pub final_objective: f64,
     /// Whether a convergence test stopped it.
     pub converged: bool,
@@ -187,17 +213,20 @@ pub struct OptimizerReport {
 }
 
 impl OptimizerReport {
-    /// From a solver summary, the final unweighted χ² and the linear system.
+    /// From a solver summary, the unweighted χ² before and after, and the
+    /// linear system.
     pub fn new<const D: usize>(
         summary: &Summary,
+        initial_chi2: f64,
         final_chi2: f64,
         system: &BlockSystem<D>,
     ) -> Self {
         Self {
             solver: summary.method.short_name(),
             iterations: summary.iterations,
-            initial_chi2: summary.initial_objective,
+            initial_chi2,
             final_chi2,
+            initial_objective: summary.initial_objective,
             final_objective: summary.final_objective,
             converged: summary.converged(),
             stop_reason: summary.stop_reason,
@@ -217,6 +246,7 @@ impl Default for OptimizerReport {
             iterations: 0,
             initial_chi2: 0.0,
             final_chi2: 0.0,
+            initial_objective: 0.0,
             final_objective: 0.0,
             converged: false,
             stop_reason: StopReason::MaxIterations,
@@ -246,6 +276,7 @@ impl Report {
             optimizer: OptimizerReport::default(),
             gate: GateReport::default(),
             chi2_test: None,
+            robust: RobustReport::default(),
             loops: Vec::new(),
             warnings: file.summary.warnings.clone(),
         }
@@ -266,8 +297,8 @@ impl Report {
             "{}: {} iterations, χ² {:.10e} → {:.10e}, {} ({:?}), {:.3} s\n",
             o.solver,
             o.iterations,
-            o.initial_chi2,
-            o.final_chi2,
+            o.initial_objective,
+            o.final_objective,
             if o.converged {
                 "converged"
             } else {

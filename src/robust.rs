@@ -26,10 +26,10 @@
 //!   GTSAM's `GncOptimizer`: `μ₀ = c² / (2 r²_max − c²)`, `μ ← 1.4 μ`, until
 //!   every weight is 0 or 1.
 //!
-//! `c` is on the whitened-residual-norm scale. Its default is
-//! `√χ²_D(0.95)` for the edge dimension `D` (2.796 in 2D, 3.548 in 3D): an
+//! `c` is on the whitened-residual-norm scale; its default comes from a χ²
+//! quantile of the edge dimension ([`default_c`]), not a magic number: an
 //! inlier's `r²` is χ²_D-distributed when the information matrices are
-//! calibrated, so 95 % of inliers keep a weight ≥ ½ under Cauchy/EM.
+//! calibrated.
 
 use serde::Serialize;
 
@@ -71,11 +71,11 @@ pub struct RobustOptions {
 }
 
 impl RobustOptions {
-    /// Defaults for edges of dimension `dim` (3 or 6).
+    /// Defaults for edges of dimension `dim` (3 or 6); see [`default_c`].
     pub fn new(method: RobustMethod, dim: usize) -> Self {
         Self {
             method,
-            c: default_c(dim),
+            c: default_c(method, dim),
             switch_off: 0.01,
             remove: 1e-4,
             tolerance: 1e-3,
@@ -84,11 +84,25 @@ impl RobustOptions {
     }
 }
 
-/// `√χ²_dim(0.95)`, the default kernel width (see the module docs).
-pub fn default_c(dim: usize) -> f64 {
-    crate::stats::chi2_critical(dim.max(1) as u64, 0.05)
-        .map(f64::sqrt)
-        .unwrap_or(3.0)
+/// The default kernel width of each method for edges of dimension `dim`:
+///
+/// * EM and GNC: `√χ²_dim(0.99)` (3.368 in 2D, 4.100 in 3D), the inlier
+///   threshold of GTSAM's `GncOptimizer`: a calibrated inlier has `r²`
+///   χ²_dim-distributed, so 99 % of inliers keep a weight ≥ ½;
+/// * Huber and Cauchy: `√χ²_dim(0.95)` (2.796 / 3.548), the width the peer
+///   baselines use;
+/// * DCS: `c = 1`, i.e. `Φ = c² = 1`, Agarwal et al.'s default.
+pub fn default_c(method: RobustMethod, dim: usize) -> f64 {
+    let quantile = |alpha: f64| {
+        crate::stats::chi2_critical(dim.max(1) as u64, alpha)
+            .map(f64::sqrt)
+            .unwrap_or(3.0)
+    };
+    match method {
+        RobustMethod::Em | RobustMethod::Gnc | RobustMethod::None => quantile(0.01),
+        RobustMethod::Huber | RobustMethod::Cauchy => quantile(0.05),
+        RobustMethod::Dcs => 1.0,
+    }
 }
 
 /// The Cauchy (EM) weight `c²/(c² + r²)`.
@@ -339,9 +353,12 @@ mod tests {
     }
 
     #[test]
-    fn default_width_is_the_95_percent_chi2_quantile() {
-        assert!((default_c(3) - 7.814727903251178f64.sqrt()).abs() < 1e-9);
-        assert!((default_c(6) - 12.591587243743977f64.sqrt()).abs() < 1e-9);
+    fn default_widths_are_chi2_quantiles() {
+        assert!((default_c(RobustMethod::Cauchy, 3) - 7.814727903251178f64.sqrt()).abs() < 1e-9);
+        assert!((default_c(RobustMethod::Huber, 6) - 12.591587243743977f64.sqrt()).abs() < 1e-9);
+        assert!((default_c(RobustMethod::Em, 3) - 11.344866730144373f64.sqrt()).abs() < 1e-9);
+        assert!((default_c(RobustMethod::Gnc, 6) - 16.811893829770927f64.sqrt()).abs() < 1e-9);
+        assert_eq!(default_c(RobustMethod::Dcs, 3), 1.0);
     }
 
     #[test]
