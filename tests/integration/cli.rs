@@ -1,6 +1,6 @@
 //! The `pgo` binary: exit codes, messages, the JSON report, output files.
 
-use crate::common::{pgo, stderr, temp_dir, write};
+use crate::common::{pgo, sample, stderr, temp_dir, write};
 
 /// A small consistent 2D graph: a square with a loop closure, noisy guess.
 const SQUARE: &str = "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1.1 0.1 1.5\nVERTEX_SE2 2 0.9 1.2 3.1\nVERTEX_SE2 3 0.1 0.9 -1.6\n\
@@ -164,4 +164,44 @@ fn inliers_csv_turns_edges_into_candidates() {
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(r["loop_candidates"], 1);
+}
+
+#[test]
+fn the_readme_sample_gates_optimises_and_passes_the_chi2_test() {
+    let out = pgo(&["optimize", &sample("grid2d.g2o"), "--json", "-q"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r["loop_candidates"], 400);
+    assert_eq!(r["gate"]["degenerate"], false);
+    assert_eq!(r["chi2_test"]["passed"], true);
+    assert_eq!(r["loops"].as_array().unwrap().len(), 400);
+}
+
+#[test]
+fn every_sample_optimises_in_2d_and_3d() {
+    for (name, dim) in [
+        ("grid2d.g2o", 2),
+        ("sphere3d.g2o", 3),
+        ("grid2d_clean.g2o", 2),
+        ("grid2d_truth.g2o", 2),
+    ] {
+        let out = pgo(&["optimize", &sample(name), "--json", "-q"]);
+        assert_eq!(out.status.code(), Some(0), "{name}: {}", stderr(&out));
+        let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(r["dimension"], dim, "{name}");
+        assert_eq!(r["optimizer"]["converged"], true, "{name}");
+    }
+}
+
+#[test]
+fn gate_prints_the_threshold_of_a_sample_and_fails_on_degenerate_counts() {
+    let out = pgo(&["gate", &sample("grid2d.g2o")]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let t: f64 = String::from_utf8_lossy(&out.stdout).trim().parse().unwrap();
+    assert!(t > 25.0 && t < 150.0, "{t}");
+    let out = pgo(&["gate", &sample("degenerate.g2o"), "--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).starts_with("degenerate: "), "{}", stderr(&out));
+    let fit: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(fit["degeneracy"].is_object());
 }

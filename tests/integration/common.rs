@@ -48,3 +48,12 @@ pub fn datasets() -> Option<PathBuf> {
         None
     }
 }
+
+/// A bundled sample file.
+pub fn sample(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("g2o_samples")
+        .join(name)
+        .to_string_lossy()
+        .into_owned()
+}
