@@ -29,6 +29,44 @@ enum Command {
     /// Make a synthetic pose graph with ground truth (and, on request, wrong
     /// loop candidates and inlier counts).
     Simulate(SimulateArgs),
+    /// Corrupt an existing pose graph with wrong loop candidates (the
+    /// outlier policies of `simulate`) and give every loop candidate an
+    /// inlier count; for benchmarks.
+    Corrupt(CorruptArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct CorruptArgs {
+    /// The clean g2o file (vertices that no line defines are composed along
+    /// a spanning tree first; mixture edges become plain edges).
+    input: PathBuf,
+    /// Wrong loop candidates to add.
+    #[arg(long, default_value_t = 100)]
+    outliers: usize,
+    /// How wrong candidates are placed.
+    #[arg(long, value_enum, default_value_t = PolicyArg::Random)]
+    outlier_policy: PolicyArg,
+    /// Size of the groups of grouped wrong candidates.
+    #[arg(long, default_value_t = 10)]
+    group_size: usize,
+    /// Median inlier count of true loops (every existing edge with |i − j| ≠ 1).
+    #[arg(long, default_value_t = 150.0)]
+    true_median: f64,
+    /// Median inlier count of wrong candidates.
+    #[arg(long, default_value_t = 25.0)]
+    wrong_median: f64,
+    /// σ of the natural log of the counts (both populations).
+    #[arg(long, default_value_t = 0.5)]
+    count_sigma: f64,
+    /// Random seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Where to write the corrupted graph.
+    #[arg(short, long, value_name = "OUT.g2o")]
+    output: PathBuf,
+    /// Where to write which edges are wrong (CSV: edge,from,to,wrong).
+    #[arg(long, value_name = "LABELS.csv")]
+    labels: Option<PathBuf>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -273,7 +311,93 @@ fn main() -> ExitCode {
         Command::Optimize(args) => optimize(args),
         Command::Gate(args) => gate(args),
         Command::Simulate(args) => simulate(args),
+        Command::Corrupt(args) => corrupt(args),
     }
+}
+
+fn corrupt(args: CorruptArgs) -> ExitCode {
+    use pgo::graph::AnyPoseGraph;
+    use pgo::simulate::{CorruptionOptions, InlierModel, OutlierPolicy};
+    let mut file = match pgo::io::g2o::read(&args.input, Default::default()) {
+        Ok(f) => f,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let options = CorruptionOptions {
+        outliers: args.outliers,
+        policy: match args.outlier_policy {
+            PolicyArg::Random => OutlierPolicy::Random,
+            PolicyArg::Local => OutlierPolicy::Local,
+            PolicyArg::Grouped => OutlierPolicy::Grouped,
+        },
+        group_size: args.group_size,
+        inliers: Some(InlierModel {
+            true_median: args.true_median,
+            true_sigma: args.count_sigma,
+            wrong_median: args.wrong_median,
+            wrong_sigma: args.count_sigma,
+        }),
+        ..CorruptionOptions::default()
+    };
+    let result = match &mut file.graph {
+        AnyPoseGraph::Planar(g) => corrupt_graph(g, &file.missing, &options, &args),
+        AnyPoseGraph::Spatial(g) => corrupt_graph(g, &file.missing, &options, &args),
+    };
+    match result {
+        Ok(message) => {
+            eprintln!("{message}");
+            ExitCode::SUCCESS
+        }
+        Err((code, message)) => {
+            eprintln!("error: {message}");
+            ExitCode::from(code)
+        }
+    }
+}
+
+fn corrupt_graph<P, const D: usize>(
+    g: &mut pgo::graph::PoseGraph<P, D>,
+    missing: &[usize],
+    options: &pgo::simulate::CorruptionOptions,
+    args: &CorruptArgs,
+) -> Result<String, (u8, String)>
+where
+    P: pgo::io::g2o::G2oPose<D> + pgo::solve::init::ChordalInit<D>,
+{
+    use pgo::io::{g2o::write_graph, write_atomically};
+    use rand::SeedableRng;
+    use std::io::Write as _;
+    pgo::solve::init::initialize(g, missing, Initialization::File, None)
+        .map_err(|e| (2, format!("{}: {e}", args.input.display())))?;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(args.seed);
+    let corruption =
+        pgo::simulate::corrupt(g, options, &mut rng).map_err(|e| (2, e.to_string()))?;
+    write_atomically(&args.output, |w| write_graph(g, w))
+        .map_err(|e| (1, format!("{}: {e}", args.output.display())))?;
+    if let Some(l) = &args.labels {
+        write_atomically(l, |w| {
+            writeln!(w, "edge,from,to,wrong")?;
+            for (k, (e, wrong)) in g.edges.iter().zip(&corruption.wrong).enumerate() {
+                writeln!(
+                    w,
+                    "{k},{},{},{}",
+                    g.id(e.from),
+                    g.id(e.to),
+                    u8::from(*wrong)
+                )?;
+            }
+            Ok(())
+        })
+        .map_err(|e| (1, format!("{}: {e}", l.display())))?;
+    }
+    Ok(format!(
+        "wrote {}: {} true loop candidates with counts, {} wrong candidates",
+        args.output.display(),
+        corruption.marked,
+        corruption.wrong.iter().filter(|w| **w).count()
+    ))
 }
 
 fn simulate(args: SimulateArgs) -> ExitCode {
