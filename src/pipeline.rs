@@ -278,6 +278,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 t.factorizations += summary.factorizations;
                 t.time += summary.time;
                 t.history.extend(summary.history);
+                t.timing.add(&summary.timing);
                 t.final_objective = summary.final_objective;
                 t.stop_reason = summary.stop_reason;
                 t

@@ -210,6 +210,8 @@ pub struct OptimizerReport {
     pub nnz_factor: usize,
     /// Objective after each iteration.
     pub history: Vec<f64>,
+    /// Where the optimiser's time went.
+    pub timing: crate::solve::Timing,
 }
 
 impl OptimizerReport {
@@ -235,6 +237,7 @@ impl OptimizerReport {
             nnz_hessian: system.nnz_hessian(),
             nnz_factor: system.nnz_factor(),
             history: summary.history.iter().map(|r| r.objective).collect(),
+            timing: summary.timing,
         }
     }
 }
@@ -255,6 +258,7 @@ impl Default for OptimizerReport {
             nnz_hessian: 0,
             nnz_factor: 0,
             history: Vec::new(),
+            timing: Default::default(),
         }
     }
 }

@@ -138,6 +138,38 @@ pub struct Summary {
     pub time: Duration,
     /// Per-iteration history.
     pub history: Vec<IterationRecord>,
+    /// Where the time went.
+    pub timing: Timing,
+}
+
+/// Wall time spent in each part of the optimiser, in seconds.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct Timing {
+    /// Errors, Jacobians and assembly of `H` and `b`.
+    pub linearize_s: f64,
+    /// Numeric Cholesky factorisations (with damping).
+    pub factorize_s: f64,
+    /// Triangular solves.
+    pub solve_s: f64,
+    /// Objective at trial points (and the step update).
+    pub evaluate_s: f64,
+}
+
+impl Timing {
+    /// Adds another run's times.
+    pub fn add(&mut self, other: &Timing) {
+        self.linearize_s += other.linearize_s;
+        self.factorize_s += other.factorize_s;
+        self.solve_s += other.solve_s;
+        self.evaluate_s += other.evaluate_s;
+    }
+}
+
+/// Adds the time since `start` to `slot` and returns now.
+fn lap(slot: &mut f64, start: Instant) -> Instant {
+    let now = Instant::now();
+    *slot += (now - start).as_secs_f64();
+    now
 }
 
 impl Summary {
@@ -311,8 +343,11 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             factorizations: 0,
             time: Duration::ZERO,
             history: Vec::new(),
+            timing: Timing::default(),
         };
+        let mut clock = Instant::now();
         let mut objective = self.linearize(graph, weights);
+        clock = lap(&mut summary.timing.linearize_s, clock);
         summary.initial_objective = objective;
         summary.final_objective = objective;
         if !objective.is_finite() {
@@ -350,7 +385,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                     lambda
                 };
                 summary.factorizations += 1;
-                match self.system.factorize(damping) {
+                let factorized = self.system.factorize(damping);
+                clock = lap(&mut summary.timing.factorize_s, clock);
+                match factorized {
                     Ok(()) => {}
                     Err(LinearError::NotPositiveDefinite { block }) => {
                         if damping == 0.0 || lambda > 1e16 {
@@ -366,6 +403,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                     Err(e) => return Err(e.into()),
                 }
                 self.system.solve(&mut self.step);
+                clock = lap(&mut summary.timing.solve_s, clock);
                 let step_max = self.step.iter().fold(0.0f64, |m, s| m.max(s.abs()));
                 if !step_max.is_finite() {
                     if opts.method == Method::GaussNewton || lambda > 1e16 {
@@ -383,6 +421,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 }
                 self.apply_step(graph);
                 let new_objective = self.objective(&self.trial, graph, weights);
+                clock = lap(&mut summary.timing.evaluate_s, clock);
                 if opts.method == Method::GaussNewton {
                     if new_objective.is_finite() {
                         break Some((step_max, new_objective, false));
@@ -439,6 +478,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 break StopReason::RelativeDecrease;
             }
             self.linearize(graph, weights);
+            clock = lap(&mut summary.timing.linearize_s, clock);
         };
         if objective > best_objective {
             graph.poses.clone_from(&self.best);
