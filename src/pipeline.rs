@@ -264,35 +264,50 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     for (j, &i) in kept.iter().enumerate() {
         weights[candidates.edges[i]] = reweighter.weights()[j];
     }
+    // Between reweighting rounds a few iterations are enough (generalised
+    // EM: each M-step only has to improve); once the weights settle, the
+    // last solve runs to full convergence.
+    let full = config.solver.clone();
+    let partial = SolverOptions {
+        max_iterations: full.max_iterations.min(3),
+        relative_tolerance: 1e-6,
+        ..full.clone()
+    };
     let mut total = None::<crate::solve::Summary>;
     loop {
+        let robust = reweighter.is_active();
+        *optimizer.options_mut() = if robust {
+            partial.clone()
+        } else {
+            full.clone()
+        };
         let summary = optimizer
             .run(graph, Some(&weights), &mut |r: &IterationRecord| {
                 observer(r)
             })
             .map_err(solve_error)?;
-        total = Some(match total {
-            None => summary,
-            Some(mut t) => {
-                t.iterations += summary.iterations;
-                t.factorizations += summary.factorizations;
-                t.time += summary.time;
-                t.history.extend(summary.history);
-                t.timing.add(&summary.timing);
-                t.final_objective = summary.final_objective;
-                t.stop_reason = summary.stop_reason;
-                t
-            }
-        });
+        total = Some(merge_summaries(total, summary));
+        if !robust {
+            break;
+        }
         let r2: Vec<f64> = kept
             .iter()
             .map(|&i| graph.edge_chi2(&graph.edges[candidates.edges[i]]))
             .collect();
-        if !reweighter.update(&r2) {
-            break;
-        }
+        let again = reweighter.update(&r2);
         for (j, &i) in kept.iter().enumerate() {
             weights[candidates.edges[i]] = reweighter.weights()[j];
+        }
+        if !again {
+            // The weights settled: one last solve to full convergence.
+            *optimizer.options_mut() = full.clone();
+            let summary = optimizer
+                .run(graph, Some(&weights), &mut |r: &IterationRecord| {
+                    observer(r)
+                })
+                .map_err(solve_error)?;
+            total = Some(merge_summaries(total, summary));
+            break;
         }
     }
     if graph.poses.iter().any(|p| !p.is_finite()) {
@@ -340,6 +355,26 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         })
         .collect();
     Ok(())
+}
+
+/// The summary of several optimiser runs (robust rounds) as one.
+fn merge_summaries(
+    total: Option<crate::solve::Summary>,
+    next: crate::solve::Summary,
+) -> crate::solve::Summary {
+    match total {
+        None => next,
+        Some(mut t) => {
+            t.iterations += next.iterations;
+            t.factorizations += next.factorizations;
+            t.time += next.time;
+            t.history.extend(next.history);
+            t.timing.add(&next.timing);
+            t.final_objective = next.final_objective;
+            t.stop_reason = next.stop_reason;
+            t
+        }
+    }
 }
 
 /// Gate: learn `T_GV` from the candidates' counts and decide which go on.

@@ -311,6 +311,11 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         })
     }
 
+    /// The options, e.g. to change the iteration limit between runs.
+    pub fn options_mut(&mut self) -> &mut SolverOptions {
+        &mut self.options
+    }
+
     /// The linear system (for statistics such as the factor's size).
     pub fn system(&self) -> &BlockSystem<D> {
         &self.system
