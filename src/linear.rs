@@ -266,6 +266,25 @@ impl<const D: usize> BlockSystem<D> {
         }
     }
 
+    /// Sets `b` to zero, keeping `H` (and its factorisation): for solving
+    /// the same system with several right-hand sides.
+    pub fn clear_gradient(&mut self) {
+        self.gradient.fill(0.0);
+    }
+
+    /// Adds edge `k`'s contribution to `b` only.
+    pub fn add_edge_gradient(&mut self, k: usize, b_i: &SVector<f64, D>, b_j: &SVector<f64, D>) {
+        let slot = self.edges[k];
+        for (block, b) in [(slot.i, b_i), (slot.j, b_j)] {
+            if let Some(block) = block {
+                let p = self.position[block] * D;
+                for a in 0..D {
+                    self.gradient[p + a] += b[a];
+                }
+            }
+        }
+    }
+
     fn add_diagonal(&mut self, block: usize, h: &SMatrix<f64, D, D>, g: &SVector<f64, D>) {
         let diag = self.diagonal[block];
         for a in 0..D {

@@ -192,13 +192,35 @@ impl<const D: usize> LinearProblem<D> {
         );
     }
 
+    /// Adds only the right-hand side of edge `k` (the matrix is unchanged).
+    fn add_rhs(
+        &mut self,
+        k: usize,
+        a_i: &SMatrix<f64, D, D>,
+        a_j: &SMatrix<f64, D, D>,
+        c: &SVector<f64, D>,
+        w: &SMatrix<f64, D, D>,
+    ) {
+        let wc = w * c;
+        self.system
+            .add_edge_gradient(k, &(a_i.transpose() * wc), &(a_j.transpose() * wc));
+    }
+
     /// Solves the assembled problem; the solution by variable block.
+    /// `refactorize = false` reuses the last factorisation (same matrix,
+    /// new right-hand side).
     fn solve<P: Pose<D2>, const D2: usize>(
         &mut self,
         graph: &PoseGraph<P, D2>,
+        refactorize: bool,
     ) -> Result<Vec<f64>, SolveError> {
         let mut x = vec![0.0; self.n_free * D];
-        match self.system.factorize(0.0) {
+        let factorized = if refactorize {
+            self.system.factorize(0.0)
+        } else {
+            Ok(())
+        };
+        match factorized {
             Ok(()) => {}
             Err(LinearError::NotPositiveDefinite { block }) => {
                 let vertex = self
@@ -279,7 +301,7 @@ impl ChordalInit<3> for Se2 {
                 &(Matrix2::identity() * w),
             );
         }
-        let x = lp.solve(graph)?;
+        let x = lp.solve(graph, true)?;
         for v in 0..graph.num_vertices() {
             if let Some(r) = lp.value(&x, v) {
                 graph.poses[v].theta = r.y.atan2(r.x);
@@ -304,7 +326,7 @@ impl ChordalInit<3> for Se2 {
             }
             lp.add(k, &(-rt), &rt, &c0, &omega);
         }
-        let x = lp.solve(graph)?;
+        let x = lp.solve(graph, true)?;
         for v in 0..graph.num_vertices() {
             if let Some(t) = lp.value(&x, v) {
                 graph.poses[v].x = t.x;
@@ -322,8 +344,14 @@ impl ChordalInit<6> for Se3 {
         // Rotations, one row at a time: row_k(R_j) = row_k(R_i)·R_ij, i.e.
         // ρ_j − R_ijᵀ ρ_i = 0 for the row vectors ρ.
         let mut rows = vec![Matrix3::<f64>::zeros(); n];
+        // The matrix is the same for the three rows: factorise once, solve
+        // three times.
         for row in 0..3 {
-            lp.system.clear();
+            if row == 0 {
+                lp.system.clear();
+            } else {
+                lp.system.clear_gradient();
+            }
             for (k, e) in graph.edges.iter().enumerate() {
                 // Rotational error in g2o's coordinates is ≈ θ/2, hence the 4.
                 let w = weight(weights, k) * rotation_precision(&e.information, 3..6) / 4.0;
@@ -339,15 +367,14 @@ impl ChordalInit<6> for Se3 {
                 if lp.variable[e.from].is_none() {
                     c0 -= m * fixed(e.from);
                 }
-                lp.add(
-                    k,
-                    &(-m),
-                    &Matrix3::identity(),
-                    &c0,
-                    &(Matrix3::identity() * w),
-                );
+                let w = Matrix3::identity() * w;
+                if row == 0 {
+                    lp.add(k, &(-m), &Matrix3::identity(), &c0, &w);
+                } else {
+                    lp.add_rhs(k, &(-m), &Matrix3::identity(), &c0, &w);
+                }
             }
-            let x = lp.solve(graph)?;
+            let x = lp.solve(graph, row == 0)?;
             for (v, r) in rows.iter_mut().enumerate() {
                 if let Some(value) = lp.value(&x, v) {
                     r.set_row(row, &value.transpose());
@@ -377,7 +404,7 @@ impl ChordalInit<6> for Se3 {
             }
             lp.add(k, &(-rt), &rt, &c0, &omega);
         }
-        let x = lp.solve(graph)?;
+        let x = lp.solve(graph, true)?;
         for v in 0..n {
             if let Some(t) = lp.value(&x, v) {
                 graph.poses[v].translation = t;

@@ -316,6 +316,11 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         &mut self.options
     }
 
+    /// The linear system, e.g. to factorise and solve it in a benchmark.
+    pub fn system_mut(&mut self) -> &mut BlockSystem<D> {
+        &mut self.system
+    }
+
     /// The linear system (for statistics such as the factor's size).
     pub fn system(&self) -> &BlockSystem<D> {
         &self.system
@@ -523,8 +528,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             .sum()
     }
 
-    /// Builds `H` and `b` at the graph's poses and returns the objective.
-    fn linearize(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
+    /// Builds `H` and `b` at the graph's poses and returns the objective
+    /// (public for benchmarks; [`Optimizer::run`] does this itself).
+    pub fn linearize(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
         self.system.clear();
         let mut objective = 0.0;
         for (k, e) in graph.edges.iter().enumerate() {
