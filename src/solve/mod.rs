@@ -11,6 +11,7 @@ pub mod init;
 use crate::geometry::Pose;
 use crate::graph::{PoseGraph, VertexId};
 use crate::linear::{BlockSystem, LinearError};
+use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::time::{Duration, Instant};
@@ -255,6 +256,7 @@ pub struct Optimizer<P, const D: usize> {
     trial: Vec<P>,
     best: Vec<P>,
     step: Vec<f64>,
+    terms: Vec<EdgeTerms<D>>,
 }
 
 impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
@@ -308,6 +310,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             trial: graph.poses.clone(),
             best: graph.poses.clone(),
             options,
+            terms: Vec::new(),
         })
     }
 
@@ -533,26 +536,83 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     pub fn linearize(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
         self.system.clear();
         let mut objective = 0.0;
-        for (k, e) in graph.edges.iter().enumerate() {
-            let w = weights.map_or(1.0, |w| w[k]);
-            if w == 0.0 {
-                continue;
+        // Edges are linearised in parallel, a chunk at a time, into a buffer
+        // reused across iterations; the scatter into H is serial (each edge
+        // writes three blocks that other edges share).
+        let terms = &mut self.terms;
+        for (c, chunk) in graph.edges.chunks(LINEARIZE_CHUNK).enumerate() {
+            let base = c * LINEARIZE_CHUNK;
+            terms.resize(chunk.len(), EdgeTerms::default());
+            terms
+                .par_iter_mut()
+                .zip(chunk.par_iter())
+                .enumerate()
+                .for_each(|(i, (t, e))| {
+                    let w = weights.map_or(1.0, |w| w[base + i]);
+                    *t = if w == 0.0 {
+                        EdgeTerms::default()
+                    } else {
+                        EdgeTerms::new(graph, e, w)
+                    };
+                });
+            for (i, t) in terms.iter().enumerate() {
+                if t.active {
+                    objective += t.chi2;
+                    self.system
+                        .add_edge(base + i, &t.h_ii, &t.h_ij, &t.h_jj, &t.b_i, &t.b_j);
+                }
             }
-            let lin =
-                P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
-            let omega = e.information * w;
-            let oi = omega * lin.jac_i;
-            let oj = omega * lin.jac_j;
-            let oe = omega * lin.error;
-            objective += lin.error.dot(&oe);
-            let h_ii = lin.jac_i.transpose() * oi;
-            let h_ij = lin.jac_i.transpose() * oj;
-            let h_jj = lin.jac_j.transpose() * oj;
-            let b_i = lin.jac_i.transpose() * oe;
-            let b_j = lin.jac_j.transpose() * oe;
-            self.system.add_edge(k, &h_ii, &h_ij, &h_jj, &b_i, &b_j);
         }
         objective
+    }
+}
+
+/// Edges linearised per parallel batch.
+const LINEARIZE_CHUNK: usize = 1 << 14;
+
+/// One edge's contribution to the normal equations.
+#[derive(Clone, Copy)]
+struct EdgeTerms<const D: usize> {
+    active: bool,
+    chi2: f64,
+    h_ii: SMatrix<f64, D, D>,
+    h_ij: SMatrix<f64, D, D>,
+    h_jj: SMatrix<f64, D, D>,
+    b_i: SVector<f64, D>,
+    b_j: SVector<f64, D>,
+}
+
+impl<const D: usize> Default for EdgeTerms<D> {
+    fn default() -> Self {
+        Self {
+            active: false,
+            chi2: 0.0,
+            h_ii: SMatrix::zeros(),
+            h_ij: SMatrix::zeros(),
+            h_jj: SMatrix::zeros(),
+            b_i: SVector::zeros(),
+            b_j: SVector::zeros(),
+        }
+    }
+}
+
+impl<const D: usize> EdgeTerms<D> {
+    /// `JᵀwΩJ`, `JᵀwΩe` and `w·eᵀΩe` of one edge at the graph's poses.
+    fn new<P: Pose<D>>(graph: &PoseGraph<P, D>, e: &crate::graph::Edge<P, D>, w: f64) -> Self {
+        let lin = P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
+        let omega = e.information * w;
+        let oi = omega * lin.jac_i;
+        let oj = omega * lin.jac_j;
+        let oe = omega * lin.error;
+        Self {
+            active: true,
+            chi2: lin.error.dot(&oe),
+            h_ii: lin.jac_i.transpose() * oi,
+            h_ij: lin.jac_i.transpose() * oj,
+            h_jj: lin.jac_j.transpose() * oj,
+            b_i: lin.jac_i.transpose() * oe,
+            b_j: lin.jac_j.transpose() * oe,
+        }
     }
 }
 
