@@ -8,6 +8,7 @@ pub mod graph;
 pub mod io;
 pub mod linear;
 pub mod pipeline;
+pub mod plot;
 pub mod report;
 pub mod robust;
 pub mod simulate;
