@@ -206,6 +206,11 @@ struct OptimizeArgs {
     /// every edge between non-consecutive ids.
     #[arg(long, value_enum, default_value_t = CandidatesArg::Counted)]
     candidates: CandidatesArg,
+    /// Write SVG pictures into this directory: counts.svg (histogram of the
+    /// normalised inlier counts with the fitted mixture and T_GV) and
+    /// trajectory.svg (before and after, loops coloured by final weight).
+    #[arg(long, value_name = "DIR")]
+    plot: Option<PathBuf>,
     /// Threads (0: all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -604,6 +609,7 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
         RobustArg::Gnc => RobustMethod::Gnc,
     };
     config.robust_c = args.robust_c;
+    config.plot = args.plot.clone();
     config.candidates = match args.candidates {
         CandidatesArg::Counted => CandidateRule::Counted,
         CandidatesArg::NonSequential => CandidateRule::NonSequential,

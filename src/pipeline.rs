@@ -48,6 +48,9 @@ pub struct OptimizeConfig {
     pub robust: RobustMethod,
     /// Kernel width override.
     pub robust_c: Option<f64>,
+    /// Write SVG pictures (inlier-count histogram with the fitted mixture;
+    /// trajectory before and after) into this directory.
+    pub plot: Option<PathBuf>,
 }
 
 /// Which edges are loop-closure candidates.
@@ -81,6 +84,7 @@ impl OptimizeConfig {
             candidates: CandidateRule::default(),
             robust: RobustMethod::default(),
             robust_c: None,
+            plot: None,
         }
     }
 }
@@ -110,6 +114,9 @@ pub enum PipelineError {
         /// The cause.
         source: std::io::Error,
     },
+    /// A picture could not be drawn or written.
+    #[error(transparent)]
+    Plot(#[from] crate::plot::PlotError),
     /// The optimiser produced non-finite poses (nothing was written).
     #[error("{path}: the optimiser produced non-finite poses; nothing was written")]
     NonFiniteResult {
@@ -132,7 +139,10 @@ impl PipelineError {
                 source: SolveError::NonFiniteStart,
                 ..
             } => 2,
-            Self::Solve { .. } | Self::Write { .. } | Self::NonFiniteResult { .. } => 1,
+            Self::Solve { .. }
+            | Self::Write { .. }
+            | Self::NonFiniteResult { .. }
+            | Self::Plot(_) => 1,
         }
     }
 }
@@ -253,6 +263,10 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     // Optimise; with a robust method, reweight the kept candidates from
     // their residuals and solve again until the weights settle.
     let initial_chi2 = graph.chi2();
+    let before = config
+        .plot
+        .as_ref()
+        .map(|_| crate::plot::top_view(&graph.poses));
     let mut robust_options = RobustOptions::new(method, D);
     if let Some(c) = config.robust_c {
         robust_options.c = c;
@@ -338,6 +352,9 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     };
 
     chi2_test(graph, &weights, config, report);
+    if let (Some(dir), Some(before)) = (&config.plot, before) {
+        plot(dir, graph, &before, &weights, &candidates, config, report)?;
+    }
     report.loops = candidates
         .edges
         .iter()
@@ -354,6 +371,63 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             }
         })
         .collect();
+    Ok(())
+}
+
+/// Writes `counts.svg` (when there are counts) and `trajectory.svg` into
+/// `dir`, and lists them in the report.
+fn plot<P: G2oPose<D>, const D: usize>(
+    dir: &Path,
+    graph: &PoseGraph<P, D>,
+    before: &[[f64; 2]],
+    weights: &[f64],
+    candidates: &Candidates,
+    config: &OptimizeConfig,
+    report: &mut Report,
+) -> Result<(), PipelineError> {
+    use crate::plot::{LoopLine, plot_counts, plot_trajectory, top_view};
+    std::fs::create_dir_all(dir).map_err(|source| PipelineError::Write {
+        path: dir.to_owned(),
+        source,
+    })?;
+    let counts: Vec<u64> = candidates.counts.iter().flatten().copied().collect();
+    if let (false, Some(fit)) = (counts.is_empty(), &report.gate.fit) {
+        let path = dir.join("counts.svg");
+        plot_counts(&path, &counts, fit)?;
+        report.plots.push(path.display().to_string());
+    }
+    let ids = graph.ids();
+    let odometry: Vec<(usize, usize)> = graph
+        .edges
+        .iter()
+        .filter(|e| e.candidate.is_none() && ids[e.from].abs_diff(ids[e.to]) == 1)
+        .map(|e| (e.from, e.to))
+        .collect();
+    let loops: Vec<LoopLine> = graph
+        .edges
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| e.candidate.is_some() || ids[e.from].abs_diff(ids[e.to]) != 1)
+        .map(|(k, e)| LoopLine {
+            from: e.from,
+            to: e.to,
+            weight: weights[k],
+        })
+        .collect();
+    let title = config
+        .input
+        .file_name()
+        .map_or_else(|| "pose graph".into(), |n| n.to_string_lossy().into_owned());
+    let path = dir.join("trajectory.svg");
+    plot_trajectory(
+        &path,
+        before,
+        &top_view(&graph.poses),
+        &odometry,
+        &loops,
+        &title,
+    )?;
+    report.plots.push(path.display().to_string());
     Ok(())
 }
 

@@ -48,6 +48,8 @@ pub struct Report {
     pub robust: RobustReport,
     /// One entry per loop candidate, in file order.
     pub loops: Vec<LoopReport>,
+    /// SVG pictures written (`--plot`).
+    pub plots: Vec<String>,
     /// Warnings, one line each.
     pub warnings: Vec<String>,
 }
@@ -71,8 +73,12 @@ pub struct GateReport {
     pub zero_counts: usize,
     /// Candidates with a count.
     pub counted: usize,
-    /// The fitted log-normal mixture (`mode = auto`).
+    /// The fitted log-normal mixture (`mode = auto` or `soft`).
     pub mixture: Option<LogNormalMixture>,
+    /// The whole fit, for pictures (not serialised: `mixture` and
+    /// `separation` carry its numbers).
+    #[serde(skip)]
+    pub fit: Option<crate::gate::ThresholdFit>,
     /// BIC, Ashman's D and the loop component's size.
     pub separation: Option<Separation>,
     /// Candidates kept.
@@ -103,6 +109,7 @@ impl GateReport {
             zero_counts: counts.iter().filter(|c| **c == Some(0)).count(),
             counted: counts.iter().flatten().count(),
             mixture: fit.and_then(|f| f.mixture.clone()),
+            fit: fit.cloned(),
             separation: fit.and_then(|f| f.separation.clone()),
             kept: decision.kept_count(),
             dropped: decision.dropped_count(),
@@ -282,6 +289,7 @@ impl Report {
             chi2_test: None,
             robust: RobustReport::default(),
             loops: Vec::new(),
+            plots: Vec::new(),
             warnings: file.summary.warnings.clone(),
         }
     }

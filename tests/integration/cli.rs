@@ -205,3 +205,43 @@ fn gate_prints_the_threshold_of_a_sample_and_fails_on_degenerate_counts() {
     let fit: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(fit["degeneracy"].is_object());
 }
+
+#[test]
+fn plot_writes_the_count_histogram_and_the_trajectory() {
+    let dir = temp_dir("plot");
+    let plots = dir.join("pictures");
+    let out = pgo(&[
+        "optimize",
+        &sample("grid2d.g2o"),
+        "--plot",
+        plots.to_str().unwrap(),
+        "--json",
+        "-q",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    for name in ["counts.svg", "trajectory.svg"] {
+        let svg = std::fs::read_to_string(plots.join(name)).unwrap();
+        assert!(
+            svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"),
+            "{name}"
+        );
+    }
+    assert!(
+        std::fs::read_to_string(plots.join("counts.svg"))
+            .unwrap()
+            .contains("T_GV = ")
+    );
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r["plots"].as_array().unwrap().len(), 2);
+    // A graph without candidates gets the trajectory only.
+    let out = pgo(&[
+        "optimize",
+        &sample("sphere3d_truth.g2o"),
+        "--plot",
+        plots.to_str().unwrap(),
+        "--json",
+        "-q",
+    ]);
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r["plots"].as_array().unwrap().len(), 1);
+}
