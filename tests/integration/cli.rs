@@ -236,7 +236,7 @@ fn plot_writes_the_count_histogram_and_the_trajectory() {
     // A graph without candidates gets the trajectory only.
     let out = pgo(&[
         "optimize",
-        &sample("sphere3d_truth.g2o"),
+        &sample("grid2d_clean.g2o"),
         "--plot",
         plots.to_str().unwrap(),
         "--json",
