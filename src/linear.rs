@@ -94,6 +94,8 @@ pub struct BlockSystem<const D: usize> {
     undamped_diagonal: Vec<f64>,
     /// `b = Σ Jᵀ Ω e`, in elimination order.
     gradient: Vec<f64>,
+    /// The right-hand side and solution of the triangular solves.
+    rhs: Vec<f64>,
     lambda: f64,
     symbolic: SymbolicCholesky<usize>,
     factor: Vec<f64>,
@@ -112,7 +114,16 @@ impl<const D: usize> BlockSystem<D> {
         threads: usize,
     ) -> Result<Self, LinearError> {
         let position = fill_reducing_order(n_blocks, edges)?;
+        Self::with_positions(n_blocks, edges, threads, position)
+    }
 
+    /// Like [`Self::new`] with a given elimination position of each block.
+    pub fn with_positions(
+        n_blocks: usize,
+        edges: &[(Option<usize>, Option<usize>)],
+        threads: usize,
+        position: Vec<usize>,
+    ) -> Result<Self, LinearError> {
         // Neighbours of each block that come later in the elimination order,
         // by elimination position.
         let mut later: Vec<Vec<usize>> = vec![Vec::new(); n_blocks];
@@ -204,6 +215,7 @@ impl<const D: usize> BlockSystem<D> {
             edges,
             undamped_diagonal: vec![0.0; n],
             gradient: vec![0.0; n],
+            rhs: vec![0.0; n],
             lambda: 0.0,
             symbolic,
             factor,
@@ -225,6 +237,30 @@ impl<const D: usize> BlockSystem<D> {
     /// Non-zeros of the Cholesky factor.
     pub fn nnz_factor(&self) -> usize {
         self.factor.len()
+    }
+
+    /// Supernodes of the factor and the floating-point operations of one
+    /// numeric factorisation, `Σ_k c_k²` over the non-zero counts `c_k` of
+    /// the factor's columns (a multiply–add counts as two).
+    pub fn factor_stats(&self) -> (usize, f64) {
+        use faer::sparse::linalg::cholesky::SymbolicCholeskyRaw;
+        match self.symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) => {
+                let (begin, end) = (s.supernode_begin(), s.supernode_end());
+                let val = s.col_ptr_for_val();
+                let mut flops = 0.0;
+                for k in 0..s.n_supernodes() {
+                    let c = end[k] - begin[k];
+                    let r = (val[k + 1] - val[k]) / c.max(1);
+                    for j in 0..c {
+                        let cnt = (r - j) as f64;
+                        flops += cnt * cnt;
+                    }
+                }
+                (s.n_supernodes(), flops)
+            }
+            SymbolicCholeskyRaw::Simplicial(_) => (0, 0.0),
+        }
     }
 
     /// Sets `H` and `b` to zero before assembly.
@@ -365,12 +401,15 @@ impl<const D: usize> BlockSystem<D> {
         if n == 0 {
             return;
         }
-        let mut rhs: Vec<f64> = self.gradient.iter().map(|g| -g).collect();
+        let rhs = &mut self.rhs;
+        for (r, g) in rhs.iter_mut().zip(&self.gradient) {
+            *r = -g;
+        }
         let llt = LltRef::<'_, usize, f64>::new(&self.symbolic, &self.factor);
         let par = parallelism(self.threads);
         llt.solve_in_place_with_conj(
             Conj::No,
-            MatMut::from_column_major_slice_mut(&mut rhs, n, 1),
+            MatMut::from_column_major_slice_mut(rhs, n, 1),
             par,
             MemStack::new(&mut self.scratch),
         );
@@ -423,12 +462,13 @@ fn transpose_pattern(n: usize, col_ptr: &[usize], row_idx: &[usize]) -> (Vec<usi
     (count, out)
 }
 
-fn parallelism(threads: usize) -> Par {
-    match threads {
-        1 => Par::Seq,
-        0 => Par::rayon(0),
-        t => Par::rayon(t),
-    }
+/// faer's parallel kernels only split the dense products of large
+/// supernodes, thousands of times per factorisation; on pose graphs (6×6 to
+/// ~300×300 fronts) that costs more than it gains: sphere2500 factorises in
+/// 18.6 ms sequentially and 28.3 ms with `Par::rayon(2)`, city10000 in 11.8
+/// and 20.0 ms (`examples/probe.rs`, minimum of 20). Sequential, then.
+fn parallelism(_threads: usize) -> Par {
+    Par::Seq
 }
 
 /// AMD on the block graph: the elimination position of each block.

@@ -254,6 +254,9 @@ pub struct Optimizer<P, const D: usize> {
     system: BlockSystem<D>,
     /// Vertex of each variable block.
     vertex_of: Vec<usize>,
+    /// Whether each edge is in the sparsity pattern (edges of weight 0 at
+    /// construction are not; a later non-zero weight rebuilds the pattern).
+    in_pattern: Vec<bool>,
     options: SolverOptions,
     trial: Vec<P>,
     best: Vec<P>,
@@ -299,14 +302,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 vertex_of.push(k);
             }
         }
-        let pairs: Vec<(Option<usize>, Option<usize>)> = graph
-            .edges
-            .iter()
-            .map(|e| (variable[e.from], variable[e.to]))
+        let in_pattern: Vec<bool> = (0..graph.edges.len())
+            .map(|k| weights.is_none_or(|w| w[k] != 0.0))
             .collect();
-        let system = BlockSystem::new(vertex_of.len(), &pairs, options.threads)?;
+        let system = Self::pattern(graph, &variable, &in_pattern, vertex_of.len(), &options)?;
         Ok(Self {
             system,
+            in_pattern,
             step: vec![0.0; vertex_of.len() * D],
             vertex_of,
             trial: graph.poses.clone(),
@@ -314,6 +316,57 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             options,
             terms: Vec::new(),
         })
+    }
+
+    /// The block system of the edges in the pattern.
+    fn pattern(
+        graph: &PoseGraph<P, D>,
+        variable: &[Option<usize>],
+        in_pattern: &[bool],
+        n_blocks: usize,
+        options: &SolverOptions,
+    ) -> Result<BlockSystem<D>, SolveError> {
+        let pairs: Vec<(Option<usize>, Option<usize>)> = graph
+            .edges
+            .iter()
+            .zip(in_pattern)
+            .map(|(e, &inside)| {
+                if inside {
+                    (variable[e.from], variable[e.to])
+                } else {
+                    (None, None)
+                }
+            })
+            .collect();
+        Ok(BlockSystem::new(n_blocks, &pairs, options.threads)?)
+    }
+
+    /// Rebuilds the pattern if an edge left out of it now has a non-zero
+    /// weight.
+    fn extend_pattern(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        weights: Option<&[f64]>,
+    ) -> Result<(), SolveError> {
+        let needed = |k: usize| weights.is_none_or(|w| w[k] != 0.0);
+        if (0..self.in_pattern.len()).all(|k| self.in_pattern[k] || !needed(k)) {
+            return Ok(());
+        }
+        for k in 0..self.in_pattern.len() {
+            self.in_pattern[k] |= needed(k);
+        }
+        let mut variable = vec![None; graph.num_vertices()];
+        for (block, &v) in self.vertex_of.iter().enumerate() {
+            variable[v] = Some(block);
+        }
+        self.system = Self::pattern(
+            graph,
+            &variable,
+            &self.in_pattern,
+            self.vertex_of.len(),
+            &self.options,
+        )?;
+        Ok(())
     }
 
     /// The options, e.g. to change the iteration limit between runs.
@@ -347,6 +400,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 });
             }
         }
+        if self.in_pattern.len() != graph.edges.len() {
+            return Err(SolveError::WeightCount {
+                weights: self.in_pattern.len(),
+                edges: graph.edges.len(),
+            });
+        }
+        self.extend_pattern(graph, weights)?;
         let start = Instant::now();
         let opts = self.options.clone();
         let mut summary = Summary {
