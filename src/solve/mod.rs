@@ -634,8 +634,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 }
 
-/// Edges linearised per parallel batch.
-const LINEARIZE_CHUNK: usize = 1 << 14;
+/// Edges linearised per parallel batch (2048 × ~1 kB of terms in 3D).
+const LINEARIZE_CHUNK: usize = 1 << 11;
 
 /// One edge's contribution to the normal equations.
 #[derive(Clone, Copy)]
