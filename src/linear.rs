@@ -25,6 +25,7 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::SymbolicSparseColMatRef;
 use faer::sparse::linalg::amd;
 use nalgebra::{SMatrix, SVector};
+use rayon::prelude::*;
 use supernodal::Symbolic;
 
 /// Errors of the linear solver.
@@ -261,16 +262,69 @@ impl<const D: usize> BlockSystem<D> {
         }
         if slot.off != NONE {
             let block = &mut self.off[slot.off as usize * D * D..][..D * D];
-            for c in 0..D {
-                for r in 0..D {
-                    block[c * D + r] += if slot.i_is_row {
-                        h_ij[(r, c)]
-                    } else {
-                        h_ij[(c, r)]
-                    };
+            add_off_diagonal::<D>(block, h_ij, slot.i_is_row);
+        }
+    }
+
+    /// Adds the contributions of edges `first`, `first + 1`, … (one per item;
+    /// `blocks` returns `None` for an item to skip), like [`Self::add_edge`]
+    /// for each but, with more than one thread, in parallel: each thread owns
+    /// a range of elimination positions and adds, in edge order, only to the
+    /// blocks of its range — no locks, and the same sums as sequentially.
+    pub fn add_edges<T: Sync>(
+        &mut self,
+        first: usize,
+        items: &[T],
+        blocks: impl Fn(&T) -> Option<&EdgeBlocks<D>> + Sync,
+    ) {
+        let threads = if self.threads == 1 {
+            1
+        } else {
+            rayon::current_num_threads()
+        };
+        if threads <= 1 || items.len() < 512 {
+            for (k, item) in items.iter().enumerate() {
+                if let Some(c) = blocks(item) {
+                    self.add_edge(first + k, &c.h_ii, &c.h_ij, &c.h_jj, &c.b_i, &c.b_j);
                 }
             }
+            return;
         }
+        let n = self.n_blocks;
+        let diag = SharedSlice(self.diag.as_mut_ptr());
+        let off = SharedSlice(self.off.as_mut_ptr());
+        let gradient = SharedSlice(self.gradient.as_mut_ptr());
+        let edges = &self.edges[first..first + items.len()];
+        (0..threads).into_par_iter().for_each(|t| {
+            let owned = (n * t / threads) as u32..(n * (t + 1) / threads) as u32;
+            for (slot, item) in edges.iter().zip(items) {
+                let mine_i = owned.contains(&slot.i);
+                let mine_j = owned.contains(&slot.j);
+                let mine_off = slot.off != NONE && owned.contains(&slot.i.min(slot.j));
+                if !(mine_i || mine_j || mine_off) {
+                    continue;
+                }
+                let Some(c) = blocks(item) else { continue };
+                // SAFETY: the blocks and gradient entries of positions in
+                // `owned` (off-diagonal blocks: of their column) are written
+                // by this thread only; the vectors outlive the scope.
+                unsafe {
+                    if mine_i {
+                        add_diagonal_raw::<D>(&diag, &gradient, slot.i as usize, &c.h_ii, &c.b_i);
+                    }
+                    if mine_j {
+                        add_diagonal_raw::<D>(&diag, &gradient, slot.j as usize, &c.h_jj, &c.b_j);
+                    }
+                    if mine_off {
+                        let block = std::slice::from_raw_parts_mut(
+                            off.at(slot.off as usize * D * D),
+                            D * D,
+                        );
+                        add_off_diagonal::<D>(block, &c.h_ij, slot.i_is_row);
+                    }
+                }
+            }
+        });
     }
 
     /// Sets `b` to zero, keeping `H` (and its factorisation): for solving
@@ -293,12 +347,7 @@ impl<const D: usize> BlockSystem<D> {
     }
 
     fn add_diagonal(&mut self, p: usize, h: &SMatrix<f64, D, D>, g: &SVector<f64, D>) {
-        let block = &mut self.diag[p * D * D..][..D * D];
-        for c in 0..D {
-            for r in c..D {
-                block[c * D + r] += h[(r, c)];
-            }
-        }
+        add_lower::<D>(&mut self.diag[p * D * D..][..D * D], h);
         let grad = &mut self.gradient[p * D..][..D];
         for a in 0..D {
             grad[a] += g[a];
@@ -407,6 +456,96 @@ impl<const D: usize> BlockSystem<D> {
     /// The largest absolute entry of `b`, for the gradient stopping test.
     pub fn gradient_max_norm(&self) -> f64 {
         self.gradient.iter().fold(0.0, |m, g| m.max(g.abs()))
+    }
+}
+
+/// One edge's blocks of the normal equations: `H_ii = J_iᵀΩJ_i`,
+/// `H_ij = J_iᵀΩJ_j`, `H_jj = J_jᵀΩJ_j`, `b_i = J_iᵀΩe`, `b_j = J_jᵀΩe`.
+#[derive(Clone, Copy, Debug)]
+pub struct EdgeBlocks<const D: usize> {
+    /// `H_ii`.
+    pub h_ii: SMatrix<f64, D, D>,
+    /// `H_ij`.
+    pub h_ij: SMatrix<f64, D, D>,
+    /// `H_jj`.
+    pub h_jj: SMatrix<f64, D, D>,
+    /// `b_i`.
+    pub b_i: SVector<f64, D>,
+    /// `b_j`.
+    pub b_j: SVector<f64, D>,
+}
+
+impl<const D: usize> Default for EdgeBlocks<D> {
+    fn default() -> Self {
+        Self {
+            h_ii: SMatrix::zeros(),
+            h_ij: SMatrix::zeros(),
+            h_jj: SMatrix::zeros(),
+            b_i: SVector::zeros(),
+            b_j: SVector::zeros(),
+        }
+    }
+}
+
+/// Adds the lower triangle of `h` to a column-major `D×D` block.
+#[inline]
+fn add_lower<const D: usize>(block: &mut [f64], h: &SMatrix<f64, D, D>) {
+    for c in 0..D {
+        for r in c..D {
+            block[c * D + r] += h[(r, c)];
+        }
+    }
+}
+
+/// Adds `H_ij` (or its transpose) to an off-diagonal slot.
+#[inline]
+fn add_off_diagonal<const D: usize>(block: &mut [f64], h_ij: &SMatrix<f64, D, D>, i_is_row: bool) {
+    for c in 0..D {
+        for r in 0..D {
+            block[c * D + r] += if i_is_row { h_ij[(r, c)] } else { h_ij[(c, r)] };
+        }
+    }
+}
+
+/// A vector written by several threads at disjoint places.
+struct SharedSlice(*mut f64);
+// SAFETY: used only where every element has one writer (see `add_edges`).
+unsafe impl Sync for SharedSlice {}
+unsafe impl Send for SharedSlice {}
+
+impl SharedSlice {
+    /// The element at `offset` (a method, so that closures capture the
+    /// whole `Sync` wrapper rather than its raw pointer).
+    ///
+    /// # Safety
+    /// `offset` is in bounds.
+    unsafe fn at(&self, offset: usize) -> *mut f64 {
+        // SAFETY: in bounds by the caller's contract.
+        unsafe { self.0.add(offset) }
+    }
+}
+
+/// `add_diagonal` through shared pointers.
+///
+/// # Safety
+/// The caller is the only writer of block `p` and gradient entries `p·D..`.
+unsafe fn add_diagonal_raw<const D: usize>(
+    diag: &SharedSlice,
+    gradient: &SharedSlice,
+    p: usize,
+    h: &SMatrix<f64, D, D>,
+    g: &SVector<f64, D>,
+) {
+    // SAFETY: see above; the offsets are in bounds for a position p < n.
+    let (block, grad) = unsafe {
+        (
+            std::slice::from_raw_parts_mut(diag.at(p * D * D), D * D),
+            std::slice::from_raw_parts_mut(gradient.at(p * D), D),
+        )
+    };
+    add_lower::<D>(block, h);
+    for a in 0..D {
+        grad[a] += g[a];
     }
 }
 

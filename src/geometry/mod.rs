@@ -22,8 +22,8 @@
 mod se2;
 mod se3;
 
-pub use se2::Se2;
-pub use se3::Se3;
+pub use se2::{Se2, Se2Prepared};
+pub use se3::{Se3, Se3Prepared};
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
@@ -59,13 +59,38 @@ pub trait Pose<const D: usize>:
     /// The position of the pose (z = 0 for SE(2)).
     fn position(&self) -> Vector3<f64>;
 
+    /// The pose with what every edge at it recomputes otherwise (the sine
+    /// and cosine of an angle, a rotation matrix), for evaluating many edges.
+    type Prepared: Copy + Clone + std::fmt::Debug + Send + Sync + 'static;
+
+    /// This pose, prepared.
+    fn prepare(&self) -> Self::Prepared;
+
     /// Relative-pose error of the edge `xi → xj` with measurement `z`
     /// (see the module documentation).
-    fn error(xi: &Self, xj: &Self, z: &Self) -> SVector<f64, D>;
+    fn error(xi: &Self, xj: &Self, z: &Self) -> SVector<f64, D> {
+        Self::error_prepared(&xi.prepare(), &xj.prepare(), &z.prepare())
+    }
 
     /// The error and its Jacobians with respect to the right updates of `xi`
     /// and `xj`.
-    fn error_and_jacobians(xi: &Self, xj: &Self, z: &Self) -> EdgeLinearization<D>;
+    fn error_and_jacobians(xi: &Self, xj: &Self, z: &Self) -> EdgeLinearization<D> {
+        Self::error_and_jacobians_prepared(&xi.prepare(), &xj.prepare(), &z.prepare())
+    }
+
+    /// [`Pose::error`] of prepared poses.
+    fn error_prepared(
+        xi: &Self::Prepared,
+        xj: &Self::Prepared,
+        z: &Self::Prepared,
+    ) -> SVector<f64, D>;
+
+    /// [`Pose::error_and_jacobians`] of prepared poses.
+    fn error_and_jacobians_prepared(
+        xi: &Self::Prepared,
+        xj: &Self::Prepared,
+        z: &Self::Prepared,
+    ) -> EdgeLinearization<D>;
 }
 
 /// The error of one edge and its Jacobians, `∂e/∂δᵢ` and `∂e/∂δⱼ`.

@@ -142,28 +142,35 @@ impl Pose<6> for Se3 {
         self.translation
     }
 
-    fn error(xi: &Self, xj: &Self, z: &Self) -> Vector6<f64> {
-        let qi_inv = xi.rotation.inverse();
-        let t_a = qi_inv * (xj.translation - xi.translation);
-        let qz_inv = z.rotation.inverse();
-        let t_e = qz_inv * (t_a - z.translation);
-        let q_e = positive_w(qz_inv.quaternion() * qi_inv.quaternion() * xj.rotation.quaternion());
+    type Prepared = Se3Prepared;
+
+    fn prepare(&self) -> Se3Prepared {
+        Se3Prepared {
+            rotation: self.rotation,
+            matrix: self.rotation_matrix(),
+            translation: self.translation,
+        }
+    }
+
+    fn error_prepared(xi: &Se3Prepared, xj: &Se3Prepared, z: &Se3Prepared) -> Vector6<f64> {
+        let t_a = xi.matrix.tr_mul(&(xj.translation - xi.translation));
+        let t_e = z.matrix.tr_mul(&(t_a - z.translation));
+        let q_e = relative_quaternion(xi, xj, z);
         Vector6::new(t_e.x, t_e.y, t_e.z, q_e.i, q_e.j, q_e.k)
     }
 
-    fn error_and_jacobians(xi: &Self, xj: &Self, z: &Self) -> EdgeLinearization<6> {
-        let ri_t = xi.rotation_matrix().transpose();
-        let rz_t = z.rotation_matrix().transpose();
-        let rj = xj.rotation_matrix();
-        let r_a = ri_t * rj;
+    fn error_and_jacobians_prepared(
+        xi: &Se3Prepared,
+        xj: &Se3Prepared,
+        z: &Se3Prepared,
+    ) -> EdgeLinearization<6> {
+        let ri_t = xi.matrix.transpose();
+        let rz_t = z.matrix.transpose();
+        let r_a = ri_t * xj.matrix;
         let r_e = rz_t * r_a;
         let t_a = ri_t * (xj.translation - xi.translation);
         let t_e = rz_t * (t_a - z.translation);
-        let q_e = positive_w(
-            z.rotation.inverse().quaternion()
-                * xi.rotation.inverse().quaternion()
-                * xj.rotation.quaternion(),
-        );
+        let q_e = relative_quaternion(xi, xj, z);
         let error = Vector6::new(t_e.x, t_e.y, t_e.z, q_e.i, q_e.j, q_e.k);
 
         // d vec(q_E ⊗ (1, φ/2)) / dφ = ½ (w I + [v]×), with q_E taken with w ≥ 0.
@@ -187,6 +194,24 @@ impl Pose<6> for Se3 {
             jac_j,
         }
     }
+}
+
+/// An [`Se3`] with its rotation matrix.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Se3Prepared {
+    rotation: UnitQuaternion<f64>,
+    matrix: Matrix3<f64>,
+    translation: Vector3<f64>,
+}
+
+/// The quaternion of `E = Z⁻¹·Xᵢ⁻¹·Xⱼ` with `w ≥ 0`.
+#[inline]
+fn relative_quaternion(xi: &Se3Prepared, xj: &Se3Prepared, z: &Se3Prepared) -> Quaternion<f64> {
+    positive_w(
+        z.rotation.inverse().quaternion()
+            * xi.rotation.inverse().quaternion()
+            * xj.rotation.quaternion(),
+    )
 }
 
 /// The same rotation with `w ≥ 0`.

@@ -10,8 +10,8 @@ pub mod init;
 
 use crate::geometry::Pose;
 use crate::graph::{PoseGraph, VertexId};
-use crate::linear::{BlockSystem, LinearError};
-use nalgebra::{SMatrix, SVector};
+use crate::linear::{BlockSystem, EdgeBlocks, LinearError};
+use nalgebra::SMatrix;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::time::{Duration, Instant};
@@ -250,7 +250,7 @@ impl<F: FnMut(&IterationRecord)> Observer for F {
 /// An optimiser bound to one graph structure: the sparsity pattern, its
 /// ordering and symbolic factorisation are built once here and reused by
 /// every [`Optimizer::run`] (e.g. across robust reweighting rounds).
-pub struct Optimizer<P, const D: usize> {
+pub struct Optimizer<P: Pose<D>, const D: usize> {
     system: BlockSystem<D>,
     /// Vertex of each variable block.
     vertex_of: Vec<usize>,
@@ -262,6 +262,10 @@ pub struct Optimizer<P, const D: usize> {
     best: Vec<P>,
     step: Vec<f64>,
     terms: Vec<EdgeTerms<D>>,
+    /// Each edge's measurement, prepared once ([`Pose::prepare`]).
+    measurements: Vec<P::Prepared>,
+    /// The poses being evaluated, prepared.
+    prepared: Vec<P::Prepared>,
 }
 
 impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
@@ -315,6 +319,12 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             best: graph.poses.clone(),
             options,
             terms: Vec::new(),
+            measurements: graph
+                .edges
+                .iter()
+                .map(|e| e.measurement.prepare())
+                .collect(),
+            prepared: graph.poses.iter().map(|p| p.prepare()).collect(),
         })
     }
 
@@ -503,7 +513,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                     break Some((step_max, objective, true));
                 }
                 self.apply_step(graph);
-                let new_objective = self.objective(&self.trial, graph, weights);
+                let trial = std::mem::take(&mut self.trial);
+                let new_objective = self.objective(&trial, graph, weights);
+                self.trial = trial;
                 clock = lap(&mut summary.timing.evaluate_s, clock);
                 if opts.method == Method::GaussNewton {
                     if new_objective.is_finite() {
@@ -582,7 +594,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// The weighted objective at `poses`.
-    fn objective(&self, poses: &[P], graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
+    fn objective(&mut self, poses: &[P], graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
+        prepare(poses, &mut self.prepared);
+        let (prepared, measurements) = (&self.prepared, &self.measurements);
         graph
             .edges
             .par_iter()
@@ -592,21 +606,25 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 if w == 0.0 {
                     return 0.0;
                 }
-                let r = P::error(&poses[e.from], &poses[e.to], &e.measurement);
+                let r = P::error_prepared(&prepared[e.from], &prepared[e.to], &measurements[k]);
                 w * r.dot(&(e.information * r))
             })
             .sum()
     }
 
     /// Builds `H` and `b` at the graph's poses and returns the objective
-    /// (public for benchmarks; [`Optimizer::run`] does this itself).
+    /// (public for benchmarks; [`Optimizer::run`] does this itself). Edges
+    /// left out of the pattern ([`Optimizer::new`]) count in the objective
+    /// but not in `H`.
     pub fn linearize(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
         self.system.clear();
+        prepare(&graph.poses, &mut self.prepared);
         let mut objective = 0.0;
         // Edges are linearised in parallel, a chunk at a time, into a buffer
-        // reused across iterations; the scatter into H is serial (each edge
-        // writes three blocks that other edges share).
+        // reused across iterations, then added into H in parallel by
+        // destination ([`BlockSystem::add_edges`]).
         let terms = &mut self.terms;
+        let (prepared, measurements) = (&self.prepared, &self.measurements);
         for (c, chunk) in graph.edges.chunks(LINEARIZE_CHUNK).enumerate() {
             let base = c * LINEARIZE_CHUNK;
             terms.resize(chunk.len(), EdgeTerms::default());
@@ -615,22 +633,32 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 .zip(chunk.par_iter())
                 .enumerate()
                 .for_each(|(i, (t, e))| {
-                    let w = weights.map_or(1.0, |w| w[base + i]);
+                    let k = base + i;
+                    let w = weights.map_or(1.0, |w| w[k]);
                     *t = if w == 0.0 {
                         EdgeTerms::default()
                     } else {
-                        EdgeTerms::new(graph, e, w)
+                        let (xi, xj) = (&prepared[e.from], &prepared[e.to]);
+                        EdgeTerms::new::<P>(xi, xj, &measurements[k], &e.information, w)
                     };
                 });
-            for (i, t) in terms.iter().enumerate() {
-                if t.active {
-                    objective += t.chi2;
-                    self.system
-                        .add_edge(base + i, &t.h_ii, &t.h_ij, &t.h_jj, &t.b_i, &t.b_j);
-                }
-            }
+            objective += terms.iter().map(|t| t.chi2).sum::<f64>();
+            self.system
+                .add_edges(base, terms, |t| t.active.then_some(&t.blocks));
         }
         objective
+    }
+}
+
+/// `out[k] = poses[k].prepare()`, in parallel.
+fn prepare<P: Pose<D>, const D: usize>(poses: &[P], out: &mut Vec<P::Prepared>) {
+    if out.len() != poses.len() {
+        *out = poses.iter().map(|p| p.prepare()).collect();
+    } else {
+        out.par_iter_mut()
+            .zip(poses.par_iter())
+            .with_min_len(4096)
+            .for_each(|(o, p)| *o = p.prepare());
     }
 }
 
@@ -642,11 +670,7 @@ const LINEARIZE_CHUNK: usize = 1 << 11;
 struct EdgeTerms<const D: usize> {
     active: bool,
     chi2: f64,
-    h_ii: SMatrix<f64, D, D>,
-    h_ij: SMatrix<f64, D, D>,
-    h_jj: SMatrix<f64, D, D>,
-    b_i: SVector<f64, D>,
-    b_j: SVector<f64, D>,
+    blocks: EdgeBlocks<D>,
 }
 
 impl<const D: usize> Default for EdgeTerms<D> {
@@ -654,31 +678,35 @@ impl<const D: usize> Default for EdgeTerms<D> {
         Self {
             active: false,
             chi2: 0.0,
-            h_ii: SMatrix::zeros(),
-            h_ij: SMatrix::zeros(),
-            h_jj: SMatrix::zeros(),
-            b_i: SVector::zeros(),
-            b_j: SVector::zeros(),
+            blocks: EdgeBlocks::default(),
         }
     }
 }
 
 impl<const D: usize> EdgeTerms<D> {
-    /// `JᵀwΩJ`, `JᵀwΩe` and `w·eᵀΩe` of one edge at the graph's poses.
-    fn new<P: Pose<D>>(graph: &PoseGraph<P, D>, e: &crate::graph::Edge<P, D>, w: f64) -> Self {
-        let lin = P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
-        let omega = e.information * w;
+    /// `JᵀwΩJ`, `JᵀwΩe` and `w·eᵀΩe` of one edge at prepared poses.
+    fn new<P: Pose<D>>(
+        xi: &P::Prepared,
+        xj: &P::Prepared,
+        z: &P::Prepared,
+        information: &SMatrix<f64, D, D>,
+        w: f64,
+    ) -> Self {
+        let lin = P::error_and_jacobians_prepared(xi, xj, z);
+        let omega = information * w;
         let oi = omega * lin.jac_i;
         let oj = omega * lin.jac_j;
         let oe = omega * lin.error;
         Self {
             active: true,
             chi2: lin.error.dot(&oe),
-            h_ii: lin.jac_i.transpose() * oi,
-            h_ij: lin.jac_i.transpose() * oj,
-            h_jj: lin.jac_j.transpose() * oj,
-            b_i: lin.jac_i.transpose() * oe,
-            b_j: lin.jac_j.transpose() * oe,
+            blocks: EdgeBlocks {
+                h_ii: lin.jac_i.transpose() * oi,
+                h_ij: lin.jac_i.transpose() * oj,
+                h_jj: lin.jac_j.transpose() * oj,
+                b_i: lin.jac_i.transpose() * oe,
+                b_j: lin.jac_j.transpose() * oe,
+            },
         }
     }
 }
