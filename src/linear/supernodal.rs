@@ -413,6 +413,11 @@ impl<const D: usize> Symbolic<D> {
         }
     }
 
+    /// Factorises the subtree of `s`: subtrees of at most `grain` flops in
+    /// one task, in post-order; above that, down the heaviest child at each
+    /// node (a loop, so that a deep tree does not overflow the stack) while
+    /// the other children's subtrees run as parallel tasks, then the path
+    /// from the bottom up.
     fn factor_subtree(
         &self,
         s: usize,
@@ -421,27 +426,58 @@ impl<const D: usize> Symbolic<D> {
         load: &(dyn Fn(usize, &mut [f64]) + Sync),
         failed: &AtomicUsize,
     ) {
-        let kids = &self.children[self.child_ptr[s]..self.child_ptr[s + 1]];
-        if self.subtree_flops[s] <= grain {
-            // Post-order without recursion.
-            let mut stack = vec![(s, false)];
-            while let Some((t, expanded)) = stack.pop() {
-                if expanded {
-                    // SAFETY: `t`'s descendants are done; nobody else writes `t`.
-                    unsafe { self.factor_node(t, Par::Seq, shared, load, failed) };
-                } else {
-                    stack.push((t, true));
-                    for &c in &self.children[self.child_ptr[t]..self.child_ptr[t + 1]] {
-                        stack.push((c as usize, false));
+        let mut path = Vec::new();
+        rayon::scope(|scope| {
+            let mut t = s;
+            loop {
+                if self.subtree_flops[t] <= grain {
+                    self.factor_postorder(t, shared, load, failed);
+                    break;
+                }
+                path.push(t);
+                let kids = &self.children[self.child_ptr[t]..self.child_ptr[t + 1]];
+                let Some(&heavy) = kids.iter().max_by(|&&a, &&b| {
+                    self.subtree_flops[a as usize].total_cmp(&self.subtree_flops[b as usize])
+                }) else {
+                    break;
+                };
+                for &c in kids {
+                    if c != heavy {
+                        scope.spawn(move |_| {
+                            self.factor_subtree(c as usize, grain, shared, load, failed)
+                        });
                     }
                 }
+                t = heavy as usize;
             }
-        } else {
-            kids.par_iter()
-                .for_each(|&c| self.factor_subtree(c as usize, grain, shared, load, failed));
-            // SAFETY: as above.
-            let par = Par::rayon(rayon::current_num_threads());
-            unsafe { self.factor_node(s, par, shared, load, failed) };
+        });
+        let par = Par::rayon(rayon::current_num_threads());
+        for &t in path.iter().rev() {
+            // SAFETY: all of `t`'s descendants are done (the scope has
+            // ended); nobody else writes `t`.
+            unsafe { self.factor_node(t, par, shared, load, failed) };
+        }
+    }
+
+    /// Factorises the subtree of `t` in this thread, in post-order.
+    fn factor_postorder(
+        &self,
+        t: usize,
+        shared: &Shared,
+        load: &(dyn Fn(usize, &mut [f64]) + Sync),
+        failed: &AtomicUsize,
+    ) {
+        let mut stack = vec![(t, false)];
+        while let Some((u, expanded)) = stack.pop() {
+            if expanded {
+                // SAFETY: `u`'s descendants are done; nobody else writes `u`.
+                unsafe { self.factor_node(u, Par::Seq, shared, load, failed) };
+            } else {
+                stack.push((u, true));
+                for &c in &self.children[self.child_ptr[u]..self.child_ptr[u + 1]] {
+                    stack.push((c as usize, false));
+                }
+            }
         }
     }
 

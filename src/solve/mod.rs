@@ -255,8 +255,12 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     /// Vertex of each variable block.
     vertex_of: Vec<usize>,
     /// Whether each edge is in the sparsity pattern (edges of weight 0 at
-    /// construction are not; a later non-zero weight rebuilds the pattern).
+    /// construction are not; see [`Self::update_pattern`]).
     in_pattern: Vec<bool>,
+    /// Time to build the pattern (ordering, symbolic factorisation) and of
+    /// the last numeric factorisation.
+    build_time: Duration,
+    factor_time: Duration,
     options: SolverOptions,
     trial: Vec<P>,
     best: Vec<P>,
@@ -309,10 +313,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let in_pattern: Vec<bool> = (0..graph.edges.len())
             .map(|k| weights.is_none_or(|w| w[k] != 0.0))
             .collect();
+        let start = Instant::now();
         let system = Self::pattern(graph, &variable, &in_pattern, vertex_of.len(), &options)?;
         Ok(Self {
             system,
             in_pattern,
+            build_time: start.elapsed(),
+            factor_time: Duration::ZERO,
             step: vec![0.0; vertex_of.len() * D],
             vertex_of,
             trial: graph.poses.clone(),
@@ -351,24 +358,30 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         Ok(BlockSystem::new(n_blocks, &pairs, options.threads)?)
     }
 
-    /// Rebuilds the pattern if an edge left out of it now has a non-zero
-    /// weight.
-    fn extend_pattern(
+    /// Rebuilds the pattern for the edges of non-zero weight when an edge
+    /// left out of it now has a weight, or when edges in it have weight 0
+    /// (loops a robust method removed) and a factorisation costs more than
+    /// building the pattern did — wrong loops that join distant places are
+    /// the ones that cost the most fill.
+    fn update_pattern(
         &mut self,
         graph: &PoseGraph<P, D>,
         weights: Option<&[f64]>,
     ) -> Result<(), SolveError> {
         let needed = |k: usize| weights.is_none_or(|w| w[k] != 0.0);
-        if (0..self.in_pattern.len()).all(|k| self.in_pattern[k] || !needed(k)) {
+        let missing = (0..self.in_pattern.len()).any(|k| !self.in_pattern[k] && needed(k));
+        let unused = (0..self.in_pattern.len()).any(|k| self.in_pattern[k] && !needed(k));
+        if !(missing || unused && self.factor_time > self.build_time) {
             return Ok(());
         }
         for k in 0..self.in_pattern.len() {
-            self.in_pattern[k] |= needed(k);
+            self.in_pattern[k] = needed(k);
         }
         let mut variable = vec![None; graph.num_vertices()];
         for (block, &v) in self.vertex_of.iter().enumerate() {
             variable[v] = Some(block);
         }
+        let start = Instant::now();
         self.system = Self::pattern(
             graph,
             &variable,
@@ -376,6 +389,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             self.vertex_of.len(),
             &self.options,
         )?;
+        self.build_time = start.elapsed();
         Ok(())
     }
 
@@ -416,7 +430,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 edges: graph.edges.len(),
             });
         }
-        self.extend_pattern(graph, weights)?;
+        self.update_pattern(graph, weights)?;
         let start = Instant::now();
         let opts = self.options.clone();
         let mut summary = Summary {
@@ -483,6 +497,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 };
                 summary.factorizations += 1;
                 let factorized = self.system.factorize(damping);
+                self.factor_time = clock.elapsed();
                 clock = lap(&mut summary.timing.factorize_s, clock);
                 match factorized {
                     Ok(()) => {}
