@@ -1387,12 +1387,19 @@ mod tests {
             assert!(mu < 0.02, "{label}: μ error {mu}");
             assert!(sigma < 0.02, "{label}: σ error {sigma}");
             assert!(weight < 0.01, "{label}: π error {weight}");
-            assert!(threshold < 0.03, "{label}: ln T_GV off the Bayes crossing by {threshold}");
+            assert!(
+                threshold < 0.03,
+                "{label}: ln T_GV off the Bayes crossing by {threshold}"
+            );
             // And it got there by converging: the large sample is at least as
             // close as the small ones on every measure that had a fit.
             for e in errors[..2].iter().flatten() {
                 for (small, large) in e.iter().zip(&errors[3].unwrap()) {
-                    assert!(large <= &(small + 0.005), "{label}: {e:?} → {:?}", errors[3]);
+                    assert!(
+                        large <= &(small + 0.005),
+                        "{label}: {e:?} → {:?}",
+                        errors[3]
+                    );
                 }
             }
         }
