@@ -1001,6 +1001,17 @@ pub enum DegeneratePolicy {
     Threshold,
 }
 
+impl DegeneratePolicy {
+    /// The name on the command line: `keep-all`, `drop-all` or `threshold`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::KeepAll => "keep-all",
+            Self::DropAll => "drop-all",
+            Self::Threshold => "threshold",
+        }
+    }
+}
+
 /// The gate's verdict on a list of loop-closure candidates.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct GateDecision {

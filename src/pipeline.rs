@@ -469,8 +469,15 @@ fn gate_candidates<P: G2oPose<D>, const D: usize>(
     if decision.degenerate && report.gate.counted > 0 {
         if let Some(reason) = &decision.reason {
             report.warnings.push(format!(
-                "the inlier counts are degenerate: {reason}; policy {:?}",
-                config.degenerate
+                "the inlier counts are degenerate: {reason}; policy {}: {}",
+                config.degenerate.name(),
+                match config.degenerate {
+                    DegeneratePolicy::DropAll =>
+                        "every counted candidate dropped, the trusted edges optimised alone",
+                    DegeneratePolicy::KeepAll =>
+                        "every candidate kept, left to the robust back end",
+                    DegeneratePolicy::Threshold => "the crossing used anyway where there is one",
+                }
             ));
         }
     }
