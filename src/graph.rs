@@ -230,7 +230,12 @@ impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
 
     /// `Σ eᵀΩe` over all edges (g2o's χ²).
     pub fn chi2(&self) -> f64 {
-        self.edges.iter().map(|e| self.edge_chi2(e)).sum()
+        // Folded from +0 (`sum` starts from -0, which an edgeless graph
+        // would report as "-0").
+        self.edges
+            .iter()
+            .map(|e| self.edge_chi2(e))
+            .fold(0.0, |a, b| a + b)
     }
 
     /// The vertices that no chain of edges connects to the gauge, by index,

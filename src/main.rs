@@ -1,5 +1,7 @@
 //! `pgo`: the command-line interface, a thin clap layer over the library.
 
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+
 use clap::{Parser, Subcommand, ValueEnum};
 use pgo::gate::{DegeneratePolicy, GateMode};
 use pgo::pipeline::{self, CandidateRule, OptimizeConfig};
@@ -320,9 +322,30 @@ fn main() -> ExitCode {
     }
 }
 
+/// The output must not be the input (through links or `..` too): only
+/// `--in-place` overwrites the input.
+fn refuse_to_overwrite_input(
+    input: &std::path::Path,
+    output: &std::path::Path,
+) -> Result<(), String> {
+    if pgo::io::same_file(input, output) {
+        Err(format!(
+            "{}: the output is the input file {}; pgo overwrites its input only with --in-place",
+            output.display(),
+            input.display()
+        ))
+    } else {
+        Ok(())
+    }
+}
+
 fn corrupt(args: CorruptArgs) -> ExitCode {
     use pgo::graph::AnyPoseGraph;
     use pgo::simulate::{CorruptionOptions, InlierModel, OutlierPolicy};
+    if let Err(message) = refuse_to_overwrite_input(&args.input, &args.output) {
+        eprintln!("error: {message}");
+        return ExitCode::from(2);
+    }
     let mut file = match pgo::io::g2o::read(&args.input, Default::default()) {
         Ok(f) => f,
         Err(e) => {
@@ -574,6 +597,12 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
         let _ = rayon::ThreadPoolBuilder::new()
             .num_threads(args.threads)
             .build_global();
+    }
+    if let Some(out) = &args.output {
+        if let Err(message) = refuse_to_overwrite_input(&args.input, out) {
+            eprintln!("error: {message}");
+            return ExitCode::from(2);
+        }
     }
     let mut config = OptimizeConfig::new(&args.input);
     config.output = if args.in_place {
