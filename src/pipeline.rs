@@ -287,21 +287,40 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         relative_tolerance: 1e-6,
         ..full.clone()
     };
+    // --max-iters and --time-limit bound the whole optimisation, robust
+    // rounds included: each run gets what is left of both.
+    let deadline = full.time_limit.map(|t| Instant::now() + t);
+    let within_budget = |options: &SolverOptions, used: usize| SolverOptions {
+        max_iterations: options
+            .max_iterations
+            .min(full.max_iterations.saturating_sub(used)),
+        time_limit: deadline.map(|d| d.saturating_duration_since(Instant::now())),
+        ..options.clone()
+    };
+    let exhausted =
+        |used: usize| used >= full.max_iterations || deadline.is_some_and(|d| Instant::now() >= d);
     let mut total = None::<crate::solve::Summary>;
     loop {
         let robust = reweighter.is_active();
-        *optimizer.options_mut() = if robust {
-            partial.clone()
-        } else {
-            full.clone()
-        };
+        let used = total.as_ref().map_or(0, |t| t.iterations);
+        *optimizer.options_mut() = within_budget(if robust { &partial } else { &full }, used);
         let summary = optimizer
             .run(graph, Some(&weights), &mut |r: &IterationRecord| {
                 observer(r)
             })
             .map_err(solve_error)?;
-        total = Some(merge_summaries(total, summary));
-        if !robust {
+        let mut merged = merge_summaries(total, summary);
+        if robust && exhausted(merged.iterations) {
+            // Out of budget before the weights settled.
+            merged.stop_reason = if merged.iterations >= full.max_iterations {
+                crate::solve::StopReason::MaxIterations
+            } else {
+                crate::solve::StopReason::TimeLimit
+            };
+        }
+        let stop = !robust || exhausted(merged.iterations);
+        total = Some(merged);
+        if stop {
             break;
         }
         let r2: Vec<f64> = kept
@@ -314,7 +333,8 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         }
         if !again {
             // The weights settled: one last solve to full convergence.
-            *optimizer.options_mut() = full.clone();
+            let used = total.as_ref().map_or(0, |t| t.iterations);
+            *optimizer.options_mut() = within_budget(&full, used);
             let summary = optimizer
                 .run(graph, Some(&weights), &mut |r: &IterationRecord| {
                     observer(r)
