@@ -4,4 +4,6 @@
 mod cli;
 mod common;
 mod datasets;
+mod faults;
 mod hostile;
+mod killed;
