@@ -4,6 +4,8 @@
 
 pub mod g2o;
 pub mod inliers;
+#[cfg(test)]
+mod roundtrip_tests;
 
 use std::fs::{self, File};
 use std::io::{self, BufRead, BufReader, BufWriter, Read, Write};
