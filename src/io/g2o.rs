@@ -126,6 +126,12 @@ pub enum LineProblem {
     /// An information matrix that cannot be repaired (all eigenvalues zero).
     #[error("information matrix is zero and cannot be made positive definite")]
     InformationZero,
+    /// An information matrix whose projection fails (entries so large that
+    /// the eigen-decomposition overflows).
+    #[error(
+        "information matrix cannot be made positive definite (its entries are too large to decompose)"
+    )]
+    InformationNotRepairable,
     /// A quaternion of zero norm.
     #[error("quaternion has zero norm")]
     ZeroQuaternion,
@@ -655,8 +661,13 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
                     min_eigenvalue: min_eigenvalue(&information),
                 });
             }
-            information =
-                nearest_positive_definite(&information).ok_or(LineProblem::InformationZero)?;
+            information = nearest_positive_definite(&information).ok_or(
+                if information.iter().all(|v| *v == 0.0) {
+                    LineProblem::InformationZero
+                } else {
+                    LineProblem::InformationNotRepairable
+                },
+            )?;
             self.information_fixed += 1;
         }
         self.vertex_index(from);
@@ -775,12 +786,13 @@ fn upper_triangle_to_matrix<const D: usize>(v: &[f64]) -> SMatrix<f64, D, D> {
     m
 }
 
+/// The smallest eigenvalue (NaN if the bounded eigen-solver fails), for
+/// messages.
 fn min_eigenvalue<const D: usize>(m: &SMatrix<f64, D, D>) -> f64 {
     let d = nalgebra::DMatrix::from_column_slice(D, D, m.as_slice());
-    d.symmetric_eigenvalues()
-        .iter()
-        .copied()
-        .fold(f64::INFINITY, f64::min)
+    nalgebra::SymmetricEigen::try_new(d, f64::EPSILON, 10_000).map_or(f64::NAN, |e| {
+        e.eigenvalues.iter().copied().fold(f64::INFINITY, f64::min)
+    })
 }
 
 impl G2oFile {

@@ -728,3 +728,32 @@ fn the_output_is_never_the_input_without_in_place() {
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert_eq!(std::fs::read_to_string(&input).expect("input"), text);
 }
+
+/// Found by the `optimize` fuzz target: two parallel edges whose rotations
+/// differ by half a turn made the chordal initialisation spin forever
+/// (nalgebra's iterative `Rotation3::from_matrix`). It must finish.
+#[test]
+fn fuzz_regression_parallel_edges_half_a_turn_apart() {
+    let dir = temp_dir("hostile-fuzz-half-turn");
+    let text = format!(
+        "{SE3_V}EDGE_SE3:QUAT 0 1 1 0 0 0 0 1 0 {I6}\nEDGE_SE3:QUAT 0 1 1 0 0 0 0 0 1 {I6}\n"
+    );
+    let path = file(&dir, "half-turn.g2o", text);
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_pgo"))
+        .args(["optimize", &path, "-q"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("start pgo");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("poll") {
+            break status;
+        }
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("pgo optimize did not finish within 60 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    assert_eq!(status.code(), Some(0));
+}
