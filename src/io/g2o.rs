@@ -986,6 +986,17 @@ mod tests {
     }
 
     #[test]
+    fn distinct_unknown_tags_are_capped() {
+        let garbage: String = (0..100).map(|k| format!("TAG{k} 1 2\n")).collect();
+        let f = parse(&format!("{SE2}{garbage}TAG0 again\n")).unwrap();
+        let tags = &f.summary.skipped_tags;
+        assert_eq!(tags.len(), MAX_SKIPPED_TAGS + 1);
+        assert_eq!(tags.get("TAG0"), Some(&2));
+        assert_eq!(tags.get(OTHER_TAGS), Some(&(100 - MAX_SKIPPED_TAGS)));
+        assert_eq!(tags.values().sum::<usize>(), 101);
+    }
+
+    #[test]
     fn unknown_tags_are_skipped_with_one_warning_per_tag() {
         let f = parse(&format!("{SE2}EQUIV 0 1\nEQUIV 1 2\nBR 0 1 2 3 4 5\n")).unwrap();
         assert_eq!(f.summary.skipped_tags.get("EQUIV"), Some(&2));
