@@ -165,10 +165,12 @@ struct OptimizeArgs {
     /// Nonlinear least-squares method.
     #[arg(long, value_enum, default_value_t = SolverArg::Lm)]
     solver: SolverArg,
-    /// Most iterations.
+    /// Most iterations, robust reweighting rounds included.
     #[arg(long, value_name = "N", default_value_t = 100)]
     max_iters: usize,
-    /// Stop after this many seconds and keep the best estimate so far.
+    /// Stop optimising after this many seconds (checked between iterations;
+    /// reading, initialisation and writing not counted) and write the best
+    /// estimate so far.
     #[arg(long, value_name = "SECONDS")]
     time_limit: Option<f64>,
     /// Initial guess.
