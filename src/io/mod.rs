@@ -205,6 +205,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(target_os = "linux")]
     fn leftovers_of_dead_processes_are_removed_and_permissions_kept() {
         use std::os::unix::fs::PermissionsExt;
         let dir = std::env::temp_dir().join(format!("pgo-stale-{}", std::process::id()));
@@ -265,6 +266,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(unix)]
     fn same_file_sees_through_dot_dot_and_links() {
         let dir = std::env::temp_dir().join(format!("pgo-same-{}", std::process::id()));
         fs::create_dir_all(dir.join("sub")).unwrap();

@@ -706,6 +706,7 @@ fn count_lists_that_are_not_text_or_too_long_name_the_line() {
 }
 
 #[test]
+#[cfg(unix)]
 fn the_output_is_never_the_input_without_in_place() {
     let dir = temp_dir("hostile-same-file");
     let text = format!("{V3}{E3}");

@@ -6,4 +6,6 @@ mod common;
 mod datasets;
 mod faults;
 mod hostile;
+// SIGKILL, and /proc to tell which leftover temporaries are stale.
+#[cfg(target_os = "linux")]
 mod killed;
