@@ -79,7 +79,11 @@ fuzz_target!(|data: &[u8]| {
         Err(e) => {
             let message = e.to_string();
             assert!(!message.is_empty());
-            assert!(!output.exists(), "failed run wrote {}: {message}", output.display());
+            assert!(
+                !output.exists(),
+                "failed run wrote {}: {message}",
+                output.display()
+            );
         }
     }
 });

@@ -604,13 +604,12 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
         let components: usize = rest[2].parse().map_err(|_| {
             LineProblem::BadMixture(format!("'{}' is not a component count", rest[2]))
         })?;
-        let body = components
-            .checked_mul(per)
-            .and_then(|b| b.checked_add(3))
-            .unwrap_or(usize::MAX);
-        if components == 0 || (rest.len() != body && rest.len() != body + 1) {
-            return Err(token_count(tag, &expected, rest.len()));
-        }
+        // A component count too large for the line (even one whose token
+        // count overflows) is a token-count error, not an overflow.
+        let body = match components.checked_mul(per).and_then(|b| b.checked_add(3)) {
+            Some(body) if components > 0 && (rest.len() == body || rest.len() == body + 1) => body,
+            _ => return Err(token_count(tag, &expected, rest.len())),
+        };
         // Every component must be well formed (its numbers finite), though
         // only the first is used: the line is written back as read.
         let mut first = None;
@@ -983,6 +982,26 @@ mod tests {
         let text = "# header\r\n\r\nVERTEX_SE2\t0 0 0 0\r\n  VERTEX_SE2 1  1 0 0  \r\n\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1";
         let f = parse(text).unwrap();
         assert_eq!(planar(&f).edges.len(), 1);
+    }
+
+    #[test]
+    fn mixture_component_counts_that_overflow_are_token_count_errors() {
+        // Found by the parse fuzz target: `body + 1` overflowed (a panic in
+        // builds with overflow checks).
+        for count in [
+            "11111111111222222222",
+            "18446744073709551615",
+            "1418129833677085",
+        ] {
+            let (line, p) = line_error(&format!(
+                "VERTEX_SE2 4 0 0 0\nEDGE_SE2_MIXTURE 4 16111 {count}\n"
+            ));
+            assert_eq!(line, 2);
+            assert!(
+                matches!(p, LineProblem::TokenCount { found: 4, .. }),
+                "{count}: {p:?}"
+            );
+        }
     }
 
     #[test]

@@ -758,3 +758,23 @@ fn fuzz_regression_parallel_edges_half_a_turn_apart() {
     };
     assert_eq!(status.code(), Some(0));
 }
+
+/// Found by the `parse` fuzz target: a mixture component count whose token
+/// count overflows made the debug binary panic ("attempt to add with
+/// overflow").
+#[test]
+fn fuzz_regression_mixture_component_count_overflow() {
+    let dir = temp_dir("hostile-fuzz-mixture");
+    let path = file(
+        &dir,
+        "mixture.g2o",
+        "5\r\nEDGE_SE2_MIXTURE 4 16111 11111111111222222222\n",
+    );
+    assert_rejected(
+        &dir,
+        &path,
+        &[],
+        Some(2),
+        "EDGE_SE2_MIXTURE needs 4 + 13·n tokens (+1 with an inlier count), found 4",
+    );
+}
