@@ -1,5 +1,7 @@
 //! `pgo`: the command-line interface, a thin clap layer over the library.
 
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+
 use clap::{Parser, Subcommand, ValueEnum};
 use pgo::gate::{DegeneratePolicy, GateMode};
 use pgo::pipeline::{self, CandidateRule, OptimizeConfig};
@@ -209,10 +211,12 @@ struct OptimizeArgs {
     /// Nonlinear least-squares method.
     #[arg(long, value_enum, default_value_t = SolverArg::Lm)]
     solver: SolverArg,
-    /// Most iterations.
+    /// Most iterations, robust reweighting rounds included.
     #[arg(long, value_name = "N", default_value_t = 100)]
     max_iters: usize,
-    /// Stop after this many seconds and keep the best estimate so far.
+    /// Stop optimising after this many seconds (checked between iterations;
+    /// reading, initialisation and writing not counted) and write the best
+    /// estimate so far.
     #[arg(long, value_name = "SECONDS")]
     time_limit: Option<f64>,
     /// Initial guess.
@@ -366,9 +370,30 @@ fn main() -> ExitCode {
     }
 }
 
+/// The output must not be the input (through links or `..` too): only
+/// `--in-place` overwrites the input.
+fn refuse_to_overwrite_input(
+    input: &std::path::Path,
+    output: &std::path::Path,
+) -> Result<(), String> {
+    if pgo::io::same_file(input, output) {
+        Err(format!(
+            "{}: the output is the input file {}; pgo overwrites its input only with --in-place",
+            output.display(),
+            input.display()
+        ))
+    } else {
+        Ok(())
+    }
+}
+
 fn corrupt(args: CorruptArgs) -> ExitCode {
     use pgo::graph::AnyPoseGraph;
     use pgo::simulate::{CorruptionOptions, InlierModel};
+    if let Err(message) = refuse_to_overwrite_input(&args.input, &args.output) {
+        eprintln!("error: {message}");
+        return ExitCode::from(2);
+    }
     let mut file = match pgo::io::g2o::read(&args.input, Default::default()) {
         Ok(f) => f,
         Err(e) => {
@@ -623,6 +648,12 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
         let _ = rayon::ThreadPoolBuilder::new()
             .num_threads(args.threads)
             .build_global();
+    }
+    if let Some(out) = &args.output {
+        if let Err(message) = refuse_to_overwrite_input(&args.input, out) {
+            eprintln!("error: {message}");
+            return ExitCode::from(2);
+        }
     }
     let mut config = OptimizeConfig::new(&args.input);
     config.output = if args.in_place {
