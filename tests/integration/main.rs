@@ -4,3 +4,9 @@
 mod cli;
 mod common;
 mod datasets;
+mod faults;
+mod gating;
+mod hostile;
+// SIGKILL, and /proc to tell which leftover temporaries are stale.
+#[cfg(target_os = "linux")]
+mod killed;
