@@ -111,6 +111,9 @@ impl<const D: usize> Symbolic<D> {
     /// `q > p`) and every diagonal block.
     pub(super) fn new(later: &[Vec<usize>]) -> Result<Self, LinearError> {
         let n = later.len();
+        if n == 0 {
+            return Ok(Self::from_structure(vec![0], vec![0], Vec::new()));
+        }
         // faer's symbolic analysis (identity ordering) reads the upper
         // triangle: column q lists rows p < q, then the diagonal.
         let mut col_ptr = vec![0usize; n + 1];
@@ -861,6 +864,20 @@ mod tests {
             assert!(err < 1e-10 * expected.norm(), "seed {seed}: {err}");
             assert_eq!(one, two, "seed {seed}: threads change the bits");
         }
+    }
+
+    #[test]
+    fn empty_and_single_block_systems() {
+        let empty = Symbolic::<3>::new(&[]).unwrap();
+        assert_eq!((empty.supernodes(), empty.len_values()), (0, 0));
+        empty.factorize(&mut [], &|_, _| {}, 1).unwrap();
+        let one = Symbolic::<1>::new(&[Vec::new()]).unwrap();
+        let mut values = vec![0.0; one.len_values()];
+        one.factorize(&mut values, &|_, panel: &mut [f64]| panel[0] = 4.0, 1)
+            .unwrap();
+        let mut x = vec![8.0];
+        one.solve(&values, &mut x, &mut Vec::new());
+        assert_eq!(x, vec![2.0]);
     }
 
     #[test]
