@@ -261,6 +261,8 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     /// the last numeric factorisation.
     build_time: Duration,
     factor_time: Duration,
+    /// LM's damping at the end of the last run.
+    last_lambda: f64,
     options: SolverOptions,
     trial: Vec<P>,
     best: Vec<P>,
@@ -320,6 +322,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             in_pattern,
             build_time: start.elapsed(),
             factor_time: Duration::ZERO,
+            last_lambda: 0.0,
             step: vec![0.0; vertex_of.len() * D],
             vertex_of,
             trial: graph.poses.clone(),
@@ -460,8 +463,14 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         // λ = 0 until a step fails: near a minimum, where the Gauss–Newton
         // model is good, any damping only slows the convergence down (on
         // long trajectories the smallest eigenvalues of H are ~1e-6 of its
-        // diagonal, so even λ = 1e-6 halves their steps).
-        let mut lambda = 0.0;
+        // diagonal, so even λ = 1e-6 halves their steps). A later run on the
+        // same optimiser (a robust reweighting round) starts from the damping
+        // the previous one ended with, instead of failing its way up again.
+        let mut lambda = if opts.method == Method::GaussNewton {
+            0.0
+        } else {
+            self.last_lambda
+        };
         let mut nu = 2.0;
         let raise = |lambda: &mut f64, nu: &mut f64| {
             if *lambda == 0.0 {
@@ -594,6 +603,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         summary.final_objective = objective;
         summary.stop_reason = stop;
         summary.time = start.elapsed();
+        // A run that gave up (λ beyond any use) does not pass that on.
+        self.last_lambda = if lambda <= 1e8 { lambda } else { 0.0 };
         Ok(summary)
     }
 
