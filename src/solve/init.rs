@@ -172,7 +172,7 @@ impl<const D: usize> LinearProblem<D> {
             })
             .collect();
         Ok(Self {
-            system: BlockSystem::new(n_free, &pairs, 0)?,
+            system: BlockSystem::new(n_free, &pairs, 1)?,
             variable,
             n_free,
         })

@@ -57,8 +57,13 @@ pub struct SolverOptions {
     /// LM damping `λ` (relative to the diagonal of `H`) after the first
     /// rejected step; until then λ = 0.
     pub initial_lambda: f64,
-    /// Threads for the factorisation (0: all cores; 1: sequential). The
-    /// linearisation uses rayon's global pool.
+    /// Threads: 0 (automatic) and 1 run everything in the calling thread;
+    /// N ≥ 2 linearises, assembles and factorises (independent subtrees and
+    /// the large dense blocks) in rayon's current pool, whose size the
+    /// caller sets (pgo's `--threads N`). Automatic is sequential because on
+    /// the 2-core machine these figures come from, shared with other work, a
+    /// second thread cost more than it gave at every size measured (see the
+    /// README's Speed section).
     pub threads: usize,
 }
 
@@ -358,7 +363,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 }
             })
             .collect();
-        Ok(BlockSystem::new(n_blocks, &pairs, options.threads)?)
+        let threads = if options.threads >= 2 { 0 } else { 1 };
+        Ok(BlockSystem::new(n_blocks, &pairs, threads)?)
     }
 
     /// Rebuilds the pattern for the edges of non-zero weight when an edge
@@ -394,6 +400,16 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         )?;
         self.build_time = start.elapsed();
         Ok(())
+    }
+
+    /// The smallest piece of a parallel loop: everything in one piece
+    /// (the calling thread) unless [`SolverOptions::threads`] asks for more.
+    fn min_len(&self) -> usize {
+        if self.options.threads >= 2 {
+            256
+        } else {
+            usize::MAX
+        }
     }
 
     /// The options, e.g. to change the iteration limit between runs.
@@ -621,12 +637,14 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
 
     /// The weighted objective at `poses`.
     fn objective(&mut self, poses: &[P], graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
-        prepare(poses, &mut self.prepared);
+        let min_len = self.min_len();
+        prepare(poses, &mut self.prepared, min_len);
         let (prepared, measurements) = (&self.prepared, &self.measurements);
         graph
             .edges
             .par_iter()
             .enumerate()
+            .with_min_len(min_len)
             .map(|(k, e)| {
                 let w = weights.map_or(1.0, |w| w[k]);
                 if w == 0.0 {
@@ -644,7 +662,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// but not in `H`.
     pub fn linearize(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
         self.system.clear();
-        prepare(&graph.poses, &mut self.prepared);
+        let min_len = self.min_len();
+        prepare(&graph.poses, &mut self.prepared, min_len);
         let mut objective = 0.0;
         // Edges are linearised in parallel, a chunk at a time, into a buffer
         // reused across iterations, then added into H in parallel by
@@ -658,6 +677,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 .par_iter_mut()
                 .zip(chunk.par_iter())
                 .enumerate()
+                .with_min_len(min_len)
                 .for_each(|(i, (t, e))| {
                     let k = base + i;
                     let w = weights.map_or(1.0, |w| w[k]);
@@ -676,14 +696,14 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 }
 
-/// `out[k] = poses[k].prepare()`, in parallel.
-fn prepare<P: Pose<D>, const D: usize>(poses: &[P], out: &mut Vec<P::Prepared>) {
+/// `out[k] = poses[k].prepare()`, in pieces of at least `min_len`.
+fn prepare<P: Pose<D>, const D: usize>(poses: &[P], out: &mut Vec<P::Prepared>, min_len: usize) {
     if out.len() != poses.len() {
         *out = poses.iter().map(|p| p.prepare()).collect();
     } else {
         out.par_iter_mut()
             .zip(poses.par_iter())
-            .with_min_len(4096)
+            .with_min_len(min_len.max(4096))
             .for_each(|(o, p)| *o = p.prepare());
     }
 }
