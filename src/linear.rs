@@ -21,6 +21,7 @@
 
 mod supernodal;
 
+use crate::geometry::NormalBlocks;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::SymbolicSparseColMatRef;
 use faer::sparse::linalg::amd;
@@ -275,7 +276,7 @@ impl<const D: usize> BlockSystem<D> {
         &mut self,
         first: usize,
         items: &[T],
-        blocks: impl Fn(&T) -> Option<&EdgeBlocks<D>> + Sync,
+        blocks: impl Fn(&T) -> Option<&NormalBlocks<D>> + Sync,
     ) {
         let threads = if self.threads == 1 {
             1
@@ -456,34 +457,6 @@ impl<const D: usize> BlockSystem<D> {
     /// The largest absolute entry of `b`, for the gradient stopping test.
     pub fn gradient_max_norm(&self) -> f64 {
         self.gradient.iter().fold(0.0, |m, g| m.max(g.abs()))
-    }
-}
-
-/// One edge's blocks of the normal equations: `H_ii = J_iᵀΩJ_i`,
-/// `H_ij = J_iᵀΩJ_j`, `H_jj = J_jᵀΩJ_j`, `b_i = J_iᵀΩe`, `b_j = J_jᵀΩe`.
-#[derive(Clone, Copy, Debug)]
-pub struct EdgeBlocks<const D: usize> {
-    /// `H_ii`.
-    pub h_ii: SMatrix<f64, D, D>,
-    /// `H_ij`.
-    pub h_ij: SMatrix<f64, D, D>,
-    /// `H_jj`.
-    pub h_jj: SMatrix<f64, D, D>,
-    /// `b_i`.
-    pub b_i: SVector<f64, D>,
-    /// `b_j`.
-    pub b_j: SVector<f64, D>,
-}
-
-impl<const D: usize> Default for EdgeBlocks<D> {
-    fn default() -> Self {
-        Self {
-            h_ii: SMatrix::zeros(),
-            h_ij: SMatrix::zeros(),
-            h_jj: SMatrix::zeros(),
-            b_i: SVector::zeros(),
-            b_j: SVector::zeros(),
-        }
     }
 }
 

@@ -8,9 +8,9 @@
 
 pub mod init;
 
-use crate::geometry::Pose;
+use crate::geometry::{NormalBlocks, Pose};
 use crate::graph::{PoseGraph, VertexId};
-use crate::linear::{BlockSystem, EdgeBlocks, LinearError};
+use crate::linear::{BlockSystem, LinearError};
 use nalgebra::SMatrix;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -688,7 +688,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                         EdgeTerms::new::<P>(xi, xj, &measurements[k], &e.information, w)
                     };
                 });
-            objective += terms.iter().map(|t| t.chi2).sum::<f64>();
+            objective += terms.iter().map(|t| t.blocks.chi2).sum::<f64>();
             self.system
                 .add_edges(base, terms, |t| t.active.then_some(&t.blocks));
         }
@@ -711,22 +711,12 @@ fn prepare<P: Pose<D>, const D: usize>(poses: &[P], out: &mut Vec<P::Prepared>, 
 /// Edges linearised per parallel batch (2048 × ~1 kB of terms in 3D).
 const LINEARIZE_CHUNK: usize = 1 << 11;
 
-/// One edge's contribution to the normal equations.
-#[derive(Clone, Copy)]
+/// One edge's contribution to the normal equations (`active`: its weight
+/// is not 0).
+#[derive(Clone, Copy, Default)]
 struct EdgeTerms<const D: usize> {
     active: bool,
-    chi2: f64,
-    blocks: EdgeBlocks<D>,
-}
-
-impl<const D: usize> Default for EdgeTerms<D> {
-    fn default() -> Self {
-        Self {
-            active: false,
-            chi2: 0.0,
-            blocks: EdgeBlocks::default(),
-        }
-    }
+    blocks: NormalBlocks<D>,
 }
 
 impl<const D: usize> EdgeTerms<D> {
@@ -738,21 +728,14 @@ impl<const D: usize> EdgeTerms<D> {
         information: &SMatrix<f64, D, D>,
         w: f64,
     ) -> Self {
-        let lin = P::error_and_jacobians_prepared(xi, xj, z);
-        let omega = information * w;
-        let oi = omega * lin.jac_i;
-        let oj = omega * lin.jac_j;
-        let oe = omega * lin.error;
+        let blocks = if w == 1.0 {
+            P::normal_blocks_prepared(xi, xj, z, information)
+        } else {
+            P::normal_blocks_prepared(xi, xj, z, &(information * w))
+        };
         Self {
             active: true,
-            chi2: lin.error.dot(&oe),
-            blocks: EdgeBlocks {
-                h_ii: lin.jac_i.transpose() * oi,
-                h_ij: lin.jac_i.transpose() * oj,
-                h_jj: lin.jac_j.transpose() * oj,
-                b_i: lin.jac_i.transpose() * oe,
-                b_j: lin.jac_j.transpose() * oe,
-            },
+            blocks,
         }
     }
 }
