@@ -8,6 +8,11 @@
 //! * `linearize`: errors, Jacobians and assembly of `H` and `b` once;
 //! * `factorize`: one numeric sparse Cholesky of `H`;
 //! * `solve`: the two triangular solves;
+//! * `iteration`: one LM iteration as [`Optimizer::run`] does it (with
+//!   `max_iterations = 1`, from the chordal guess): linearisation, one
+//!   factorisation, the solves, the objective at the trial point and the
+//!   linearisation at the accepted point — so one linearisation more than a
+//!   steady-state iteration, to compare with `factorize`;
 //! * `optimize`: initial guess (chordal) and LM to convergence, from a fresh
 //!   copy of the graph each time.
 //!
@@ -186,6 +191,20 @@ fn solve(bencher: Bencher, case: &str) {
         opt.system_mut().factorize(0.0).expect("PD");
         let mut step = vec![0.0; g.num_vertices() * 6];
         bencher.bench_local(|| opt.system_mut().solve(&mut step));
+    });
+}
+
+#[divan::bench(args = cases(), sample_count = 20)]
+fn iteration(bencher: Bencher, case: &str) {
+    with_prepared!(case, |g, opt| {
+        opt.options_mut().max_iterations = 1;
+        let start = g.poses.clone();
+        let mut g = g;
+        bencher.bench_local(|| {
+            g.poses.clone_from(&start);
+            opt.run(&mut g, None, &mut |_: &IterationRecord| {})
+                .expect("iterates")
+        });
     });
 }
 
