@@ -47,6 +47,19 @@ const SMALL_WIDTH: usize = 12;
 /// are where the tree itself offers no parallelism.
 const PARALLEL_PRODUCT: f64 = 2e6;
 
+/// Scratch for one update product, in scalars (2 MiB): the product is
+/// formed this many entries at a time (at least one block column), not
+/// whole — the largest update of a big graph's top separator would
+/// otherwise need scratch the size of a good part of the factor.
+const UPDATE_SCRATCH: usize = 1 << 18;
+
+/// Block columns of an update product of `m` scalar rows and `count` block
+/// columns formed at once with `scratch` scalars of scratch (see
+/// [`UPDATE_SCRATCH`]).
+fn chunk_blocks<const D: usize>(scratch: usize, m: usize, count: usize) -> usize {
+    (scratch / (m * D).max(1)).clamp(1, count.max(1))
+}
+
 /// One descendant's update of a supernode: rows `start .. start + count` of
 /// the descendant's pattern fall in the supernode's columns.
 #[derive(Clone, Copy, Debug)]
@@ -84,6 +97,9 @@ pub(super) struct Symbolic<const D: usize> {
     /// diagonal block (workspace sizes).
     max_update: usize,
     max_below: usize,
+    /// Scalars of scratch an update product is formed in (at least one
+    /// block column of it at a time).
+    update_scratch: usize,
 }
 
 /// A panel's geometry: first block column, width in blocks, block rows below.
@@ -110,9 +126,14 @@ impl<const D: usize> Symbolic<D> {
     /// block `(q, p)` for every `q` in `later[p]` (each list increasing, all
     /// `q > p`) and every diagonal block.
     pub(super) fn new(later: &[Vec<usize>]) -> Result<Self, LinearError> {
+        Self::with_update_scratch(later, UPDATE_SCRATCH)
+    }
+
+    /// [`Self::new`] with the scratch of an update product given in scalars.
+    fn with_update_scratch(later: &[Vec<usize>], scratch: usize) -> Result<Self, LinearError> {
         let n = later.len();
         if n == 0 {
-            return Ok(Self::from_structure(vec![0], vec![0], Vec::new()));
+            return Ok(Self::from_structure(vec![0], vec![0], Vec::new(), scratch));
         }
         // faer's symbolic analysis (identity ordering) reads the upper
         // triangle: column q lists rows p < q, then the diagonal.
@@ -174,11 +195,16 @@ impl<const D: usize> Symbolic<D> {
             row_ptr.push(rows.len());
         }
         drop(symbolic);
-        Ok(Self::from_structure(begin, row_ptr, rows))
+        Ok(Self::from_structure(begin, row_ptr, rows, scratch))
     }
 
     /// Everything else from the supernodes and their patterns.
-    fn from_structure(begin: Vec<usize>, row_ptr: Vec<usize>, rows: Vec<u32>) -> Self {
+    fn from_structure(
+        begin: Vec<usize>,
+        row_ptr: Vec<usize>,
+        rows: Vec<u32>,
+        update_scratch: usize,
+    ) -> Self {
         let ns = begin.len() - 1;
         let n = begin[ns];
         let mut supernode_of = vec![0u32; n];
@@ -284,7 +310,8 @@ impl<const D: usize> Symbolic<D> {
                 let gd = panel(u.from as usize);
                 let m = D * (gd.p - u.start as usize);
                 let nn = D * u.count as usize;
-                max_update = max_update.max(m * nn);
+                max_update =
+                    max_update.max(m * D * chunk_blocks::<D>(update_scratch, m, u.count as usize));
                 // The top n×n of the product is triangular.
                 node_flops[t] += ((nn * (nn + 1) + 2 * (m - nn) * nn) * gd.cols::<D>()) as f64;
             }
@@ -311,6 +338,7 @@ impl<const D: usize> Symbolic<D> {
             flops,
             max_update,
             max_below,
+            update_scratch,
         }
     }
 
@@ -515,7 +543,7 @@ impl<const D: usize> Symbolic<D> {
                 let gd = self.panel(d);
                 let (wd, ldd) = (gd.cols::<D>(), gd.ld::<D>());
                 let (start, count) = (u.start as usize, u.count as usize);
-                let (m, n) = (D * (gd.p - start), D * count);
+                let m = D * (gd.p - start);
                 let d_rows = &self.rows[self.row_ptr[d] + start..self.row_ptr[d + 1]];
                 // SAFETY: `d` is a finished descendant; its panel is only read.
                 let a = unsafe {
@@ -527,36 +555,6 @@ impl<const D: usize> Symbolic<D> {
                         ldd as isize,
                     )
                 };
-                let temp = &mut ws.temp[..m * n];
-                // The top n×n of the product is symmetric: its lower half
-                // only (the scatter skips what lies above the diagonal).
-                let b = a.subrows(0, n);
-                let par = if (m * n * wd) as f64 > PARALLEL_PRODUCT {
-                    par
-                } else {
-                    Par::Seq
-                };
-                let (top, bottom) =
-                    MatMut::from_column_major_slice_mut(temp, m, n).split_at_row_mut(n);
-                triangular::matmul(
-                    top,
-                    BlockStructure::TriangularLower,
-                    Accum::Replace,
-                    b,
-                    BlockStructure::Rectangular,
-                    b.transpose(),
-                    BlockStructure::Rectangular,
-                    1.0,
-                    par,
-                );
-                matmul(
-                    bottom,
-                    Accum::Replace,
-                    a.subrows(n, m - n),
-                    b.transpose(),
-                    1.0,
-                    par,
-                );
                 // Where each block row of the product goes in the panel.
                 let local = &mut ws.rows[..gd.p - start];
                 for (l, &r) in local.iter_mut().zip(d_rows) {
@@ -567,15 +565,54 @@ impl<const D: usize> Symbolic<D> {
                         D * (g.w + ws.local[r] as usize)
                     };
                 }
-                // Scatter the lower part, block by block.
-                for jb in 0..count {
-                    let col = local[jb];
-                    for (ib, &row) in local.iter().enumerate().skip(jb) {
-                        for a in 0..D {
-                            let dst = &mut panel[(col + a) * ld + row..][..D];
-                            let src = &temp[(D * jb + a) * m + D * ib..][..D];
-                            for (x, y) in dst.iter_mut().zip(src) {
-                                *x -= y;
+                // The lower part of the m×n product, a few block columns at
+                // a time so that the scratch stays small: columns j0..j1 of
+                // it are rows j0.. of `a` times rows j0..j1 of `a`
+                // transposed, their top block symmetric (its lower half
+                // only: the scatter skips what lies above the diagonal).
+                let chunk = chunk_blocks::<D>(self.update_scratch, m, count);
+                for j0 in (0..count).step_by(chunk) {
+                    let j1 = (j0 + chunk).min(count);
+                    let (r0, nc) = (D * j0, D * (j1 - j0));
+                    let mc = m - r0;
+                    let temp = &mut ws.temp[..mc * nc];
+                    let b = a.subrows(r0, nc);
+                    let par = if (mc * nc * wd) as f64 > PARALLEL_PRODUCT {
+                        par
+                    } else {
+                        Par::Seq
+                    };
+                    let (top, bottom) =
+                        MatMut::from_column_major_slice_mut(temp, mc, nc).split_at_row_mut(nc);
+                    triangular::matmul(
+                        top,
+                        BlockStructure::TriangularLower,
+                        Accum::Replace,
+                        b,
+                        BlockStructure::Rectangular,
+                        b.transpose(),
+                        BlockStructure::Rectangular,
+                        1.0,
+                        par,
+                    );
+                    matmul(
+                        bottom,
+                        Accum::Replace,
+                        a.subrows(r0 + nc, mc - nc),
+                        b.transpose(),
+                        1.0,
+                        par,
+                    );
+                    // Scatter the lower part, block by block.
+                    for jb in j0..j1 {
+                        let col = local[jb];
+                        for (ib, &row) in local.iter().enumerate().skip(jb) {
+                            for a in 0..D {
+                                let dst = &mut panel[(col + a) * ld + row..][..D];
+                                let src = &temp[(D * (jb - j0) + a) * mc + D * (ib - j0)..][..D];
+                                for (x, y) in dst.iter_mut().zip(src) {
+                                    *x -= y;
+                                }
                             }
                         }
                     }
@@ -819,9 +856,10 @@ mod tests {
         a: &DMatrix<f64>,
         threads: usize,
         grain: Option<f64>,
+        scratch: usize,
     ) -> Vec<f64> {
         const D: usize = 2;
-        let sym = Symbolic::<D>::new(later).unwrap();
+        let sym = Symbolic::<D>::with_update_scratch(later, scratch).unwrap();
         let mut values = vec![0.0; sym.len_values()];
         let load = |s: usize, panel: &mut [f64]| {
             let (cols, start, _) = sym.supernode_range(s);
@@ -857,12 +895,19 @@ mod tests {
             let b =
                 nalgebra::DVector::from_iterator(a.nrows(), (0..a.nrows()).map(|i| i as f64 - 3.0));
             let expected = a.clone().cholesky().unwrap().solve(&b);
-            let one = factor_and_solve(&later, &a, 1, None);
+            let one = factor_and_solve(&later, &a, 1, None, UPDATE_SCRATCH);
             // Every supernode a task of its own.
-            let two = factor_and_solve(&later, &a, 2, Some(0.0));
+            let two = factor_and_solve(&later, &a, 2, Some(0.0), UPDATE_SCRATCH);
             let err = (nalgebra::DVector::from_vec(one.clone()) - &expected).norm();
             assert!(err < 1e-10 * expected.norm(), "seed {seed}: {err}");
             assert_eq!(one, two, "seed {seed}: threads change the bits");
+            // Update products formed one block column at a time.
+            let narrow = factor_and_solve(&later, &a, 1, None, 1);
+            let err = (nalgebra::DVector::from_vec(narrow) - &expected).norm();
+            assert!(
+                err < 1e-10 * expected.norm(),
+                "seed {seed}, narrow scratch: {err}"
+            );
         }
     }
 
