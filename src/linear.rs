@@ -229,6 +229,12 @@ impl<const D: usize> BlockSystem<D> {
         self.symbolic.len_values()
     }
 
+    /// Frees the factor's values (the next [`Self::factorize`] allocates
+    /// them again).
+    pub fn release_factor(&mut self) {
+        self.factor = Vec::new();
+    }
+
     /// Supernodes of the factor and the floating-point operations of one
     /// numeric factorisation (a multiply–add counts as two).
     pub fn factor_stats(&self) -> (usize, f64) {

@@ -266,6 +266,8 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     /// the last numeric factorisation.
     build_time: Duration,
     factor_time: Duration,
+    /// Values of the largest factor among the patterns built so far.
+    max_nnz_factor: usize,
     /// LM's damping at the end of the last run.
     last_lambda: f64,
     options: SolverOptions,
@@ -323,6 +325,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let start = Instant::now();
         let system = Self::pattern(graph, &variable, &in_pattern, vertex_of.len(), &options)?;
         Ok(Self {
+            max_nnz_factor: system.nnz_factor(),
             system,
             in_pattern,
             build_time: start.elapsed(),
@@ -391,6 +394,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             variable[v] = Some(block);
         }
         let start = Instant::now();
+        // The old factor goes before the new pattern is built, so that the
+        // two never take memory at the same time.
+        self.system.release_factor();
         self.system = Self::pattern(
             graph,
             &variable,
@@ -399,6 +405,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             &self.options,
         )?;
         self.build_time = start.elapsed();
+        self.max_nnz_factor = self.max_nnz_factor.max(self.system.nnz_factor());
         Ok(())
     }
 
@@ -425,6 +432,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// The linear system (for statistics such as the factor's size).
     pub fn system(&self) -> &BlockSystem<D> {
         &self.system
+    }
+
+    /// Values of the largest Cholesky factor among the patterns this
+    /// optimiser has built (a pattern rebuilt without the loops a robust
+    /// method removed has a smaller factor than the first one).
+    pub fn max_nnz_factor(&self) -> usize {
+        self.max_nnz_factor
     }
 
     /// Minimises `Σ wₖ eₖᵀΩₖeₖ` from the graph's current poses and leaves the
