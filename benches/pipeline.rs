@@ -7,6 +7,9 @@
 //!   temporary directory first);
 //! * `linearize`: errors, Jacobians and assembly of `H` and `b` once;
 //! * `factorize`: one numeric sparse Cholesky of `H`;
+//! * `factorize_faer`: the same numeric factorisation of the same matrix
+//!   (`BlockSystem::upper_csc`, same ordering) by faer's own supernodal
+//!   sparse Cholesky, which pgo used before its block-supernodal one;
 //! * `solve`: the two triangular solves;
 //! * `iteration`: one LM iteration as [`Optimizer::run`] does it (with
 //!   `max_iterations = 1`, from the chordal guess): linearisation, one
@@ -181,6 +184,49 @@ fn factorize(bencher: Bencher, case: &str) {
     with_prepared!(case, |g, opt| {
         opt.linearize(&g, None);
         bencher.bench_local(|| opt.system_mut().factorize(0.0).expect("PD"));
+    });
+}
+
+#[divan::bench(args = cases(), sample_count = 20)]
+fn factorize_faer(bencher: Bencher, case: &str) {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::sparse::linalg::SupernodalThreshold;
+    use faer::sparse::linalg::cholesky::{
+        CholeskySymbolicParams, SymmetricOrdering, factorize_symbolic_cholesky,
+    };
+    use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+    use faer::{Par, Side};
+    with_prepared!(case, |g, opt| {
+        opt.linearize(&g, None);
+        let (col_ptr, rows, values) = opt.system().upper_csc();
+        let n = col_ptr.len() - 1;
+        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &rows);
+        let params = CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+            ..Default::default()
+        };
+        let symbolic =
+            factorize_symbolic_cholesky(pattern, Side::Upper, SymmetricOrdering::Identity, params)
+                .expect("symbolic");
+        let mut l = vec![0.0; symbolic.len_val()];
+        let mut mem = MemBuffer::new(
+            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+        );
+        let a = SparseColMatRef::new(pattern, &values);
+        bencher.bench_local(|| {
+            symbolic
+                .factorize_numeric_llt::<f64>(
+                    &mut l,
+                    a,
+                    Side::Upper,
+                    Default::default(),
+                    Par::Seq,
+                    MemStack::new(&mut mem),
+                    Default::default(),
+                )
+                .map(|_| ())
+                .expect("PD")
+        });
     });
 }
 

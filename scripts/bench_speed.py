@@ -60,7 +60,7 @@ def pgo_run(pgo, path, extra, rss=False):
     o = r["optimizer"]
     res = {"iterations": o["iterations"], "chi2": o["final_chi2"], "time": o["time_s"],
            "time_init": r["initialization"]["time_s"], "stop": o["stop_reason"], "timing": o["timing"],
-           "factorizations": o["factorizations"], "nnz_factor": o["nnz_factor"]}
+           "factorizations": o["factorizations"], "nnz_factor": o["max_nnz_factor"]}
     m = re.search(r"Maximum resident set size \(kbytes\): (\d+)", err)
     if m:
         res["rss_mb"] = int(m.group(1)) * 1024 / 1e6

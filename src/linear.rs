@@ -229,6 +229,48 @@ impl<const D: usize> BlockSystem<D> {
         self.symbolic.len_values()
     }
 
+    /// The upper triangle of `H` (undamped, scalar, in elimination order)
+    /// in compressed sparse columns: column pointers, row indices (sorted in
+    /// each column) and values — to hand the same matrix to another sparse
+    /// solver (benchmarks, tests).
+    pub fn upper_csc(&self) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+        // The off-diagonal blocks above each block column: (row block, slot).
+        let mut above: Vec<Vec<(usize, usize)>> = vec![Vec::new(); self.n_blocks];
+        for slot in &self.edges {
+            if slot.off != NONE {
+                let (p, q) = (slot.i.min(slot.j) as usize, slot.i.max(slot.j) as usize);
+                above[q].push((p, slot.off as usize));
+            }
+        }
+        let n = self.n_blocks * D;
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        let mut rows = Vec::new();
+        let mut values = Vec::new();
+        col_ptr.push(0);
+        for (q, list) in above.iter_mut().enumerate() {
+            list.sort_unstable();
+            list.dedup();
+            for a in 0..D {
+                // Entry (D·p + b, D·q + a) of the upper triangle is the
+                // lower block (q, p) at row a, column b.
+                for &(p, k) in list.iter() {
+                    let block = &self.off[k * D * D..][..D * D];
+                    for b in 0..D {
+                        rows.push(D * p + b);
+                        values.push(block[b * D + a]);
+                    }
+                }
+                let diag = &self.diag[q * D * D..][..D * D];
+                for b in 0..=a {
+                    rows.push(D * q + b);
+                    values.push(diag[b * D + a]);
+                }
+                col_ptr.push(rows.len());
+            }
+        }
+        (col_ptr, rows, values)
+    }
+
     /// Frees the factor's values (the next [`Self::factorize`] allocates
     /// them again).
     pub fn release_factor(&mut self) {
@@ -644,6 +686,82 @@ mod tests {
             // Predicted decrease of the undamped model: −2δᵀb − δᵀHδ.
             let model = -2.0 * got.dot(&b) - got.dot(&(&h * &got));
             assert!((sys.predicted_decrease(&step) - model).abs() < 1e-9 * model.abs().max(1.0));
+        }
+    }
+
+    #[test]
+    fn upper_csc_is_h_and_faer_solves_it_alike() {
+        use faer::Side;
+        use faer::sparse::linalg::cholesky::{
+            CholeskySymbolicParams, LltRef, SymmetricOrdering, factorize_symbolic_cholesky,
+        };
+        use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+        let (mut sys, h, b) = random_system(3);
+        let (col_ptr, rows, values) = sys.upper_csc();
+        let n = 24;
+        // Dense, by elimination position, from the CSC.
+        let mut dense = DMatrix::zeros(n, n);
+        for c in 0..n {
+            for k in col_ptr[c]..col_ptr[c + 1] {
+                assert!(rows[k] <= c && (k == col_ptr[c] || rows[k] > rows[k - 1]));
+                dense[(rows[k], c)] = values[k];
+                dense[(c, rows[k])] = values[k];
+            }
+        }
+        let position = sys.position.clone();
+        let scalar = |block: usize, a: usize| 2 * position[block] + a;
+        for i in 0..n {
+            for j in 0..n {
+                assert_eq!(
+                    dense[(scalar(i / 2, i % 2), scalar(j / 2, j % 2))],
+                    h[(i, j)]
+                );
+            }
+        }
+        // faer's supernodal Cholesky of the same matrix, same solution.
+        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &rows);
+        let symbolic = factorize_symbolic_cholesky(
+            pattern,
+            Side::Upper,
+            SymmetricOrdering::Identity,
+            CholeskySymbolicParams::default(),
+        )
+        .unwrap();
+        let mut l = vec![0.0; symbolic.len_val()];
+        let mut mem = MemBuffer::new(
+            symbolic.factorize_numeric_llt_scratch::<f64>(faer::Par::Seq, Default::default()),
+        );
+        symbolic
+            .factorize_numeric_llt::<f64>(
+                &mut l,
+                SparseColMatRef::new(pattern, &values),
+                Side::Upper,
+                Default::default(),
+                faer::Par::Seq,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .unwrap();
+        let mut rhs = faer::Mat::<f64>::zeros(n, 1);
+        for i in 0..n {
+            rhs[(scalar(i / 2, i % 2), 0)] = -b[i];
+        }
+        let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, faer::Par::Seq));
+        LltRef::<'_, usize, f64>::new(&symbolic, &l).solve_in_place_with_conj(
+            faer::Conj::No,
+            rhs.as_mut(),
+            faer::Par::Seq,
+            MemStack::new(&mut mem),
+        );
+        sys.factorize(0.0).unwrap();
+        let mut step = vec![0.0; n];
+        sys.solve(&mut step);
+        for i in 0..n {
+            let theirs = rhs[(scalar(i / 2, i % 2), 0)];
+            assert!(
+                (step[i] - theirs).abs() < 1e-10 * theirs.abs().max(1.0),
+                "{i}"
+            );
         }
     }
 
