@@ -74,7 +74,7 @@ def plot(results, svg):
         ax_t.loglog(n, [r["wall_s"] for r in rows], marker + "-", label="%s: pgo optimize (wall)" % world)
         ax_t.loglog(n, [r["optimizer_s"] for r in rows], marker + "--", label="%s: optimiser" % world)
         ax_m.loglog(n, [r["rss_mb"] for r in rows], marker + "-", label="%s: peak RSS" % world)
-        ax_m.loglog(n, [r["factor_mb"] for r in rows], marker + "--", label="%s: Cholesky factor" % world)
+        ax_m.loglog(n, [r["factor_mb"] for r in rows], marker + "--", label="%s: largest Cholesky factor" % world)
     for ax, label in ((ax_t, "seconds"), (ax_m, "MB")):
         ax.set_xlabel("poses")
         ax.set_ylabel(label)
