@@ -722,8 +722,10 @@ fn prepare<P: Pose<D>, const D: usize>(poses: &[P], out: &mut Vec<P::Prepared>, 
     }
 }
 
-/// Edges linearised per parallel batch (2048 × ~1 kB of terms in 3D).
-const LINEARIZE_CHUNK: usize = 1 << 11;
+/// Edges linearised per parallel batch (512 × ~1 kB of terms in 3D: the
+/// buffer is memory held for the whole run, and larger batches were not
+/// faster).
+const LINEARIZE_CHUNK: usize = 1 << 9;
 
 /// One edge's contribution to the normal equations (`active`: its weight
 /// is not 0).
