@@ -1,21 +1,34 @@
 //! Benchmarks of the library, one stage at a time, on the public datasets
 //! (`$PGO_DATASETS`, else `../shared/datasets`; skipped with a message when
-//! absent) and on `pgo simulate` graphs:
+//! absent) and on graphs made by `pgo simulate` (`sim2d-…`: grid world,
+//! `sim3d-…`: sphere world; loop closures on 10 % of the poses):
 //!
-//! * `parse`: reading the g2o file;
+//! * `parse`: reading the g2o file (simulated graphs are written to the
+//!   temporary directory first);
 //! * `linearize`: errors, Jacobians and assembly of `H` and `b` once;
 //! * `factorize`: one numeric sparse Cholesky of `H`;
+//! * `factorize_faer`: the same numeric factorisation of the same matrix
+//!   (`BlockSystem::upper_csc`, same ordering) by faer's own supernodal
+//!   sparse Cholesky, which pgo used before its block-supernodal one;
 //! * `solve`: the two triangular solves;
+//! * `iteration`: one LM iteration as [`Optimizer::run`] does it (with
+//!   `max_iterations = 1`, from the chordal guess): linearisation, one
+//!   factorisation, the solves, the objective at the trial point and the
+//!   linearisation at the accepted point — so one linearisation more than a
+//!   steady-state iteration, to compare with `factorize`;
 //! * `optimize`: initial guess (chordal) and LM to convergence, from a fresh
-//!   copy of the file's graph each time;
-//! * `optimize_simulated_*`: the same on simulated graphs of 10⁴ and 10⁵
-//!   poses (10⁶ with `PGO_BENCH_MILLION=1`).
+//!   copy of the graph each time.
+//!
+//! Cases: the seven datasets and simulated graphs of 10⁴ and 10⁵ poses in
+//! 2D and 3D; 10⁶ poses too with `PGO_BENCH_MILLION=1` (minutes).
 //!
 //! Run: `cargo bench --bench pipeline` (all) or e.g.
-//! `cargo bench --bench pipeline -- factorize`. Single-threaded runs:
-//! `RAYON_NUM_THREADS=1 PGO_BENCH_THREADS=1 cargo bench --bench pipeline`.
+//! `cargo bench --bench pipeline -- factorize`. The linear algebra runs in
+//! rayon's pool: `RAYON_NUM_THREADS=1 cargo bench --bench pipeline` for one
+//! thread. `cargo test` does not build or run these.
 
 use divan::Bencher;
+use pgo::geometry::{Se2, Se3};
 use pgo::graph::{AnyPoseGraph, PoseGraph};
 use pgo::io::g2o::{self, G2oPose, ReadOptions};
 use pgo::simulate::{AnySimulation, SimulationOptions, World};
@@ -37,11 +50,25 @@ const DATASETS: &[&str] = &[
     "cubicle",
 ];
 
-fn threads() -> usize {
-    std::env::var("PGO_BENCH_THREADS")
-        .ok()
-        .and_then(|t| t.parse().ok())
-        .unwrap_or(0)
+fn cases() -> Vec<&'static str> {
+    let mut cases = DATASETS.to_vec();
+    cases.extend(["sim2d-1e4", "sim2d-1e5", "sim3d-1e4", "sim3d-1e5"]);
+    if std::env::var_os("PGO_BENCH_MILLION").is_some() {
+        cases.extend(["sim2d-1e6", "sim3d-1e6"]);
+    }
+    cases
+}
+
+/// A simulated case's world and size.
+fn simulated(case: &str) -> Option<(World, usize)> {
+    let (world, size) = case.strip_prefix("sim")?.split_once('-')?;
+    let world = match world {
+        "2d" => World::Grid2d,
+        "3d" => World::Sphere3d,
+        _ => return None,
+    };
+    let poses = size.parse::<f64>().ok()? as usize;
+    Some((world, poses))
 }
 
 fn dataset(name: &str) -> Option<PathBuf> {
@@ -60,20 +87,51 @@ fn dataset(name: &str) -> Option<PathBuf> {
     }
 }
 
-fn read(name: &str) -> Option<g2o::G2oFile> {
-    let path = dataset(name)?;
+fn read_options(name: &str) -> ReadOptions {
     // cubicle.g2o has indefinite information matrices (MANIFEST quirk 2).
-    let options = ReadOptions {
+    ReadOptions {
         fix_information: name == "cubicle",
-    };
-    Some(g2o::read(&path, options).expect("dataset reads"))
+    }
 }
 
-fn solver_options() -> SolverOptions {
-    SolverOptions {
-        threads: threads(),
-        ..SolverOptions::default()
+/// The graph of a case and its vertices without a line in the file.
+fn load(case: &str) -> Option<(AnyPoseGraph, Vec<usize>)> {
+    if let Some((world, poses)) = simulated(case) {
+        let options = SimulationOptions {
+            world,
+            poses,
+            loops: poses / 10,
+            seed: 7,
+            ..SimulationOptions::default()
+        };
+        let graph = match pgo::simulate::simulate(&options).expect("simulates") {
+            AnySimulation::Planar(s) => AnyPoseGraph::Planar(s.noisy),
+            AnySimulation::Spatial(s) => AnyPoseGraph::Spatial(s.noisy),
+        };
+        return Some((graph, Vec::new()));
     }
+    let path = dataset(case)?;
+    let file = g2o::read(&path, read_options(case)).expect("dataset reads");
+    Some((file.graph, file.missing))
+}
+
+/// The file to parse for a case (simulated graphs written once to the
+/// temporary directory).
+fn file_of(case: &str) -> Option<PathBuf> {
+    if simulated(case).is_none() {
+        return dataset(case);
+    }
+    let path = std::env::temp_dir().join(format!("pgo-bench-{case}.g2o"));
+    if !path.is_file() {
+        let (graph, _) = load(case)?;
+        let mut out = std::io::BufWriter::new(std::fs::File::create(&path).expect("temp file"));
+        match &graph {
+            AnyPoseGraph::Planar(g) => g2o::write_graph(g, &mut out),
+            AnyPoseGraph::Spatial(g) => g2o::write_graph(g, &mut out),
+        }
+        .expect("writes");
+    }
+    Some(path)
 }
 
 /// The graph at its chordal initial guess and an optimiser for it.
@@ -83,57 +141,98 @@ fn prepared<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
 ) -> (PoseGraph<P, D>, Optimizer<P, D>) {
     initialize(&mut g, missing, Initialization::File, None).expect("spanning tree");
     initialize(&mut g, missing, Initialization::Chordal, None).expect("chordal");
-    let opt = Optimizer::new(&g, None, solver_options()).expect("optimiser");
+    let opt = Optimizer::new(&g, None, SolverOptions::default()).expect("optimiser");
     (g, opt)
 }
 
-#[divan::bench(args = DATASETS)]
-fn parse(bencher: Bencher, name: &str) {
-    let Some(path) = dataset(name) else { return };
-    let options = ReadOptions {
-        fix_information: name == "cubicle",
-    };
+#[divan::bench(args = cases(), sample_count = 10)]
+fn parse(bencher: Bencher, case: &str) {
+    let Some(path) = file_of(case) else { return };
+    let options = read_options(case);
     bencher.bench(|| g2o::read(&path, options).expect("reads"));
 }
 
-/// Runs `$body` with `$g` and `$opt` bound for either pose type.
+/// Runs `$body` with `$g` (the graph at its chordal guess) and `$opt` bound
+/// for either pose type.
 macro_rules! with_prepared {
-    ($name:expr, |$g:ident, $opt:ident| $body:expr) => {{
-        let Some(file) = read($name) else { return };
-        match file.graph {
+    ($case:expr, |$g:ident, $opt:ident| $body:expr) => {{
+        let Some((graph, missing)) = load($case) else {
+            return;
+        };
+        match graph {
             AnyPoseGraph::Planar(g) => {
-                let (mut $g, mut $opt) = prepared(g, &file.missing);
+                let ($g, mut $opt) = prepared::<Se2, 3>(g, &missing);
                 $body
             }
             AnyPoseGraph::Spatial(g) => {
-                let (mut $g, mut $opt) = prepared(g, &file.missing);
+                let ($g, mut $opt) = prepared::<Se3, 6>(g, &missing);
                 $body
             }
         }
     }};
 }
 
-#[divan::bench(args = DATASETS)]
-fn linearize(bencher: Bencher, name: &str) {
-    with_prepared!(name, |g, opt| {
-        let _ = &mut g;
+#[divan::bench(args = cases(), sample_count = 20)]
+fn linearize(bencher: Bencher, case: &str) {
+    with_prepared!(case, |g, opt| {
         bencher.bench_local(|| opt.linearize(&g, None));
     });
 }
 
-#[divan::bench(args = DATASETS)]
-fn factorize(bencher: Bencher, name: &str) {
-    with_prepared!(name, |g, opt| {
-        let _ = &mut g;
+#[divan::bench(args = cases(), sample_count = 20)]
+fn factorize(bencher: Bencher, case: &str) {
+    with_prepared!(case, |g, opt| {
         opt.linearize(&g, None);
         bencher.bench_local(|| opt.system_mut().factorize(0.0).expect("PD"));
     });
 }
 
-#[divan::bench(args = DATASETS)]
-fn solve(bencher: Bencher, name: &str) {
-    with_prepared!(name, |g, opt| {
-        let _ = &mut g;
+#[divan::bench(args = cases(), sample_count = 20)]
+fn factorize_faer(bencher: Bencher, case: &str) {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::sparse::linalg::SupernodalThreshold;
+    use faer::sparse::linalg::cholesky::{
+        CholeskySymbolicParams, SymmetricOrdering, factorize_symbolic_cholesky,
+    };
+    use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+    use faer::{Par, Side};
+    with_prepared!(case, |g, opt| {
+        opt.linearize(&g, None);
+        let (col_ptr, rows, values) = opt.system().upper_csc();
+        let n = col_ptr.len() - 1;
+        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &rows);
+        let params = CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+            ..Default::default()
+        };
+        let symbolic =
+            factorize_symbolic_cholesky(pattern, Side::Upper, SymmetricOrdering::Identity, params)
+                .expect("symbolic");
+        let mut l = vec![0.0; symbolic.len_val()];
+        let mut mem = MemBuffer::new(
+            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+        );
+        let a = SparseColMatRef::new(pattern, &values);
+        bencher.bench_local(|| {
+            symbolic
+                .factorize_numeric_llt::<f64>(
+                    &mut l,
+                    a,
+                    Side::Upper,
+                    Default::default(),
+                    Par::Seq,
+                    MemStack::new(&mut mem),
+                    Default::default(),
+                )
+                .map(|_| ())
+                .expect("PD")
+        });
+    });
+}
+
+#[divan::bench(args = cases(), sample_count = 20)]
+fn solve(bencher: Bencher, case: &str) {
+    with_prepared!(case, |g, opt| {
         opt.linearize(&g, None);
         opt.system_mut().factorize(0.0).expect("PD");
         let mut step = vec![0.0; g.num_vertices() * 6];
@@ -141,17 +240,33 @@ fn solve(bencher: Bencher, name: &str) {
     });
 }
 
-#[divan::bench(args = DATASETS, sample_count = 5, sample_size = 1)]
-fn optimize(bencher: Bencher, name: &str) {
-    let Some(file) = read(name) else { return };
-    match file.graph {
-        AnyPoseGraph::Planar(g) => optimize_from_file(bencher, g, &file.missing),
-        AnyPoseGraph::Spatial(g) => optimize_from_file(bencher, g, &file.missing),
+#[divan::bench(args = cases(), sample_count = 20)]
+fn iteration(bencher: Bencher, case: &str) {
+    with_prepared!(case, |g, opt| {
+        opt.options_mut().max_iterations = 1;
+        let start = g.poses.clone();
+        let mut g = g;
+        bencher.bench_local(|| {
+            g.poses.clone_from(&start);
+            opt.run(&mut g, None, &mut |_: &IterationRecord| {})
+                .expect("iterates")
+        });
+    });
+}
+
+#[divan::bench(args = cases(), sample_count = 5, sample_size = 1)]
+fn optimize(bencher: Bencher, case: &str) {
+    let Some((graph, missing)) = load(case) else {
+        return;
+    };
+    match graph {
+        AnyPoseGraph::Planar(g) => optimize_from(bencher, g, &missing),
+        AnyPoseGraph::Spatial(g) => optimize_from(bencher, g, &missing),
     }
 }
 
 /// Chordal initial guess and LM, from a fresh copy of the graph each time.
-fn optimize_from_file<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
+fn optimize_from<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     bencher: Bencher,
     g: PoseGraph<P, D>,
     missing: &[usize],
@@ -161,41 +276,8 @@ fn optimize_from_file<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         .bench_local_values(|mut g| {
             initialize(&mut g, missing, Initialization::File, None).expect("spanning tree");
             initialize(&mut g, missing, Initialization::Chordal, None).expect("chordal");
-            let mut opt = Optimizer::new(&g, None, solver_options()).expect("optimiser");
+            let mut opt = Optimizer::new(&g, None, SolverOptions::default()).expect("optimiser");
             opt.run(&mut g, None, &mut |_: &IterationRecord| {})
                 .expect("converges")
         });
-}
-
-fn simulated_sizes() -> Vec<usize> {
-    let mut sizes = vec![10_000, 100_000];
-    if std::env::var_os("PGO_BENCH_MILLION").is_some() {
-        sizes.push(1_000_000);
-    }
-    sizes
-}
-
-fn simulated(world: World, poses: usize) -> AnySimulation {
-    let options = SimulationOptions {
-        world,
-        poses,
-        loops: poses / 10,
-        seed: 7,
-        ..SimulationOptions::default()
-    };
-    pgo::simulate::simulate(&options).expect("simulates")
-}
-
-#[divan::bench(args = simulated_sizes(), sample_count = 3, sample_size = 1)]
-fn optimize_simulated_2d(bencher: Bencher, poses: usize) {
-    if let AnySimulation::Planar(s) = simulated(World::Grid2d, poses) {
-        optimize_from_file(bencher, s.noisy, &[]);
-    }
-}
-
-#[divan::bench(args = simulated_sizes(), sample_count = 3, sample_size = 1)]
-fn optimize_simulated_3d(bencher: Bencher, poses: usize) {
-    if let AnySimulation::Spatial(s) = simulated(World::Sphere3d, poses) {
-        optimize_from_file(bencher, s.noisy, &[]);
-    }
 }

@@ -1,32 +1,33 @@
 //! The sparse linear algebra of one Gauss–Newton step: the block sparsity
 //! pattern of the normal equations `H δ = −b`, values written straight into
-//! that pattern, and faer's supernodal sparse Cholesky.
+//! that pattern, and a block-supernodal sparse Cholesky ([`supernodal`]).
 //!
 //! Everything that depends only on the graph's structure is done once in
 //! [`BlockSystem::new`]:
 //!
 //! * a fill-reducing ordering, computed with AMD on the graph of *blocks*
 //!   (one node per free vertex), which is `D²` times smaller than the scalar
-//!   matrix and keeps each vertex's `D` columns together (they become part
-//!   of the same supernode);
-//! * the lower-triangular CSC pattern of `H` in that order, and for every
-//!   edge and vertex the positions of its blocks in the value array, so that
-//!   assembly writes each Jacobian product in place (no triplets, no sort);
-//! * the symbolic Cholesky factorisation and all workspace.
+//!   matrix and keeps each vertex's `D` columns together;
+//! * one `D×D` slot per diagonal block and per distinct pair of vertices
+//!   joined by an edge, and for every edge the slots of its three blocks, so
+//!   that assembly adds each Jacobian product in place (no triplets, no
+//!   sort);
+//! * the symbolic factorisation (supernodes, update lists, elimination
+//!   tree) and where each slot goes in the factor.
 //!
-//! Each iteration then only refills values, adds the damping, runs the
-//! numeric factorisation and two triangular solves, with no allocation.
+//! Each iteration then only refills the slots, copies them (with the
+//! damping) into the factor's panels, factorises — the independent subtrees
+//! in parallel — and runs the two triangular solves.
 
-use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
-use faer::linalg::cholesky::llt::factor::{LltError, LltRegularization};
-use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
-    factorize_symbolic_cholesky,
-};
-use faer::sparse::linalg::{SupernodalThreshold, amd};
-use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::{Conj, MatMut, Par, Side};
+mod supernodal;
+
+use crate::geometry::NormalBlocks;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::SymbolicSparseColMatRef;
+use faer::sparse::linalg::amd;
 use nalgebra::{SMatrix, SVector};
+use rayon::prelude::*;
+use supernodal::Symbolic;
 
 /// Errors of the linear solver.
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
@@ -43,22 +44,19 @@ pub enum LinearError {
     Factorization(String),
 }
 
-/// Where one edge's off-diagonal block lives in the value array.
-#[derive(Clone, Copy, Debug)]
-struct OffDiagonal<const D: usize> {
-    /// Value index of the block's first entry in each of its `D` columns.
-    cols: [usize; D],
-    /// Whether the stored block is `H_ij` (`false`: rows are `j`'s, columns
-    /// `i`'s, i.e. the stored block is `H_ji = H_ijᵀ`).
-    i_is_row: bool,
-}
+/// No block (a fixed vertex, or no off-diagonal block).
+const NONE: u32 = u32::MAX;
 
-/// The variable blocks an edge touches and where its off-diagonal block is.
+/// The blocks one edge adds to: the elimination positions of its two
+/// vertices and its off-diagonal slot.
 #[derive(Clone, Copy, Debug)]
-struct EdgeSlot<const D: usize> {
-    i: Option<usize>,
-    j: Option<usize>,
-    off: Option<OffDiagonal<D>>,
+struct EdgeSlot {
+    i: u32,
+    j: u32,
+    off: u32,
+    /// Whether the slot holds `H_ij` (rows `i`, columns `j`: `i` comes later
+    /// in the elimination order) rather than `H_ji = H_ijᵀ`.
+    i_is_row: bool,
 }
 
 /// The normal equations of a pose graph with `D`-dimensional blocks, and
@@ -83,36 +81,60 @@ pub struct BlockSystem<const D: usize> {
     n_blocks: usize,
     /// Elimination position of each variable block.
     position: Vec<usize>,
-    col_ptr: Vec<usize>,
-    row_idx: Vec<usize>,
-    /// Value index of the diagonal entry of each column, by variable block.
-    diagonal: Vec<[usize; D]>,
-    edges: Vec<EdgeSlot<D>>,
-    /// Lower triangle of `H` (plus damping after [`Self::factorize`]).
-    values: Vec<f64>,
+    edges: Vec<EdgeSlot>,
+    /// Diagonal blocks of `H` by position (column-major, lower triangle).
+    diag: Vec<f64>,
+    /// Off-diagonal blocks of `H` (rows: the later block), grouped by the
+    /// position of their column block: `off[off_ptr[p]..off_ptr[p + 1]]`
+    /// (in units of `D²`).
+    off: Vec<f64>,
+    off_ptr: Vec<usize>,
+    /// Where each diagonal and off-diagonal block starts in the factor.
+    diag_dest: Vec<usize>,
+    off_dest: Vec<usize>,
     /// The undamped diagonal of `H`, by scalar column in elimination order.
     undamped_diagonal: Vec<f64>,
     /// `b = Σ Jᵀ Ω e`, in elimination order.
     gradient: Vec<f64>,
+    /// The right-hand side and solution of the triangular solves, and their
+    /// scratch.
+    rhs: Vec<f64>,
+    solve_work: Vec<f64>,
     lambda: f64,
-    symbolic: SymbolicCholesky<usize>,
+    symbolic: Symbolic<D>,
+    /// The factor's panels, allocated by the first factorisation (so that a
+    /// system built early, e.g. to check the graph before the initial guess,
+    /// costs little memory until it is used).
     factor: Vec<f64>,
-    scratch: MemBuffer,
     threads: usize,
 }
 
 impl<const D: usize> BlockSystem<D> {
     /// Builds the pattern for `n_blocks` variable blocks and the given edges,
     /// each as the variable blocks `(i, j)` it joins (`None` for a fixed
-    /// vertex). `threads` > 1 lets faer factorise in parallel; 0 means all
-    /// available cores.
+    /// vertex). `threads`: 1 factorises sequentially, anything else in
+    /// parallel in rayon's current pool.
     pub fn new(
         n_blocks: usize,
         edges: &[(Option<usize>, Option<usize>)],
         threads: usize,
     ) -> Result<Self, LinearError> {
         let position = fill_reducing_order(n_blocks, edges)?;
+        Self::with_positions(n_blocks, edges, threads, position)
+    }
 
+    /// Like [`Self::new`] with a given elimination position of each block.
+    pub fn with_positions(
+        n_blocks: usize,
+        edges: &[(Option<usize>, Option<usize>)],
+        threads: usize,
+        position: Vec<usize>,
+    ) -> Result<Self, LinearError> {
+        if n_blocks >= NONE as usize {
+            return Err(LinearError::Factorization(format!(
+                "{n_blocks} variable blocks are too many"
+            )));
+        }
         // Neighbours of each block that come later in the elimination order,
         // by elimination position.
         let mut later: Vec<Vec<usize>> = vec![Vec::new(); n_blocks];
@@ -128,86 +150,66 @@ impl<const D: usize> BlockSystem<D> {
             l.sort_unstable();
             l.dedup();
         }
-
-        // Scalar CSC of the lower triangle: column p·D + a holds rows
-        // p·D + a … p·D + D − 1 of the diagonal block, then D rows for each
-        // later neighbour in order.
-        let n = n_blocks * D;
-        let mut col_ptr = Vec::with_capacity(n + 1);
-        let nnz: usize = later
-            .iter()
-            .map(|l| D * (D + 1) / 2 + l.len() * D * D)
-            .sum();
-        let mut row_idx = Vec::with_capacity(nnz);
-        col_ptr.push(0);
-        for (p, l) in later.iter().enumerate() {
-            for a in 0..D {
-                row_idx.extend((a..D).map(|b| p * D + b));
-                for &q in l {
-                    row_idx.extend((0..D).map(|b| q * D + b));
-                }
-                col_ptr.push(row_idx.len());
-            }
+        let mut off_ptr = Vec::with_capacity(n_blocks + 1);
+        off_ptr.push(0usize);
+        for l in &later {
+            off_ptr.push(off_ptr.last().copied().unwrap_or(0) + l.len());
         }
-
-        let diagonal: Vec<[usize; D]> = (0..n_blocks)
-            .map(|b| std::array::from_fn(|a| col_ptr[position[b] * D + a]))
-            .collect();
-        let edges = edges
+        let n_off = off_ptr[n_blocks];
+        if n_off >= NONE as usize {
+            return Err(LinearError::Factorization(format!(
+                "{n_off} off-diagonal blocks are too many"
+            )));
+        }
+        let slots = edges
             .iter()
             .map(|&(i, j)| {
-                let off = match (i, j) {
-                    (Some(i), Some(j)) if i != j => {
-                        let (pi, pj) = (position[i], position[j]);
-                        let (col, row) = (pi.min(pj), pi.max(pj));
-                        // Cannot fail: `row` was recorded as a later neighbour of `col`.
-                        let rank = later[col].binary_search(&row).unwrap_or(0);
-                        let cols =
-                            std::array::from_fn(|a| col_ptr[col * D + a] + (D - a) + rank * D);
-                        Some(OffDiagonal {
-                            cols,
-                            i_is_row: pi > pj,
-                        })
-                    }
-                    _ => None,
+                let pos = |b: Option<usize>| b.map_or(NONE, |b| position[b] as u32);
+                let (pi, pj) = (pos(i), pos(j));
+                let mut slot = EdgeSlot {
+                    i: pi,
+                    j: pj,
+                    off: NONE,
+                    i_is_row: false,
                 };
-                EdgeSlot { i, j, off }
+                if pi != NONE && pj != NONE && pi != pj {
+                    let (col, row) = (pi.min(pj) as usize, pi.max(pj) as usize);
+                    // Cannot fail: `row` was recorded as a later neighbour of `col`.
+                    let rank = later[col].binary_search(&row).unwrap_or(0);
+                    slot.off = (off_ptr[col] + rank) as u32;
+                    slot.i_is_row = pi > pj;
+                }
+                slot
             })
             .collect();
 
-        // faer's symbolic analysis without reordering reads the *upper*
-        // triangle whatever `side` says, so hand it the transposed pattern.
-        let (upper_ptr, upper_idx) = transpose_pattern(n, &col_ptr, &row_idx);
-        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &upper_ptr, None, &upper_idx);
-        let params = CholeskySymbolicParams {
-            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
-            ..Default::default()
-        };
-        let symbolic =
-            factorize_symbolic_cholesky(pattern, Side::Upper, SymmetricOrdering::Identity, params)
-                .map_err(|e| LinearError::Factorization(format!("{e:?}")))?;
-        let par = parallelism(threads);
-        let req = StackReq::any_of(&[
-            symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
-            symbolic.solve_in_place_scratch::<f64>(1, par),
-        ]);
-        let scratch = MemBuffer::try_new(req)
-            .map_err(|_| LinearError::Factorization("out of memory".into()))?;
-        let factor = vec![0.0; symbolic.len_val()];
+        let symbolic = Symbolic::<D>::new(&later)?;
+        let diag_dest = (0..n_blocks)
+            .map(|p| symbolic.block_offset(p, p).0)
+            .collect();
+        let off_dest = later
+            .iter()
+            .enumerate()
+            .flat_map(|(p, l)| l.iter().map(move |&q| (q, p)))
+            .map(|(q, p)| symbolic.block_offset(q, p).0)
+            .collect();
+        let n = n_blocks * D;
         Ok(Self {
             n_blocks,
             position,
-            values: vec![0.0; row_idx.len()],
-            col_ptr,
-            row_idx,
-            diagonal,
-            edges,
+            edges: slots,
+            diag: vec![0.0; n_blocks * D * D],
+            off: vec![0.0; n_off * D * D],
+            off_ptr,
+            diag_dest,
+            off_dest,
             undamped_diagonal: vec![0.0; n],
             gradient: vec![0.0; n],
+            rhs: vec![0.0; n],
+            solve_work: Vec::new(),
             lambda: 0.0,
             symbolic,
-            factor,
-            scratch,
+            factor: Vec::new(),
             threads,
         })
     }
@@ -217,19 +219,74 @@ impl<const D: usize> BlockSystem<D> {
         self.n_blocks
     }
 
-    /// Non-zeros stored for the lower triangle of `H`.
+    /// Non-zeros of the lower triangle of `H`.
     pub fn nnz_hessian(&self) -> usize {
-        self.row_idx.len()
+        self.n_blocks * D * (D + 1) / 2 + self.off_ptr[self.n_blocks] * D * D
     }
 
-    /// Non-zeros of the Cholesky factor.
+    /// Values stored for the Cholesky factor (its dense supernodal panels).
     pub fn nnz_factor(&self) -> usize {
-        self.factor.len()
+        self.symbolic.len_values()
+    }
+
+    /// The upper triangle of `H` (undamped, scalar, in elimination order)
+    /// in compressed sparse columns: column pointers, row indices (sorted in
+    /// each column) and values — to hand the same matrix to another sparse
+    /// solver (benchmarks, tests).
+    pub fn upper_csc(&self) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+        // The off-diagonal blocks above each block column: (row block, slot).
+        let mut above: Vec<Vec<(usize, usize)>> = vec![Vec::new(); self.n_blocks];
+        for slot in &self.edges {
+            if slot.off != NONE {
+                let (p, q) = (slot.i.min(slot.j) as usize, slot.i.max(slot.j) as usize);
+                above[q].push((p, slot.off as usize));
+            }
+        }
+        let n = self.n_blocks * D;
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        let mut rows = Vec::new();
+        let mut values = Vec::new();
+        col_ptr.push(0);
+        for (q, list) in above.iter_mut().enumerate() {
+            list.sort_unstable();
+            list.dedup();
+            for a in 0..D {
+                // Entry (D·p + b, D·q + a) of the upper triangle is the
+                // lower block (q, p) at row a, column b.
+                for &(p, k) in list.iter() {
+                    let block = &self.off[k * D * D..][..D * D];
+                    for b in 0..D {
+                        rows.push(D * p + b);
+                        values.push(block[b * D + a]);
+                    }
+                }
+                let diag = &self.diag[q * D * D..][..D * D];
+                for b in 0..=a {
+                    rows.push(D * q + b);
+                    values.push(diag[b * D + a]);
+                }
+                col_ptr.push(rows.len());
+            }
+        }
+        (col_ptr, rows, values)
+    }
+
+    /// Frees the factor's values (the next [`Self::factorize`] allocates
+    /// them again).
+    pub fn release_factor(&mut self) {
+        self.factor = Vec::new();
+    }
+
+    /// Supernodes of the factor and the floating-point operations of one
+    /// numeric factorisation (a multiply–add counts as two).
+    pub fn factor_stats(&self) -> (usize, f64) {
+        (self.symbolic.supernodes(), self.symbolic.flops())
     }
 
     /// Sets `H` and `b` to zero before assembly.
     pub fn clear(&mut self) {
-        self.values.fill(0.0);
+        self.diag.fill(0.0);
+        self.off.fill(0.0);
         self.gradient.fill(0.0);
     }
 
@@ -246,24 +303,77 @@ impl<const D: usize> BlockSystem<D> {
         b_j: &SVector<f64, D>,
     ) {
         let slot = self.edges[k];
-        if let Some(i) = slot.i {
-            self.add_diagonal(i, h_ii, b_i);
+        if slot.i != NONE {
+            self.add_diagonal(slot.i as usize, h_ii, b_i);
         }
-        if let Some(j) = slot.j {
-            self.add_diagonal(j, h_jj, b_j);
+        if slot.j != NONE {
+            self.add_diagonal(slot.j as usize, h_jj, b_j);
         }
-        if let Some(off) = slot.off {
-            for a in 0..D {
-                let col = &mut self.values[off.cols[a]..off.cols[a] + D];
-                for (b, v) in col.iter_mut().enumerate() {
-                    *v += if off.i_is_row {
-                        h_ij[(b, a)]
-                    } else {
-                        h_ij[(a, b)]
-                    };
+        if slot.off != NONE {
+            let block = &mut self.off[slot.off as usize * D * D..][..D * D];
+            add_off_diagonal::<D>(block, h_ij, slot.i_is_row);
+        }
+    }
+
+    /// Adds the contributions of edges `first`, `first + 1`, … (one per item;
+    /// `blocks` returns `None` for an item to skip), like [`Self::add_edge`]
+    /// for each but, with more than one thread, in parallel: each thread owns
+    /// a range of elimination positions and adds, in edge order, only to the
+    /// blocks of its range — no locks, and the same sums as sequentially.
+    pub fn add_edges<T: Sync>(
+        &mut self,
+        first: usize,
+        items: &[T],
+        blocks: impl Fn(&T) -> Option<&NormalBlocks<D>> + Sync,
+    ) {
+        let threads = if self.threads == 1 {
+            1
+        } else {
+            rayon::current_num_threads()
+        };
+        if threads <= 1 || items.len() < 512 {
+            for (k, item) in items.iter().enumerate() {
+                if let Some(c) = blocks(item) {
+                    self.add_edge(first + k, &c.h_ii, &c.h_ij, &c.h_jj, &c.b_i, &c.b_j);
                 }
             }
+            return;
         }
+        let n = self.n_blocks;
+        let diag = SharedSlice(self.diag.as_mut_ptr());
+        let off = SharedSlice(self.off.as_mut_ptr());
+        let gradient = SharedSlice(self.gradient.as_mut_ptr());
+        let edges = &self.edges[first..first + items.len()];
+        (0..threads).into_par_iter().for_each(|t| {
+            let owned = (n * t / threads) as u32..(n * (t + 1) / threads) as u32;
+            for (slot, item) in edges.iter().zip(items) {
+                let mine_i = owned.contains(&slot.i);
+                let mine_j = owned.contains(&slot.j);
+                let mine_off = slot.off != NONE && owned.contains(&slot.i.min(slot.j));
+                if !(mine_i || mine_j || mine_off) {
+                    continue;
+                }
+                let Some(c) = blocks(item) else { continue };
+                // SAFETY: the blocks and gradient entries of positions in
+                // `owned` (off-diagonal blocks: of their column) are written
+                // by this thread only; the vectors outlive the scope.
+                unsafe {
+                    if mine_i {
+                        add_diagonal_raw::<D>(&diag, &gradient, slot.i as usize, &c.h_ii, &c.b_i);
+                    }
+                    if mine_j {
+                        add_diagonal_raw::<D>(&diag, &gradient, slot.j as usize, &c.h_jj, &c.b_j);
+                    }
+                    if mine_off {
+                        let block = std::slice::from_raw_parts_mut(
+                            off.at(slot.off as usize * D * D),
+                            D * D,
+                        );
+                        add_off_diagonal::<D>(block, &c.h_ij, slot.i_is_row);
+                    }
+                }
+            }
+        });
     }
 
     /// Sets `b` to zero, keeping `H` (and its factorisation): for solving
@@ -275,27 +385,21 @@ impl<const D: usize> BlockSystem<D> {
     /// Adds edge `k`'s contribution to `b` only.
     pub fn add_edge_gradient(&mut self, k: usize, b_i: &SVector<f64, D>, b_j: &SVector<f64, D>) {
         let slot = self.edges[k];
-        for (block, b) in [(slot.i, b_i), (slot.j, b_j)] {
-            if let Some(block) = block {
-                let p = self.position[block] * D;
+        for (p, b) in [(slot.i, b_i), (slot.j, b_j)] {
+            if p != NONE {
+                let g = &mut self.gradient[p as usize * D..][..D];
                 for a in 0..D {
-                    self.gradient[p + a] += b[a];
+                    g[a] += b[a];
                 }
             }
         }
     }
 
-    fn add_diagonal(&mut self, block: usize, h: &SMatrix<f64, D, D>, g: &SVector<f64, D>) {
-        let diag = self.diagonal[block];
+    fn add_diagonal(&mut self, p: usize, h: &SMatrix<f64, D, D>, g: &SVector<f64, D>) {
+        add_lower::<D>(&mut self.diag[p * D * D..][..D * D], h);
+        let grad = &mut self.gradient[p * D..][..D];
         for a in 0..D {
-            let col = &mut self.values[diag[a]..diag[a] + (D - a)];
-            for (r, v) in col.iter_mut().enumerate() {
-                *v += h[(a + r, a)];
-            }
-        }
-        let p = self.position[block] * D;
-        for a in 0..D {
-            self.gradient[p + a] += g[a];
+            grad[a] += g[a];
         }
     }
 
@@ -308,50 +412,49 @@ impl<const D: usize> BlockSystem<D> {
             return Ok(());
         }
         let mut max_diag = 0.0f64;
-        for (block, diag) in self.diagonal.iter().enumerate() {
-            let p = self.position[block] * D;
+        for p in 0..self.n_blocks {
             for a in 0..D {
-                let d = self.values[diag[a]];
-                self.undamped_diagonal[p + a] = d;
+                let d = self.diag[p * D * D + a * D + a];
+                self.undamped_diagonal[p * D + a] = d;
                 max_diag = max_diag.max(d);
             }
         }
         let floor = 1e-9 * max_diag;
-        if lambda > 0.0 {
-            for (block, diag) in self.diagonal.iter().enumerate() {
-                let p = self.position[block] * D;
-                for a in 0..D {
-                    self.values[diag[a]] += lambda * self.undamped_diagonal[p + a].max(floor);
+        if self.factor.is_empty() {
+            let len = self.symbolic.len_values();
+            self.factor
+                .try_reserve_exact(len)
+                .map_err(|_| LinearError::Factorization("out of memory for the factor".into()))?;
+            self.factor.resize(len, 0.0);
+        }
+        let sym = &self.symbolic;
+        let (diag, off, off_ptr) = (&self.diag, &self.off, &self.off_ptr);
+        let (diag_dest, off_dest) = (&self.diag_dest, &self.off_dest);
+        let load = |s: usize, panel: &mut [f64]| {
+            let (cols, start, ld) = sym.supernode_range(s);
+            for p in cols {
+                let dst = &mut panel[diag_dest[p] - start..];
+                let src = &diag[p * D * D..][..D * D];
+                for c in 0..D {
+                    for r in c..D {
+                        dst[c * ld + r] = src[c * D + r];
+                    }
+                    if lambda > 0.0 {
+                        dst[c * ld + c] += lambda * src[c * D + c].max(floor);
+                    }
+                }
+                for k in off_ptr[p]..off_ptr[p + 1] {
+                    let dst = &mut panel[off_dest[k] - start..];
+                    let src = &off[k * D * D..][..D * D];
+                    for c in 0..D {
+                        dst[c * ld..c * ld + D].copy_from_slice(&src[c * D..c * D + D]);
+                    }
                 }
             }
-        }
-        let n = self.n_blocks * D;
-        let pattern =
-            SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
-        let a = SparseColMatRef::new(pattern, &self.values);
-        let par = parallelism(self.threads);
-        let result = self.symbolic.factorize_numeric_llt::<f64>(
-            &mut self.factor,
-            a,
-            Side::Lower,
-            LltRegularization::default(),
-            par,
-            MemStack::new(&mut self.scratch),
-            Default::default(),
-        );
-        // Restore the undamped diagonal so that `H` can be damped again.
-        if lambda > 0.0 {
-            for (block, diag) in self.diagonal.iter().enumerate() {
-                let p = self.position[block] * D;
-                for a in 0..D {
-                    self.values[diag[a]] = self.undamped_diagonal[p + a];
-                }
-            }
-        }
-        match result {
-            Ok(_) => Ok(()),
-            Err(LltError::NonPositivePivot { index }) => {
-                let p = index / D;
+        };
+        match sym.factorize(&mut self.factor, &load, self.threads) {
+            Ok(()) => Ok(()),
+            Err(p) => {
                 let block = self.position.iter().position(|&q| q == p).unwrap_or(p);
                 Err(LinearError::NotPositiveDefinite { block })
             }
@@ -360,22 +463,24 @@ impl<const D: usize> BlockSystem<D> {
 
     /// Solves `(H + λ·diag H) δ = −b` with the last factorisation and writes
     /// `δ` by variable block (`step[k·D + a]`).
+    ///
+    /// # Panics
+    /// If no factorisation succeeded before.
     pub fn solve(&mut self, step: &mut [f64]) {
-        let n = self.n_blocks * D;
-        if n == 0 {
+        if self.n_blocks == 0 {
             return;
         }
-        let mut rhs: Vec<f64> = self.gradient.iter().map(|g| -g).collect();
-        let llt = LltRef::<'_, usize, f64>::new(&self.symbolic, &self.factor);
-        let par = parallelism(self.threads);
-        llt.solve_in_place_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(&mut rhs, n, 1),
-            par,
-            MemStack::new(&mut self.scratch),
+        assert!(
+            !self.factor.is_empty(),
+            "BlockSystem::solve needs a factorisation first"
         );
+        for (r, g) in self.rhs.iter_mut().zip(&self.gradient) {
+            *r = -g;
+        }
+        self.symbolic
+            .solve(&self.factor, &mut self.rhs, &mut self.solve_work);
         for (block, &p) in self.position.iter().enumerate() {
-            step[block * D..block * D + D].copy_from_slice(&rhs[p * D..p * D + D]);
+            step[block * D..block * D + D].copy_from_slice(&self.rhs[p * D..p * D + D]);
         }
     }
 
@@ -403,31 +508,65 @@ impl<const D: usize> BlockSystem<D> {
     }
 }
 
-/// The CSC pattern of the transpose of an `n × n` CSC pattern (sorted rows).
-fn transpose_pattern(n: usize, col_ptr: &[usize], row_idx: &[usize]) -> (Vec<usize>, Vec<usize>) {
-    let mut count = vec![0usize; n + 1];
-    for &r in row_idx {
-        count[r + 1] += 1;
-    }
-    for k in 0..n {
-        count[k + 1] += count[k];
-    }
-    let mut next = count.clone();
-    let mut out = vec![0usize; row_idx.len()];
-    for c in 0..n {
-        for &r in &row_idx[col_ptr[c]..col_ptr[c + 1]] {
-            out[next[r]] = c;
-            next[r] += 1;
+/// Adds the lower triangle of `h` to a column-major `D×D` block.
+#[inline]
+fn add_lower<const D: usize>(block: &mut [f64], h: &SMatrix<f64, D, D>) {
+    for c in 0..D {
+        for r in c..D {
+            block[c * D + r] += h[(r, c)];
         }
     }
-    (count, out)
 }
 
-fn parallelism(threads: usize) -> Par {
-    match threads {
-        1 => Par::Seq,
-        0 => Par::rayon(0),
-        t => Par::rayon(t),
+/// Adds `H_ij` (or its transpose) to an off-diagonal slot.
+#[inline]
+fn add_off_diagonal<const D: usize>(block: &mut [f64], h_ij: &SMatrix<f64, D, D>, i_is_row: bool) {
+    for c in 0..D {
+        for r in 0..D {
+            block[c * D + r] += if i_is_row { h_ij[(r, c)] } else { h_ij[(c, r)] };
+        }
+    }
+}
+
+/// A vector written by several threads at disjoint places.
+struct SharedSlice(*mut f64);
+// SAFETY: used only where every element has one writer (see `add_edges`).
+unsafe impl Sync for SharedSlice {}
+unsafe impl Send for SharedSlice {}
+
+impl SharedSlice {
+    /// The element at `offset` (a method, so that closures capture the
+    /// whole `Sync` wrapper rather than its raw pointer).
+    ///
+    /// # Safety
+    /// `offset` is in bounds.
+    unsafe fn at(&self, offset: usize) -> *mut f64 {
+        // SAFETY: in bounds by the caller's contract.
+        unsafe { self.0.add(offset) }
+    }
+}
+
+/// `add_diagonal` through shared pointers.
+///
+/// # Safety
+/// The caller is the only writer of block `p` and gradient entries `p·D..`.
+unsafe fn add_diagonal_raw<const D: usize>(
+    diag: &SharedSlice,
+    gradient: &SharedSlice,
+    p: usize,
+    h: &SMatrix<f64, D, D>,
+    g: &SVector<f64, D>,
+) {
+    // SAFETY: see above; the offsets are in bounds for a position p < n.
+    let (block, grad) = unsafe {
+        (
+            std::slice::from_raw_parts_mut(diag.at(p * D * D), D * D),
+            std::slice::from_raw_parts_mut(gradient.at(p * D), D),
+        )
+    };
+    add_lower::<D>(block, h);
+    for a in 0..D {
+        grad[a] += g[a];
     }
 }
 
@@ -547,6 +686,82 @@ mod tests {
             // Predicted decrease of the undamped model: −2δᵀb − δᵀHδ.
             let model = -2.0 * got.dot(&b) - got.dot(&(&h * &got));
             assert!((sys.predicted_decrease(&step) - model).abs() < 1e-9 * model.abs().max(1.0));
+        }
+    }
+
+    #[test]
+    fn upper_csc_is_h_and_faer_solves_it_alike() {
+        use faer::Side;
+        use faer::sparse::linalg::cholesky::{
+            CholeskySymbolicParams, LltRef, SymmetricOrdering, factorize_symbolic_cholesky,
+        };
+        use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+        let (mut sys, h, b) = random_system(3);
+        let (col_ptr, rows, values) = sys.upper_csc();
+        let n = 24;
+        // Dense, by elimination position, from the CSC.
+        let mut dense = DMatrix::zeros(n, n);
+        for c in 0..n {
+            for k in col_ptr[c]..col_ptr[c + 1] {
+                assert!(rows[k] <= c && (k == col_ptr[c] || rows[k] > rows[k - 1]));
+                dense[(rows[k], c)] = values[k];
+                dense[(c, rows[k])] = values[k];
+            }
+        }
+        let position = sys.position.clone();
+        let scalar = |block: usize, a: usize| 2 * position[block] + a;
+        for i in 0..n {
+            for j in 0..n {
+                assert_eq!(
+                    dense[(scalar(i / 2, i % 2), scalar(j / 2, j % 2))],
+                    h[(i, j)]
+                );
+            }
+        }
+        // faer's supernodal Cholesky of the same matrix, same solution.
+        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &rows);
+        let symbolic = factorize_symbolic_cholesky(
+            pattern,
+            Side::Upper,
+            SymmetricOrdering::Identity,
+            CholeskySymbolicParams::default(),
+        )
+        .unwrap();
+        let mut l = vec![0.0; symbolic.len_val()];
+        let mut mem = MemBuffer::new(
+            symbolic.factorize_numeric_llt_scratch::<f64>(faer::Par::Seq, Default::default()),
+        );
+        symbolic
+            .factorize_numeric_llt::<f64>(
+                &mut l,
+                SparseColMatRef::new(pattern, &values),
+                Side::Upper,
+                Default::default(),
+                faer::Par::Seq,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .unwrap();
+        let mut rhs = faer::Mat::<f64>::zeros(n, 1);
+        for i in 0..n {
+            rhs[(scalar(i / 2, i % 2), 0)] = -b[i];
+        }
+        let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, faer::Par::Seq));
+        LltRef::<'_, usize, f64>::new(&symbolic, &l).solve_in_place_with_conj(
+            faer::Conj::No,
+            rhs.as_mut(),
+            faer::Par::Seq,
+            MemStack::new(&mut mem),
+        );
+        sys.factorize(0.0).unwrap();
+        let mut step = vec![0.0; n];
+        sys.solve(&mut step);
+        for i in 0..n {
+            let theirs = rhs[(scalar(i / 2, i % 2), 0)];
+            assert!(
+                (step[i] - theirs).abs() < 1e-10 * theirs.abs().max(1.0),
+                "{i}"
+            );
         }
     }
 

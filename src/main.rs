@@ -261,7 +261,8 @@ struct OptimizeArgs {
     /// trajectory.svg (before and after, loops coloured by final weight).
     #[arg(long, value_name = "DIR")]
     plot: Option<PathBuf>,
-    /// Threads (0: all cores).
+    /// Threads: 0 (the default) and 1 optimise in one thread, which was the
+    /// fastest on a 2-core machine shared with other work; N > 1 uses N.
     #[arg(long, default_value_t = 0)]
     threads: usize,
     /// Print the JSON report on stdout.

@@ -398,8 +398,13 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         });
     }
     if let Some(summary) = &total {
-        report.optimizer =
-            OptimizerReport::new(summary, initial_chi2, graph.chi2(), optimizer.system());
+        report.optimizer = OptimizerReport::new(
+            summary,
+            initial_chi2,
+            graph.chi2(),
+            optimizer.system(),
+            optimizer.max_nnz_factor(),
+        );
     }
     let accepted = kept
         .iter()

@@ -219,8 +219,13 @@ pub struct OptimizerReport {
     pub factorizations: usize,
     /// Non-zeros of the lower triangle of `H`.
     pub nnz_hessian: usize,
-    /// Non-zeros of the Cholesky factor.
+    /// Values stored for the Cholesky factor (8 bytes each) of the last
+    /// pattern.
     pub nnz_factor: usize,
+    /// The same for the largest factor of the run (the first pattern, when
+    /// robust weighting later removed loops from it): what the peak memory
+    /// held.
+    pub max_nnz_factor: usize,
     /// Objective after each iteration.
     pub history: Vec<f64>,
     /// Where the optimiser's time went.
@@ -228,13 +233,14 @@ pub struct OptimizerReport {
 }
 
 impl OptimizerReport {
-    /// From a solver summary, the unweighted χ² before and after, and the
-    /// linear system.
+    /// From a solver summary, the unweighted χ² before and after, the
+    /// linear system and the largest factor of the run (values).
     pub fn new<const D: usize>(
         summary: &Summary,
         initial_chi2: f64,
         final_chi2: f64,
         system: &BlockSystem<D>,
+        max_nnz_factor: usize,
     ) -> Self {
         Self {
             solver: summary.method.short_name(),
@@ -249,6 +255,7 @@ impl OptimizerReport {
             factorizations: summary.factorizations,
             nnz_hessian: system.nnz_hessian(),
             nnz_factor: system.nnz_factor(),
+            max_nnz_factor: max_nnz_factor.max(system.nnz_factor()),
             history: summary.history.iter().map(|r| r.objective).collect(),
             timing: summary.timing,
         }
@@ -270,6 +277,7 @@ impl Default for OptimizerReport {
             factorizations: 0,
             nnz_hessian: 0,
             nnz_factor: 0,
+            max_nnz_factor: 0,
             history: Vec::new(),
             timing: Default::default(),
         }

@@ -24,8 +24,8 @@ mod proptests;
 mod se2;
 mod se3;
 
-pub use se2::Se2;
-pub use se3::Se3;
+pub use se2::{Se2, Se2Prepared};
+pub use se3::{Se3, Se3Prepared};
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
@@ -61,13 +61,114 @@ pub trait Pose<const D: usize>:
     /// The position of the pose (z = 0 for SE(2)).
     fn position(&self) -> Vector3<f64>;
 
+    /// The pose with what every edge at it recomputes otherwise (the sine
+    /// and cosine of an angle, a rotation matrix), for evaluating many edges.
+    type Prepared: Copy + Clone + std::fmt::Debug + Send + Sync + 'static;
+
+    /// This pose, prepared.
+    fn prepare(&self) -> Self::Prepared;
+
     /// Relative-pose error of the edge `xi → xj` with measurement `z`
     /// (see the module documentation).
-    fn error(xi: &Self, xj: &Self, z: &Self) -> SVector<f64, D>;
+    fn error(xi: &Self, xj: &Self, z: &Self) -> SVector<f64, D> {
+        Self::error_prepared(&xi.prepare(), &xj.prepare(), &z.prepare())
+    }
 
     /// The error and its Jacobians with respect to the right updates of `xi`
     /// and `xj`.
-    fn error_and_jacobians(xi: &Self, xj: &Self, z: &Self) -> EdgeLinearization<D>;
+    fn error_and_jacobians(xi: &Self, xj: &Self, z: &Self) -> EdgeLinearization<D> {
+        Self::error_and_jacobians_prepared(&xi.prepare(), &xj.prepare(), &z.prepare())
+    }
+
+    /// [`Pose::error`] of prepared poses.
+    fn error_prepared(
+        xi: &Self::Prepared,
+        xj: &Self::Prepared,
+        z: &Self::Prepared,
+    ) -> SVector<f64, D>;
+
+    /// [`Pose::error_and_jacobians`] of prepared poses.
+    fn error_and_jacobians_prepared(
+        xi: &Self::Prepared,
+        xj: &Self::Prepared,
+        z: &Self::Prepared,
+    ) -> EdgeLinearization<D>;
+
+    /// The edge's blocks of the normal equations for information `omega`
+    /// ([`NormalBlocks`]). The default multiplies out the Jacobians of
+    /// [`Pose::error_and_jacobians_prepared`]; a pose type may use the
+    /// structure of its Jacobians to do less.
+    fn normal_blocks_prepared(
+        xi: &Self::Prepared,
+        xj: &Self::Prepared,
+        z: &Self::Prepared,
+        omega: &SMatrix<f64, D, D>,
+    ) -> NormalBlocks<D> {
+        let lin = Self::error_and_jacobians_prepared(xi, xj, z);
+        NormalBlocks::from_jacobians(&lin, omega)
+    }
+}
+
+/// One edge's contribution to the normal equations `H δ = −b` of
+/// `eᵀΩe`: `H_ii = J_iᵀΩJ_i`, `H_ij = J_iᵀΩJ_j`, `H_jj = J_jᵀΩJ_j`,
+/// `b_i = J_iᵀΩe`, `b_j = J_jᵀΩe`, and `χ² = eᵀΩe`.
+#[derive(Clone, Copy, Debug)]
+pub struct NormalBlocks<const D: usize> {
+    /// `H_ii`.
+    pub h_ii: SMatrix<f64, D, D>,
+    /// `H_ij`.
+    pub h_ij: SMatrix<f64, D, D>,
+    /// `H_jj`.
+    pub h_jj: SMatrix<f64, D, D>,
+    /// `b_i`.
+    pub b_i: SVector<f64, D>,
+    /// `b_j`.
+    pub b_j: SVector<f64, D>,
+    /// `eᵀΩe`.
+    pub chi2: f64,
+}
+
+impl<const D: usize> Default for NormalBlocks<D> {
+    fn default() -> Self {
+        Self {
+            h_ii: SMatrix::zeros(),
+            h_ij: SMatrix::zeros(),
+            h_jj: SMatrix::zeros(),
+            b_i: SVector::zeros(),
+            b_j: SVector::zeros(),
+            chi2: 0.0,
+        }
+    }
+}
+
+impl<const D: usize> NormalBlocks<D> {
+    /// The blocks multiplied out from the error and its Jacobians.
+    pub fn from_jacobians(lin: &EdgeLinearization<D>, omega: &SMatrix<f64, D, D>) -> Self {
+        let oi = omega * lin.jac_i;
+        let oj = omega * lin.jac_j;
+        let oe = omega * lin.error;
+        Self {
+            h_ii: lin.jac_i.transpose() * oi,
+            h_ij: lin.jac_i.transpose() * oj,
+            h_jj: lin.jac_j.transpose() * oj,
+            b_i: lin.jac_i.transpose() * oe,
+            b_j: lin.jac_j.transpose() * oe,
+            chi2: lin.error.dot(&oe),
+        }
+    }
+
+    /// These blocks scaled by a weight.
+    pub fn scaled(mut self, w: f64) -> Self {
+        if w != 1.0 {
+            self.h_ii *= w;
+            self.h_ij *= w;
+            self.h_jj *= w;
+            self.b_i *= w;
+            self.b_j *= w;
+            self.chi2 *= w;
+        }
+        self
+    }
 }
 
 /// The error of one edge and its Jacobians, `∂e/∂δᵢ` and `∂e/∂δⱼ`.

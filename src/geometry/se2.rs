@@ -105,25 +105,43 @@ impl Pose<3> for Se2 {
         Vector3::new(self.x, self.y, 0.0)
     }
 
-    fn error(xi: &Self, xj: &Self, z: &Self) -> Vector3<f64> {
+    type Prepared = Se2Prepared;
+
+    fn prepare(&self) -> Se2Prepared {
+        let (s, c) = self.theta.sin_cos();
+        Se2Prepared {
+            x: self.x,
+            y: self.y,
+            theta: self.theta,
+            c,
+            s,
+        }
+    }
+
+    fn error_prepared(xi: &Se2Prepared, xj: &Se2Prepared, z: &Se2Prepared) -> Vector3<f64> {
         // A = Xi⁻¹ Xj, E = Z⁻¹ A
-        let ta = xi.rotate_inv(xj.translation() - xi.translation());
-        let te = z.rotate_inv(ta - z.translation());
+        let ta = xi.rotate_inv(xj.x - xi.x, xj.y - xi.y);
+        let te = z.rotate_inv(ta.x - z.x, ta.y - z.y);
         Vector3::new(te.x, te.y, wrap_angle(xj.theta - xi.theta - z.theta))
     }
 
-    fn error_and_jacobians(xi: &Self, xj: &Self, z: &Self) -> EdgeLinearization<3> {
-        let dt = xj.translation() - xi.translation();
-        let ta = xi.rotate_inv(dt);
-        let te = z.rotate_inv(ta - z.translation());
+    fn error_and_jacobians_prepared(
+        xi: &Se2Prepared,
+        xj: &Se2Prepared,
+        z: &Se2Prepared,
+    ) -> EdgeLinearization<3> {
+        let ta = xi.rotate_inv(xj.x - xi.x, xj.y - xi.y);
+        let te = z.rotate_inv(ta.x - z.x, ta.y - z.y);
         let error = Vector3::new(te.x, te.y, wrap_angle(xj.theta - xi.theta - z.theta));
 
         // R_E = R_zᵀ R_iᵀ R_j; e_t = R_zᵀ (R_iᵀ (t_j − t_i) − t_z).
         // ∂e_t/∂ρ_j = R_E, ∂e_t/∂ρ_i = −R_zᵀ, ∂e_t/∂φ_i = R_zᵀ (a_y, −a_x) (a = t_A),
-        // ∂e_θ/∂φ_j = 1, ∂e_θ/∂φ_i = −1.
-        let (sz, cz) = z.theta.sin_cos();
-        let (se, ce) = (xj.theta - xi.theta - z.theta).sin_cos();
-        let p = z.rotate_inv(Vector2::new(ta.y, -ta.x));
+        // ∂e_θ/∂φ_j = 1, ∂e_θ/∂φ_i = −1. The angle of R_E from the prepared
+        // sines and cosines: θ_E = θ_j − (θ_i + θ_z).
+        let (cz, sz) = (z.c, z.s);
+        let (ciz, siz) = (xi.c * cz - xi.s * sz, xi.s * cz + xi.c * sz);
+        let (ce, se) = (xj.c * ciz + xj.s * siz, xj.s * ciz - xj.c * siz);
+        let p = z.rotate_inv(ta.y, -ta.x);
         let jac_i = Matrix3::new(-cz, -sz, p.x, sz, -cz, p.y, 0.0, 0.0, -1.0);
         let jac_j = Matrix3::new(ce, -se, 0.0, se, ce, 0.0, 0.0, 0.0, 1.0);
         EdgeLinearization {
@@ -131,6 +149,24 @@ impl Pose<3> for Se2 {
             jac_i,
             jac_j,
         }
+    }
+}
+
+/// An [`Se2`] with the cosine and sine of its heading.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Se2Prepared {
+    x: f64,
+    y: f64,
+    theta: f64,
+    c: f64,
+    s: f64,
+}
+
+impl Se2Prepared {
+    /// `R(θ)ᵀ·(vx, vy)`.
+    #[inline]
+    fn rotate_inv(&self, vx: f64, vy: f64) -> Vector2<f64> {
+        Vector2::new(self.c * vx + self.s * vy, -self.s * vx + self.c * vy)
     }
 }
 

@@ -724,6 +724,10 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
             ));
         }
         let missing: Vec<usize> = (defined..self.graph.num_vertices()).collect();
+        // The vectors grew by doubling: give back the unused capacity (up
+        // to half of the graph's memory) before the optimiser needs its own.
+        self.graph.edges.shrink_to_fit();
+        self.records.shrink_to_fit();
         Ok(G2oFile {
             graph: P::wrap(self.graph),
             missing,

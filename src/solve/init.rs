@@ -157,13 +157,22 @@ impl<const D: usize> LinearProblem<D> {
             });
         }
         let (variable, n_free) = variables(graph);
+        // Edges of weight 0 are left out of the pattern: a dropped loop
+        // candidate would otherwise cost fill for nothing.
         let pairs: Vec<_> = graph
             .edges
             .iter()
-            .map(|e| (variable[e.from], variable[e.to]))
+            .enumerate()
+            .map(|(k, e)| {
+                if weight(weights, k) == 0.0 {
+                    (None, None)
+                } else {
+                    (variable[e.from], variable[e.to])
+                }
+            })
             .collect();
         Ok(Self {
-            system: BlockSystem::new(n_free, &pairs, 0)?,
+            system: BlockSystem::new(n_free, &pairs, 1)?,
             variable,
             n_free,
         })

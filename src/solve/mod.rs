@@ -8,10 +8,10 @@
 
 pub mod init;
 
-use crate::geometry::Pose;
+use crate::geometry::{NormalBlocks, Pose};
 use crate::graph::{PoseGraph, VertexId};
 use crate::linear::{BlockSystem, LinearError};
-use nalgebra::{SMatrix, SVector};
+use nalgebra::SMatrix;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::time::{Duration, Instant};
@@ -21,7 +21,8 @@ use std::time::{Duration, Instant};
 #[serde(rename_all = "snake_case")]
 pub enum Method {
     /// Levenberg–Marquardt with Marquardt's diagonal scaling and Nielsen's
-    /// damping update.
+    /// damping update, starting undamped: λ = 0 (a Gauss–Newton step) until
+    /// a step is rejected, then `initial_lambda` and Nielsen's rule.
     #[default]
     LevenbergMarquardt,
     /// Gauss–Newton: the undamped step, always taken.
@@ -53,10 +54,16 @@ pub struct SolverOptions {
     pub step_tolerance: f64,
     /// Stop when this much time has passed; the best estimate so far is kept.
     pub time_limit: Option<Duration>,
-    /// Initial LM damping `λ` (relative to the diagonal of `H`).
+    /// LM damping `λ` (relative to the diagonal of `H`) after the first
+    /// rejected step; until then λ = 0.
     pub initial_lambda: f64,
-    /// Threads for the factorisation (0: all cores; 1: sequential). The
-    /// linearisation uses rayon's global pool.
+    /// Threads: 0 (automatic) and 1 run everything in the calling thread;
+    /// N ≥ 2 linearises, assembles and factorises (independent subtrees and
+    /// the large dense blocks) in rayon's current pool, whose size the
+    /// caller sets (pgo's `--threads N`). Automatic is sequential because on
+    /// the 2-core machine these figures come from, shared with other work, a
+    /// second thread cost more than it gave at every size measured (see the
+    /// README's Speed section).
     pub threads: usize,
 }
 
@@ -248,15 +255,30 @@ impl<F: FnMut(&IterationRecord)> Observer for F {
 /// An optimiser bound to one graph structure: the sparsity pattern, its
 /// ordering and symbolic factorisation are built once here and reused by
 /// every [`Optimizer::run`] (e.g. across robust reweighting rounds).
-pub struct Optimizer<P, const D: usize> {
+pub struct Optimizer<P: Pose<D>, const D: usize> {
     system: BlockSystem<D>,
     /// Vertex of each variable block.
     vertex_of: Vec<usize>,
+    /// Whether each edge is in the sparsity pattern (edges of weight 0 at
+    /// construction are not; see [`Self::update_pattern`]).
+    in_pattern: Vec<bool>,
+    /// Time to build the pattern (ordering, symbolic factorisation) and of
+    /// the last numeric factorisation.
+    build_time: Duration,
+    factor_time: Duration,
+    /// Values of the largest factor among the patterns built so far.
+    max_nnz_factor: usize,
+    /// LM's damping at the end of the last run.
+    last_lambda: f64,
     options: SolverOptions,
     trial: Vec<P>,
     best: Vec<P>,
     step: Vec<f64>,
     terms: Vec<EdgeTerms<D>>,
+    /// Each edge's measurement, prepared once ([`Pose::prepare`]).
+    measurements: Vec<P::Prepared>,
+    /// The poses being evaluated, prepared.
+    prepared: Vec<P::Prepared>,
 }
 
 impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
@@ -297,21 +319,104 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 vertex_of.push(k);
             }
         }
-        let pairs: Vec<(Option<usize>, Option<usize>)> = graph
-            .edges
-            .iter()
-            .map(|e| (variable[e.from], variable[e.to]))
+        let in_pattern: Vec<bool> = (0..graph.edges.len())
+            .map(|k| weights.is_none_or(|w| w[k] != 0.0))
             .collect();
-        let system = BlockSystem::new(vertex_of.len(), &pairs, options.threads)?;
+        let start = Instant::now();
+        let system = Self::pattern(graph, &variable, &in_pattern, vertex_of.len(), &options)?;
         Ok(Self {
+            max_nnz_factor: system.nnz_factor(),
             system,
+            in_pattern,
+            build_time: start.elapsed(),
+            factor_time: Duration::ZERO,
+            last_lambda: 0.0,
             step: vec![0.0; vertex_of.len() * D],
             vertex_of,
             trial: graph.poses.clone(),
             best: graph.poses.clone(),
             options,
             terms: Vec::new(),
+            measurements: graph
+                .edges
+                .iter()
+                .map(|e| e.measurement.prepare())
+                .collect(),
+            prepared: graph.poses.iter().map(|p| p.prepare()).collect(),
         })
+    }
+
+    /// The block system of the edges in the pattern.
+    fn pattern(
+        graph: &PoseGraph<P, D>,
+        variable: &[Option<usize>],
+        in_pattern: &[bool],
+        n_blocks: usize,
+        options: &SolverOptions,
+    ) -> Result<BlockSystem<D>, SolveError> {
+        let pairs: Vec<(Option<usize>, Option<usize>)> = graph
+            .edges
+            .iter()
+            .zip(in_pattern)
+            .map(|(e, &inside)| {
+                if inside {
+                    (variable[e.from], variable[e.to])
+                } else {
+                    (None, None)
+                }
+            })
+            .collect();
+        let threads = if options.threads >= 2 { 0 } else { 1 };
+        Ok(BlockSystem::new(n_blocks, &pairs, threads)?)
+    }
+
+    /// Rebuilds the pattern for the edges of non-zero weight when an edge
+    /// left out of it now has a weight, or when edges in it have weight 0
+    /// (loops a robust method removed) and a factorisation costs more than
+    /// building the pattern did — wrong loops that join distant places are
+    /// the ones that cost the most fill.
+    fn update_pattern(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        weights: Option<&[f64]>,
+    ) -> Result<(), SolveError> {
+        let needed = |k: usize| weights.is_none_or(|w| w[k] != 0.0);
+        let missing = (0..self.in_pattern.len()).any(|k| !self.in_pattern[k] && needed(k));
+        let unused = (0..self.in_pattern.len()).any(|k| self.in_pattern[k] && !needed(k));
+        if !(missing || unused && self.factor_time > self.build_time) {
+            return Ok(());
+        }
+        for k in 0..self.in_pattern.len() {
+            self.in_pattern[k] = needed(k);
+        }
+        let mut variable = vec![None; graph.num_vertices()];
+        for (block, &v) in self.vertex_of.iter().enumerate() {
+            variable[v] = Some(block);
+        }
+        let start = Instant::now();
+        // The old factor goes before the new pattern is built, so that the
+        // two never take memory at the same time.
+        self.system.release_factor();
+        self.system = Self::pattern(
+            graph,
+            &variable,
+            &self.in_pattern,
+            self.vertex_of.len(),
+            &self.options,
+        )?;
+        self.build_time = start.elapsed();
+        self.max_nnz_factor = self.max_nnz_factor.max(self.system.nnz_factor());
+        Ok(())
+    }
+
+    /// The smallest piece of a parallel loop: everything in one piece
+    /// (the calling thread) unless [`SolverOptions::threads`] asks for more.
+    fn min_len(&self) -> usize {
+        if self.options.threads >= 2 {
+            256
+        } else {
+            usize::MAX
+        }
     }
 
     /// The options, e.g. to change the iteration limit between runs.
@@ -327,6 +432,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// The linear system (for statistics such as the factor's size).
     pub fn system(&self) -> &BlockSystem<D> {
         &self.system
+    }
+
+    /// Values of the largest Cholesky factor among the patterns this
+    /// optimiser has built (a pattern rebuilt without the loops a robust
+    /// method removed has a smaller factor than the first one).
+    pub fn max_nnz_factor(&self) -> usize {
+        self.max_nnz_factor
     }
 
     /// Minimises `Σ wₖ eₖᵀΩₖeₖ` from the graph's current poses and leaves the
@@ -345,6 +457,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 });
             }
         }
+        if self.in_pattern.len() != graph.edges.len() {
+            return Err(SolveError::WeightCount {
+                weights: self.in_pattern.len(),
+                edges: graph.edges.len(),
+            });
+        }
+        self.update_pattern(graph, weights)?;
         let start = Instant::now();
         let opts = self.options.clone();
         let mut summary = Summary {
@@ -371,8 +490,26 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             summary.time = start.elapsed();
             return Ok(summary);
         }
-        let mut lambda = opts.initial_lambda;
+        // λ = 0 until a step fails: near a minimum, where the Gauss–Newton
+        // model is good, any damping only slows the convergence down (on
+        // long trajectories the smallest eigenvalues of H are ~1e-6 of its
+        // diagonal, so even λ = 1e-6 halves their steps). A later run on the
+        // same optimiser (a robust reweighting round) starts from the damping
+        // the previous one ended with, instead of failing its way up again.
+        let mut lambda = if opts.method == Method::GaussNewton {
+            0.0
+        } else {
+            self.last_lambda
+        };
         let mut nu = 2.0;
+        let raise = |lambda: &mut f64, nu: &mut f64| {
+            if *lambda == 0.0 {
+                *lambda = opts.initial_lambda;
+            } else {
+                *lambda *= *nu;
+                *nu *= 2.0;
+            }
+        };
         self.best.clone_from(&graph.poses);
         let mut best_objective = objective;
         let stop = loop {
@@ -392,24 +529,24 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             let mut rejected = 0;
             let outcome = loop {
                 let structural_check = summary.factorizations == 0;
-                let damping = if opts.method == Method::GaussNewton || structural_check {
+                let damping = if opts.method == Method::GaussNewton {
                     0.0
                 } else {
                     lambda
                 };
                 summary.factorizations += 1;
                 let factorized = self.system.factorize(damping);
+                self.factor_time = clock.elapsed();
                 clock = lap(&mut summary.timing.factorize_s, clock);
                 match factorized {
                     Ok(()) => {}
                     Err(LinearError::NotPositiveDefinite { block }) => {
-                        if damping == 0.0 || lambda > 1e16 {
+                        if opts.method == Method::GaussNewton || structural_check || lambda > 1e16 {
                             return Err(SolveError::NotPositiveDefinite {
                                 vertex: graph.id(self.vertex_of[block]),
                             });
                         }
-                        lambda *= nu;
-                        nu *= 2.0;
+                        raise(&mut lambda, &mut nu);
                         rejected += 1;
                         continue;
                     }
@@ -422,10 +559,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                     if opts.method == Method::GaussNewton || lambda > 1e16 {
                         break None;
                     }
-                    if !structural_check {
-                        lambda *= nu;
-                        nu *= 2.0;
-                    }
+                    raise(&mut lambda, &mut nu);
                     rejected += 1;
                     continue;
                 }
@@ -433,7 +567,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                     break Some((step_max, objective, true));
                 }
                 self.apply_step(graph);
-                let new_objective = self.objective(&self.trial, graph, weights);
+                let trial = std::mem::take(&mut self.trial);
+                let new_objective = self.objective(&trial, graph, weights);
+                self.trial = trial;
                 clock = lap(&mut summary.timing.evaluate_s, clock);
                 if opts.method == Method::GaussNewton {
                     if new_objective.is_finite() {
@@ -444,17 +580,14 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 let predicted = self.system.predicted_decrease(&self.step);
                 let rho = (objective - new_objective) / predicted;
                 if new_objective.is_finite() && new_objective <= objective && rho > 0.0 {
-                    if !structural_check {
+                    if lambda > 0.0 {
                         lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
                         lambda = lambda.max(1e-12);
                     }
                     nu = 2.0;
                     break Some((step_max, new_objective, false));
                 }
-                if !structural_check {
-                    lambda *= nu;
-                    nu *= 2.0;
-                }
+                raise(&mut lambda, &mut nu);
                 rejected += 1;
                 if lambda > 1e16 {
                     break None;
@@ -500,6 +633,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         summary.final_objective = objective;
         summary.stop_reason = stop;
         summary.time = start.elapsed();
+        // A run that gave up (λ beyond any use) does not pass that on.
+        self.last_lambda = if lambda <= 1e8 { lambda } else { 0.0 };
         Ok(summary)
     }
 
@@ -515,31 +650,40 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// The weighted objective at `poses`.
-    fn objective(&self, poses: &[P], graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
+    fn objective(&mut self, poses: &[P], graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
+        let min_len = self.min_len();
+        prepare(poses, &mut self.prepared, min_len);
+        let (prepared, measurements) = (&self.prepared, &self.measurements);
         graph
             .edges
             .par_iter()
             .enumerate()
+            .with_min_len(min_len)
             .map(|(k, e)| {
                 let w = weights.map_or(1.0, |w| w[k]);
                 if w == 0.0 {
                     return 0.0;
                 }
-                let r = P::error(&poses[e.from], &poses[e.to], &e.measurement);
+                let r = P::error_prepared(&prepared[e.from], &prepared[e.to], &measurements[k]);
                 w * r.dot(&(e.information * r))
             })
             .sum()
     }
 
     /// Builds `H` and `b` at the graph's poses and returns the objective
-    /// (public for benchmarks; [`Optimizer::run`] does this itself).
+    /// (public for benchmarks; [`Optimizer::run`] does this itself). Edges
+    /// left out of the pattern ([`Optimizer::new`]) count in the objective
+    /// but not in `H`.
     pub fn linearize(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
         self.system.clear();
+        let min_len = self.min_len();
+        prepare(&graph.poses, &mut self.prepared, min_len);
         let mut objective = 0.0;
         // Edges are linearised in parallel, a chunk at a time, into a buffer
-        // reused across iterations; the scatter into H is serial (each edge
-        // writes three blocks that other edges share).
+        // reused across iterations, then added into H in parallel by
+        // destination ([`BlockSystem::add_edges`]).
         let terms = &mut self.terms;
+        let (prepared, measurements) = (&self.prepared, &self.measurements);
         for (c, chunk) in graph.edges.chunks(LINEARIZE_CHUNK).enumerate() {
             let base = c * LINEARIZE_CHUNK;
             terms.resize(chunk.len(), EdgeTerms::default());
@@ -547,71 +691,67 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 .par_iter_mut()
                 .zip(chunk.par_iter())
                 .enumerate()
+                .with_min_len(min_len)
                 .for_each(|(i, (t, e))| {
-                    let w = weights.map_or(1.0, |w| w[base + i]);
+                    let k = base + i;
+                    let w = weights.map_or(1.0, |w| w[k]);
                     *t = if w == 0.0 {
                         EdgeTerms::default()
                     } else {
-                        EdgeTerms::new(graph, e, w)
+                        let (xi, xj) = (&prepared[e.from], &prepared[e.to]);
+                        EdgeTerms::new::<P>(xi, xj, &measurements[k], &e.information, w)
                     };
                 });
-            for (i, t) in terms.iter().enumerate() {
-                if t.active {
-                    objective += t.chi2;
-                    self.system
-                        .add_edge(base + i, &t.h_ii, &t.h_ij, &t.h_jj, &t.b_i, &t.b_j);
-                }
-            }
+            objective += terms.iter().map(|t| t.blocks.chi2).sum::<f64>();
+            self.system
+                .add_edges(base, terms, |t| t.active.then_some(&t.blocks));
         }
         objective
     }
 }
 
-/// Edges linearised per parallel batch.
-const LINEARIZE_CHUNK: usize = 1 << 14;
-
-/// One edge's contribution to the normal equations.
-#[derive(Clone, Copy)]
-struct EdgeTerms<const D: usize> {
-    active: bool,
-    chi2: f64,
-    h_ii: SMatrix<f64, D, D>,
-    h_ij: SMatrix<f64, D, D>,
-    h_jj: SMatrix<f64, D, D>,
-    b_i: SVector<f64, D>,
-    b_j: SVector<f64, D>,
-}
-
-impl<const D: usize> Default for EdgeTerms<D> {
-    fn default() -> Self {
-        Self {
-            active: false,
-            chi2: 0.0,
-            h_ii: SMatrix::zeros(),
-            h_ij: SMatrix::zeros(),
-            h_jj: SMatrix::zeros(),
-            b_i: SVector::zeros(),
-            b_j: SVector::zeros(),
-        }
+/// `out[k] = poses[k].prepare()`, in pieces of at least `min_len`.
+fn prepare<P: Pose<D>, const D: usize>(poses: &[P], out: &mut Vec<P::Prepared>, min_len: usize) {
+    if out.len() != poses.len() {
+        *out = poses.iter().map(|p| p.prepare()).collect();
+    } else {
+        out.par_iter_mut()
+            .zip(poses.par_iter())
+            .with_min_len(min_len.max(4096))
+            .for_each(|(o, p)| *o = p.prepare());
     }
 }
 
+/// Edges linearised per parallel batch (512 × ~1 kB of terms in 3D: the
+/// buffer is memory held for the whole run, and larger batches were not
+/// faster).
+const LINEARIZE_CHUNK: usize = 1 << 9;
+
+/// One edge's contribution to the normal equations (`active`: its weight
+/// is not 0).
+#[derive(Clone, Copy, Default)]
+struct EdgeTerms<const D: usize> {
+    active: bool,
+    blocks: NormalBlocks<D>,
+}
+
 impl<const D: usize> EdgeTerms<D> {
-    /// `JᵀwΩJ`, `JᵀwΩe` and `w·eᵀΩe` of one edge at the graph's poses.
-    fn new<P: Pose<D>>(graph: &PoseGraph<P, D>, e: &crate::graph::Edge<P, D>, w: f64) -> Self {
-        let lin = P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
-        let omega = e.information * w;
-        let oi = omega * lin.jac_i;
-        let oj = omega * lin.jac_j;
-        let oe = omega * lin.error;
+    /// `JᵀwΩJ`, `JᵀwΩe` and `w·eᵀΩe` of one edge at prepared poses.
+    fn new<P: Pose<D>>(
+        xi: &P::Prepared,
+        xj: &P::Prepared,
+        z: &P::Prepared,
+        information: &SMatrix<f64, D, D>,
+        w: f64,
+    ) -> Self {
+        let blocks = if w == 1.0 {
+            P::normal_blocks_prepared(xi, xj, z, information)
+        } else {
+            P::normal_blocks_prepared(xi, xj, z, &(information * w))
+        };
         Self {
             active: true,
-            chi2: lin.error.dot(&oe),
-            h_ii: lin.jac_i.transpose() * oi,
-            h_ij: lin.jac_i.transpose() * oj,
-            h_jj: lin.jac_j.transpose() * oj,
-            b_i: lin.jac_i.transpose() * oe,
-            b_j: lin.jac_j.transpose() * oe,
+            blocks,
         }
     }
 }

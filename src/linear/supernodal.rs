@@ -1,0 +1,968 @@
+//! A block-supernodal sparse Cholesky factorisation `H = L·Lᵀ` for
+//! matrices made of `D×D` blocks (one block row and column per free pose),
+//! already in elimination order.
+//!
+//! * The symbolic analysis runs on the graph of *blocks* (faer's supernodal
+//!   symbolic Cholesky with its relaxed amalgamation, `D²` times smaller than
+//!   the scalar problem). Each supernode is a run of consecutive block
+//!   columns with one block-row pattern; its values are one dense
+//!   column-major panel (diagonal block on top, then the off-diagonal block
+//!   rows), so every block row is `D` contiguous scalars.
+//! * The numeric factorisation is left-looking: a supernode gathers the
+//!   updates of the descendants that have rows in its columns (one dense
+//!   product each, scattered block row by block row), then factorises its
+//!   diagonal block and solves for the rows below. A supernode only *writes*
+//!   its own panel and only *reads* finished descendants, so the subtrees of
+//!   the elimination tree are factorised in parallel; the result is the same
+//!   bits whatever the number of threads.
+//! * Everything the numeric phase needs (panel offsets, update lists, the
+//!   tree and the work of each subtree) is computed once; a factorisation
+//!   allocates nothing but its thread's workspace on first use.
+
+use super::LinearError;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{
+    LltError, LltRegularization, cholesky_in_place, cholesky_in_place_scratch,
+};
+use faer::linalg::matmul::matmul;
+use faer::linalg::matmul::triangular::{self, BlockStructure};
+use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+use faer::reborrow::{Reborrow, ReborrowMut};
+use faer::sparse::SymbolicSparseColMatRef;
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
+};
+use faer::{Accum, MatMut, MatRef, Par, Side};
+use rayon::prelude::*;
+use std::cell::RefCell;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Diagonal blocks up to this width are factorised by the column kernel of
+/// this module; wider ones by faer's blocked dense Cholesky.
+const SMALL_WIDTH: usize = 12;
+
+/// Dense products of more flops than this use all threads (when the
+/// factorisation is parallel); the top separators of the elimination tree
+/// are where the tree itself offers no parallelism.
+const PARALLEL_PRODUCT: f64 = 2e6;
+
+/// Scratch for one update product, in scalars (2 MiB): the product is
+/// formed this many entries at a time (at least one block column), not
+/// whole — the largest update of a big graph's top separator would
+/// otherwise need scratch the size of a good part of the factor.
+const UPDATE_SCRATCH: usize = 1 << 18;
+
+/// Block columns of an update product of `m` scalar rows and `count` block
+/// columns formed at once with `scratch` scalars of scratch (see
+/// [`UPDATE_SCRATCH`]).
+fn chunk_blocks<const D: usize>(scratch: usize, m: usize, count: usize) -> usize {
+    (scratch / (m * D).max(1)).clamp(1, count.max(1))
+}
+
+/// One descendant's update of a supernode: rows `start .. start + count` of
+/// the descendant's pattern fall in the supernode's columns.
+#[derive(Clone, Copy, Debug)]
+struct Update {
+    from: u32,
+    start: u32,
+    count: u32,
+}
+
+/// The structure of the factor.
+#[derive(Debug)]
+pub(super) struct Symbolic<const D: usize> {
+    /// First block column of each supernode (and the end, length `ns + 1`).
+    begin: Vec<usize>,
+    /// Block rows below each supernode's diagonal block:
+    /// `rows[row_ptr[s]..row_ptr[s + 1]]`, increasing.
+    row_ptr: Vec<usize>,
+    rows: Vec<u32>,
+    /// Offset of each supernode's panel in the values (length `ns + 1`).
+    val_ptr: Vec<usize>,
+    /// Supernode of each block column.
+    supernode_of: Vec<u32>,
+    /// Updates received by each supernode: `updates[update_ptr[s]..update_ptr[s + 1]]`.
+    update_ptr: Vec<usize>,
+    updates: Vec<Update>,
+    /// Children of each supernode in the elimination tree, and the roots.
+    child_ptr: Vec<usize>,
+    children: Vec<u32>,
+    roots: Vec<u32>,
+    /// Floating-point operations of each subtree (for the schedule).
+    subtree_flops: Vec<f64>,
+    /// Floating-point operations of one factorisation.
+    flops: f64,
+    /// Largest update product (`m·n`) and largest number of rows below a
+    /// diagonal block (workspace sizes).
+    max_update: usize,
+    max_below: usize,
+    /// Scalars of scratch an update product is formed in (at least one
+    /// block column of it at a time).
+    update_scratch: usize,
+}
+
+/// A panel's geometry: first block column, width in blocks, block rows below.
+#[derive(Clone, Copy)]
+struct Panel {
+    b0: usize,
+    w: usize,
+    p: usize,
+}
+
+impl Panel {
+    /// Scalar columns.
+    fn cols<const D: usize>(self) -> usize {
+        D * self.w
+    }
+    /// Scalar rows (the leading dimension).
+    fn ld<const D: usize>(self) -> usize {
+        D * (self.w + self.p)
+    }
+}
+
+impl<const D: usize> Symbolic<D> {
+    /// The structure of the factor of a block matrix whose lower triangle has
+    /// block `(q, p)` for every `q` in `later[p]` (each list increasing, all
+    /// `q > p`) and every diagonal block.
+    pub(super) fn new(later: &[Vec<usize>]) -> Result<Self, LinearError> {
+        Self::with_update_scratch(later, UPDATE_SCRATCH)
+    }
+
+    /// [`Self::new`] with the scratch of an update product given in scalars.
+    fn with_update_scratch(later: &[Vec<usize>], scratch: usize) -> Result<Self, LinearError> {
+        let n = later.len();
+        if n == 0 {
+            return Ok(Self::from_structure(vec![0], vec![0], Vec::new(), scratch));
+        }
+        // faer's symbolic analysis (identity ordering) reads the upper
+        // triangle: column q lists rows p < q, then the diagonal.
+        let mut col_ptr = vec![0usize; n + 1];
+        for (p, l) in later.iter().enumerate() {
+            col_ptr[p + 1] += 1;
+            for &q in l {
+                col_ptr[q + 1] += 1;
+            }
+        }
+        for k in 0..n {
+            col_ptr[k + 1] += col_ptr[k];
+        }
+        let mut next = col_ptr.clone();
+        let mut row_idx = vec![0usize; col_ptr[n]];
+        for (p, l) in later.iter().enumerate() {
+            // Column p has all its rows p' < p by now: the diagonal goes last.
+            row_idx[next[p]] = p;
+            next[p] += 1;
+            for &q in l {
+                row_idx[next[q]] = p;
+                next[q] += 1;
+            }
+        }
+        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
+        // faer's default relaxation counts scalar columns; in blocks of D
+        // columns the same thresholds are D times smaller.
+        let relax: Vec<(usize, f64)> = [(4, 1.0), (16, 0.8), (48, 0.1)]
+            .iter()
+            .map(|&(c, z)| ((c / D).max(1), z))
+            .chain([(usize::MAX, 0.05)])
+            .collect();
+        let mut params = CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+            ..Default::default()
+        };
+        params.supernodal_params.relax = Some(&relax);
+        let symbolic =
+            factorize_symbolic_cholesky(pattern, Side::Upper, SymmetricOrdering::Identity, params)
+                .map_err(|e| LinearError::Factorization(format!("{e:?}")))?;
+        let SymbolicCholeskyRaw::Supernodal(s) = symbolic.raw() else {
+            return Err(LinearError::Factorization(
+                "expected a supernodal structure".into(),
+            ));
+        };
+        let ns = s.n_supernodes();
+        let mut begin = Vec::with_capacity(ns + 1);
+        begin.extend_from_slice(s.supernode_begin());
+        begin.push(n);
+        let (fa_row_ptr, fa_rows, fa_val_ptr) =
+            (s.col_ptr_for_row_idx(), s.row_idx(), s.col_ptr_for_val());
+        let mut row_ptr = Vec::with_capacity(ns + 1);
+        let mut rows = Vec::new();
+        row_ptr.push(0);
+        for k in 0..ns {
+            let w = begin[k + 1] - begin[k];
+            let p = (fa_val_ptr[k + 1] - fa_val_ptr[k]) / w - w;
+            rows.extend(fa_rows[fa_row_ptr[k]..][..p].iter().map(|&r| r as u32));
+            row_ptr.push(rows.len());
+        }
+        drop(symbolic);
+        Ok(Self::from_structure(begin, row_ptr, rows, scratch))
+    }
+
+    /// Everything else from the supernodes and their patterns.
+    fn from_structure(
+        begin: Vec<usize>,
+        row_ptr: Vec<usize>,
+        rows: Vec<u32>,
+        update_scratch: usize,
+    ) -> Self {
+        let ns = begin.len() - 1;
+        let n = begin[ns];
+        let mut supernode_of = vec![0u32; n];
+        for s in 0..ns {
+            supernode_of[begin[s]..begin[s + 1]].fill(s as u32);
+        }
+        let panel = |s: usize| Panel {
+            b0: begin[s],
+            w: begin[s + 1] - begin[s],
+            p: row_ptr[s + 1] - row_ptr[s],
+        };
+        let mut val_ptr = Vec::with_capacity(ns + 1);
+        val_ptr.push(0usize);
+        for s in 0..ns {
+            let g = panel(s);
+            val_ptr.push(val_ptr[s] + g.ld::<D>() * g.cols::<D>());
+        }
+
+        // Updates: the rows of descendant d, grouped by the supernode they
+        // fall in (consecutive, since rows increase and supernodes are runs).
+        let mut counts = vec![0usize; ns + 1];
+        let mut groups = Vec::new();
+        for d in 0..ns {
+            let r = &rows[row_ptr[d]..row_ptr[d + 1]];
+            let mut i = 0;
+            while i < r.len() {
+                let t = supernode_of[r[i] as usize];
+                let mut j = i + 1;
+                while j < r.len() && supernode_of[r[j] as usize] == t {
+                    j += 1;
+                }
+                groups.push((
+                    t,
+                    Update {
+                        from: d as u32,
+                        start: i as u32,
+                        count: (j - i) as u32,
+                    },
+                ));
+                counts[t as usize + 1] += 1;
+                i = j;
+            }
+        }
+        for k in 0..ns {
+            counts[k + 1] += counts[k];
+        }
+        let update_ptr = counts.clone();
+        let mut updates = vec![
+            Update {
+                from: 0,
+                start: 0,
+                count: 0
+            };
+            groups.len()
+        ];
+        for (t, u) in groups {
+            updates[counts[t as usize]] = u;
+            counts[t as usize] += 1;
+        }
+
+        // The elimination tree of the supernodes (the parent holds the first
+        // row below the diagonal block; parents come after their children).
+        let parent: Vec<u32> = (0..ns)
+            .map(|s| {
+                if row_ptr[s + 1] > row_ptr[s] {
+                    supernode_of[rows[row_ptr[s]] as usize]
+                } else {
+                    u32::MAX
+                }
+            })
+            .collect();
+        let mut child_ptr = vec![0usize; ns + 1];
+        for &p in &parent {
+            if p != u32::MAX {
+                child_ptr[p as usize + 1] += 1;
+            }
+        }
+        for k in 0..ns {
+            child_ptr[k + 1] += child_ptr[k];
+        }
+        let mut next = child_ptr.clone();
+        let mut children = vec![0u32; child_ptr[ns]];
+        let mut roots = Vec::new();
+        for (s, &p) in parent.iter().enumerate() {
+            if p == u32::MAX {
+                roots.push(s as u32);
+            } else {
+                children[next[p as usize]] = s as u32;
+                next[p as usize] += 1;
+            }
+        }
+
+        // Work: each update product, each diagonal factorisation and solve.
+        let mut node_flops = vec![0.0f64; ns];
+        let mut max_update = 0usize;
+        let mut max_below = 0usize;
+        for t in 0..ns {
+            let g = panel(t);
+            let (wc, below) = (g.cols::<D>() as f64, (D * g.p) as f64);
+            node_flops[t] += wc * wc * wc / 3.0 + below * wc * wc;
+            max_below = max_below.max(D * g.p);
+            for u in &updates[update_ptr[t]..update_ptr[t + 1]] {
+                let gd = panel(u.from as usize);
+                let m = D * (gd.p - u.start as usize);
+                let nn = D * u.count as usize;
+                max_update =
+                    max_update.max(m * D * chunk_blocks::<D>(update_scratch, m, u.count as usize));
+                // The top n×n of the product is triangular.
+                node_flops[t] += ((nn * (nn + 1) + 2 * (m - nn) * nn) * gd.cols::<D>()) as f64;
+            }
+        }
+        let flops = node_flops.iter().sum();
+        let mut subtree_flops = node_flops;
+        for s in 0..ns {
+            if parent[s] != u32::MAX {
+                subtree_flops[parent[s] as usize] += subtree_flops[s];
+            }
+        }
+        Self {
+            begin,
+            row_ptr,
+            rows,
+            val_ptr,
+            supernode_of,
+            update_ptr,
+            updates,
+            child_ptr,
+            children,
+            roots,
+            subtree_flops,
+            flops,
+            max_update,
+            max_below,
+            update_scratch,
+        }
+    }
+
+    fn panel(&self, s: usize) -> Panel {
+        Panel {
+            b0: self.begin[s],
+            w: self.begin[s + 1] - self.begin[s],
+            p: self.row_ptr[s + 1] - self.row_ptr[s],
+        }
+    }
+
+    /// Number of supernodes.
+    pub(super) fn supernodes(&self) -> usize {
+        self.begin.len() - 1
+    }
+
+    /// Values stored for the factor (dense panels, upper triangles of the
+    /// diagonal blocks included).
+    pub(super) fn len_values(&self) -> usize {
+        self.val_ptr[self.supernodes()]
+    }
+
+    /// Floating-point operations of one numeric factorisation.
+    pub(super) fn flops(&self) -> f64 {
+        self.flops
+    }
+
+    /// Supernode of block column `b` and where, in that supernode's panel,
+    /// block `(row, b)` starts (`row ≥ b`, in the pattern): the offset of its
+    /// first entry and the panel's leading dimension.
+    pub(super) fn block_offset(&self, row: usize, b: usize) -> (usize, usize) {
+        let s = self.supernode_of[b] as usize;
+        let g = self.panel(s);
+        let ld = g.ld::<D>();
+        let local_row = if row < g.b0 + g.w {
+            D * (row - g.b0)
+        } else {
+            let r = &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]];
+            // Cannot fail for a block of the pattern.
+            let i = r.binary_search(&(row as u32)).unwrap_or(0);
+            D * (g.w + i)
+        };
+        (self.val_ptr[s] + D * (b - g.b0) * ld + local_row, ld)
+    }
+
+    /// The block columns of supernode `s`, where its panel starts and its
+    /// leading dimension.
+    pub(super) fn supernode_range(&self, s: usize) -> (std::ops::Range<usize>, usize, usize) {
+        (
+            self.begin[s]..self.begin[s + 1],
+            self.val_ptr[s],
+            self.panel(s).ld::<D>(),
+        )
+    }
+
+    /// Factorises in place: `load(s, panel)` must write the values of the
+    /// matrix into supernode `s`'s (zeroed) panel. `threads == 1` runs
+    /// sequentially, anything else in rayon's current pool. Returns the
+    /// first block column (in elimination order) whose pivot is not
+    /// positive.
+    pub(super) fn factorize(
+        &self,
+        values: &mut [f64],
+        load: &(dyn Fn(usize, &mut [f64]) + Sync),
+        threads: usize,
+    ) -> Result<(), usize> {
+        self.factorize_with_grain(values, load, threads, None)
+    }
+
+    /// [`Self::factorize`] with the size of the sequential tasks (default:
+    /// 1/16 of each thread's share of the work, at least 2·10⁵ flops).
+    fn factorize_with_grain(
+        &self,
+        values: &mut [f64],
+        load: &(dyn Fn(usize, &mut [f64]) + Sync),
+        threads: usize,
+        grain: Option<f64>,
+    ) -> Result<(), usize> {
+        assert_eq!(values.len(), self.len_values());
+        let ns = self.supernodes();
+        let failed = AtomicUsize::new(usize::MAX);
+        let shared = Shared(values.as_mut_ptr());
+        if threads == 1 || rayon::current_num_threads() == 1 || ns < 2 {
+            for s in 0..ns {
+                // SAFETY: one thread, each supernode once, in elimination order.
+                unsafe { self.factor_node(s, Par::Seq, &shared, load, &failed) };
+                if failed.load(Ordering::Relaxed) != usize::MAX {
+                    break;
+                }
+            }
+        } else {
+            // Subtrees below this much work run sequentially in one task.
+            let grain = grain.unwrap_or_else(|| {
+                (self.flops / (16 * rayon::current_num_threads()) as f64).max(2e5)
+            });
+            self.roots
+                .par_iter()
+                .for_each(|&r| self.factor_subtree(r as usize, grain, &shared, load, &failed));
+        }
+        match failed.into_inner() {
+            usize::MAX => Ok(()),
+            b => Err(b),
+        }
+    }
+
+    /// Factorises the subtree of `s`: subtrees of at most `grain` flops in
+    /// one task, in post-order; above that, down the heaviest child at each
+    /// node (a loop, so that a deep tree does not overflow the stack) while
+    /// the other children's subtrees run as parallel tasks, then the path
+    /// from the bottom up.
+    fn factor_subtree(
+        &self,
+        s: usize,
+        grain: f64,
+        shared: &Shared,
+        load: &(dyn Fn(usize, &mut [f64]) + Sync),
+        failed: &AtomicUsize,
+    ) {
+        let mut path = Vec::new();
+        rayon::scope(|scope| {
+            let mut t = s;
+            loop {
+                if self.subtree_flops[t] <= grain {
+                    self.factor_postorder(t, shared, load, failed);
+                    break;
+                }
+                path.push(t);
+                let kids = &self.children[self.child_ptr[t]..self.child_ptr[t + 1]];
+                let Some(&heavy) = kids.iter().max_by(|&&a, &&b| {
+                    self.subtree_flops[a as usize].total_cmp(&self.subtree_flops[b as usize])
+                }) else {
+                    break;
+                };
+                for &c in kids {
+                    if c != heavy {
+                        scope.spawn(move |_| {
+                            self.factor_subtree(c as usize, grain, shared, load, failed)
+                        });
+                    }
+                }
+                t = heavy as usize;
+            }
+        });
+        let par = Par::rayon(rayon::current_num_threads());
+        for &t in path.iter().rev() {
+            // SAFETY: all of `t`'s descendants are done (the scope has
+            // ended); nobody else writes `t`.
+            unsafe { self.factor_node(t, par, shared, load, failed) };
+        }
+    }
+
+    /// Factorises the subtree of `t` in this thread, in post-order.
+    fn factor_postorder(
+        &self,
+        t: usize,
+        shared: &Shared,
+        load: &(dyn Fn(usize, &mut [f64]) + Sync),
+        failed: &AtomicUsize,
+    ) {
+        let mut stack = vec![(t, false)];
+        while let Some((u, expanded)) = stack.pop() {
+            if expanded {
+                // SAFETY: `u`'s descendants are done; nobody else writes `u`.
+                unsafe { self.factor_node(u, Par::Seq, shared, load, failed) };
+            } else {
+                stack.push((u, true));
+                for &c in &self.children[self.child_ptr[u]..self.child_ptr[u + 1]] {
+                    stack.push((c as usize, false));
+                }
+            }
+        }
+    }
+
+    /// Loads, updates and factorises supernode `s`.
+    ///
+    /// # Safety
+    /// Every descendant of `s` is factorised, and no other thread reads or
+    /// writes `s`'s panel meanwhile.
+    unsafe fn factor_node(
+        &self,
+        s: usize,
+        par: Par,
+        shared: &Shared,
+        load: &(dyn Fn(usize, &mut [f64]) + Sync),
+        failed: &AtomicUsize,
+    ) {
+        let g = self.panel(s);
+        let (wc, ld) = (g.cols::<D>(), g.ld::<D>());
+        let len = self.val_ptr[s + 1] - self.val_ptr[s];
+        // SAFETY: the panels are disjoint; the caller owns this one.
+        let panel = unsafe { std::slice::from_raw_parts_mut(shared.0.add(self.val_ptr[s]), len) };
+        panel.fill(0.0);
+        load(s, panel);
+        let pattern = &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]];
+        WORKSPACE.with_borrow_mut(|ws| {
+            ws.reserve(self.supernode_of.len(), self.max_update);
+            for (i, &r) in pattern.iter().enumerate() {
+                ws.local[r as usize] = i as u32;
+            }
+            for u in &self.updates[self.update_ptr[s]..self.update_ptr[s + 1]] {
+                let d = u.from as usize;
+                let gd = self.panel(d);
+                let (wd, ldd) = (gd.cols::<D>(), gd.ld::<D>());
+                let (start, count) = (u.start as usize, u.count as usize);
+                let m = D * (gd.p - start);
+                let d_rows = &self.rows[self.row_ptr[d] + start..self.row_ptr[d + 1]];
+                // SAFETY: `d` is a finished descendant; its panel is only read.
+                let a = unsafe {
+                    MatRef::from_raw_parts(
+                        shared.0.add(self.val_ptr[d] + D * (gd.w + start)) as *const f64,
+                        m,
+                        wd,
+                        1,
+                        ldd as isize,
+                    )
+                };
+                // Where each block row of the product goes in the panel.
+                let local = &mut ws.rows[..gd.p - start];
+                for (l, &r) in local.iter_mut().zip(d_rows) {
+                    let r = r as usize;
+                    *l = if r < g.b0 + g.w {
+                        D * (r - g.b0)
+                    } else {
+                        D * (g.w + ws.local[r] as usize)
+                    };
+                }
+                // The lower part of the m×n product, a few block columns at
+                // a time so that the scratch stays small: columns j0..j1 of
+                // it are rows j0.. of `a` times rows j0..j1 of `a`
+                // transposed, their top block symmetric (its lower half
+                // only: the scatter skips what lies above the diagonal).
+                let chunk = chunk_blocks::<D>(self.update_scratch, m, count);
+                for j0 in (0..count).step_by(chunk) {
+                    let j1 = (j0 + chunk).min(count);
+                    let (r0, nc) = (D * j0, D * (j1 - j0));
+                    let mc = m - r0;
+                    let temp = &mut ws.temp[..mc * nc];
+                    let b = a.subrows(r0, nc);
+                    let par = if (mc * nc * wd) as f64 > PARALLEL_PRODUCT {
+                        par
+                    } else {
+                        Par::Seq
+                    };
+                    let (top, bottom) =
+                        MatMut::from_column_major_slice_mut(temp, mc, nc).split_at_row_mut(nc);
+                    triangular::matmul(
+                        top,
+                        BlockStructure::TriangularLower,
+                        Accum::Replace,
+                        b,
+                        BlockStructure::Rectangular,
+                        b.transpose(),
+                        BlockStructure::Rectangular,
+                        1.0,
+                        par,
+                    );
+                    matmul(
+                        bottom,
+                        Accum::Replace,
+                        a.subrows(r0 + nc, mc - nc),
+                        b.transpose(),
+                        1.0,
+                        par,
+                    );
+                    // Scatter the lower part, block by block.
+                    for jb in j0..j1 {
+                        let col = local[jb];
+                        for (ib, &row) in local.iter().enumerate().skip(jb) {
+                            for a in 0..D {
+                                let dst = &mut panel[(col + a) * ld + row..][..D];
+                                let src = &temp[(D * (jb - j0) + a) * mc + D * (ib - j0)..][..D];
+                                for (x, y) in dst.iter_mut().zip(src) {
+                                    *x -= y;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        });
+        let result = if wc <= SMALL_WIDTH {
+            column_cholesky(panel, wc, ld)
+        } else {
+            let par = if (wc * wc * ld) as f64 > PARALLEL_PRODUCT {
+                par
+            } else {
+                Par::Seq
+            };
+            blocked_cholesky(panel, wc, ld, par)
+        };
+        if let Err(col) = result {
+            failed.fetch_min(g.b0 + col / D, Ordering::Relaxed);
+        }
+    }
+
+    /// Solves `L·Lᵀ·x = b` in place (`x` in elimination order); `work` is
+    /// scratch, grown on first use.
+    pub(super) fn solve(&self, values: &[f64], x: &mut [f64], work: &mut Vec<f64>) {
+        if work.len() < self.max_below {
+            work.resize(self.max_below, 0.0);
+        }
+        let gathered = work;
+        let ns = self.supernodes();
+        // L·y = b.
+        for s in 0..ns {
+            let g = self.panel(s);
+            let (wc, ld) = (g.cols::<D>(), g.ld::<D>());
+            let panel = &values[self.val_ptr[s]..self.val_ptr[s + 1]];
+            let xs = &mut x[D * g.b0..D * g.b0 + wc];
+            for j in 0..wc {
+                let col = &panel[j * ld..j * ld + wc];
+                xs[j] /= col[j];
+                let xj = xs[j];
+                for i in j + 1..wc {
+                    xs[i] -= col[i] * xj;
+                }
+            }
+            let below = D * g.p;
+            if below == 0 {
+                continue;
+            }
+            let y = &mut gathered[..below];
+            y.fill(0.0);
+            for j in 0..wc {
+                let xj = xs[j];
+                let col = &panel[j * ld + wc..(j + 1) * ld];
+                for (yi, &l) in y.iter_mut().zip(col) {
+                    *yi += l * xj;
+                }
+            }
+            for (i, &r) in self.rows[self.row_ptr[s]..self.row_ptr[s + 1]]
+                .iter()
+                .enumerate()
+            {
+                let dst = &mut x[D * r as usize..][..D];
+                for a in 0..D {
+                    dst[a] -= y[D * i + a];
+                }
+            }
+        }
+        // Lᵀ·x = y.
+        for s in (0..ns).rev() {
+            let g = self.panel(s);
+            let (wc, ld) = (g.cols::<D>(), g.ld::<D>());
+            let panel = &values[self.val_ptr[s]..self.val_ptr[s + 1]];
+            let below = D * g.p;
+            let y = &mut gathered[..below];
+            for (i, &r) in self.rows[self.row_ptr[s]..self.row_ptr[s + 1]]
+                .iter()
+                .enumerate()
+            {
+                y[D * i..D * i + D].copy_from_slice(&x[D * r as usize..][..D]);
+            }
+            let xs = &mut x[D * g.b0..D * g.b0 + wc];
+            for j in 0..wc {
+                let col = &panel[j * ld + wc..(j + 1) * ld];
+                xs[j] -= dot(col, y);
+            }
+            for j in (0..wc).rev() {
+                let col = &panel[j * ld..j * ld + wc];
+                let mut v = xs[j];
+                for i in j + 1..wc {
+                    v -= col[i] * xs[i];
+                }
+                xs[j] = v / col[j];
+            }
+        }
+    }
+}
+
+/// `Σ aᵢbᵢ` with eight partial sums (so that it vectorises).
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for k in 0..8 {
+            acc[k] += x[k] * y[k];
+        }
+    }
+    acc.iter().sum::<f64>() + tail
+}
+
+/// The factor's values, shared by the threads of one factorisation: each
+/// supernode's panel is written by exactly one task.
+struct Shared(*mut f64);
+// SAFETY: see `factor_node`: disjoint writes, reads of finished panels only.
+unsafe impl Sync for Shared {}
+unsafe impl Send for Shared {}
+
+/// Per-thread scratch of the numeric factorisation.
+#[derive(Default)]
+struct Workspace {
+    /// Position of each block row in the current supernode's pattern.
+    local: Vec<u32>,
+    /// One update product.
+    temp: Vec<f64>,
+    /// Where each block row of the update goes in the panel.
+    rows: Vec<usize>,
+}
+
+impl Workspace {
+    fn reserve(&mut self, blocks: usize, update: usize) {
+        if self.local.len() < blocks {
+            self.local.resize(blocks, 0);
+            self.rows.resize(blocks, 0);
+        }
+        if self.temp.len() < update {
+            self.temp.resize(update, 0.0);
+        }
+    }
+}
+
+thread_local! {
+    static WORKSPACE: RefCell<Workspace> = RefCell::new(Workspace::default());
+}
+
+/// Cholesky of the `w×w` top of a column-major panel with leading dimension
+/// `ld`, and `L₂₁ = A₂₁·L₁₁⁻ᵀ` for the rows below, one column at a time
+/// (left-looking; each column update is an axpy over contiguous rows).
+/// Returns the column of a non-positive pivot.
+fn column_cholesky(panel: &mut [f64], w: usize, ld: usize) -> Result<(), usize> {
+    for j in 0..w {
+        let (done, rest) = panel.split_at_mut(j * ld);
+        let col = &mut rest[j..ld];
+        for k in 0..j {
+            let prev = &done[k * ld + j..k * ld + ld];
+            let f = prev[0];
+            if f != 0.0 {
+                for (c, &p) in col.iter_mut().zip(prev) {
+                    *c -= f * p;
+                }
+            }
+        }
+        let d = col[0];
+        // NaN is not positive either.
+        if d.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return Err(j);
+        }
+        let inv = 1.0 / d.sqrt();
+        for c in col.iter_mut() {
+            *c *= inv;
+        }
+    }
+    Ok(())
+}
+
+/// The same with faer's blocked dense kernels, for wide diagonal blocks.
+fn blocked_cholesky(panel: &mut [f64], w: usize, ld: usize, par: Par) -> Result<(), usize> {
+    let rows = ld;
+    let mat = MatMut::from_column_major_slice_with_stride_mut(panel, rows, w, ld);
+    let (mut top, bottom) = mat.split_at_row_mut(w);
+    let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(w, par, Default::default()));
+    match cholesky_in_place(
+        top.rb_mut(),
+        LltRegularization::default(),
+        par,
+        MemStack::new(&mut mem),
+        Default::default(),
+    ) {
+        Ok(_) => {}
+        Err(LltError::NonPositivePivot { index }) => return Err(index),
+    }
+    solve_lower_triangular_in_place(top.rb(), bottom.transpose_mut(), par);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DMatrix;
+    use rand::{Rng, SeedableRng, rngs::StdRng};
+
+    /// A random SPD block matrix with a random sparse block pattern, dense.
+    fn random_problem(seed: u64, n: usize) -> (Vec<Vec<usize>>, DMatrix<f64>) {
+        const D: usize = 2;
+        let mut rng = StdRng::seed_from_u64(seed);
+        let mut later = vec![Vec::new(); n];
+        // A chain broken in two places (a forest), plus random blocks.
+        let breaks = [n / 3, n / 3 + 1 + (seed as usize % 5)];
+        for p in 0..n {
+            for q in p + 1..n {
+                if (q == p + 1 && !breaks.contains(&p)) || rng.random_bool(0.1) {
+                    later[p].push(q);
+                }
+            }
+        }
+        let mut a = DMatrix::<f64>::zeros(D * n, D * n);
+        for p in 0..n {
+            for &q in &later[p] {
+                for x in 0..D {
+                    for y in 0..D {
+                        let v = rng.random_range(-1.0..1.0);
+                        a[(D * q + x, D * p + y)] = v;
+                        a[(D * p + y, D * q + x)] = v;
+                    }
+                }
+            }
+        }
+        // Diagonally dominant, hence positive definite.
+        for i in 0..D * n {
+            let s: f64 = (0..D * n).map(|j| a[(i, j)].abs()).sum();
+            a[(i, i)] = s + 1.0;
+        }
+        (later, a)
+    }
+
+    fn factor_and_solve(
+        later: &[Vec<usize>],
+        a: &DMatrix<f64>,
+        threads: usize,
+        grain: Option<f64>,
+        scratch: usize,
+    ) -> Vec<f64> {
+        const D: usize = 2;
+        let sym = Symbolic::<D>::with_update_scratch(later, scratch).unwrap();
+        let mut values = vec![0.0; sym.len_values()];
+        let load = |s: usize, panel: &mut [f64]| {
+            let (cols, start, _) = sym.supernode_range(s);
+            let _ = panel.len();
+            for b in cols {
+                for row in std::iter::once(b).chain(later[b].iter().copied()) {
+                    let (off, ld) = sym.block_offset(row, b);
+                    for y in 0..D {
+                        for x in 0..D {
+                            panel[off - start + y * ld + x] = a[(D * row + x, D * b + y)];
+                        }
+                    }
+                }
+            }
+        };
+        sym.factorize_with_grain(&mut values, &load, threads, grain)
+            .unwrap();
+        let mut x: Vec<f64> = (0..D * later.len()).map(|i| i as f64 - 3.0).collect();
+        sym.solve(&values, &mut x, &mut Vec::new());
+        x
+    }
+
+    #[test]
+    fn solves_like_a_dense_cholesky_with_any_number_of_threads() {
+        for seed in 0..7 {
+            // The last one has wide top supernodes (parallel dense kernels).
+            let n = if seed == 6 {
+                400
+            } else {
+                40 + 20 * seed as usize
+            };
+            let (later, a) = random_problem(seed, n);
+            let b =
+                nalgebra::DVector::from_iterator(a.nrows(), (0..a.nrows()).map(|i| i as f64 - 3.0));
+            let expected = a.clone().cholesky().unwrap().solve(&b);
+            let one = factor_and_solve(&later, &a, 1, None, UPDATE_SCRATCH);
+            // Every supernode a task of its own.
+            let two = factor_and_solve(&later, &a, 2, Some(0.0), UPDATE_SCRATCH);
+            let err = (nalgebra::DVector::from_vec(one.clone()) - &expected).norm();
+            assert!(err < 1e-10 * expected.norm(), "seed {seed}: {err}");
+            assert_eq!(one, two, "seed {seed}: threads change the bits");
+            // Update products formed one block column at a time.
+            let narrow = factor_and_solve(&later, &a, 1, None, 1);
+            let err = (nalgebra::DVector::from_vec(narrow) - &expected).norm();
+            assert!(
+                err < 1e-10 * expected.norm(),
+                "seed {seed}, narrow scratch: {err}"
+            );
+        }
+    }
+
+    #[test]
+    fn empty_and_single_block_systems() {
+        let empty = Symbolic::<3>::new(&[]).unwrap();
+        assert_eq!((empty.supernodes(), empty.len_values()), (0, 0));
+        empty.factorize(&mut [], &|_, _| {}, 1).unwrap();
+        let one = Symbolic::<1>::new(&[Vec::new()]).unwrap();
+        let mut values = vec![0.0; one.len_values()];
+        one.factorize(&mut values, &|_, panel: &mut [f64]| panel[0] = 4.0, 1)
+            .unwrap();
+        let mut x = vec![8.0];
+        one.solve(&values, &mut x, &mut Vec::new());
+        assert_eq!(x, vec![2.0]);
+    }
+
+    #[test]
+    fn column_and_blocked_kernels_agree() {
+        let mut rng = StdRng::seed_from_u64(9);
+        let (w, ld) = (60, 75);
+        let m = DMatrix::<f64>::from_fn(ld, w, |_, _| rng.random_range(-1.0..1.0));
+        let mut a = &m * m.transpose();
+        for i in 0..ld {
+            a[(i, i)] += ld as f64;
+        }
+        let mut p1: Vec<f64> = a.columns(0, w).iter().copied().collect();
+        let mut p2 = p1.clone();
+        column_cholesky(&mut p1, w, ld).unwrap();
+        blocked_cholesky(&mut p2, w, ld, Par::Seq).unwrap();
+        for j in 0..w {
+            for i in j..ld {
+                assert!((p1[j * ld + i] - p2[j * ld + i]).abs() < 1e-10);
+            }
+        }
+        // Neither kernel reads above the diagonal.
+        let mut q1 = p1.clone();
+        let mut q2 = p2.clone();
+        for (q, src) in [(&mut q1, &a), (&mut q2, &a)] {
+            for j in 0..w {
+                for i in 0..ld {
+                    q[j * ld + i] = if i < j { f64::NAN } else { src[(i, j)] };
+                }
+            }
+        }
+        column_cholesky(&mut q1, w, ld).unwrap();
+        blocked_cholesky(&mut q2, w, ld, Par::Seq).unwrap();
+        for j in 0..w {
+            for i in j..ld {
+                assert_eq!(q1[j * ld + i], p1[j * ld + i]);
+                assert!((q2[j * ld + i] - p2[j * ld + i]).abs() < 1e-12);
+            }
+        }
+        // A non-positive pivot names its column.
+        let mut bad = vec![1.0, 2.0, 2.0, 1.0];
+        assert_eq!(column_cholesky(&mut bad, 2, 2), Err(1));
+    }
+}
