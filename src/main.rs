@@ -58,6 +58,11 @@ struct CorruptArgs {
     /// σ of the natural log of the counts (both populations).
     #[arg(long, default_value_t = 0.5)]
     count_sigma: f64,
+    /// The last N non-sequential edges of the input are known to be wrong (the
+    /// max-mixture outlier files: the last 1000 mixture edges): they are
+    /// labelled wrong and get wrong-loop counts.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    known_wrong_last: usize,
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -338,6 +343,7 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
             PolicyArg::Grouped => OutlierPolicy::Grouped,
         },
         group_size: args.group_size,
+        known_wrong_last: args.known_wrong_last,
         inliers: Some(InlierModel {
             true_median: args.true_median,
             true_sigma: args.count_sigma,

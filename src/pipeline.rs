@@ -223,7 +223,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     }
 
     // An unconstrained vertex makes every later step meaningless: say so first.
-    let mut optimizer =
+    let optimizer =
         Optimizer::new(graph, Some(&weights), config.solver.clone()).map_err(solve_error)?;
 
     // The robust method decides how much the initial guess may trust the
@@ -279,50 +279,100 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         weights[candidates.edges[i]] = reweighter.weights()[j];
     }
     // Between reweighting rounds a few iterations are enough (generalised
-    // EM: each M-step only has to improve); once the weights settle, the
-    // last solve runs to full convergence.
+    // EM: each M-step only has to improve); EM's hard decisions and the
+    // last solve of the other methods run to full convergence.
     let full = config.solver.clone();
     let partial = SolverOptions {
         max_iterations: full.max_iterations.min(3),
         relative_tolerance: 1e-6,
         ..full.clone()
     };
+    let candidate_r2 = |graph: &PoseGraph<P, D>| -> Vec<f64> {
+        kept.iter()
+            .map(|&i| graph.edge_chi2(&graph.edges[candidates.edges[i]]))
+            .collect()
+    };
+    if method == RobustMethod::Em {
+        // EM's first E-step is at the initial guess.
+        reweighter.update(&candidate_r2(graph));
+        for (j, &i) in kept.iter().enumerate() {
+            weights[candidates.edges[i]] = reweighter.weights()[j];
+        }
+    }
+    let mut solver = ActiveSolver::new(optimizer, graph, &weights);
+    // EM's decisions solve to a moderate tolerance; the decided map is then
+    // polished to the caller's.
+    let deciding = SolverOptions {
+        relative_tolerance: full.relative_tolerance.max(1e-6),
+        ..full.clone()
+    };
+    let mut noise_scale = None;
     let mut total = None::<crate::solve::Summary>;
     loop {
         let robust = reweighter.is_active();
-        *optimizer.options_mut() = if robust {
-            partial.clone()
-        } else {
+        let options = if !robust {
             full.clone()
+        } else if reweighter.full_solve() {
+            deciding.clone()
+        } else {
+            partial.clone()
         };
-        let summary = optimizer
-            .run(graph, Some(&weights), &mut |r: &IterationRecord| {
-                observer(r)
-            })
+        let summary = solver
+            .run(graph, &weights, options, observer)
             .map_err(solve_error)?;
         total = Some(merge_summaries(total, summary));
         if !robust {
             break;
         }
-        let r2: Vec<f64> = kept
-            .iter()
-            .map(|&i| graph.edge_chi2(&graph.edges[candidates.edges[i]]))
-            .collect();
+        let mut r2 = candidate_r2(graph);
+        if reweighter.full_solve() {
+            let s2 = decision_scale(graph, &weights);
+            noise_scale = Some(s2);
+            r2.iter_mut().for_each(|r| *r /= s2);
+        }
         let again = reweighter.update(&r2);
+        let changed = kept
+            .iter()
+            .enumerate()
+            .any(|(j, &i)| weights[candidates.edges[i]] != reweighter.weights()[j]);
         for (j, &i) in kept.iter().enumerate() {
             weights[candidates.edges[i]] = reweighter.weights()[j];
         }
-        if !again {
-            // The weights settled: one last solve to full convergence.
-            *optimizer.options_mut() = full.clone();
-            let summary = optimizer
-                .run(graph, Some(&weights), &mut |r: &IterationRecord| {
-                    observer(r)
-                })
+        if again && reweighter.take_restart() {
+            // EM solves each decided set from the initial guess made with the
+            // accepted loops (for the chordal guess, the relaxation of the
+            // trusted edges and the accepted loops), not from a map that
+            // wrong loops may have pulled into another basin.
+            initialize(graph, missing, config.initialization, Some(&weights))
                 .map_err(solve_error)?;
-            total = Some(merge_summaries(total, summary));
+        }
+        if !again {
+            if method == RobustMethod::Em {
+                if deciding.relative_tolerance > full.relative_tolerance {
+                    let summary = solver
+                        .run(graph, &weights, full.clone(), observer)
+                        .map_err(solve_error)?;
+                    total = Some(merge_summaries(total, summary));
+                    let s2 = decision_scale(graph, &weights);
+                    noise_scale = Some(s2);
+                    let r2: Vec<f64> = candidate_r2(graph).iter().map(|r| r / s2).collect();
+                    reweighter.refresh(&r2);
+                }
+            } else if changed {
+                // The weights settled: one last solve to full convergence.
+                let summary = solver
+                    .run(graph, &weights, full.clone(), observer)
+                    .map_err(solve_error)?;
+                total = Some(merge_summaries(total, summary));
+            }
             break;
         }
+    }
+    let optimizer = solver.optimizer;
+    // EM reports its posteriors at the final map (≥ ½ exactly for the loops
+    // the map was solved with); the others the weights of the last solve.
+    for (j, &i) in kept.iter().enumerate() {
+        weights[candidates.edges[i]] = reweighter.final_weights()[j];
     }
     if graph.poses.iter().any(|p| !p.is_finite()) {
         return Err(PipelineError::NonFiniteResult {
@@ -349,6 +399,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             .iter()
             .filter(|s| **s == CandidateState::Off)
             .count(),
+        variance_factor: noise_scale,
     };
 
     chi2_test(graph, &weights, config, report);
@@ -431,6 +482,116 @@ fn plot<P: G2oPose<D>, const D: usize>(
     Ok(())
 }
 
+/// The optimiser over the edges of non-zero weight only: switched-off
+/// candidates leave the sparsity pattern (wrong loops between distant poses
+/// fill the Cholesky factor), and the pattern, ordering and symbolic
+/// factorisation are rebuilt whenever the set of such edges changes.
+struct ActiveSolver<P, const D: usize> {
+    /// The optimiser of the current active set.
+    optimizer: Optimizer<P, D>,
+    /// The graph of the active edges (its poses are a working copy).
+    sub: Option<PoseGraph<P, D>>,
+    /// Edge of the full graph of each edge of `sub`.
+    active: Vec<usize>,
+    /// Weights of the edges of `sub`.
+    sub_weights: Vec<f64>,
+}
+
+impl<P: G2oPose<D>, const D: usize> ActiveSolver<P, D> {
+    /// Starts from an optimiser of the whole graph.
+    fn new(optimizer: Optimizer<P, D>, graph: &PoseGraph<P, D>, weights: &[f64]) -> Self {
+        let mut solver = Self {
+            optimizer,
+            sub: None,
+            active: (0..graph.edges.len()).collect(),
+            sub_weights: Vec::new(),
+        };
+        solver.rebuild(graph, weights);
+        solver
+    }
+
+    /// Rebuilds the optimiser when the edges of non-zero weight changed. If
+    /// the active edges leave a vertex unconstrained, keeps the whole graph
+    /// (the damping of LM copes, as before the robust rounds).
+    fn rebuild(&mut self, graph: &PoseGraph<P, D>, weights: &[f64]) {
+        let active: Vec<usize> = (0..graph.edges.len())
+            .filter(|&k| weights[k] != 0.0)
+            .collect();
+        if active == self.active {
+            return;
+        }
+        let mut sub = PoseGraph::clone(graph);
+        sub.edges = active.iter().map(|&k| graph.edges[k].clone()).collect();
+        let options = self.optimizer.options_mut().clone();
+        if let Ok(optimizer) = Optimizer::new(&sub, None, options) {
+            self.optimizer = optimizer;
+            self.sub = Some(sub);
+            self.active = active;
+        } else if self.sub.is_some() {
+            let options = self.optimizer.options_mut().clone();
+            if let Ok(optimizer) = Optimizer::new(graph, Some(weights), options) {
+                self.optimizer = optimizer;
+                self.sub = None;
+                self.active = (0..graph.edges.len()).collect();
+            }
+        }
+    }
+
+    /// Minimises the weighted objective from the graph's poses, leaving the
+    /// result in the graph.
+    fn run(
+        &mut self,
+        graph: &mut PoseGraph<P, D>,
+        weights: &[f64],
+        options: SolverOptions,
+        observer: &mut dyn FnMut(&IterationRecord),
+    ) -> Result<crate::solve::Summary, SolveError> {
+        self.rebuild(graph, weights);
+        *self.optimizer.options_mut() = options;
+        let mut observe = |r: &IterationRecord| observer(r);
+        match &mut self.sub {
+            None => self.optimizer.run(graph, Some(weights), &mut observe),
+            Some(sub) => {
+                sub.poses.clone_from(&graph.poses);
+                self.sub_weights.clear();
+                self.sub_weights
+                    .extend(self.active.iter().map(|&k| weights[k]));
+                let summary = self
+                    .optimizer
+                    .run(sub, Some(&self.sub_weights), &mut observe)?;
+                graph.poses.clone_from(&sub.poses);
+                Ok(summary)
+            }
+        }
+    }
+}
+
+/// The noise scale of EM's decisions: the variance factor of the decided
+/// map, at most 1 (never more lenient than the information matrices say).
+fn decision_scale<P: G2oPose<D>, const D: usize>(graph: &PoseGraph<P, D>, weights: &[f64]) -> f64 {
+    variance_factor(graph, weights).min(1.0)
+}
+
+/// The a-posteriori variance factor `s² = Σ eₖᵀΩₖeₖ / (D·edges − D·free
+/// poses)` of a least-squares solution over the edges of non-zero weight at
+/// the graph's poses; 1 when there is not one edge's worth of redundancy.
+fn variance_factor<P: G2oPose<D>, const D: usize>(graph: &PoseGraph<P, D>, weights: &[f64]) -> f64 {
+    let (d2, n) = graph
+        .edges
+        .iter()
+        .zip(weights)
+        .filter(|(_, w)| **w > 0.0)
+        .fold((0.0, 0usize), |(d2, n), (e, _)| {
+            (d2 + graph.edge_chi2(e), n + 1)
+        });
+    let free = graph.num_vertices() - graph.gauge().len();
+    if n > free && d2 > 0.0 {
+        d2 / (D * (n - free)) as f64
+    } else {
+        1.0
+    }
+}
+
 /// The summary of several optimiser runs (robust rounds) as one.
 fn merge_summaries(
     total: Option<crate::solve::Summary>,
@@ -480,11 +641,10 @@ fn gate_candidates<P: G2oPose<D>, const D: usize>(
     let priors = counts
         .iter()
         .map(|c| match (config.gate, &decision.fit, c) {
-            (GateMode::Soft, Some(fit), Some(n)) if !decision.degenerate => {
-                fit.mixture.as_ref().map_or(0.5, |m| {
-                    m.posterior_true_loop(*n, max).clamp(1e-6, 1.0 - 1e-6)
-                })
-            }
+            (GateMode::Soft, Some(fit), Some(n)) if !decision.degenerate => fit
+                .mixture
+                .as_ref()
+                .map_or(0.5, |m| m.posterior_true_loop(*n, max).clamp(1e-6, 0.5)),
             _ => 0.5,
         })
         .collect();

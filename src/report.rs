@@ -155,6 +155,11 @@ pub struct RobustReport {
     pub removed_loops: usize,
     /// EM: candidates switched off at the end (may have come back later).
     pub switched_off_loops: usize,
+    /// EM: the a-posteriori variance factor `s²` of the decided map (≤ 1)
+    /// by which the candidates' residuals were divided for the decisions,
+    /// so that under-confident (square-root) information does not let wrong
+    /// loops through; `null` for the other methods.
+    pub variance_factor: Option<f64>,
 }
 
 /// One loop candidate's fate.
