@@ -64,6 +64,7 @@ import argparse
 import json
 import math
 import os
+import shlex
 import subprocess
 import sys
 import time
@@ -233,7 +234,7 @@ def peer_weights(kind, r2, dim, delta):
 # ----------------------------------------------------------------------------- tools
 
 def run_pgo(args, path, flags, out_g2o):
-    stdout, err, wall = run([args.pgo, "optimize", path, "--json", "-q", "-o", out_g2o] + flags + args.pgo_flags,
+    stdout, err, wall = run([args.pgo, "optimize", path, "--json", "-q", "-o", out_g2o] + flags + [t for f in args.pgo_flags for t in shlex.split(f)],
                             args.timeout)
     if err:
         return {"error": err, "wall_s": wall}

@@ -1001,6 +1001,17 @@ pub enum DegeneratePolicy {
     Threshold,
 }
 
+impl DegeneratePolicy {
+    /// The name on the command line: `keep-all`, `drop-all` or `threshold`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::KeepAll => "keep-all",
+            Self::DropAll => "drop-all",
+            Self::Threshold => "threshold",
+        }
+    }
+}
+
 /// The gate's verdict on a list of loop-closure candidates.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct GateDecision {
@@ -1143,6 +1154,7 @@ mod tests {
     use rand::SeedableRng;
     use rand::rngs::StdRng;
     use rand_distr::{Distribution, LogNormal, Normal, Uniform};
+    use rayon::prelude::*;
     use statrs::distribution::{Continuous, LogNormal as StatrsLogNormal, Normal as StatrsNormal};
 
     /// `n` integer counts whose logarithm is normal with this median and σ.
@@ -1279,6 +1291,128 @@ mod tests {
                 "seed {seed}: {t:?} vs {true_crossing}"
             );
             assert!((t.count - t.normalized * fit.max_count as f64).abs() < 1e-9 * t.count);
+        }
+    }
+
+    /// Counts from a known two-component log-normal mixture: each count is
+    /// a true loop with probability `w_loop`; `ln count` is normal with the
+    /// component's median and σ; rounded to an integer.
+    fn mixture_counts(rng: &mut StdRng, n: usize, truth: &Params) -> Vec<u64> {
+        let unit = Uniform::new(0.0, 1.0).unwrap();
+        let comps = [0, 1].map(|k| LogNormal::new(truth.mu[k], truth.sigma[k]).unwrap());
+        (0..n)
+            .map(|_| {
+                let k = usize::from(unit.sample(rng) < truth.weight[1]);
+                (comps[k].sample(rng).round() as u64).max(1)
+            })
+            .collect()
+    }
+
+    /// The fit in `ln count` (undoing the normalisation by the maximum), so
+    /// that it compares with a truth that does not depend on the sample.
+    fn fit_in_log_counts(fit: &ThresholdFit) -> Option<(Params, f64)> {
+        let (m, t) = (fit.mixture.as_ref()?, fit.threshold.as_ref()?);
+        let ln_max = (fit.max_count as f64).ln();
+        let p = Params {
+            mu: m.mu.map(|mu| mu + ln_max),
+            sigma: m.sigma,
+            weight: m.weight,
+        };
+        Some((p, t.count.ln()))
+    }
+
+    #[test]
+    fn fit_and_threshold_converge_to_the_truth_as_the_sample_grows() {
+        // Wrong candidates: median 30 inliers, σ 0.5 in ln; true loops
+        // e^Δ times more, σ 0.35. Δ = 1.5, 2.25, 3 give Ashman's D = 3.5,
+        // 5.2, 7.0; the loop share runs from 5 % to 95 %; N from 50 to 10⁵.
+        let sizes = [50usize, 500, 5_000, 100_000];
+        let mut cases = Vec::new();
+        for delta in [1.5, 2.25, 3.0] {
+            for w_loop in [0.05, 0.2, 0.5, 0.8, 0.95] {
+                cases.push((delta, w_loop));
+            }
+        }
+        let results: Vec<_> = cases
+            .par_iter()
+            .enumerate()
+            .map(|(case, &(delta, w_loop))| {
+                let truth = Params {
+                    mu: [30f64.ln(), 30f64.ln() + delta],
+                    sigma: [0.5, 0.35],
+                    weight: [1.0 - w_loop, w_loop],
+                };
+                // The Bayes-optimal threshold of the true mixture (ln count).
+                let bayes = brute_force_crossing(&truth).unwrap();
+                let mut rng = StdRng::seed_from_u64(1000 + case as u64);
+                let errors: Vec<Option<[f64; 4]>> = sizes
+                    .iter()
+                    .map(|&n| {
+                        let counts = mixture_counts(&mut rng, n, &truth);
+                        let fit = default_fit(&counts);
+                        assert_all_finite(&fit);
+                        if fit.is_degenerate() {
+                            return None;
+                        }
+                        let (p, ln_t) = fit_in_log_counts(&fit).unwrap();
+                        let e = |f: fn(&Params) -> [f64; 2]| {
+                            let (a, b) = (f(&p), f(&truth));
+                            (a[0] - b[0]).abs().max((a[1] - b[1]).abs())
+                        };
+                        Some([
+                            e(|q| q.mu),
+                            e(|q| q.sigma),
+                            e(|q| q.weight),
+                            (ln_t - bayes).abs(),
+                        ])
+                    })
+                    .collect();
+                (delta, w_loop, errors)
+            })
+            .collect();
+        for (delta, w_loop, errors) in results {
+            let label = format!("Δ = {delta}, loop share {w_loop}");
+            // With ≥ 5000 counts the smaller component has ≥ 250 members:
+            // never degenerate, and every error is within a statistical bound.
+            for (&n, e) in sizes.iter().zip(&errors) {
+                let Some([mu, sigma, weight, _]) = *e else {
+                    assert!(n < 5_000, "{label}, N = {n}: degenerate");
+                    continue;
+                };
+                // Standard error of the smaller component's mean ~ σ/√(nπ);
+                // allow 6 of them plus the integer rounding of the counts.
+                let smaller = n as f64 * w_loop.min(1.0 - w_loop);
+                let bound = 6.0 * 0.5 / smaller.sqrt() + 0.01;
+                if n >= 500 {
+                    assert!(mu < bound, "{label}, N = {n}: μ error {mu} ≥ {bound}");
+                    assert!(sigma < bound, "{label}, N = {n}: σ error {sigma} ≥ {bound}");
+                    assert!(
+                        weight < 6.0 / (n as f64).sqrt(),
+                        "{label}, N = {n}: π error {weight}"
+                    );
+                }
+            }
+            // At N = 10⁵ the fit is the truth and T_GV the Bayes-optimal
+            // crossing, to within the tolerances the tests state.
+            let [mu, sigma, weight, threshold] = errors[3].unwrap();
+            assert!(mu < 0.02, "{label}: μ error {mu}");
+            assert!(sigma < 0.02, "{label}: σ error {sigma}");
+            assert!(weight < 0.01, "{label}: π error {weight}");
+            assert!(
+                threshold < 0.03,
+                "{label}: ln T_GV off the Bayes crossing by {threshold}"
+            );
+            // And it got there by converging: the large sample is at least as
+            // close as the small ones on every measure that had a fit.
+            for e in errors[..2].iter().flatten() {
+                for (small, large) in e.iter().zip(&errors[3].unwrap()) {
+                    assert!(
+                        large <= &(small + 0.005),
+                        "{label}: {e:?} → {:?}",
+                        errors[3]
+                    );
+                }
+            }
         }
     }
 

@@ -230,7 +230,12 @@ impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
 
     /// `Σ eᵀΩe` over all edges (g2o's χ²).
     pub fn chi2(&self) -> f64 {
-        self.edges.iter().map(|e| self.edge_chi2(e)).sum()
+        // Folded from +0 (`sum` starts from -0, which an edgeless graph
+        // would report as "-0").
+        self.edges
+            .iter()
+            .map(|e| self.edge_chi2(e))
+            .fold(0.0, |a, b| a + b)
     }
 
     /// The vertices that no chain of edges connects to the gauge, by index,
@@ -323,8 +328,8 @@ pub fn is_positive_definite<const D: usize>(m: &SMatrix<f64, D, D>) -> bool {
 
 /// The nearest positive-definite matrix in the spectral sense: eigenvalues
 /// below `1e-6 · max|λ|` are raised to it (as `repair_info.py` of the
-/// baseline does). Returns `None` when every eigenvalue is zero or the matrix
-/// is not finite.
+/// baseline does). Returns `None` when every eigenvalue is zero, or the
+/// matrix (or its eigen-decomposition) is not finite.
 pub fn nearest_positive_definite<const D: usize>(
     m: &SMatrix<f64, D, D>,
 ) -> Option<SMatrix<f64, D, D>> {
@@ -333,7 +338,16 @@ pub fn nearest_positive_definite<const D: usize>(
     }
     let sym = (m + m.transpose()) * 0.5;
     // Dynamic storage: nalgebra's eigen-solver is not generic over `Const<D>`.
-    let eig = SymmetricEigen::new(DMatrix::from_column_slice(D, D, sym.as_slice()));
+    // Bounded iterations: an unbounded eigen-solver could spin forever on
+    // entries so large that its intermediate values overflow.
+    let eig = SymmetricEigen::try_new(
+        DMatrix::from_column_slice(D, D, sym.as_slice()),
+        f64::EPSILON,
+        10_000,
+    )?;
+    if !eig.eigenvalues.iter().all(|v| v.is_finite()) {
+        return None;
+    }
     let max_abs = eig.eigenvalues.iter().fold(0.0f64, |a, v| a.max(v.abs()));
     if max_abs == 0.0 {
         return None;

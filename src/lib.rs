@@ -2,6 +2,8 @@
 
 // Index loops over small fixed-size blocks read like the maths they implement.
 #![allow(clippy::needless_range_loop)]
+// No panics on bad input: errors are values. Tests may unwrap.
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 pub mod gate;
 pub mod geometry;
 pub mod graph;

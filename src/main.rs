@@ -1,5 +1,7 @@
 //! `pgo`: the command-line interface, a thin clap layer over the library.
 
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+
 use clap::{Parser, Subcommand, ValueEnum};
 use pgo::gate::{DegeneratePolicy, GateMode};
 use pgo::pipeline::{self, CandidateRule, OptimizeConfig};
@@ -92,24 +94,33 @@ struct SimulateArgs {
     #[arg(long, default_value_t = 300)]
     loops: usize,
     /// Wrong loop candidates to plant.
-    #[arg(long, default_value_t = 0)]
-    outliers: usize,
-    /// How wrong candidates are placed.
-    #[arg(long, value_enum, default_value_t = PolicyArg::Random)]
-    outlier_policy: PolicyArg,
+    #[arg(
+        long,
+        visible_alias = "outliers",
+        value_name = "N",
+        default_value_t = 0
+    )]
+    wrong: usize,
+    /// How wrong candidates are placed: any two poses, poses within 20 of
+    /// each other, or groups of consecutive mutually consistent wrong loops.
+    #[arg(long, visible_alias = "outlier-policy", value_enum, default_value_t = PolicyArg::Random)]
+    wrong_mode: PolicyArg,
     /// Size of the groups of grouped wrong candidates.
     #[arg(long, default_value_t = 10)]
     group_size: usize,
-    /// Give every loop candidate an inlier count (true loops: median 150,
-    /// wrong ones: median 25, log-normal).
+    /// Give every loop candidate an inlier count, log-normal: true loops
+    /// with median 150 and σ 0.5 (of ln count), wrong ones with median 25
+    /// and σ 0.5, unless set below.
     #[arg(long)]
     inliers: bool,
-    /// Median inlier count of true loops.
-    #[arg(long, default_value_t = 150.0)]
-    true_median: f64,
-    /// Median inlier count of wrong candidates.
-    #[arg(long, default_value_t = 25.0)]
-    wrong_median: f64,
+    /// Inlier counts of true loops: median and σ of ln count (implies
+    /// --inliers).
+    #[arg(long, visible_alias = "true-median", value_name = "MEDIAN[,SIGMA]", value_parser = parse_count_model)]
+    true_inliers: Option<CountModel>,
+    /// Inlier counts of wrong candidates: median and σ of ln count (implies
+    /// --inliers).
+    #[arg(long, visible_alias = "wrong-median", value_name = "MEDIAN[,SIGMA]", value_parser = parse_count_model)]
+    wrong_inliers: Option<CountModel>,
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -145,6 +156,43 @@ enum PolicyArg {
     Grouped,
 }
 
+impl From<PolicyArg> for pgo::simulate::OutlierPolicy {
+    fn from(p: PolicyArg) -> Self {
+        match p {
+            PolicyArg::Random => Self::Random,
+            PolicyArg::Local => Self::Local,
+            PolicyArg::Grouped => Self::Grouped,
+        }
+    }
+}
+
+/// A log-normal inlier-count model from the command line: `MEDIAN[,SIGMA]`.
+#[derive(Copy, Clone, Debug)]
+struct CountModel {
+    median: f64,
+    sigma: Option<f64>,
+}
+
+fn parse_count_model(s: &str) -> Result<CountModel, String> {
+    let number = |t: &str| {
+        t.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| format!("expected MEDIAN[,SIGMA] with finite numbers, got '{s}'"))
+    };
+    let (median, sigma) = match s.split_once(',') {
+        Some((m, sd)) => (number(m)?, Some(number(sd)?)),
+        None => (number(s)?, None),
+    };
+    if median <= 0.0 || sigma.is_some_and(|sd| sd < 0.0) {
+        return Err(format!(
+            "the median must be positive and σ non-negative, got '{s}'"
+        ));
+    }
+    Ok(CountModel { median, sigma })
+}
+
 #[derive(clap::Args, Debug)]
 struct GateArgs {
     /// A g2o file (the counts of its loop candidates), a CSV whose last field
@@ -168,10 +216,12 @@ struct OptimizeArgs {
     /// Nonlinear least-squares method.
     #[arg(long, value_enum, default_value_t = SolverArg::Lm)]
     solver: SolverArg,
-    /// Most iterations.
+    /// Most iterations, robust reweighting rounds included.
     #[arg(long, value_name = "N", default_value_t = 100)]
     max_iters: usize,
-    /// Stop after this many seconds and keep the best estimate so far.
+    /// Stop optimising after this many seconds (checked between iterations;
+    /// reading, initialisation and writing not counted) and write the best
+    /// estimate so far.
     #[arg(long, value_name = "SECONDS")]
     time_limit: Option<f64>,
     /// Initial guess.
@@ -325,9 +375,30 @@ fn main() -> ExitCode {
     }
 }
 
+/// The output must not be the input (through links or `..` too): only
+/// `--in-place` overwrites the input.
+fn refuse_to_overwrite_input(
+    input: &std::path::Path,
+    output: &std::path::Path,
+) -> Result<(), String> {
+    if pgo::io::same_file(input, output) {
+        Err(format!(
+            "{}: the output is the input file {}; pgo overwrites its input only with --in-place",
+            output.display(),
+            input.display()
+        ))
+    } else {
+        Ok(())
+    }
+}
+
 fn corrupt(args: CorruptArgs) -> ExitCode {
     use pgo::graph::AnyPoseGraph;
-    use pgo::simulate::{CorruptionOptions, InlierModel, OutlierPolicy};
+    use pgo::simulate::{CorruptionOptions, InlierModel};
+    if let Err(message) = refuse_to_overwrite_input(&args.input, &args.output) {
+        eprintln!("error: {message}");
+        return ExitCode::from(2);
+    }
     let mut file = match pgo::io::g2o::read(&args.input, Default::default()) {
         Ok(f) => f,
         Err(e) => {
@@ -337,11 +408,7 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
     };
     let options = CorruptionOptions {
         outliers: args.outliers,
-        policy: match args.outlier_policy {
-            PolicyArg::Random => OutlierPolicy::Random,
-            PolicyArg::Local => OutlierPolicy::Local,
-            PolicyArg::Grouped => OutlierPolicy::Grouped,
-        },
+        policy: args.outlier_policy.into(),
         group_size: args.group_size,
         known_wrong_last: args.known_wrong_last,
         inliers: Some(InlierModel {
@@ -412,9 +479,7 @@ where
 }
 
 fn simulate(args: SimulateArgs) -> ExitCode {
-    use pgo::simulate::{
-        self, AnySimulation, InlierModel, OutlierPolicy, SimulationOptions, World,
-    };
+    use pgo::simulate::{self, AnySimulation, InlierModel, SimulationOptions, World};
     let options = SimulationOptions {
         world: match args.world {
             WorldArg::Grid2d => World::Grid2d,
@@ -426,18 +491,27 @@ fn simulate(args: SimulateArgs) -> ExitCode {
         rotation_noise: args.rotation_noise,
         loops: args.loops,
         seed: args.seed,
-        outliers: args.outliers,
-        outlier_policy: match args.outlier_policy {
-            PolicyArg::Random => OutlierPolicy::Random,
-            PolicyArg::Local => OutlierPolicy::Local,
-            PolicyArg::Grouped => OutlierPolicy::Grouped,
-        },
+        outliers: args.wrong,
+        outlier_policy: args.wrong_mode.into(),
         group_size: args.group_size,
-        inliers: args.inliers.then(|| InlierModel {
-            true_median: args.true_median,
-            wrong_median: args.wrong_median,
-            ..InlierModel::default()
-        }),
+        inliers: (args.inliers || args.true_inliers.is_some() || args.wrong_inliers.is_some())
+            .then(|| {
+                let d = InlierModel::default();
+                let t = args.true_inliers.unwrap_or(CountModel {
+                    median: d.true_median,
+                    sigma: None,
+                });
+                let w = args.wrong_inliers.unwrap_or(CountModel {
+                    median: d.wrong_median,
+                    sigma: None,
+                });
+                InlierModel {
+                    true_median: t.median,
+                    true_sigma: t.sigma.unwrap_or(d.true_sigma),
+                    wrong_median: w.median,
+                    wrong_sigma: w.sigma.unwrap_or(d.wrong_sigma),
+                }
+            }),
     };
     let result = match simulate::simulate(&options) {
         Ok(AnySimulation::Planar(s)) => write_simulation(&s, &args),
@@ -580,6 +654,12 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
         let _ = rayon::ThreadPoolBuilder::new()
             .num_threads(args.threads)
             .build_global();
+    }
+    if let Some(out) = &args.output {
+        if let Err(message) = refuse_to_overwrite_input(&args.input, out) {
+            eprintln!("error: {message}");
+            return ExitCode::from(2);
+        }
     }
     let mut config = OptimizeConfig::new(&args.input);
     config.output = if args.in_place {

@@ -117,6 +117,25 @@ pub enum PipelineError {
     /// A picture could not be drawn or written.
     #[error(transparent)]
     Plot(#[from] crate::plot::PlotError),
+    /// An edge's cost is not finite at the initial guess (its measurement,
+    /// information or poses are too large for floating point).
+    #[error(
+        "{path}: edge {edge} (vertex {from} → {to}) has a non-finite χ² at the {} initial \
+         guess (--init): its measurement, information or poses are too large",
+        initialization_name(*.initialization)
+    )]
+    NonFiniteEdge {
+        /// The input file.
+        path: PathBuf,
+        /// 1-based index of the edge among the file's edges.
+        edge: usize,
+        /// Its first vertex id.
+        from: crate::graph::VertexId,
+        /// Its second vertex id.
+        to: crate::graph::VertexId,
+        /// The initial guess.
+        initialization: Initialization,
+    },
     /// The optimiser produced non-finite poses (nothing was written).
     #[error("{path}: the optimiser produced non-finite poses; nothing was written")]
     NonFiniteResult {
@@ -125,12 +144,21 @@ pub enum PipelineError {
     },
 }
 
+/// `file`, `odometry` or `chordal`, as on the command line.
+fn initialization_name(i: Initialization) -> &'static str {
+    match i {
+        Initialization::File => "file",
+        Initialization::Odometry => "odometry",
+        Initialization::Chordal => "chordal",
+    }
+}
+
 impl PipelineError {
     /// The process exit status: 2 for bad input, 1 for other failures.
     pub fn exit_code(&self) -> i32 {
         match self {
             Self::Read(ReadError::Io { .. }) | Self::Inliers(InlierCsvError::Io { .. }) => 2,
-            Self::Read(_) | Self::Inliers(_) => 2,
+            Self::Read(_) | Self::Inliers(_) | Self::NonFiniteEdge { .. } => 2,
             Self::Solve {
                 source: SolveError::Unconstrained { .. } | SolveError::NotPositiveDefinite { .. },
                 ..
@@ -249,9 +277,29 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     // so that its χ² can be reported whatever the initialisation.
     initialize(graph, missing, Initialization::File, Some(&init_weights)).map_err(solve_error)?;
     report.input_chi2 = graph.chi2();
+    if !report.input_chi2.is_finite() {
+        report.warnings.push(format!(
+            "the file's own guess has a non-finite χ² ({}; null in JSON)",
+            report.input_chi2
+        ));
+    }
     if config.initialization != Initialization::File {
         initialize(graph, missing, config.initialization, Some(&init_weights))
             .map_err(solve_error)?;
+    }
+    // An edge whose cost overflows at the start makes the objective
+    // meaningless: name it rather than report a bare non-finite objective.
+    if let Some(k) = (0..graph.edges.len())
+        .find(|&k| weights[k] != 0.0 && !graph.edge_chi2(&graph.edges[k]).is_finite())
+    {
+        let e = &graph.edges[k];
+        return Err(PipelineError::NonFiniteEdge {
+            path: config.input.clone(),
+            edge: k + 1,
+            from: graph.id(e.from),
+            to: graph.id(e.to),
+            initialization: config.initialization,
+        });
     }
     report.initialization = InitializationReport {
         method: config.initialization,
@@ -306,22 +354,48 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         relative_tolerance: full.relative_tolerance.max(1e-6),
         ..full.clone()
     };
+    // --max-iters and --time-limit bound the whole optimisation, robust
+    // rounds included: each run gets what is left of both.
+    let deadline = full.time_limit.map(|t| Instant::now() + t);
+    let within_budget = |options: &SolverOptions, used: usize| SolverOptions {
+        max_iterations: options
+            .max_iterations
+            .min(full.max_iterations.saturating_sub(used)),
+        time_limit: deadline.map(|d| d.saturating_duration_since(Instant::now())),
+        ..options.clone()
+    };
+    let exhausted =
+        |used: usize| used >= full.max_iterations || deadline.is_some_and(|d| Instant::now() >= d);
+    let out_of_budget = |summary: &mut crate::solve::Summary| {
+        summary.stop_reason = if summary.iterations >= full.max_iterations {
+            crate::solve::StopReason::MaxIterations
+        } else {
+            crate::solve::StopReason::TimeLimit
+        };
+    };
     let mut noise_scale = None;
     let mut total = None::<crate::solve::Summary>;
     loop {
         let robust = reweighter.is_active();
         let options = if !robust {
-            full.clone()
+            &full
         } else if reweighter.full_solve() {
-            deciding.clone()
+            &deciding
         } else {
-            partial.clone()
+            &partial
         };
+        let used = total.as_ref().map_or(0, |t| t.iterations);
         let summary = solver
-            .run(graph, &weights, options, observer)
+            .run(graph, &weights, within_budget(options, used), observer)
             .map_err(solve_error)?;
-        total = Some(merge_summaries(total, summary));
-        if !robust {
+        let mut merged = merge_summaries(total, summary);
+        let stop = !robust || exhausted(merged.iterations);
+        if robust && stop {
+            // Out of budget before the weights settled.
+            out_of_budget(&mut merged);
+        }
+        total = Some(merged);
+        if stop {
             break;
         }
         let mut r2 = candidate_r2(graph);
@@ -347,23 +421,25 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 .map_err(solve_error)?;
         }
         if !again {
-            if method == RobustMethod::Em {
-                if deciding.relative_tolerance > full.relative_tolerance {
-                    let summary = solver
-                        .run(graph, &weights, full.clone(), observer)
-                        .map_err(solve_error)?;
-                    total = Some(merge_summaries(total, summary));
+            let polish = if method == RobustMethod::Em {
+                // The decided map, polished to the caller's tolerance.
+                deciding.relative_tolerance > full.relative_tolerance
+            } else {
+                // The weights settled: one last solve to full convergence.
+                changed
+            };
+            let used = total.as_ref().map_or(0, |t| t.iterations);
+            if polish && !exhausted(used) {
+                let summary = solver
+                    .run(graph, &weights, within_budget(&full, used), observer)
+                    .map_err(solve_error)?;
+                total = Some(merge_summaries(total, summary));
+                if method == RobustMethod::Em {
                     let s2 = decision_scale(graph, &weights);
                     noise_scale = Some(s2);
                     let r2: Vec<f64> = candidate_r2(graph).iter().map(|r| r / s2).collect();
                     reweighter.refresh(&r2);
                 }
-            } else if changed {
-                // The weights settled: one last solve to full convergence.
-                let summary = solver
-                    .run(graph, &weights, full.clone(), observer)
-                    .map_err(solve_error)?;
-                total = Some(merge_summaries(total, summary));
             }
             break;
         }
@@ -630,8 +706,15 @@ fn gate_candidates<P: G2oPose<D>, const D: usize>(
     if decision.degenerate && report.gate.counted > 0 {
         if let Some(reason) = &decision.reason {
             report.warnings.push(format!(
-                "the inlier counts are degenerate: {reason}; policy {:?}",
-                config.degenerate
+                "the inlier counts are degenerate: {reason}; policy {}: {}",
+                config.degenerate.name(),
+                match config.degenerate {
+                    DegeneratePolicy::DropAll =>
+                        "every counted candidate dropped, the trusted edges optimised alone",
+                    DegeneratePolicy::KeepAll =>
+                        "every candidate kept, left to the robust back end",
+                    DegeneratePolicy::Threshold => "the crossing used anyway where there is one",
+                }
             ));
         }
     }

@@ -126,9 +126,15 @@ impl GateReport {
         }
         let rule = match (self.mode, self.threshold) {
             (GateMode::Off, _) => "off".to_string(),
+            (GateMode::Fixed(n), _) => format!("fixed threshold {n} inliers"),
+            (GateMode::Soft, _) if !self.degenerate => {
+                "soft (each candidate's P(true loop | count) is its robust prior)".to_string()
+            }
             (_, Some(t)) if !self.degenerate => format!("T_GV = {t:.1} inliers"),
             (_, Some(t)) => format!("T_GV = {t:.1} inliers despite degenerate counts"),
-            (_, None) if self.degenerate => format!("degenerate counts, {:?}", self.policy),
+            (_, None) if self.degenerate => {
+                format!("degenerate counts (policy {})", self.policy.name())
+            }
             (_, None) => "no threshold".to_string(),
         };
         format!(

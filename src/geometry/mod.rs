@@ -19,6 +19,8 @@
 //!   [`Pose::error_and_jacobians`] are derivatives with respect to these
 //!   increments at `δ = 0`.
 
+#[cfg(test)]
+mod proptests;
 mod se2;
 mod se3;
 

@@ -29,6 +29,7 @@
 //! * Lines longer than [`MAX_LINE_BYTES`] are rejected, and the file is read
 //!   line by line, never whole.
 
+use super::{LineError, LineReader};
 use crate::geometry::{Pose, Se2, Se3};
 use crate::graph::{
     AnyPoseGraph, GraphError, LoopCandidate, PoseGraph, VertexId, is_positive_definite,
@@ -37,11 +38,30 @@ use crate::graph::{
 use nalgebra::SMatrix;
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
-use std::io::{self, BufRead, BufReader, Read, Write};
+use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
 
 /// The longest line the reader accepts, in bytes.
 pub const MAX_LINE_BYTES: usize = 1 << 16;
+
+/// Distinct unknown tags counted one by one in [`ReadSummary::skipped_tags`];
+/// lines with further tags are counted together under [`OTHER_TAGS`], so that
+/// a file of garbage cannot make the summary (and the report) grow with it.
+pub const MAX_SKIPPED_TAGS: usize = 32;
+
+/// The key of [`ReadSummary::skipped_tags`] that counts the lines of tags
+/// beyond the first [`MAX_SKIPPED_TAGS`].
+pub const OTHER_TAGS: &str = "(other tags)";
+
+/// A tag as shown in messages: at most 40 characters, control and other
+/// non-printable characters escaped (garbage input stays readable).
+fn shown_tag(tag: &str) -> String {
+    let mut shown: String = tag.chars().take(40).flat_map(char::escape_debug).collect();
+    if tag.chars().nth(40).is_some() {
+        shown.push('…');
+    }
+    shown
+}
 
 /// What is wrong with one line of a g2o file.
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
@@ -106,6 +126,12 @@ pub enum LineProblem {
     /// An information matrix that cannot be repaired (all eigenvalues zero).
     #[error("information matrix is zero and cannot be made positive definite")]
     InformationZero,
+    /// An information matrix whose projection fails (entries so large that
+    /// the eigen-decomposition overflows).
+    #[error(
+        "information matrix cannot be made positive definite (its entries are too large to decompose)"
+    )]
+    InformationNotRepairable,
     /// A quaternion of zero norm.
     #[error("quaternion has zero norm")]
     ZeroQuaternion,
@@ -160,10 +186,14 @@ pub enum ReadError {
         problem: LineProblem,
     },
     /// The file holds no pose graph.
-    #[error("{path}: no VERTEX_SE2, EDGE_SE2, VERTEX_SE3:QUAT or EDGE_SE3:QUAT lines{skipped}")]
+    #[error(
+        "{path}: no VERTEX_SE2, EDGE_SE2, VERTEX_SE3:QUAT or EDGE_SE3:QUAT lines in {lines} lines{skipped}"
+    )]
     NoPoseGraph {
         /// The file.
         path: PathBuf,
+        /// How many lines the file has (0: it is empty).
+        lines: usize,
         /// A note on the tags that were skipped, if any.
         skipped: String,
     },
@@ -307,33 +337,24 @@ pub fn read_from<R: Read>(
         options,
         state: State::Undecided { fixes: Vec::new() },
         summary: ReadSummary::default(),
+        lines: 0,
     };
-    let mut reader = BufReader::with_capacity(1 << 16, reader);
-    let mut buf = Vec::with_capacity(256);
-    let mut line_no = 0usize;
-    loop {
-        buf.clear();
-        line_no += 1;
-        let n = (&mut reader)
-            .take(MAX_LINE_BYTES as u64 + 1)
-            .read_until(b'\n', &mut buf)
-            .map_err(|source| ReadError::Io {
+    let mut lines = LineReader::new(reader, MAX_LINE_BYTES);
+    while let Some((line_no, text)) = lines.next_line() {
+        let text = text.map_err(|e| match e {
+            LineError::Io(source) => ReadError::Io {
                 path: path.to_owned(),
                 source,
-            })?;
-        if n == 0 {
-            break;
-        }
-        if buf.len() > MAX_LINE_BYTES && buf.last() != Some(&b'\n') {
-            return Err(parser.error(
+            },
+            LineError::TooLong => parser.error(
                 line_no,
                 LineProblem::LineTooLong {
                     limit: MAX_LINE_BYTES,
                 },
-            ));
-        }
-        let text =
-            std::str::from_utf8(&buf).map_err(|_| parser.error(line_no, LineProblem::NotText))?;
+            ),
+            LineError::NotText => parser.error(line_no, LineProblem::NotText),
+        })?;
+        parser.lines = line_no;
         parser.line(line_no, text)?;
     }
     parser.finish()
@@ -350,6 +371,8 @@ struct Parser<'a> {
     options: ReadOptions,
     state: State,
     summary: ReadSummary,
+    /// Lines read so far.
+    lines: usize,
 }
 
 impl Parser<'_> {
@@ -379,7 +402,13 @@ impl Parser<'_> {
             }
             "FIX" => self.fix(&rest, line_no),
             _ => {
-                *self.summary.skipped_tags.entry(tag.to_owned()).or_insert(0) += 1;
+                let tags = &mut self.summary.skipped_tags;
+                let key = if tags.contains_key(tag) || tags.len() < MAX_SKIPPED_TAGS {
+                    tag
+                } else {
+                    OTHER_TAGS
+                };
+                *tags.entry(key.to_owned()).or_insert(0) += 1;
                 Ok(())
             }
         };
@@ -455,7 +484,7 @@ impl Parser<'_> {
                     let shown: Vec<String> = by_count
                         .iter()
                         .take(5)
-                        .map(|(t, n)| format!("{t} ×{n}"))
+                        .map(|(t, n)| format!("{} ×{n}", shown_tag(t)))
                         .collect();
                     let more = match by_count.len().saturating_sub(5) {
                         0 => String::new(),
@@ -465,6 +494,7 @@ impl Parser<'_> {
                 };
                 return Err(ReadError::NoPoseGraph {
                     path: self.path.to_owned(),
+                    lines: self.lines,
                     skipped,
                 });
             }
@@ -473,7 +503,8 @@ impl Parser<'_> {
         };
         for (tag, count) in &self.summary.skipped_tags {
             self.summary.warnings.push(format!(
-                "skipped {count} line(s) with unsupported tag {tag}"
+                "skipped {count} line(s) with unsupported tag {}",
+                shown_tag(tag)
             ));
         }
         file.summary.skipped_tags = std::mem::take(&mut self.summary.skipped_tags);
@@ -566,30 +597,39 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
         let per = 4 + P::POSE_NUMBERS + D * (D + 1) / 2;
         let expected = format!("4 + {per}·n tokens (+1 with an inlier count)");
         if rest.len() < 3 {
-            return Err(token_count(tag, &expected, rest.len() + 1));
+            return Err(token_count(tag, &expected, rest.len()));
         }
         let from = parse_id(rest[0])?;
         let to = parse_id(rest[1])?;
         let components: usize = rest[2].parse().map_err(|_| {
             LineProblem::BadMixture(format!("'{}' is not a component count", rest[2]))
         })?;
-        let body = components
-            .checked_mul(per)
-            .and_then(|b| b.checked_add(3))
-            .unwrap_or(usize::MAX);
-        if components == 0 || (rest.len() != body && rest.len() != body + 1) {
-            return Err(token_count(tag, &expected, rest.len() + 1));
+        // A component count too large for the line (even one whose token
+        // count overflows) is a token-count error, not an overflow.
+        let body = match components.checked_mul(per).and_then(|b| b.checked_add(3)) {
+            Some(body) if components > 0 && (rest.len() == body || rest.len() == body + 1) => body,
+            _ => return Err(token_count(tag, &expected, rest.len())),
+        };
+        // Every component must be well formed (its numbers finite), though
+        // only the first is used: the line is written back as read.
+        let mut first = None;
+        for component in rest[3..body].chunks(per) {
+            if component[0] != P::EDGE_TAG {
+                return Err(LineProblem::BadMixture(format!(
+                    "component starts with '{}', expected {}",
+                    component[0],
+                    P::EDGE_TAG
+                )));
+            }
+            parse_numbers(&component[1..2])?;
+            parse_id(component[2])?;
+            parse_id(component[3])?;
+            let numbers = parse_numbers(&component[4..])?;
+            P::from_numbers(&numbers[..P::POSE_NUMBERS])?;
+            first.get_or_insert(numbers);
         }
-        let first = &rest[3..3 + per];
-        if first[0] != P::EDGE_TAG {
-            return Err(LineProblem::BadMixture(format!(
-                "component starts with '{}', expected {}",
-                first[0],
-                P::EDGE_TAG
-            )));
-        }
+        let numbers = first.ok_or_else(|| LineProblem::BadMixture("no components".into()))?;
         let inliers = rest.get(body).map(|t| parse_count(t)).transpose()?;
-        let numbers = parse_numbers(&first[4..])?;
         self.push_edge(from, to, &numbers, inliers)?;
         let k = self.graph.edges.len() - 1;
         // Keep the line as read, without the count (the writer appends it).
@@ -620,8 +660,13 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
                     min_eigenvalue: min_eigenvalue(&information),
                 });
             }
-            information =
-                nearest_positive_definite(&information).ok_or(LineProblem::InformationZero)?;
+            information = nearest_positive_definite(&information).ok_or(
+                if information.iter().all(|v| *v == 0.0) {
+                    LineProblem::InformationZero
+                } else {
+                    LineProblem::InformationNotRepairable
+                },
+            )?;
             self.information_fixed += 1;
         }
         self.vertex_index(from);
@@ -740,12 +785,13 @@ fn upper_triangle_to_matrix<const D: usize>(v: &[f64]) -> SMatrix<f64, D, D> {
     m
 }
 
+/// The smallest eigenvalue (NaN if the bounded eigen-solver fails), for
+/// messages.
 fn min_eigenvalue<const D: usize>(m: &SMatrix<f64, D, D>) -> f64 {
     let d = nalgebra::DMatrix::from_column_slice(D, D, m.as_slice());
-    d.symmetric_eigenvalues()
-        .iter()
-        .copied()
-        .fold(f64::INFINITY, f64::min)
+    nalgebra::SymmetricEigen::try_new(d, f64::EPSILON, 10_000).map_or(f64::NAN, |e| {
+        e.eigenvalues.iter().copied().fold(f64::INFINITY, f64::min)
+    })
 }
 
 impl G2oFile {
@@ -936,6 +982,37 @@ mod tests {
         let text = "# header\r\n\r\nVERTEX_SE2\t0 0 0 0\r\n  VERTEX_SE2 1  1 0 0  \r\n\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1";
         let f = parse(text).unwrap();
         assert_eq!(planar(&f).edges.len(), 1);
+    }
+
+    #[test]
+    fn mixture_component_counts_that_overflow_are_token_count_errors() {
+        // Found by the parse fuzz target: `body + 1` overflowed (a panic in
+        // builds with overflow checks).
+        for count in [
+            "11111111111222222222",
+            "18446744073709551615",
+            "1418129833677085",
+        ] {
+            let (line, p) = line_error(&format!(
+                "VERTEX_SE2 4 0 0 0\nEDGE_SE2_MIXTURE 4 16111 {count}\n"
+            ));
+            assert_eq!(line, 2);
+            assert!(
+                matches!(p, LineProblem::TokenCount { found: 4, .. }),
+                "{count}: {p:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn distinct_unknown_tags_are_capped() {
+        let garbage: String = (0..100).map(|k| format!("TAG{k} 1 2\n")).collect();
+        let f = parse(&format!("{SE2}{garbage}TAG0 again\n")).unwrap();
+        let tags = &f.summary.skipped_tags;
+        assert_eq!(tags.len(), MAX_SKIPPED_TAGS + 1);
+        assert_eq!(tags.get("TAG0"), Some(&2));
+        assert_eq!(tags.get(OTHER_TAGS), Some(&(100 - MAX_SKIPPED_TAGS)));
+        assert_eq!(tags.values().sum::<usize>(), 101);
     }
 
     #[test]

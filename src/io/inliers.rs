@@ -6,10 +6,12 @@
 //! the reverse direction. When a vertex pair has several edges, the k-th row
 //! for the pair goes to the k-th such edge in file order.
 
+use super::g2o::MAX_LINE_BYTES;
+use super::{LineError, LineReader};
 use crate::geometry::Pose;
 use crate::graph::{LoopCandidate, PoseGraph, VertexId};
 use std::collections::HashMap;
-use std::io::{self, BufRead, BufReader};
+use std::io;
 use std::path::{Path, PathBuf};
 
 /// One row of the CSV.
@@ -48,6 +50,25 @@ pub enum InlierCsvError {
     },
 }
 
+/// The error for a line that could not be read.
+fn line_error(path: &Path, line: usize, e: LineError) -> InlierCsvError {
+    let problem = match e {
+        LineError::Io(source) => {
+            return InlierCsvError::Io {
+                path: path.to_owned(),
+                source,
+            };
+        }
+        LineError::TooLong => format!("line is longer than {MAX_LINE_BYTES} bytes"),
+        LineError::NotText => "not UTF-8 text (is this a binary file?)".to_owned(),
+    };
+    InlierCsvError::Row {
+        path: path.to_owned(),
+        line,
+        problem,
+    }
+}
+
 /// Reads `from,to,inliers` rows. Blank lines and `#` lines are skipped; a
 /// first line that does not start with a number is taken as a header.
 pub fn read_csv(path: &Path) -> Result<Vec<InlierRow>, InlierCsvError> {
@@ -55,12 +76,10 @@ pub fn read_csv(path: &Path) -> Result<Vec<InlierRow>, InlierCsvError> {
         path: path.to_owned(),
         source,
     };
-    let reader = BufReader::new(std::fs::File::open(path).map_err(io_err)?);
+    let mut lines = LineReader::new(std::fs::File::open(path).map_err(io_err)?, MAX_LINE_BYTES);
     let mut rows = Vec::new();
-    for (k, line) in reader.lines().enumerate() {
-        let line_no = k + 1;
-        let line = line.map_err(io_err)?;
-        let text = line.trim();
+    while let Some((line_no, line)) = lines.next_line() {
+        let text = line.map_err(|e| line_error(path, line_no, e))?.trim();
         if text.is_empty() || text.starts_with('#') {
             continue;
         }
@@ -105,13 +124,9 @@ pub fn read_csv(path: &Path) -> Result<Vec<InlierRow>, InlierCsvError> {
 /// is taken as a header.
 pub fn read_counts<R: std::io::Read>(reader: R, path: &Path) -> Result<Vec<u64>, InlierCsvError> {
     let mut counts = Vec::new();
-    for (k, line) in BufReader::new(reader).lines().enumerate() {
-        let line_no = k + 1;
-        let line = line.map_err(|source| InlierCsvError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
-        let text = line.trim();
+    let mut lines = LineReader::new(reader, MAX_LINE_BYTES);
+    while let Some((line_no, line)) = lines.next_line() {
+        let text = line.map_err(|e| line_error(path, line_no, e))?.trim();
         if text.is_empty() || text.starts_with('#') {
             continue;
         }

@@ -415,9 +415,20 @@ impl ChordalInit<6> for Se3 {
 }
 
 /// The rotation nearest to `m` in the Frobenius norm (`U·Vᵀ` of its SVD,
-/// with the sign fixed so that the determinant is +1).
+/// with the sign fixed so that the determinant is +1); the identity when `m`
+/// is not finite or the SVD does not converge.
+///
+/// `U·Vᵀ` is orthonormal already, so it is converted to a quaternion
+/// directly: nalgebra's iterative `from_matrix` never returns for a matrix
+/// half a turn away from its identity starting guess (found by fuzzing:
+/// two parallel edges whose rotations differ by π).
 fn nearest_rotation(m: &Matrix3<f64>) -> UnitQuaternion<f64> {
-    let svd = m.svd(true, true);
+    if !m.iter().all(|v| v.is_finite()) {
+        return UnitQuaternion::identity();
+    }
+    let Some(svd) = m.try_svd(true, true, f64::EPSILON, 10_000) else {
+        return UnitQuaternion::identity();
+    };
     match (svd.u, svd.v_t) {
         (Some(u), Some(v_t)) => {
             let mut r = u * v_t;
@@ -426,7 +437,14 @@ fn nearest_rotation(m: &Matrix3<f64>) -> UnitQuaternion<f64> {
                 u.set_column(2, &(-u.column(2)));
                 r = u * v_t;
             }
-            UnitQuaternion::from_matrix(&r)
+            let q = UnitQuaternion::from_rotation_matrix(
+                &nalgebra::Rotation3::from_matrix_unchecked(r),
+            );
+            if q.coords.iter().all(|v| v.is_finite()) {
+                q
+            } else {
+                UnitQuaternion::identity()
+            }
         }
         _ => UnitQuaternion::identity(),
     }
@@ -435,6 +453,23 @@ fn nearest_rotation(m: &Matrix3<f64>) -> UnitQuaternion<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn nearest_rotation_of_half_turns_and_degenerate_matrices_returns() {
+        // Found by the optimize fuzz target: this used to loop forever.
+        let half_turn = Matrix3::new(-1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0);
+        let q = nearest_rotation(&half_turn);
+        assert!((q.to_rotation_matrix().into_inner() - half_turn).norm() < 1e-12);
+        // The chordal average of two rotations half a turn apart (rank 1).
+        let average = (half_turn + Matrix3::identity()) * 0.5;
+        let q = nearest_rotation(&average);
+        assert!((q.to_rotation_matrix().into_inner().determinant() - 1.0).abs() < 1e-12);
+        let mut nan = Matrix3::identity();
+        nan[(1, 2)] = f64::NAN;
+        assert_eq!(nearest_rotation(&nan), UnitQuaternion::identity());
+        let zero = nearest_rotation(&Matrix3::zeros());
+        assert!(zero.coords.iter().all(|v| v.is_finite()));
+    }
     use crate::solve::{SolverOptions, optimize};
     use nalgebra::{Matrix3, Matrix6, Vector6};
     use rand::{Rng, SeedableRng, rngs::StdRng};

@@ -1,0 +1,273 @@
+//! Numerical faults and limits: LM never writes NaN or infinite poses, a
+//! step with a non-finite χ² is never taken, overflowing or singular
+//! problems are named errors, and `--max-iters` / `--time-limit` stop the
+//! whole optimisation (robust rounds included) with the best estimate so far
+//! written and the stop reason in the report.
+
+use crate::common::{pgo, sample, stderr, temp_dir, write};
+use nalgebra::Matrix3;
+use pgo::geometry::{Pose, Se2};
+use pgo::graph::PoseGraph;
+use pgo::solve::{Method, SolveError, SolverOptions, optimize};
+use proptest::prelude::*;
+use std::path::Path;
+
+/// Runs `pgo optimize INPUT --json -q -o OUT ARGS…`; returns the report.
+fn run_json(input: &str, out: &Path, args: &[&str]) -> serde_json::Value {
+    let mut all = vec![
+        "optimize",
+        input,
+        "--json",
+        "-q",
+        "-o",
+        out.to_str().expect("utf-8"),
+    ];
+    all.extend_from_slice(args);
+    let o = pgo(&all);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    serde_json::from_slice(&o.stdout).expect("JSON report")
+}
+
+/// χ² of the poses written to `out` (read back as the file's own guess).
+fn written_chi2(out: &Path) -> f64 {
+    let back = pgo(&[
+        "optimize",
+        out.to_str().expect("utf-8"),
+        "--init",
+        "file",
+        "--max-iters",
+        "0",
+        "--json",
+        "-q",
+    ]);
+    assert_eq!(back.status.code(), Some(0), "{}", stderr(&back));
+    let r: serde_json::Value = serde_json::from_slice(&back.stdout).expect("JSON");
+    r["input_chi2"].as_f64().expect("finite χ²")
+}
+
+fn close(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * a.abs().max(b.abs())
+}
+
+#[test]
+fn max_iters_bounds_robust_rounds_too_and_the_best_estimate_is_written() {
+    let dir = temp_dir("faults-max-iters");
+    let out = dir.join("out.g2o");
+    // grid2d.g2o has loop candidates: EM reweighting runs several rounds.
+    for n in [0usize, 1, 2, 5] {
+        let r = run_json(
+            &sample("grid2d.g2o"),
+            &out,
+            &["--max-iters", &n.to_string()],
+        );
+        let o = &r["optimizer"];
+        assert_eq!(o["iterations"], n, "--max-iters {n}: {o}");
+        assert_eq!(o["stop_reason"], "max_iterations", "--max-iters {n}");
+        assert_eq!(o["converged"], false);
+        assert!(
+            o["final_objective"].as_f64().expect("finite")
+                <= o["initial_objective"].as_f64().expect("finite")
+        );
+        let final_chi2 = o["final_chi2"].as_f64().expect("finite");
+        assert!(close(written_chi2(&out), final_chi2), "--max-iters {n}");
+    }
+}
+
+#[test]
+fn time_limit_stops_the_optimisation_and_writes_the_best_so_far() {
+    let dir = temp_dir("faults-time-limit");
+    let graph = dir.join("g.g2o");
+    let sim = pgo(&[
+        "simulate",
+        "--poses",
+        "3000",
+        "--loops",
+        "500",
+        "--outliers",
+        "100",
+        "--inliers",
+        "-o",
+        graph.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(sim.status.code(), Some(0), "{}", stderr(&sim));
+    let out = dir.join("out.g2o");
+    let input = graph.to_str().expect("utf-8");
+    // No time at all: the initial guess is written.
+    let r = run_json(input, &out, &["--time-limit", "0"]);
+    assert_eq!(r["optimizer"]["iterations"], 0);
+    assert_eq!(r["optimizer"]["stop_reason"], "time_limit");
+    assert!(close(
+        written_chi2(&out),
+        r["initialization"]["chi2"].as_f64().expect("χ²")
+    ));
+    // A fraction of a second: the limit is checked between iterations, so
+    // the run overshoots by at most one iteration (about a second for this
+    // graph in a debug build).
+    let limit = 0.3;
+    let r = run_json(input, &out, &["--time-limit", &limit.to_string()]);
+    let o = &r["optimizer"];
+    assert_eq!(o["stop_reason"], "time_limit", "{o}");
+    assert!(o["iterations"].as_u64().expect("n") >= 1);
+    assert!(o["time_s"].as_f64().expect("t") < limit + 30.0);
+    assert!(
+        o["final_objective"].as_f64().expect("f") <= o["initial_objective"].as_f64().expect("f")
+    );
+    assert!(close(
+        written_chi2(&out),
+        o["final_chi2"].as_f64().expect("χ²")
+    ));
+    // Nonsense limits are usage errors.
+    for bad in ["-1", "nan", "inf"] {
+        let o = pgo(&["optimize", input, &format!("--time-limit={bad}")]);
+        assert_eq!(o.status.code(), Some(2), "--time-limit {bad}");
+        assert!(stderr(&o).contains("--time-limit"), "{}", stderr(&o));
+    }
+}
+
+#[test]
+fn overflowing_and_singular_problems_are_named_errors_and_write_nothing() {
+    let dir = temp_dir("faults-overflow");
+    let out = dir.join("out.g2o");
+    let v = "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_SE2 2 2 0 0\n";
+    let cases = [
+        // Measurements near the largest double: χ² overflows at any guess.
+        (
+            "huge-measurement.g2o",
+            format!("{v}EDGE_SE2 0 1 1e300 0 0 1 0 0 1 0 1\nEDGE_SE2 1 2 1e300 0 0 1 0 0 1 0 1\n"),
+            vec![],
+            "edge 1 (vertex 0 → 1) has a non-finite χ² at the chordal initial guess",
+        ),
+        // A pose near the largest double, kept by --init file.
+        (
+            "huge-pose.g2o",
+            "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1e300 0 0\nVERTEX_SE2 2 2 0 0\n\
+             EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 1 2 1 0 0 1 0 0 1 0 1\n"
+                .to_string(),
+            vec!["--init", "file"],
+            "edge 1 (vertex 0 → 1) has a non-finite χ² at the file initial guess",
+        ),
+        // Information spanning 600 orders of magnitude: the normal
+        // equations are numerically singular at vertex 1.
+        (
+            "singular.g2o",
+            format!(
+                "{v}EDGE_SE2 0 1 1 0 0 1e300 0 0 1e300 0 1e300\n\
+                 EDGE_SE2 1 2 1 0 0 1e-300 0 0 1e-300 0 1e-300\n\
+                 EDGE_SE2 0 2 5 3 2 1e300 0 0 1e300 0 1e300\n"
+            ),
+            vec![],
+            "the normal equations are not positive definite at vertex 1",
+        ),
+    ];
+    for (name, text, args, message) in cases {
+        let input = write(&dir, name, &text);
+        let mut all = vec![
+            "optimize",
+            input.to_str().expect("utf-8"),
+            "-o",
+            out.to_str().expect("utf-8"),
+        ];
+        all.extend(args);
+        let o = pgo(&all);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{name}: {err}");
+        assert!(
+            err.contains(&format!("{name}: ")) && err.contains(message),
+            "{name}: {err}"
+        );
+        assert!(!err.contains("panicked"));
+        assert!(!out.exists(), "{name}: output written");
+    }
+    // The file's own guess overflowing is only reported (the chordal guess
+    // replaces it): a warning, and the optimum is found.
+    let input = write(
+        &dir,
+        "huge-guess.g2o",
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1e300 0 0\nVERTEX_SE2 2 2 0 0\n\
+         EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 1 2 1 0 0 1 0 0 1 0 1\n",
+    );
+    let r = run_json(input.to_str().expect("utf-8"), &out, &[]);
+    assert!(r["input_chi2"].is_null());
+    assert!(
+        r["warnings"].to_string().contains("non-finite χ²"),
+        "{}",
+        r["warnings"]
+    );
+    assert!(r["optimizer"]["final_chi2"].as_f64().expect("finite") < 1e-12);
+}
+
+/// A chain of `n` SE(2) poses with one loop, at extreme scales: positions
+/// up to 10^±`pos_exp`, information 10^±`info_exp`, measurements that
+/// disagree with the guess.
+fn extreme_graph(
+    n: usize,
+    pos_exp: i32,
+    info_exp: i32,
+    seeds: &[(f64, f64, f64)],
+) -> PoseGraph<Se2, 3> {
+    let scale = 10f64.powi(pos_exp);
+    let info = Matrix3::identity() * 10f64.powi(info_exp);
+    let mut g = PoseGraph::new();
+    for k in 0..n {
+        let (a, b, c) = seeds[k % seeds.len()];
+        g.add_vertex(k as u64, Se2::new(a * scale * k as f64, b * scale, c * 3.0))
+            .expect("new id");
+    }
+    for k in 1..n {
+        let (a, b, c) = seeds[(k * 7) % seeds.len()];
+        g.add_edge(
+            (k - 1) as u64,
+            k as u64,
+            Se2::new(scale * (1.0 + a), scale * b, c),
+            info,
+            None,
+        )
+        .expect("edge");
+    }
+    let (a, b, c) = seeds[0];
+    g.add_edge(
+        0,
+        (n - 1) as u64,
+        Se2::new(scale * a * n as f64, scale * b, c * 2.0),
+        info,
+        None,
+    )
+    .expect("loop");
+    g
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// LM and GN at scales where χ² overflows at some trial points: the
+    /// result is finite poses with an objective no worse than the start,
+    /// or a named error; never NaN.
+    #[test]
+    fn lm_never_returns_non_finite_poses(
+        n in 3usize..8,
+        pos_exp in -5i32..160,
+        info_exp in -200i32..200,
+        seeds in prop::collection::vec((-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0), 1..8),
+        gn in any::<bool>(),
+    ) {
+        let mut g = extreme_graph(n, pos_exp, info_exp, &seeds);
+        let start = g.chi2();
+        let options = SolverOptions {
+            method: if gn { Method::GaussNewton } else { Method::LevenbergMarquardt },
+            max_iterations: 30,
+            ..SolverOptions::default()
+        };
+        match optimize(&mut g, &options) {
+            Ok(s) => {
+                prop_assert!(g.poses.iter().all(|p| p.is_finite()), "{:?}", g.poses);
+                prop_assert!(s.final_objective.is_finite());
+                prop_assert!(s.final_objective <= s.initial_objective, "{s:?}");
+                prop_assert!(s.history.iter().all(|r| r.objective.is_finite()));
+                prop_assert!(s.final_objective <= start || !start.is_finite());
+            }
+            Err(SolveError::NonFiniteStart) => prop_assert!(!start.is_finite()),
+            Err(SolveError::NotPositiveDefinite { vertex }) => prop_assert!(vertex < n as u64),
+            Err(e) => prop_assert!(false, "unexpected error {e}"),
+        }
+    }
+}
