@@ -19,7 +19,7 @@ Cases
     25 for wrong ones, sigma 0.5 in log space (pgo corrupt's defaults);
   * the public max-mixture outlier files (*-maxmix-*.g2o; component 0 of every
     mixture edge; the last 1000 mixture edges are the outliers, MANIFEST.md),
-    counts assigned the same way (`pgo corrupt --outliers 0 --known-wrong-last 1000`).
+    counts assigned the same way (`pgo corrupt --wrong 0 --known-wrong-last 1000`).
   Each case is run twice: with the information matrices as published, and
   calibrated: every information matrix multiplied by one factor per dataset so
   that the clean graph's optimum has chi2/dof = 1 (dof = sum of edge
@@ -300,7 +300,7 @@ def prepare(args, work):
                 seed += 1
                 case = "%s %s %d" % (name, policy, n)
                 stem = os.path.join(work, "%s-%s-%d" % (name, policy, n))
-                flags = ["--outliers", str(n), "--outlier-policy", policy, "--seed", str(seed)]
+                flags = ["--wrong", str(n), "--wrong-mode", policy, "--seed", str(seed)]
                 cases.append(corrupt_case(args, case, name, src, stem, flags, clean=src))
     if args.maxmix:
         for base in MAXMIX_BASES:
@@ -314,7 +314,7 @@ def prepare(args, work):
                     continue
                 seed += 1
                 stem = os.path.join(work, name)
-                flags = ["--outliers", "0", "--known-wrong-last", "1000", "--seed", str(seed)]
+                flags = ["--wrong", "0", "--known-wrong-last", "1000", "--seed", str(seed)]
                 cases.append(corrupt_case(args, name, base, src, stem, flags, clean=None))
     return cases
 
