@@ -236,9 +236,11 @@ struct OptimizeArgs {
     /// Nonlinear least-squares method.
     #[arg(long, value_enum, default_value_t = SolverArg::Lm)]
     solver: SolverArg,
-    /// Most iterations, robust reweighting rounds included.
-    #[arg(long, value_name = "N", default_value_t = 100)]
-    max_iters: usize,
+    /// Most LM/GN iterations in all, robust reweighting rounds included.
+    /// Without it, each solve stops after 100 and the robust rounds are
+    /// bounded by their own limits.
+    #[arg(long, value_name = "N")]
+    max_iters: Option<usize>,
     /// Stop optimising after this many seconds (checked between iterations;
     /// reading, initialisation and writing not counted) and write the best
     /// estimate so far.
@@ -278,6 +280,12 @@ struct OptimizeArgs {
     /// 4.100); huber and cauchy √χ²_D(0.95) (2.796 / 3.548); dcs 1 (Φ = 1).
     #[arg(long, value_name = "C")]
     robust_c: Option<f64>,
+    /// EM: do not rescue the candidates the gate dropped. By default each is
+    /// held out of the weighting and accepted if its residual at the map made
+    /// from the kept candidates is that of an inlier (r² ≤ c² after the
+    /// variance factor); a wrong loop never shapes the map it is judged by.
+    #[arg(long)]
+    no_rescue: bool,
     /// Which edges are loop candidates: those with an inlier count, or also
     /// every edge between non-consecutive ids.
     #[arg(long, value_enum, default_value_t = CandidatesArg::Counted)]
@@ -653,7 +661,10 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
         SolverArg::Lm => Method::LevenbergMarquardt,
         SolverArg::Gn => Method::GaussNewton,
     };
-    config.solver.max_iterations = args.max_iters;
+    if let Some(n) = args.max_iters {
+        config.solver.max_iterations = n;
+    }
+    config.iteration_budget = args.max_iters;
     config.gate = args.gate;
     config.degenerate = match args.degenerate {
         DegenerateArg::KeepAll => DegeneratePolicy::KeepAll,
@@ -670,6 +681,7 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
         RobustArg::Gnc => RobustMethod::Gnc,
     };
     config.robust_c = args.robust_c;
+    config.rescue = !args.no_rescue;
     config.plot = args.plot.clone();
     config.candidates = match args.candidates {
         CandidatesArg::Counted => CandidateRule::Counted,

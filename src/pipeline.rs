@@ -48,6 +48,13 @@ pub struct OptimizeConfig {
     pub robust: RobustMethod,
     /// Kernel width override.
     pub robust_c: Option<f64>,
+    /// Most solver iterations in all, robust rounds included (`None`: each
+    /// solve bounded by `solver.max_iterations`, the rounds by their own
+    /// limits).
+    pub iteration_budget: Option<usize>,
+    /// EM: rescue the candidates the gate dropped whose residual at the map
+    /// of the kept ones is that of an inlier (default on).
+    pub rescue: bool,
     /// Write SVG pictures (inlier-count histogram with the fitted mixture;
     /// trajectory before and after) into this directory.
     pub plot: Option<PathBuf>,
@@ -84,6 +91,8 @@ impl OptimizeConfig {
             candidates: CandidateRule::default(),
             robust: RobustMethod::default(),
             robust_c: None,
+            iteration_budget: None,
+            rescue: true,
             plot: None,
         }
     }
@@ -211,6 +220,9 @@ struct Candidates {
     kept: Vec<bool>,
     /// Its prior inlier probability for the robust back end.
     priors: Vec<f64>,
+    /// Whether EM may rescue the dropped ones: a threshold was learned or
+    /// given (not off, not soft, not a degenerate fit).
+    rescuable: bool,
 }
 
 fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
@@ -257,14 +269,18 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     // The robust method decides how much the initial guess may trust the
     // candidates: not at all when they are to be reweighted, since a wrong
     // loop in the chordal problem bends the whole map.
-    let kept: Vec<usize> = (0..candidates.edges.len())
-        .filter(|&i| candidates.kept[i])
-        .collect();
-    let method = if kept.is_empty() {
-        RobustMethod::None
-    } else {
+    let method = if candidates.kept.iter().any(|&k| k) {
         config.robust
+    } else {
+        RobustMethod::None
     };
+    // The candidates the robust method weighs: those the gate kept, and for
+    // EM with --rescue the ones it dropped too, held out of the weighting and
+    // decided at the maps of the others (see `Reweighter::hold_out`).
+    let rescue = method == RobustMethod::Em && config.rescue && candidates.rescuable;
+    let kept: Vec<usize> = (0..candidates.edges.len())
+        .filter(|&i| candidates.kept[i] || rescue)
+        .collect();
     let mut init_weights = weights.clone();
     if method != RobustMethod::None {
         for &k in &candidates.edges {
@@ -323,6 +339,8 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         robust_options,
         kept.iter().map(|&i| candidates.priors[i]).collect(),
     );
+    let held_out: Vec<bool> = kept.iter().map(|&i| !candidates.kept[i]).collect();
+    reweighter.hold_out(&held_out);
     for (j, &i) in kept.iter().enumerate() {
         weights[candidates.edges[i]] = reweighter.weights()[j];
     }
@@ -357,17 +375,15 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     // --max-iters and --time-limit bound the whole optimisation, robust
     // rounds included: each run gets what is left of both.
     let deadline = full.time_limit.map(|t| Instant::now() + t);
+    let budget = config.iteration_budget.unwrap_or(usize::MAX);
     let within_budget = |options: &SolverOptions, used: usize| SolverOptions {
-        max_iterations: options
-            .max_iterations
-            .min(full.max_iterations.saturating_sub(used)),
+        max_iterations: options.max_iterations.min(budget.saturating_sub(used)),
         time_limit: deadline.map(|d| d.saturating_duration_since(Instant::now())),
         ..options.clone()
     };
-    let exhausted =
-        |used: usize| used >= full.max_iterations || deadline.is_some_and(|d| Instant::now() >= d);
+    let exhausted = |used: usize| used >= budget || deadline.is_some_and(|d| Instant::now() >= d);
     let out_of_budget = |summary: &mut crate::solve::Summary| {
-        summary.stop_reason = if summary.iterations >= full.max_iterations {
+        summary.stop_reason = if summary.iterations >= budget {
             crate::solve::StopReason::MaxIterations
         } else {
             crate::solve::StopReason::TimeLimit
@@ -398,13 +414,17 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         if stop {
             break;
         }
-        let mut r2 = candidate_r2(graph);
-        if reweighter.full_solve() {
-            let s2 = decision_scale(graph, &weights);
-            noise_scale = Some(s2);
-            r2.iter_mut().for_each(|r| *r /= s2);
+        // EM decides on r²/s², s² the variance factor of the latest map.
+        let r2 = candidate_r2(graph);
+        let s2 = if method == RobustMethod::Em {
+            decision_scale(graph, &weights)
+        } else {
+            1.0
+        };
+        let again = reweighter.update_scaled(&r2, s2);
+        if reweighter.full_solve() || !again {
+            noise_scale = Some(s2).filter(|_| method == RobustMethod::Em);
         }
-        let again = reweighter.update(&r2);
         let changed = kept
             .iter()
             .enumerate()
@@ -447,8 +467,9 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let optimizer = solver.optimizer;
     // EM reports its posteriors at the final map (≥ ½ exactly for the loops
     // the map was solved with); the others the weights of the last solve.
+    let final_weights = reweighter.final_weights();
     for (j, &i) in kept.iter().enumerate() {
-        weights[candidates.edges[i]] = reweighter.final_weights()[j];
+        weights[candidates.edges[i]] = final_weights[j];
     }
     if graph.poses.iter().any(|p| !p.is_finite()) {
         return Err(PipelineError::NonFiniteResult {
@@ -476,6 +497,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             .filter(|s| **s == CandidateState::Off)
             .count(),
         variance_factor: noise_scale,
+        rescued_loops: reweighter.rescued(),
     };
 
     chi2_test(graph, &weights, config, report);
@@ -718,16 +740,28 @@ fn gate_candidates<P: G2oPose<D>, const D: usize>(
             ));
         }
     }
-    // The soft gate hands the mixture's posterior on as a prior; otherwise
-    // nothing is known beyond the gate (½).
+    // The soft gate hands the mixture's posterior on as a prior, and so does
+    // the hard gate for the candidates it dropped (EM may rescue them, with
+    // the count's evidence against them); a kept candidate is known no
+    // better than ½ (nor is a dropped one under a fixed threshold without a
+    // fit). A zero count is no loop by definition: prior 0.
     let max = report.gate.max_inliers;
+    let rescuable =
+        matches!(config.gate, GateMode::Auto | GateMode::Fixed(_)) && !decision.degenerate;
+    let posterior = |n: u64| match &decision.fit {
+        _ if n == 0 => 0.0,
+        Some(fit) => fit
+            .mixture
+            .as_ref()
+            .map_or(0.5, |m| m.posterior_true_loop(n, max).clamp(1e-6, 0.5)),
+        None => 0.5,
+    };
     let priors = counts
         .iter()
-        .map(|c| match (config.gate, &decision.fit, c) {
-            (GateMode::Soft, Some(fit), Some(n)) if !decision.degenerate => fit
-                .mixture
-                .as_ref()
-                .map_or(0.5, |m| m.posterior_true_loop(*n, max).clamp(1e-6, 0.5)),
+        .zip(&decision.kept)
+        .map(|(c, &kept)| match (config.gate, c) {
+            (GateMode::Soft, Some(n)) if !decision.degenerate => posterior(*n),
+            (_, Some(n)) if rescuable && !kept => posterior(*n),
             _ => 0.5,
         })
         .collect();
@@ -736,6 +770,7 @@ fn gate_candidates<P: G2oPose<D>, const D: usize>(
         counts,
         kept: decision.kept,
         priors,
+        rescuable,
     }
 }
 

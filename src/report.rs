@@ -166,6 +166,9 @@ pub struct RobustReport {
     /// so that under-confident (square-root) information does not let wrong
     /// loops through; `null` for the other methods.
     pub variance_factor: Option<f64>,
+    /// EM: candidates the gate dropped that were accepted at the map of the
+    /// kept ones (`--rescue`).
+    pub rescued_loops: usize,
 }
 
 /// One loop candidate's fate.

@@ -231,6 +231,9 @@ pub struct Reweighter {
     weights: Vec<f64>,
     posteriors: Vec<f64>,
     states: Vec<CandidateState>,
+    /// EM: candidates held out of the weighting phase (those the gate
+    /// dropped), decided only at the decided maps.
+    held_out: Vec<bool>,
     rounds: usize,
     mu: Option<f64>,
     phase: EmPhase,
@@ -271,6 +274,7 @@ impl Reweighter {
             posteriors: weights.clone(),
             weights,
             states: vec![CandidateState::Active; n],
+            held_out: vec![false; n],
             priors,
             rounds: 0,
             mu: None,
@@ -281,19 +285,54 @@ impl Reweighter {
         }
     }
 
+    /// EM: holds the candidates marked `true` out of the weighting phase
+    /// (weight 0, switched off) and lets only EM's hard decisions accept
+    /// them, at the maps decided without them. This is how the candidates
+    /// the gate dropped are *rescued*: a true loop whose count fell below
+    /// `T_GV` is accepted when its residual at the map of the gated loops is
+    /// that of an inlier; a wrong one never shapes the map it is judged by.
+    /// Without effect for the other methods (held-out candidates stay at
+    /// weight 0).
+    pub fn hold_out(&mut self, held_out: &[bool]) {
+        for (k, &h) in held_out.iter().enumerate().take(self.weights.len()) {
+            self.held_out[k] = h;
+            if h {
+                self.weights[k] = 0.0;
+                self.posteriors[k] = 0.0;
+                self.states[k] = CandidateState::Off;
+            }
+        }
+    }
+
+    /// EM: candidates held out of the weighting phase that are accepted
+    /// (final weight ≥ ½).
+    pub fn rescued(&self) -> usize {
+        self.held_out
+            .iter()
+            .zip(self.final_weights())
+            .filter(|(h, w)| **h && *w >= 0.5)
+            .count()
+    }
+
     /// The weight of every candidate for the next solve.
     pub fn weights(&self) -> &[f64] {
         &self.weights
     }
 
     /// The weight to report for every candidate: for EM the posterior at the
-    /// final solution (≥ ½ exactly for the accepted candidates), for the
-    /// other methods the weights of the last solve.
-    pub fn final_weights(&self) -> &[f64] {
-        if self.options.method == RobustMethod::Em {
-            &self.posteriors
+    /// final solution for the accepted candidates (at least ½: the map was
+    /// solved with them) and 0 for the others (switched off, removed, or
+    /// held out and not rescued); for the other methods the weights of the
+    /// last solve.
+    pub fn final_weights(&self) -> Vec<f64> {
+        if self.options.method == RobustMethod::Em && self.phase == EmPhase::Done {
+            self.weights
+                .iter()
+                .zip(&self.posteriors)
+                .map(|(&w, &p)| if w > 0.0 { p.max(0.5) } else { 0.0 })
+                .collect()
         } else {
-            &self.weights
+            self.weights.clone()
         }
     }
 
@@ -345,6 +384,14 @@ impl Reweighter {
     /// One E-step from the candidates' whitened squared residuals at the
     /// latest solution. Returns whether another solve is needed.
     pub fn update(&mut self, r2: &[f64]) -> bool {
+        self.update_scaled(r2, 1.0)
+    }
+
+    /// [`Reweighter::update`] with the noise scale `s²` of the latest
+    /// solution (its variance factor): EM's hard decisions, the first
+    /// included, judge `r²/s²`; its weighting rounds and the other methods
+    /// use `r²` as it is.
+    pub fn update_scaled(&mut self, r2: &[f64], s2: f64) -> bool {
         if !self.is_active() {
             return false;
         }
@@ -361,7 +408,7 @@ impl Reweighter {
             RobustMethod::Cauchy => self.apply(r2, |r2, _| cauchy_weight(r2, c)),
             RobustMethod::Dcs => self.apply(r2, |r2, _| dcs_weight(r2, c * c)),
             RobustMethod::Gnc => return self.gnc_step(r2, &old),
-            RobustMethod::Em => return self.em_step(r2, &old),
+            RobustMethod::Em => return self.em_step(r2, s2, &old),
         }
         max_change(&old, &self.weights) > self.options.tolerance
     }
@@ -387,22 +434,39 @@ impl Reweighter {
 
     /// One EM round: an E-step with switching off in the weighting phase, a
     /// hard decision in the deciding phase.
-    fn em_step(&mut self, r2: &[f64], old: &[f64]) -> bool {
+    fn em_step(&mut self, r2: &[f64], s2: f64, old: &[f64]) -> bool {
         let o = self.options;
+        let scaled: Vec<f64> = if s2 > 0.0 && s2.is_finite() && s2 != 1.0 {
+            r2.iter().map(|r| r / s2).collect()
+        } else {
+            r2.to_vec()
+        };
         let anneal = match self.anneal {
             // The first E-step: start wide enough that half the candidates
             // keep a weight ≥ ½ (the median residual), never below c².
-            None => (median(r2) / (o.c * o.c)).max(1.0),
+            None => {
+                let weighed: Vec<f64> = r2
+                    .iter()
+                    .zip(&self.held_out)
+                    .filter(|(_, h)| !**h)
+                    .map(|(r, _)| *r)
+                    .collect();
+                (median(&weighed) / (o.c * o.c)).max(1.0)
+            }
             Some(m) => (m / ANNEAL_FACTOR).max(1.0),
         };
         self.anneal = Some(anneal);
-        self.posterior(r2);
+        if matches!(self.phase, EmPhase::Weighting) {
+            self.posterior(r2);
+        } else {
+            self.posterior(&scaled);
+        }
         match self.phase {
             EmPhase::Done => false,
             EmPhase::Weighting => {
                 let old_states = self.states.clone();
                 for k in 0..self.weights.len() {
-                    if self.states[k] == CandidateState::Removed {
+                    if self.states[k] == CandidateState::Removed || self.held_out[k] {
                         continue;
                     }
                     let w = self.posteriors[k];
@@ -420,10 +484,10 @@ impl Reweighter {
                         .zip(&self.weights)
                         .all(|(a, b)| (*a >= 0.5) == (*b >= 0.5));
                 self.stable = if same_sets { self.stable + 1 } else { 0 };
-                if anneal > 1.0
-                    || max_change(old, &self.weights) > o.tolerance
-                        && self.stable < STABLE_ROUNDS
-                        && self.rounds < o.max_rounds
+                if self.rounds < o.max_rounds
+                    && (anneal > 1.0
+                        || max_change(old, &self.weights) > o.tolerance
+                            && self.stable < STABLE_ROUNDS)
                 {
                     return true;
                 }
@@ -435,7 +499,10 @@ impl Reweighter {
                         self.posteriors[k] = 0.0;
                     }
                 }
+                // Decisions are taken at the plain kernel width.
                 self.phase = EmPhase::Deciding { rounds: 0 };
+                self.anneal = Some(1.0);
+                self.posterior(&scaled);
                 self.decide(old)
             }
             EmPhase::Deciding { .. } => self.decide(old),

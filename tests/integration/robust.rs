@@ -88,7 +88,12 @@ fn counts(report: &Report, wrong: &[bool]) -> (usize, usize, usize) {
     for (l, &w) in report.loops.iter().zip(wrong) {
         assert!((0.0..=1.0).contains(&l.weight), "weight {}", l.weight);
         if !l.kept {
-            assert_eq!(l.weight, 0.0, "a candidate the gate dropped has weight 0");
+            // Dropped by the gate: left out (0), or rescued by EM (≥ ½).
+            assert!(
+                l.weight == 0.0 || l.weight >= 0.5,
+                "a candidate the gate dropped has weight {}",
+                l.weight
+            );
         }
         let accepted = l.weight >= 0.5;
         tp += usize::from(accepted && !w);
@@ -270,11 +275,62 @@ fn degenerate_counts_are_flagged_before_optimisation_or_fail_the_chi2_test() {
 }
 
 #[test]
+fn em_rescues_the_true_loops_the_gate_dropped_and_no_wrong_one() {
+    let dir = temp_dir("robust-rescue");
+    // The default count models overlap: a few true loops fall below T_GV.
+    let c = case(&dir, "overlap", options(OutlierPolicy::Random, 60, 41));
+    let without = pipeline::run(
+        &OptimizeConfig {
+            rescue: false,
+            ..OptimizeConfig::new(&c.noisy)
+        },
+        &mut |_| {},
+    )
+    .expect("optimise");
+    let with = run(&c.noisy, GateMode::Auto, RobustMethod::Em, None);
+    let (tp_without, fp_without, gated_true) = counts(&without, &c.wrong);
+    let (tp_with, fp_with, _) = counts(&with, &c.wrong);
+    let n_true = c.wrong.iter().filter(|w| !**w).count();
+    assert!(gated_true < n_true, "the gate drops some true loops");
+    assert_eq!((fp_without, fp_with), (0, 0));
+    // Without the rescue a dropped candidate stays at weight 0.
+    assert!(without.loops.iter().all(|l| l.kept || l.weight == 0.0));
+    assert_eq!(without.robust.rescued_loops, 0);
+    // With it, the dropped true loops consistent with the map come back.
+    let rescued = with
+        .loops
+        .iter()
+        .filter(|l| !l.kept && l.weight >= 0.5)
+        .count();
+    assert_eq!(with.robust.rescued_loops, rescued);
+    assert!(rescued > 0);
+    assert_eq!(tp_with, tp_without + rescued);
+    assert!(
+        tp_with as f64 >= 0.97 * n_true as f64,
+        "{tp_with} of {n_true} true loops accepted"
+    );
+    // The wrong candidates the gate dropped stay out although some of them
+    // would fit a map bent by them: they never shape it.
+    for (l, &w) in with.loops.iter().zip(&c.wrong) {
+        if w {
+            assert_eq!(l.weight, 0.0, "wrong {}–{}", l.from, l.to);
+        }
+    }
+}
+
+#[test]
 fn the_soft_gate_recovers_true_loops_below_the_threshold() {
     let dir = temp_dir("robust-soft");
     // The default count models overlap: a few true loops fall below T_GV.
     let c = case(&dir, "overlap", options(OutlierPolicy::Random, 60, 41));
-    let hard = run(&c.noisy, GateMode::Auto, RobustMethod::Em, None);
+    let hard = pipeline::run(
+        &OptimizeConfig {
+            rescue: false,
+            ..OptimizeConfig::new(&c.noisy)
+        },
+        &mut |_| {},
+    )
+    .expect("optimise");
     let soft = run(&c.noisy, GateMode::Soft, RobustMethod::Em, None);
     let (hard_tp, hard_fp, gated_true) = counts(&hard, &c.wrong);
     let (soft_tp, soft_fp, _) = counts(&soft, &c.wrong);
