@@ -337,6 +337,19 @@ impl Report {
         let mut verdict = Vec::new();
         if self.loop_candidates > 0 {
             verdict.push(self.gate.summary());
+            if self.robust.method != RobustMethod::None {
+                let rescued = if self.robust.rescued_loops > 0 {
+                    format!(" ({} rescued below the gate)", self.robust.rescued_loops)
+                } else {
+                    String::new()
+                };
+                verdict.push(format!(
+                    "robust {}: accepted {}{rescued}, rejected {}",
+                    self.robust.method.name(),
+                    self.robust.active_loops,
+                    self.robust.rejected_loops
+                ));
+            }
         }
         if let Some(t) = &self.chi2_test {
             verdict.push(format!(

@@ -52,6 +52,20 @@ pub enum RobustMethod {
     Gnc,
 }
 
+impl RobustMethod {
+    /// Its name on the command line and in the JSON report.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Em => "em",
+            Self::Huber => "huber",
+            Self::Cauchy => "cauchy",
+            Self::Dcs => "dcs",
+            Self::Gnc => "gnc",
+        }
+    }
+}
+
 /// Options of the robust reweighting.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RobustOptions {
