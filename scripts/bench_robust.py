@@ -61,6 +61,7 @@ Writes the raw results to --out (JSON) and the tables to the same name with
 .md, and prints the tables.
 """
 import argparse
+import copy
 import json
 import math
 import os
@@ -391,12 +392,29 @@ def main():
                    "factor": ref["factor"] if scale == "calibrated" else 1.0,
                    "candidates": len(wrong), "wrong": sum(wrong), "tools": {}}
             for tool in args.tools:
-                out_g2o = os.path.join(args.work, "result.g2o")
+                # One scratch file per process: several runs may share --work.
+                out_g2o = os.path.join(args.work, "result-%d.g2o" % os.getpid())
                 if tool in PGO_TOOLS:
                     r = run_pgo(args, path, PGO_TOOLS[tool], out_g2o)
                 else:
+                    # A peer's result on a file depends on nothing pgo does:
+                    # cached per input, tool and timeout, so that pgo can be
+                    # re-run alone (delete --work/peers to run them again).
                     script, kind = PEER_TOOLS[tool]
-                    r = run_peer(args, path, script, kind, out_g2o, ref["dim"])
+                    cache = os.path.join(args.work, "peers", "%s.%s.t%g.json" % (
+                        os.path.basename(path), tool.replace(" ", "-"), args.timeout))
+                    if os.path.exists(cache):
+                        with open(cache) as f:
+                            r = json.load(f)
+                        if "positions" in r:
+                            r["positions"] = {int(k): tuple(v) for k, v in r["positions"].items()}
+                    else:
+                        r = run_peer(args, path, script, kind, out_g2o, ref["dim"])
+                        os.makedirs(os.path.dirname(cache), exist_ok=True)
+                        with open(cache + ".tmp", "w") as f:
+                            json.dump(r, f)
+                        os.replace(cache + ".tmp", cache)
+                    r = copy.deepcopy(r)
                 if "error" not in r:
                     if len(r["weights"]) != len(wrong):
                         r = {"error": "%d loop weights for %d candidates" % (len(r["weights"]), len(wrong))}

@@ -761,7 +761,7 @@ fn gate_candidates<P: G2oPose<D>, const D: usize>(
         .zip(&decision.kept)
         .map(|(c, &kept)| match (config.gate, c) {
             (GateMode::Soft, Some(n)) if !decision.degenerate => posterior(*n),
-            (_, Some(n)) if rescuable && !kept => posterior(*n),
+            (_, Some(0)) if rescuable && !kept => 0.0,
             _ => 0.5,
         })
         .collect();

@@ -299,12 +299,13 @@ impl Reweighter {
         }
     }
 
-    /// EM: holds the candidates marked `true` out of the weighting phase
-    /// (weight 0, switched off) and lets only EM's hard decisions accept
-    /// them, at the maps decided without them. This is how the candidates
-    /// the gate dropped are *rescued*: a true loop whose count fell below
-    /// `T_GV` is accepted when its residual at the map of the gated loops is
-    /// that of an inlier; a wrong one never shapes the map it is judged by.
+    /// EM: holds the candidates marked `true` out of the weighting and the
+    /// decisions (weight 0, switched off) and judges them once, at the final
+    /// decided map, which none of them shaped: those whose posterior there
+    /// is ≥ ½ are accepted and the map is solved once more with them. This
+    /// is how the candidates the gate dropped are *rescued*: a true loop
+    /// whose count fell below `T_GV` comes back when its residual is that of
+    /// an inlier, and a wrong one cannot bend the map until it fits.
     /// Without effect for the other methods (held-out candidates stay at
     /// weight 0).
     pub fn hold_out(&mut self, held_out: &[bool]) {
@@ -531,7 +532,8 @@ impl Reweighter {
             return false;
         };
         for k in 0..self.weights.len() {
-            let accept = self.posteriors[k] >= 0.5;
+            // Held-out candidates wait for the rescue, at the final map.
+            let accept = !self.held_out[k] && self.posteriors[k] >= 0.5;
             self.weights[k] = if accept { 1.0 } else { 0.0 };
             if self.states[k] != CandidateState::Removed {
                 self.states[k] = if accept {
@@ -547,15 +549,32 @@ impl Reweighter {
         if changed && rounds < MAX_DECISIONS {
             self.phase = EmPhase::Deciding { rounds: rounds + 1 };
             self.restart_pending = self.options.restart;
-            true
-        } else {
-            if changed {
-                // Out of decisions: keep the set the map was solved with.
-                self.weights.copy_from_slice(old);
-            }
-            self.phase = EmPhase::Done;
-            false
+            return true;
         }
+        if changed {
+            // Out of decisions: keep the set the map was solved with.
+            self.weights.copy_from_slice(old);
+        }
+        self.phase = EmPhase::Done;
+        self.rescue()
+    }
+
+    /// Accepts the held-out candidates whose posterior at the decided map
+    /// (which none of them shaped) is ≥ ½, once and for all; returns whether
+    /// any was (and the map is to be solved again with them).
+    fn rescue(&mut self) -> bool {
+        let mut any = false;
+        for k in 0..self.weights.len() {
+            if self.held_out[k]
+                && self.states[k] != CandidateState::Removed
+                && self.posteriors[k] >= 0.5
+            {
+                self.weights[k] = 1.0;
+                self.states[k] = CandidateState::Active;
+                any = true;
+            }
+        }
+        any
     }
 
     /// One GNC step: weights at the current μ, then μ grows.
@@ -708,6 +727,27 @@ mod tests {
             assert!((w - e).abs() < 1e-12, "{:?}", rw.final_weights());
         }
         assert!(!rw.update(&[1.0, 0.0, 3.5, 0.5]), "finished for good");
+    }
+
+    #[test]
+    fn em_judges_held_out_candidates_once_at_the_decided_map() {
+        let mut rw = Reweighter::new(em_options(), vec![0.5; 3]);
+        rw.hold_out(&[false, true, true]);
+        assert_eq!(rw.weights(), &[1.0, 0.0, 0.0]);
+        // Candidate 1 fits (r² = 1 < c² = 4), candidate 2 does not.
+        let r2 = [1.0, 1.0, 100.0];
+        let mut solves = 0;
+        while rw.update(&r2) {
+            solves += 1;
+            // Not weighed, not decided: out of every map until the rescue.
+            if rw.weights()[1] != 0.0 {
+                assert_eq!(rw.weights(), &[1.0, 1.0, 0.0], "rescued: one more solve");
+            }
+            assert!(solves < 20);
+        }
+        assert_eq!(rw.final_weights(), vec![0.8, 0.8, 0.0]);
+        assert_eq!(rw.rescued(), 1);
+        assert_eq!(rw.states()[2], CandidateState::Off);
     }
 
     #[test]
