@@ -366,7 +366,16 @@ def main():
     ap.add_argument("--timeout", type=int, default=300)
     ap.add_argument("--pgo-flags", nargs="*", default=[], help="extra flags for every pgo run (e.g. --robust-c 4)")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--tables-from", nargs="*", default=None, metavar="JSON",
+                    help="print the tables of earlier runs' --out files (merged) and exit")
     args = ap.parse_args()
+    if args.tables_from:
+        results = []
+        for path in args.tables_from:
+            with open(path) as f:
+                results += json.load(f)["results"]
+        print(tables(results, args.tools))
+        return
     args.work = os.path.abspath(args.work)
     os.makedirs(args.work, exist_ok=True)
     sys.path.insert(0, args.peers)
