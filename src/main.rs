@@ -43,23 +43,33 @@ struct CorruptArgs {
     /// a spanning tree first; mixture edges become plain edges).
     input: PathBuf,
     /// Wrong loop candidates to add.
-    #[arg(long, default_value_t = 100)]
-    outliers: usize,
-    /// How wrong candidates are placed.
-    #[arg(long, value_enum, default_value_t = PolicyArg::Random)]
-    outlier_policy: PolicyArg,
+    #[arg(
+        long,
+        visible_alias = "outliers",
+        value_name = "N",
+        default_value_t = 100
+    )]
+    wrong: usize,
+    /// How wrong candidates are placed: any two poses, poses within 20 of
+    /// each other, or groups of consecutive mutually consistent wrong loops.
+    #[arg(long, visible_alias = "outlier-policy", value_enum, default_value_t = PolicyArg::Random)]
+    wrong_mode: PolicyArg,
     /// Size of the groups of grouped wrong candidates.
     #[arg(long, default_value_t = 10)]
     group_size: usize,
-    /// Median inlier count of true loops (every existing edge with |i − j| ≠ 1).
-    #[arg(long, default_value_t = 150.0)]
-    true_median: f64,
-    /// Median inlier count of wrong candidates.
-    #[arg(long, default_value_t = 25.0)]
-    wrong_median: f64,
-    /// σ of the natural log of the counts (both populations).
-    #[arg(long, default_value_t = 0.5)]
-    count_sigma: f64,
+    /// Inlier counts of true loops (every existing edge with |i − j| ≠ 1):
+    /// median and σ of ln count [default: 150,0.5].
+    #[arg(long, visible_alias = "true-median", value_name = "MEDIAN[,SIGMA]", value_parser = parse_count_model)]
+    true_inliers: Option<CountModel>,
+    /// Inlier counts of wrong candidates: median and σ of ln count
+    /// [default: 25,0.5].
+    #[arg(long, visible_alias = "wrong-median", value_name = "MEDIAN[,SIGMA]", value_parser = parse_count_model)]
+    wrong_inliers: Option<CountModel>,
+    /// The last N non-sequential edges of the input are known to be wrong (the
+    /// max-mixture outlier files: the last 1000 mixture edges): they are
+    /// labelled wrong and get wrong-loop counts.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    known_wrong_last: usize,
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -168,6 +178,21 @@ struct CountModel {
     sigma: Option<f64>,
 }
 
+/// The inlier model of the command line, [`pgo::simulate::InlierModel`]'s
+/// defaults where a part is not given.
+fn inlier_model(
+    true_loops: Option<CountModel>,
+    wrong: Option<CountModel>,
+) -> pgo::simulate::InlierModel {
+    let d = pgo::simulate::InlierModel::default();
+    pgo::simulate::InlierModel {
+        true_median: true_loops.map_or(d.true_median, |m| m.median),
+        true_sigma: true_loops.and_then(|m| m.sigma).unwrap_or(d.true_sigma),
+        wrong_median: wrong.map_or(d.wrong_median, |m| m.median),
+        wrong_sigma: wrong.and_then(|m| m.sigma).unwrap_or(d.wrong_sigma),
+    }
+}
+
 fn parse_count_model(s: &str) -> Result<CountModel, String> {
     let number = |t: &str| {
         t.trim()
@@ -211,9 +236,11 @@ struct OptimizeArgs {
     /// Nonlinear least-squares method.
     #[arg(long, value_enum, default_value_t = SolverArg::Lm)]
     solver: SolverArg,
-    /// Most iterations, robust reweighting rounds included.
-    #[arg(long, value_name = "N", default_value_t = 100)]
-    max_iters: usize,
+    /// Most LM/GN iterations in all, robust reweighting rounds included.
+    /// Without it, each solve stops after 100 and the robust rounds are
+    /// bounded by their own limits.
+    #[arg(long, value_name = "N")]
+    max_iters: Option<usize>,
     /// Stop optimising after this many seconds (checked between iterations;
     /// reading, initialisation and writing not counted) and write the best
     /// estimate so far.
@@ -248,10 +275,17 @@ struct OptimizeArgs {
     /// Robust weighting of the loop candidates that pass the gate.
     #[arg(long, value_enum, default_value_t = RobustArg::Em)]
     robust: RobustArg,
-    /// Kernel width c on the whitened residual norm (default √χ²_D(0.95):
-    /// 2.796 in 2D, 3.548 in 3D).
+    /// Kernel width c on the whitened residual norm. Defaults: em
+    /// √χ²_D(1 − 10⁻⁶) (5.54 in 2D, 6.19 in 3D); gnc √χ²_D(0.99) (3.368 /
+    /// 4.100); huber and cauchy √χ²_D(0.95) (2.796 / 3.548); dcs 1 (Φ = 1).
     #[arg(long, value_name = "C")]
     robust_c: Option<f64>,
+    /// EM: do not rescue the candidates the gate dropped. By default each is
+    /// held out of the weighting and accepted if its residual at the map made
+    /// from the kept candidates is that of an inlier (r² ≤ c² after the
+    /// variance factor); a wrong loop never shapes the map it is judged by.
+    #[arg(long)]
+    no_rescue: bool,
     /// Which edges are loop candidates: those with an inlier count, or also
     /// every edge between non-consecutive ids.
     #[arg(long, value_enum, default_value_t = CandidatesArg::Counted)]
@@ -390,7 +424,7 @@ fn refuse_to_overwrite_input(
 
 fn corrupt(args: CorruptArgs) -> ExitCode {
     use pgo::graph::AnyPoseGraph;
-    use pgo::simulate::{CorruptionOptions, InlierModel};
+    use pgo::simulate::CorruptionOptions;
     if let Err(message) = refuse_to_overwrite_input(&args.input, &args.output) {
         eprintln!("error: {message}");
         return ExitCode::from(2);
@@ -403,15 +437,11 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
         }
     };
     let options = CorruptionOptions {
-        outliers: args.outliers,
-        policy: args.outlier_policy.into(),
+        outliers: args.wrong,
+        policy: args.wrong_mode.into(),
         group_size: args.group_size,
-        inliers: Some(InlierModel {
-            true_median: args.true_median,
-            true_sigma: args.count_sigma,
-            wrong_median: args.wrong_median,
-            wrong_sigma: args.count_sigma,
-        }),
+        known_wrong_last: args.known_wrong_last,
+        inliers: Some(inlier_model(args.true_inliers, args.wrong_inliers)),
         ..CorruptionOptions::default()
     };
     let result = match &mut file.graph {
@@ -441,7 +471,6 @@ where
 {
     use pgo::io::{g2o::write_graph, write_atomically};
     use rand::SeedableRng;
-    use std::io::Write as _;
     pgo::solve::init::initialize(g, missing, Initialization::File, None)
         .map_err(|e| (2, format!("{}: {e}", args.input.display())))?;
     let mut rng = rand::rngs::StdRng::seed_from_u64(args.seed);
@@ -450,20 +479,8 @@ where
     write_atomically(&args.output, |w| write_graph(g, w))
         .map_err(|e| (1, format!("{}: {e}", args.output.display())))?;
     if let Some(l) = &args.labels {
-        write_atomically(l, |w| {
-            writeln!(w, "edge,from,to,wrong")?;
-            for (k, (e, wrong)) in g.edges.iter().zip(&corruption.wrong).enumerate() {
-                writeln!(
-                    w,
-                    "{k},{},{},{}",
-                    g.id(e.from),
-                    g.id(e.to),
-                    u8::from(*wrong)
-                )?;
-            }
-            Ok(())
-        })
-        .map_err(|e| (1, format!("{}: {e}", l.display())))?;
+        write_atomically(l, |w| pgo::simulate::write_labels(g, &corruption.wrong, w))
+            .map_err(|e| (1, format!("{}: {e}", l.display())))?;
     }
     Ok(format!(
         "wrote {}: {} true loop candidates with counts, {} wrong candidates",
@@ -474,7 +491,7 @@ where
 }
 
 fn simulate(args: SimulateArgs) -> ExitCode {
-    use pgo::simulate::{self, AnySimulation, InlierModel, SimulationOptions, World};
+    use pgo::simulate::{self, AnySimulation, SimulationOptions, World};
     let options = SimulationOptions {
         world: match args.world {
             WorldArg::Grid2d => World::Grid2d,
@@ -490,23 +507,7 @@ fn simulate(args: SimulateArgs) -> ExitCode {
         outlier_policy: args.wrong_mode.into(),
         group_size: args.group_size,
         inliers: (args.inliers || args.true_inliers.is_some() || args.wrong_inliers.is_some())
-            .then(|| {
-                let d = InlierModel::default();
-                let t = args.true_inliers.unwrap_or(CountModel {
-                    median: d.true_median,
-                    sigma: None,
-                });
-                let w = args.wrong_inliers.unwrap_or(CountModel {
-                    median: d.wrong_median,
-                    sigma: None,
-                });
-                InlierModel {
-                    true_median: t.median,
-                    true_sigma: t.sigma.unwrap_or(d.true_sigma),
-                    wrong_median: w.median,
-                    wrong_sigma: w.sigma.unwrap_or(d.wrong_sigma),
-                }
-            }),
+            .then(|| inlier_model(args.true_inliers, args.wrong_inliers)),
     };
     let result = match simulate::simulate(&options) {
         Ok(AnySimulation::Planar(s)) => write_simulation(&s, &args),
@@ -533,7 +534,6 @@ fn write_simulation<P: pgo::io::g2o::G2oPose<D>, const D: usize>(
     args: &SimulateArgs,
 ) -> Result<String, String> {
     use pgo::io::{g2o::write_graph, write_atomically};
-    use std::io::Write as _;
     let write = |path: &PathBuf, g: &pgo::graph::PoseGraph<P, D>| {
         write_atomically(path, |w| write_graph(g, w))
             .map_err(|e| format!("{}: {e}", path.display()))
@@ -543,19 +543,8 @@ fn write_simulation<P: pgo::io::g2o::G2oPose<D>, const D: usize>(
         write(t, &sim.truth)?;
     }
     if let Some(l) = &args.labels {
-        let g = &sim.noisy;
         write_atomically(l, |w| {
-            writeln!(w, "edge,from,to,wrong")?;
-            for (k, (e, wrong)) in g.edges.iter().zip(&sim.wrong).enumerate() {
-                writeln!(
-                    w,
-                    "{k},{},{},{}",
-                    g.id(e.from),
-                    g.id(e.to),
-                    u8::from(*wrong)
-                )?;
-            }
-            Ok(())
+            pgo::simulate::write_labels(&sim.noisy, &sim.wrong, w)
         })
         .map_err(|e| format!("{}: {e}", l.display()))?;
     }
@@ -673,7 +662,10 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
         SolverArg::Lm => Method::LevenbergMarquardt,
         SolverArg::Gn => Method::GaussNewton,
     };
-    config.solver.max_iterations = args.max_iters;
+    if let Some(n) = args.max_iters {
+        config.solver.max_iterations = n;
+    }
+    config.iteration_budget = args.max_iters;
     config.gate = args.gate;
     config.degenerate = match args.degenerate {
         DegenerateArg::KeepAll => DegeneratePolicy::KeepAll,
@@ -690,6 +682,7 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
         RobustArg::Gnc => RobustMethod::Gnc,
     };
     config.robust_c = args.robust_c;
+    config.rescue = !args.no_rescue;
     config.plot = args.plot.clone();
     config.candidates = match args.candidates {
         CandidatesArg::Counted => CandidateRule::Counted,

@@ -48,6 +48,13 @@ pub struct OptimizeConfig {
     pub robust: RobustMethod,
     /// Kernel width override.
     pub robust_c: Option<f64>,
+    /// Most solver iterations in all, robust rounds included (`None`: each
+    /// solve bounded by `solver.max_iterations`, the rounds by their own
+    /// limits).
+    pub iteration_budget: Option<usize>,
+    /// EM: rescue the candidates the gate dropped whose residual at the map
+    /// of the kept ones is that of an inlier (default on).
+    pub rescue: bool,
     /// Write SVG pictures (inlier-count histogram with the fitted mixture;
     /// trajectory before and after) into this directory.
     pub plot: Option<PathBuf>,
@@ -84,6 +91,8 @@ impl OptimizeConfig {
             candidates: CandidateRule::default(),
             robust: RobustMethod::default(),
             robust_c: None,
+            iteration_budget: None,
+            rescue: true,
             plot: None,
         }
     }
@@ -211,6 +220,9 @@ struct Candidates {
     kept: Vec<bool>,
     /// Its prior inlier probability for the robust back end.
     priors: Vec<f64>,
+    /// Whether EM may rescue the dropped ones: a threshold was learned or
+    /// given (not off, not soft, not a degenerate fit).
+    rescuable: bool,
 }
 
 fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
@@ -251,20 +263,24 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     }
 
     // An unconstrained vertex makes every later step meaningless: say so first.
-    let mut optimizer =
+    let optimizer =
         Optimizer::new(graph, Some(&weights), config.solver.clone()).map_err(solve_error)?;
 
     // The robust method decides how much the initial guess may trust the
     // candidates: not at all when they are to be reweighted, since a wrong
     // loop in the chordal problem bends the whole map.
-    let kept: Vec<usize> = (0..candidates.edges.len())
-        .filter(|&i| candidates.kept[i])
-        .collect();
-    let method = if kept.is_empty() {
-        RobustMethod::None
-    } else {
+    let method = if candidates.kept.iter().any(|&k| k) {
         config.robust
+    } else {
+        RobustMethod::None
     };
+    // The candidates the robust method weighs: those the gate kept, and for
+    // EM with --rescue the ones it dropped too, held out of the weighting and
+    // decided at the maps of the others (see `Reweighter::hold_out`).
+    let rescue = method == RobustMethod::Em && config.rescue && candidates.rescuable;
+    let kept: Vec<usize> = (0..candidates.edges.len())
+        .filter(|&i| candidates.kept[i] || rescue)
+        .collect();
     let mut init_weights = weights.clone();
     if method != RobustMethod::None {
         for &k in &candidates.edges {
@@ -323,74 +339,137 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         robust_options,
         kept.iter().map(|&i| candidates.priors[i]).collect(),
     );
+    let held_out: Vec<bool> = kept.iter().map(|&i| !candidates.kept[i]).collect();
+    reweighter.hold_out(&held_out);
     for (j, &i) in kept.iter().enumerate() {
         weights[candidates.edges[i]] = reweighter.weights()[j];
     }
     // Between reweighting rounds a few iterations are enough (generalised
-    // EM: each M-step only has to improve); once the weights settle, the
-    // last solve runs to full convergence.
+    // EM: each M-step only has to improve); EM's hard decisions and the
+    // last solve of the other methods run to full convergence.
     let full = config.solver.clone();
     let partial = SolverOptions {
         max_iterations: full.max_iterations.min(3),
         relative_tolerance: 1e-6,
         ..full.clone()
     };
+    let candidate_r2 = |graph: &PoseGraph<P, D>| -> Vec<f64> {
+        kept.iter()
+            .map(|&i| graph.edge_chi2(&graph.edges[candidates.edges[i]]))
+            .collect()
+    };
+    if method == RobustMethod::Em {
+        // EM's first E-step is at the initial guess.
+        reweighter.update(&candidate_r2(graph));
+        for (j, &i) in kept.iter().enumerate() {
+            weights[candidates.edges[i]] = reweighter.weights()[j];
+        }
+    }
+    let mut solver = ActiveSolver::new(optimizer, graph, &weights);
+    // EM's decisions solve to a moderate tolerance; the decided map is then
+    // polished to the caller's.
+    let deciding = SolverOptions {
+        relative_tolerance: full.relative_tolerance.max(1e-6),
+        ..full.clone()
+    };
     // --max-iters and --time-limit bound the whole optimisation, robust
     // rounds included: each run gets what is left of both.
     let deadline = full.time_limit.map(|t| Instant::now() + t);
+    let budget = config.iteration_budget.unwrap_or(usize::MAX);
     let within_budget = |options: &SolverOptions, used: usize| SolverOptions {
-        max_iterations: options
-            .max_iterations
-            .min(full.max_iterations.saturating_sub(used)),
+        max_iterations: options.max_iterations.min(budget.saturating_sub(used)),
         time_limit: deadline.map(|d| d.saturating_duration_since(Instant::now())),
         ..options.clone()
     };
-    let exhausted =
-        |used: usize| used >= full.max_iterations || deadline.is_some_and(|d| Instant::now() >= d);
+    let exhausted = |used: usize| used >= budget || deadline.is_some_and(|d| Instant::now() >= d);
+    let out_of_budget = |summary: &mut crate::solve::Summary| {
+        summary.stop_reason = if summary.iterations >= budget {
+            crate::solve::StopReason::MaxIterations
+        } else {
+            crate::solve::StopReason::TimeLimit
+        };
+    };
+    let mut noise_scale = None;
     let mut total = None::<crate::solve::Summary>;
     loop {
         let robust = reweighter.is_active();
+        let options = if !robust {
+            &full
+        } else if reweighter.full_solve() {
+            &deciding
+        } else {
+            &partial
+        };
         let used = total.as_ref().map_or(0, |t| t.iterations);
-        *optimizer.options_mut() = within_budget(if robust { &partial } else { &full }, used);
-        let summary = optimizer
-            .run(graph, Some(&weights), &mut |r: &IterationRecord| {
-                observer(r)
-            })
+        let summary = solver
+            .run(graph, &weights, within_budget(options, used), observer)
             .map_err(solve_error)?;
         let mut merged = merge_summaries(total, summary);
-        if robust && exhausted(merged.iterations) {
-            // Out of budget before the weights settled.
-            merged.stop_reason = if merged.iterations >= full.max_iterations {
-                crate::solve::StopReason::MaxIterations
-            } else {
-                crate::solve::StopReason::TimeLimit
-            };
-        }
         let stop = !robust || exhausted(merged.iterations);
+        if robust && stop {
+            // Out of budget before the weights settled.
+            out_of_budget(&mut merged);
+        }
         total = Some(merged);
         if stop {
             break;
         }
-        let r2: Vec<f64> = kept
+        // EM decides on r²/s², s² the variance factor of the latest map.
+        let r2 = candidate_r2(graph);
+        let s2 = if method == RobustMethod::Em {
+            decision_scale(graph, &weights)
+        } else {
+            1.0
+        };
+        let again = reweighter.update_scaled(&r2, s2);
+        if reweighter.full_solve() || !again {
+            noise_scale = Some(s2).filter(|_| method == RobustMethod::Em);
+        }
+        let changed = kept
             .iter()
-            .map(|&i| graph.edge_chi2(&graph.edges[candidates.edges[i]]))
-            .collect();
-        let again = reweighter.update(&r2);
+            .enumerate()
+            .any(|(j, &i)| weights[candidates.edges[i]] != reweighter.weights()[j]);
         for (j, &i) in kept.iter().enumerate() {
             weights[candidates.edges[i]] = reweighter.weights()[j];
         }
-        if !again {
-            // The weights settled: one last solve to full convergence.
-            let used = total.as_ref().map_or(0, |t| t.iterations);
-            *optimizer.options_mut() = within_budget(&full, used);
-            let summary = optimizer
-                .run(graph, Some(&weights), &mut |r: &IterationRecord| {
-                    observer(r)
-                })
+        if again && reweighter.take_restart() {
+            // EM solves each decided set from the initial guess made with the
+            // accepted loops (for the chordal guess, the relaxation of the
+            // trusted edges and the accepted loops), not from a map that
+            // wrong loops may have pulled into another basin.
+            initialize(graph, missing, config.initialization, Some(&weights))
                 .map_err(solve_error)?;
-            total = Some(merge_summaries(total, summary));
+        }
+        if !again {
+            let polish = if method == RobustMethod::Em {
+                // The decided map, polished to the caller's tolerance.
+                deciding.relative_tolerance > full.relative_tolerance
+            } else {
+                // The weights settled: one last solve to full convergence.
+                changed
+            };
+            let used = total.as_ref().map_or(0, |t| t.iterations);
+            if polish && !exhausted(used) {
+                let summary = solver
+                    .run(graph, &weights, within_budget(&full, used), observer)
+                    .map_err(solve_error)?;
+                total = Some(merge_summaries(total, summary));
+                if method == RobustMethod::Em {
+                    let s2 = decision_scale(graph, &weights);
+                    noise_scale = Some(s2);
+                    let r2: Vec<f64> = candidate_r2(graph).iter().map(|r| r / s2).collect();
+                    reweighter.refresh(&r2);
+                }
+            }
             break;
         }
+    }
+    let optimizer = solver.optimizer;
+    // EM reports its posteriors at the final map (≥ ½ exactly for the loops
+    // the map was solved with); the others the weights of the last solve.
+    let final_weights = reweighter.final_weights();
+    for (j, &i) in kept.iter().enumerate() {
+        weights[candidates.edges[i]] = final_weights[j];
     }
     if graph.poses.iter().any(|p| !p.is_finite()) {
         return Err(PipelineError::NonFiniteResult {
@@ -422,6 +501,8 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             .iter()
             .filter(|s| **s == CandidateState::Off)
             .count(),
+        variance_factor: noise_scale,
+        rescued_loops: reweighter.rescued(),
     };
 
     chi2_test(graph, &weights, config, report);
@@ -504,6 +585,116 @@ fn plot<P: G2oPose<D>, const D: usize>(
     Ok(())
 }
 
+/// The optimiser over the edges of non-zero weight only: switched-off
+/// candidates leave the sparsity pattern (wrong loops between distant poses
+/// fill the Cholesky factor), and the pattern, ordering and symbolic
+/// factorisation are rebuilt whenever the set of such edges changes.
+struct ActiveSolver<P, const D: usize> {
+    /// The optimiser of the current active set.
+    optimizer: Optimizer<P, D>,
+    /// The graph of the active edges (its poses are a working copy).
+    sub: Option<PoseGraph<P, D>>,
+    /// Edge of the full graph of each edge of `sub`.
+    active: Vec<usize>,
+    /// Weights of the edges of `sub`.
+    sub_weights: Vec<f64>,
+}
+
+impl<P: G2oPose<D>, const D: usize> ActiveSolver<P, D> {
+    /// Starts from an optimiser of the whole graph.
+    fn new(optimizer: Optimizer<P, D>, graph: &PoseGraph<P, D>, weights: &[f64]) -> Self {
+        let mut solver = Self {
+            optimizer,
+            sub: None,
+            active: (0..graph.edges.len()).collect(),
+            sub_weights: Vec::new(),
+        };
+        solver.rebuild(graph, weights);
+        solver
+    }
+
+    /// Rebuilds the optimiser when the edges of non-zero weight changed. If
+    /// the active edges leave a vertex unconstrained, keeps the whole graph
+    /// (the damping of LM copes, as before the robust rounds).
+    fn rebuild(&mut self, graph: &PoseGraph<P, D>, weights: &[f64]) {
+        let active: Vec<usize> = (0..graph.edges.len())
+            .filter(|&k| weights[k] != 0.0)
+            .collect();
+        if active == self.active {
+            return;
+        }
+        let mut sub = PoseGraph::clone(graph);
+        sub.edges = active.iter().map(|&k| graph.edges[k].clone()).collect();
+        let options = self.optimizer.options_mut().clone();
+        if let Ok(optimizer) = Optimizer::new(&sub, None, options) {
+            self.optimizer = optimizer;
+            self.sub = Some(sub);
+            self.active = active;
+        } else if self.sub.is_some() {
+            let options = self.optimizer.options_mut().clone();
+            if let Ok(optimizer) = Optimizer::new(graph, Some(weights), options) {
+                self.optimizer = optimizer;
+                self.sub = None;
+                self.active = (0..graph.edges.len()).collect();
+            }
+        }
+    }
+
+    /// Minimises the weighted objective from the graph's poses, leaving the
+    /// result in the graph.
+    fn run(
+        &mut self,
+        graph: &mut PoseGraph<P, D>,
+        weights: &[f64],
+        options: SolverOptions,
+        observer: &mut dyn FnMut(&IterationRecord),
+    ) -> Result<crate::solve::Summary, SolveError> {
+        self.rebuild(graph, weights);
+        *self.optimizer.options_mut() = options;
+        let mut observe = |r: &IterationRecord| observer(r);
+        match &mut self.sub {
+            None => self.optimizer.run(graph, Some(weights), &mut observe),
+            Some(sub) => {
+                sub.poses.clone_from(&graph.poses);
+                self.sub_weights.clear();
+                self.sub_weights
+                    .extend(self.active.iter().map(|&k| weights[k]));
+                let summary = self
+                    .optimizer
+                    .run(sub, Some(&self.sub_weights), &mut observe)?;
+                graph.poses.clone_from(&sub.poses);
+                Ok(summary)
+            }
+        }
+    }
+}
+
+/// The noise scale of EM's decisions: the variance factor of the decided
+/// map, at most 1 (never more lenient than the information matrices say).
+fn decision_scale<P: G2oPose<D>, const D: usize>(graph: &PoseGraph<P, D>, weights: &[f64]) -> f64 {
+    variance_factor(graph, weights).min(1.0)
+}
+
+/// The a-posteriori variance factor `s² = Σ eₖᵀΩₖeₖ / (D·edges − D·free
+/// poses)` of a least-squares solution over the edges of non-zero weight at
+/// the graph's poses; 1 when there is not one edge's worth of redundancy.
+fn variance_factor<P: G2oPose<D>, const D: usize>(graph: &PoseGraph<P, D>, weights: &[f64]) -> f64 {
+    let (d2, n) = graph
+        .edges
+        .iter()
+        .zip(weights)
+        .filter(|(_, w)| **w > 0.0)
+        .fold((0.0, 0usize), |(d2, n), (e, _)| {
+            (d2 + graph.edge_chi2(e), n + 1)
+        });
+    let free = graph.num_vertices() - graph.gauge().len();
+    if n > free && d2 > 0.0 {
+        d2 / (D * (n - free)) as f64
+    } else {
+        1.0
+    }
+}
+
 /// The summary of several optimiser runs (robust rounds) as one.
 fn merge_summaries(
     total: Option<crate::solve::Summary>,
@@ -554,17 +745,28 @@ fn gate_candidates<P: G2oPose<D>, const D: usize>(
             ));
         }
     }
-    // The soft gate hands the mixture's posterior on as a prior; otherwise
-    // nothing is known beyond the gate (½).
+    // The soft gate hands the mixture's posterior on as a prior, and so does
+    // the hard gate for the candidates it dropped (EM may rescue them, with
+    // the count's evidence against them); a kept candidate is known no
+    // better than ½ (nor is a dropped one under a fixed threshold without a
+    // fit). A zero count is no loop by definition: prior 0.
     let max = report.gate.max_inliers;
+    let rescuable =
+        matches!(config.gate, GateMode::Auto | GateMode::Fixed(_)) && !decision.degenerate;
+    let posterior = |n: u64| match &decision.fit {
+        _ if n == 0 => 0.0,
+        Some(fit) => fit
+            .mixture
+            .as_ref()
+            .map_or(0.5, |m| m.posterior_true_loop(n, max).clamp(1e-6, 0.5)),
+        None => 0.5,
+    };
     let priors = counts
         .iter()
-        .map(|c| match (config.gate, &decision.fit, c) {
-            (GateMode::Soft, Some(fit), Some(n)) if !decision.degenerate => {
-                fit.mixture.as_ref().map_or(0.5, |m| {
-                    m.posterior_true_loop(*n, max).clamp(1e-6, 1.0 - 1e-6)
-                })
-            }
+        .zip(&decision.kept)
+        .map(|(c, &kept)| match (config.gate, c) {
+            (GateMode::Soft, Some(n)) if !decision.degenerate => posterior(*n),
+            (_, Some(0)) if rescuable && !kept => 0.0,
             _ => 0.5,
         })
         .collect();
@@ -573,6 +775,7 @@ fn gate_candidates<P: G2oPose<D>, const D: usize>(
         counts,
         kept: decision.kept,
         priors,
+        rescuable,
     }
 }
 

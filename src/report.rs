@@ -161,6 +161,14 @@ pub struct RobustReport {
     pub removed_loops: usize,
     /// EM: candidates switched off at the end (may have come back later).
     pub switched_off_loops: usize,
+    /// EM: the a-posteriori variance factor `s²` of the decided map (≤ 1)
+    /// by which the candidates' residuals were divided for the decisions,
+    /// so that under-confident (square-root) information does not let wrong
+    /// loops through; `null` for the other methods.
+    pub variance_factor: Option<f64>,
+    /// EM: candidates the gate dropped that were accepted at the map of the
+    /// kept ones (`--rescue`).
+    pub rescued_loops: usize,
 }
 
 /// One loop candidate's fate.
@@ -337,6 +345,19 @@ impl Report {
         let mut verdict = Vec::new();
         if self.loop_candidates > 0 {
             verdict.push(self.gate.summary());
+            if self.robust.method != RobustMethod::None {
+                let rescued = if self.robust.rescued_loops > 0 {
+                    format!(" ({} rescued below the gate)", self.robust.rescued_loops)
+                } else {
+                    String::new()
+                };
+                verdict.push(format!(
+                    "robust {}: accepted {}{rescued}, rejected {}",
+                    self.robust.method.name(),
+                    self.robust.active_loops,
+                    self.robust.rejected_loops
+                ));
+            }
         }
         if let Some(t) = &self.chi2_test {
             verdict.push(format!(

@@ -12,11 +12,19 @@
 //!   weight, which for their model is the Cauchy weight
 //!   `w = c² / (c² + r²)`; the M-step is the weighted solve. Candidates whose
 //!   weight falls below [`RobustOptions::switch_off`] are switched off (weight
-//!   0) and may come back in a later E-step; at the end of each EM process,
-//!   those still off with a weight below [`RobustOptions::remove`] are
-//!   removed for good, and EM runs again, until nothing changes. With a
-//!   prior inlier probability `p` per candidate (the soft gate), the E-step
-//!   multiplies the Cauchy odds `c²/r²` by the prior odds `p/(1 − p)`.
+//!   0) and may come back in a later E-step; when the weights settle, those
+//!   still off with a weight below [`RobustOptions::remove`] are removed for
+//!   good. Beyond the paper, measured on the outlier benchmark (README,
+//!   "Robust loops"): the kernel starts wide (the median residual) and
+//!   narrows to `c` as GNC's does, so the first maps are not pulled by the
+//!   wrong loops a narrow kernel would keep; the settled weights are then
+//!   turned into hard decisions (accept iff `w ≥ ½` at `r²/s²`, `s²` the
+//!   variance factor of the decided map, re-decided until the set repeats),
+//!   so the map returned is the least-squares map of the accepted loops and
+//!   the χ² test tests it; and the candidates the gate dropped are judged
+//!   once at that map ([`Reweighter::hold_out`]). With a prior inlier
+//!   probability `p` per candidate (the soft gate), the E-step multiplies the
+//!   Cauchy odds `c²/r²` by the prior odds `p/(1 − p)`.
 //! * [`RobustMethod::Huber`]: `w = 1` for `r ≤ c`, else `c / r`.
 //! * [`RobustMethod::Cauchy`]: `w = c² / (c² + r²)`, plain IRLS (no switching).
 //! * [`RobustMethod::Dcs`]: dynamic covariance scaling (Agarwal et al.,
@@ -52,6 +60,20 @@ pub enum RobustMethod {
     Gnc,
 }
 
+impl RobustMethod {
+    /// Its name on the command line and in the JSON report.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Em => "em",
+            Self::Huber => "huber",
+            Self::Cauchy => "cauchy",
+            Self::Dcs => "dcs",
+            Self::Gnc => "gnc",
+        }
+    }
+}
+
 /// Options of the robust reweighting.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RobustOptions {
@@ -66,7 +88,12 @@ pub struct RobustOptions {
     pub remove: f64,
     /// Stop when no weight changes by more than this.
     pub tolerance: f64,
-    /// Most E-steps (reweighting rounds) in all.
+    /// EM: solve each decided set from a fresh initial guess made with the
+    /// accepted loops rather than from the previous map (a wrong loop met
+    /// on the way can have left that map in another basin of the cost).
+    pub restart: bool,
+    /// Most reweighting rounds (E-steps); EM's hard decisions after them
+    /// are limited separately ([`MAX_DECISIONS`]).
     pub max_rounds: usize,
 }
 
@@ -80,15 +107,24 @@ impl RobustOptions {
             remove: 1e-4,
             tolerance: 1e-3,
             max_rounds: 100,
+            restart: true,
         }
     }
 }
 
 /// The default kernel width of each method for edges of dimension `dim`:
 ///
-/// * EM and GNC: `√χ²_dim(0.99)` (3.368 in 2D, 4.100 in 3D), the inlier
-///   threshold of GTSAM's `GncOptimizer`: a calibrated inlier has `r²`
-///   χ²_dim-distributed, so 99 % of inliers keep a weight ≥ ½;
+/// * EM: `√χ²_dim(1 − 10⁻⁶)` (5.54 in 2D, 6.19 in 3D): a calibrated inlier
+///   has `r²/s²` χ²_dim-distributed (`s²` the variance factor of the decided
+///   map, see the pipeline), so one true loop in a million falls below
+///   weight ½, while a wrong loop, typically hundreds of σ away, stays far
+///   out. Measured on the outlier benchmark (README, "Robust loops"): with
+///   `√χ²_dim(0.99)` EM rejected 3–11 % of the true loops of manhattan and
+///   parking-garage, whose loop residuals are heavy-tailed at the clean
+///   optimum, and left manhattan's map 1 % of its size away; with this width
+///   it keeps ≥ 97.6 % of them at the same precision;
+/// * GNC: `√χ²_dim(0.99)` (3.368 / 4.100), the inlier threshold of GTSAM's
+///   `GncOptimizer`;
 /// * Huber and Cauchy: `√χ²_dim(0.95)` (2.796 / 3.548), the width the peer
 ///   baselines use;
 /// * DCS: `c = 1`, i.e. `Φ = c² = 1`, Agarwal et al.'s default.
@@ -99,7 +135,8 @@ pub fn default_c(method: RobustMethod, dim: usize) -> f64 {
             .unwrap_or(3.0)
     };
     match method {
-        RobustMethod::Em | RobustMethod::Gnc | RobustMethod::None => quantile(0.01),
+        RobustMethod::Em => quantile(1e-6),
+        RobustMethod::Gnc | RobustMethod::None => quantile(0.01),
         RobustMethod::Huber | RobustMethod::Cauchy => quantile(0.05),
         RobustMethod::Dcs => 1.0,
     }
@@ -169,43 +206,172 @@ pub enum CandidateState {
     Removed,
 }
 
+/// Where EM is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum EmPhase {
+    /// E-steps with continuous weights and switching off.
+    Weighting,
+    /// Hard decisions: the accepted candidates (weight ≥ ½) at full weight,
+    /// the others off, re-decided at each solution until the set is stable.
+    Deciding {
+        /// Decisions taken so far.
+        rounds: usize,
+    },
+    /// Finished.
+    Done,
+}
+
 /// Iteratively reweights candidates from their residuals.
 ///
-/// Use: start with [`Reweighter::new`] (all weights 1, or the priors for the
-/// soft gate), solve with [`Reweighter::weights`], call
-/// [`Reweighter::update`] with the new residuals, and repeat while it
-/// returns `true`.
+/// Use: start with [`Reweighter::new`] (EM starts every candidate at
+/// `min(1, p/(1 − p))`, its prior odds capped at 1: weight 1 without prior
+/// knowledge; the other methods at 1), solve with [`Reweighter::weights`]
+/// (to convergence when [`Reweighter::full_solve`] says so, a few iterations
+/// otherwise), call [`Reweighter::update`] with the new residuals, and
+/// repeat while it returns `true`. Report [`Reweighter::final_weights`].
+///
+/// EM runs in two phases. **Weighting**: E-steps (the posterior weight of
+/// each candidate from its residual) alternate with M-steps (the weighted
+/// solve); candidates whose weight falls below
+/// [`RobustOptions::switch_off`] are switched off (weight 0) and come back
+/// when a later E-step gives them more; when the weights settle (no change
+/// above [`RobustOptions::tolerance`], or the switched-off and accepted sets
+/// unchanged for [`STABLE_ROUNDS`] rounds), the candidates still off with a
+/// weight below [`RobustOptions::remove`] are removed for good.
+/// **Deciding**: the candidates with weight ≥ ½ are accepted and solved at
+/// full weight, the others left out; at that solution every candidate not
+/// removed is accepted again iff its posterior weight at `r²/s²` is ≥ ½
+/// (`s²` given to [`Reweighter::update_scaled`]), until the accepted set
+/// repeats (at most [`MAX_DECISIONS`] times). So the map is the
+/// least-squares solution over the trusted edges and the accepted loops, a
+/// loop is accepted exactly when it is consistent with that map, and the χ²
+/// test of the accepted edges tests the map that is returned. **Rescue**:
+/// held-out candidates ([`Reweighter::hold_out`]) are judged once at that
+/// map. The final weights are the posteriors at the final map for the
+/// accepted candidates, 0 for the others.
 #[derive(Clone, Debug)]
 pub struct Reweighter {
     options: RobustOptions,
     priors: Vec<f64>,
     weights: Vec<f64>,
+    posteriors: Vec<f64>,
     states: Vec<CandidateState>,
+    /// EM: candidates held out of the weighting and the decisions (those
+    /// the gate dropped), judged once at the final decided map.
+    held_out: Vec<bool>,
     rounds: usize,
     mu: Option<f64>,
-    /// EM: whether the current EM process has converged and removal ran.
-    em_removed_last: usize,
+    phase: EmPhase,
+    /// Rounds in a row in which the switched-off and accepted sets stayed
+    /// the same.
+    stable: usize,
+    /// EM: the factor `m ≥ 1` of the annealed kernel width `c²·m` (set by
+    /// the first E-step, divided by [`ANNEAL_FACTOR`] every round).
+    anneal: Option<f64>,
+    /// EM: a restart from a fresh initial guess was asked for.
+    restart_pending: bool,
 }
+
+/// EM: the kernel width's square is divided by this every round until it
+/// reaches `c²` (GTSAM's GNC grows μ by the same factor).
+pub const ANNEAL_FACTOR: f64 = 1.4;
+
+/// EM: rounds in a row with unchanged switched-off and accepted sets after
+/// which the weighting phase ends even if some weight still moves by more
+/// than the tolerance.
+pub const STABLE_ROUNDS: usize = 3;
+
+/// EM: most hard decisions (solves to convergence) in the deciding phase.
+pub const MAX_DECISIONS: usize = 8;
 
 impl Reweighter {
     /// A reweighter for `priors.len()` candidates; `priors` are their prior
     /// inlier probabilities (½ when nothing is known; only EM uses them).
     pub fn new(options: RobustOptions, priors: Vec<f64>) -> Self {
         let n = priors.len();
+        let weights = if options.method == RobustMethod::Em {
+            priors.iter().map(|&p| em_initial_weight(p)).collect()
+        } else {
+            vec![1.0; n]
+        };
         Self {
             options,
-            weights: vec![1.0; n],
+            posteriors: weights.clone(),
+            weights,
             states: vec![CandidateState::Active; n],
+            held_out: vec![false; n],
             priors,
             rounds: 0,
             mu: None,
-            em_removed_last: 0,
+            phase: EmPhase::Weighting,
+            stable: 0,
+            anneal: None,
+            restart_pending: false,
         }
     }
 
-    /// The current weight of every candidate.
+    /// EM: holds the candidates marked `true` out of the weighting and the
+    /// decisions (weight 0, switched off) and judges them once, at the final
+    /// decided map, which none of them shaped: those whose posterior there
+    /// is ≥ ½ are accepted and the map is solved once more with them. This
+    /// is how the candidates the gate dropped are *rescued*: a true loop
+    /// whose count fell below `T_GV` comes back when its residual is that of
+    /// an inlier, and a wrong one cannot bend the map until it fits.
+    /// Without effect for the other methods (held-out candidates stay at
+    /// weight 0).
+    pub fn hold_out(&mut self, held_out: &[bool]) {
+        for (k, &h) in held_out.iter().enumerate().take(self.weights.len()) {
+            self.held_out[k] = h;
+            if h {
+                self.weights[k] = 0.0;
+                self.posteriors[k] = 0.0;
+                self.states[k] = CandidateState::Off;
+            }
+        }
+    }
+
+    /// EM: candidates held out of the weighting phase that are accepted
+    /// (final weight ≥ ½).
+    pub fn rescued(&self) -> usize {
+        self.held_out
+            .iter()
+            .zip(self.final_weights())
+            .filter(|(h, w)| **h && *w >= 0.5)
+            .count()
+    }
+
+    /// The weight of every candidate for the next solve.
     pub fn weights(&self) -> &[f64] {
         &self.weights
+    }
+
+    /// The weight to report for every candidate: for EM the posterior at the
+    /// final solution for the accepted candidates (at least ½: the map was
+    /// solved with them) and 0 for the others (switched off, removed, or
+    /// held out and not rescued); for the other methods the weights of the
+    /// last solve.
+    pub fn final_weights(&self) -> Vec<f64> {
+        if self.options.method == RobustMethod::Em && self.phase == EmPhase::Done {
+            self.weights
+                .iter()
+                .zip(&self.posteriors)
+                .map(|(&w, &p)| if w > 0.0 { p.max(0.5) } else { 0.0 })
+                .collect()
+        } else {
+            self.weights.clone()
+        }
+    }
+
+    /// Whether the next solve should run to convergence (EM's deciding
+    /// phase) rather than a few iterations.
+    pub fn full_solve(&self) -> bool {
+        matches!(self.phase, EmPhase::Deciding { .. })
+    }
+
+    /// EM: whether the next solve should start from a fresh initial guess
+    /// (built with the accepted loops); asking clears the request.
+    pub fn take_restart(&mut self) -> bool {
+        std::mem::take(&mut self.restart_pending)
     }
 
     /// The EM state of every candidate.
@@ -213,7 +379,7 @@ impl Reweighter {
         &self.states
     }
 
-    /// Reweighting rounds (E-steps) so far.
+    /// Reweighting rounds (E-steps and decisions) so far.
     pub fn rounds(&self) -> usize {
         self.rounds
     }
@@ -231,10 +397,32 @@ impl Reweighter {
         self.options.method != RobustMethod::None && !self.weights.is_empty()
     }
 
+    /// EM: the posteriors at a map polished after the last decision (the
+    /// decisions and states stay).
+    pub fn refresh(&mut self, r2: &[f64]) {
+        if self.options.method == RobustMethod::Em {
+            let anneal = self.anneal.take();
+            self.posterior(r2);
+            self.anneal = anneal;
+        }
+    }
+
     /// One E-step from the candidates' whitened squared residuals at the
     /// latest solution. Returns whether another solve is needed.
     pub fn update(&mut self, r2: &[f64]) -> bool {
-        if !self.is_active() || self.rounds >= self.options.max_rounds {
+        self.update_scaled(r2, 1.0)
+    }
+
+    /// [`Reweighter::update`] with the noise scale `s²` of the latest
+    /// solution (its variance factor): EM's hard decisions, the first
+    /// included, judge `r²/s²`; its weighting rounds and the other methods
+    /// use `r²` as it is.
+    pub fn update_scaled(&mut self, r2: &[f64], s2: f64) -> bool {
+        if !self.is_active() {
+            return false;
+        }
+        // EM's deciding phase has its own limit (MAX_DECISIONS).
+        if self.rounds >= self.options.max_rounds && self.options.method != RobustMethod::Em {
             return false;
         }
         self.rounds += 1;
@@ -246,7 +434,7 @@ impl Reweighter {
             RobustMethod::Cauchy => self.apply(r2, |r2, _| cauchy_weight(r2, c)),
             RobustMethod::Dcs => self.apply(r2, |r2, _| dcs_weight(r2, c * c)),
             RobustMethod::Gnc => return self.gnc_step(r2, &old),
-            RobustMethod::Em => return self.em_step(r2, &old),
+            RobustMethod::Em => return self.em_step(r2, s2, &old),
         }
         max_change(&old, &self.weights) > self.options.tolerance
     }
@@ -257,40 +445,147 @@ impl Reweighter {
         }
     }
 
-    /// E-step of EM with switching off; at the end of an EM process (weights
-    /// settled), removes the lowest for good and starts another process.
-    fn em_step(&mut self, r2: &[f64], old: &[f64]) -> bool {
-        let o = self.options;
-        for k in 0..self.weights.len() {
-            if self.states[k] == CandidateState::Removed {
-                continue;
-            }
-            let w = em_weight(r2[k], o.c, self.priors[k]);
-            if w < o.switch_off {
-                self.states[k] = CandidateState::Off;
-                self.weights[k] = 0.0;
+    /// The posterior weight of every candidate not removed (0 for removed),
+    /// at the current (annealed) kernel width.
+    fn posterior(&mut self, r2: &[f64]) {
+        let c = self.options.c * self.anneal.unwrap_or(1.0).sqrt();
+        for k in 0..self.posteriors.len() {
+            self.posteriors[k] = if self.states[k] == CandidateState::Removed {
+                0.0
             } else {
-                self.states[k] = CandidateState::Active;
-                self.weights[k] = w;
+                em_weight(r2[k], c, self.priors[k])
+            };
+        }
+    }
+
+    /// One EM round: an E-step with switching off in the weighting phase, a
+    /// hard decision in the deciding phase.
+    fn em_step(&mut self, r2: &[f64], s2: f64, old: &[f64]) -> bool {
+        let o = self.options;
+        let scaled: Vec<f64> = if s2 > 0.0 && s2.is_finite() && s2 != 1.0 {
+            r2.iter().map(|r| r / s2).collect()
+        } else {
+            r2.to_vec()
+        };
+        let anneal = match self.anneal {
+            // The first E-step: start wide enough that half the candidates
+            // keep a weight ≥ ½ (the median residual), never below c².
+            None => {
+                let weighed: Vec<f64> = r2
+                    .iter()
+                    .zip(&self.held_out)
+                    .filter(|(_, h)| !**h)
+                    .map(|(r, _)| *r)
+                    .collect();
+                (median(&weighed) / (o.c * o.c)).max(1.0)
+            }
+            Some(m) => (m / ANNEAL_FACTOR).max(1.0),
+        };
+        self.anneal = Some(anneal);
+        if matches!(self.phase, EmPhase::Weighting) {
+            self.posterior(r2);
+        } else {
+            self.posterior(&scaled);
+        }
+        match self.phase {
+            EmPhase::Done => false,
+            EmPhase::Weighting => {
+                let old_states = self.states.clone();
+                for k in 0..self.weights.len() {
+                    if self.states[k] == CandidateState::Removed || self.held_out[k] {
+                        continue;
+                    }
+                    let w = self.posteriors[k];
+                    if w < o.switch_off {
+                        self.states[k] = CandidateState::Off;
+                        self.weights[k] = 0.0;
+                    } else {
+                        self.states[k] = CandidateState::Active;
+                        self.weights[k] = w;
+                    }
+                }
+                let same_sets = old_states == self.states
+                    && old
+                        .iter()
+                        .zip(&self.weights)
+                        .all(|(a, b)| (*a >= 0.5) == (*b >= 0.5));
+                self.stable = if same_sets { self.stable + 1 } else { 0 };
+                if self.rounds < o.max_rounds
+                    && (anneal > 1.0
+                        || max_change(old, &self.weights) > o.tolerance
+                            && self.stable < STABLE_ROUNDS)
+                {
+                    return true;
+                }
+                // The EM process converged: remove the lowest for good, then
+                // decide.
+                for k in 0..self.weights.len() {
+                    if self.states[k] == CandidateState::Off && self.posteriors[k] < o.remove {
+                        self.states[k] = CandidateState::Removed;
+                        self.posteriors[k] = 0.0;
+                    }
+                }
+                // Decisions are taken at the plain kernel width.
+                self.phase = EmPhase::Deciding { rounds: 0 };
+                self.anneal = Some(1.0);
+                self.posterior(&scaled);
+                self.decide(old)
+            }
+            EmPhase::Deciding { .. } => self.decide(old),
+        }
+    }
+
+    /// Accepts the candidates whose posterior is ≥ ½ (weight 1), leaves the
+    /// others out (weight 0); returns whether the accepted set changed (and
+    /// another solve is needed).
+    fn decide(&mut self, old: &[f64]) -> bool {
+        let EmPhase::Deciding { rounds } = self.phase else {
+            return false;
+        };
+        for k in 0..self.weights.len() {
+            // Held-out candidates wait for the rescue, at the final map.
+            let accept = !self.held_out[k] && self.posteriors[k] >= 0.5;
+            self.weights[k] = if accept { 1.0 } else { 0.0 };
+            if self.states[k] != CandidateState::Removed {
+                self.states[k] = if accept {
+                    CandidateState::Active
+                } else {
+                    CandidateState::Off
+                };
             }
         }
-        if max_change(old, &self.weights) > o.tolerance {
+        // The first decision always needs a solve (the last one used
+        // continuous weights); later ones only when the set changed.
+        let changed = rounds == 0 || old != self.weights.as_slice();
+        if changed && rounds < MAX_DECISIONS {
+            self.phase = EmPhase::Deciding { rounds: rounds + 1 };
+            self.restart_pending = self.options.restart;
             return true;
         }
-        // The EM process converged: remove the lowest for good.
-        let mut removed = 0;
+        if changed {
+            // Out of decisions: keep the set the map was solved with.
+            self.weights.copy_from_slice(old);
+        }
+        self.phase = EmPhase::Done;
+        self.rescue()
+    }
+
+    /// Accepts the held-out candidates whose posterior at the decided map
+    /// (which none of them shaped) is ≥ ½, once and for all; returns whether
+    /// any was (and the map is to be solved again with them).
+    fn rescue(&mut self) -> bool {
+        let mut any = false;
         for k in 0..self.weights.len() {
-            if self.states[k] == CandidateState::Off
-                && em_weight(r2[k], o.c, self.priors[k]) < o.remove
+            if self.held_out[k]
+                && self.states[k] != CandidateState::Removed
+                && self.posteriors[k] >= 0.5
             {
-                self.states[k] = CandidateState::Removed;
-                removed += 1;
+                self.weights[k] = 1.0;
+                self.states[k] = CandidateState::Active;
+                any = true;
             }
         }
-        self.em_removed_last = removed;
-        // Removing an edge that already had weight 0 does not change the
-        // solution, so the weights are final.
-        false
+        any
     }
 
     /// One GNC step: weights at the current μ, then μ grows.
@@ -306,7 +601,8 @@ impl Reweighter {
                     self.weights.iter_mut().for_each(|w| *w = 1.0);
                     return false;
                 }
-                c2 / (2.0 * r2_max - c2)
+                // GTSAM clamps μ₀ at 1e-6 against numerical trouble.
+                (c2 / (2.0 * r2_max - c2)).max(1e-6)
             }
         };
         self.apply(r2, |r, _| gnc_tls_weight(r, c, mu));
@@ -314,6 +610,28 @@ impl Reweighter {
         let binary = self.weights.iter().all(|&w| w == 0.0 || w == 1.0);
         !(binary && max_change(old, &self.weights) <= self.options.tolerance) && mu < 1e9
     }
+}
+
+/// EM's starting weight for a candidate of prior inlier probability `p`:
+/// its prior odds `p/(1 − p)`, capped at 1 (so 1 without prior knowledge,
+/// `p = ½`, as in the paper, which starts from all loops).
+pub fn em_initial_weight(prior: f64) -> f64 {
+    if prior >= 0.5 {
+        1.0
+    } else {
+        (prior / (1.0 - prior)).max(0.0)
+    }
+}
+
+/// The median of a slice (0 when empty).
+fn median(x: &[f64]) -> f64 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    let mut v = x.to_vec();
+    let mid = v.len() / 2;
+    let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    *m
 }
 
 fn max_change(a: &[f64], b: &[f64]) -> f64 {
@@ -356,38 +674,138 @@ mod tests {
     fn default_widths_are_chi2_quantiles() {
         assert!((default_c(RobustMethod::Cauchy, 3) - 7.814727903251178f64.sqrt()).abs() < 1e-9);
         assert!((default_c(RobustMethod::Huber, 6) - 12.591587243743977f64.sqrt()).abs() < 1e-9);
-        assert!((default_c(RobustMethod::Em, 3) - 11.344866730144373f64.sqrt()).abs() < 1e-9);
+        // χ²₃ tail: erfc(√(x/2)) + √(2x/π)·e^(−x/2) = 10⁻⁶ at x = 30.6648497.
+        assert!((default_c(RobustMethod::Em, 3) - 30.664849706213598f64.sqrt()).abs() < 1e-7);
+        // χ²₆ tail: e^(−x/2)(1 + x/2 + x²/8) = 10⁻⁶ at x = 38.2583364.
+        assert!((default_c(RobustMethod::Em, 6) - 38.25833637720968f64.sqrt()).abs() < 1e-7);
         assert!((default_c(RobustMethod::Gnc, 6) - 16.811893829770927f64.sqrt()).abs() < 1e-9);
         assert_eq!(default_c(RobustMethod::Dcs, 3), 1.0);
     }
 
+    /// EM options with `c = 2` (`c² = 4`), whatever the default.
+    fn em_options() -> RobustOptions {
+        RobustOptions {
+            c: 2.0,
+            ..RobustOptions::new(RobustMethod::Em, 3)
+        }
+    }
+
     #[test]
-    fn em_switches_off_restores_and_removes() {
-        let opts = RobustOptions::new(RobustMethod::Em, 3);
-        let mut rw = Reweighter::new(opts, vec![0.5; 3]);
-        // Candidate 1 looks wrong, candidate 2 borderline.
-        assert!(rw.update(&[1.0, 1e5, 30.0]));
+    fn em_switches_off_restores_removes_and_decides() {
+        let mut rw = Reweighter::new(em_options(), vec![0.5; 4]);
+        assert_eq!(rw.weights(), &[1.0; 4]);
+        // Median residual 3 < c²: no annealing. Candidate 1 looks wrong.
+        assert!(rw.update(&[1.0, 1e5, 3.0, 0.5]));
         assert_eq!(
             rw.states(),
             &[
                 CandidateState::Active,
                 CandidateState::Off,
+                CandidateState::Active,
                 CandidateState::Active
             ]
         );
         assert_eq!(rw.weights()[1], 0.0);
-        // Next round the solution moved: candidate 1 fits now and comes back.
-        assert!(rw.update(&[1.0, 2.0, 30.0]));
+        assert!((rw.weights()[0] - 0.8).abs() < 1e-12);
+        assert!(!rw.full_solve());
+        // The solution moved: candidate 1 fits now and comes back.
+        assert!(rw.update(&[1.0, 2.0, 3.0, 0.5]));
         assert_eq!(rw.states()[1], CandidateState::Active);
-        // It drifts away again, weights settle, the EM process ends and the
-        // far-off candidate is removed for good.
-        assert!(rw.update(&[1.0, 1e7, 30.0]));
-        assert!(!rw.update(&[1.0, 1e7, 30.0]));
+        assert!((rw.weights()[1] - 4.0 / 6.0).abs() < 1e-12);
+        // It drifts away again; then the weights settle, the candidates still
+        // off far out are removed for good, and the hard decisions start:
+        // weight ≥ ½ → 1, else 0, solved to convergence.
+        assert!(rw.update(&[1.0, 1e7, 3.0, 0.5]));
+        assert!(rw.update(&[1.0, 1e7, 3.0, 0.5]));
         assert_eq!(rw.states()[1], CandidateState::Removed);
         assert_eq!(rw.removed(), 1);
-        // A removed candidate never comes back.
-        rw.update(&[1.0, 0.0, 30.0]);
-        assert_eq!(rw.weights()[1], 0.0);
+        assert!(rw.full_solve());
+        assert_eq!(rw.weights(), &[1.0, 0.0, 1.0, 1.0]);
+        // At the decided map candidate 2 no longer fits (4/9 < ½): left out.
+        assert!(rw.update(&[1.0, 0.0, 5.0, 0.5]));
+        assert_eq!(rw.weights(), &[1.0, 0.0, 0.0, 1.0]);
+        assert_eq!(rw.states()[2], CandidateState::Off);
+        // Without it the map changes and it fits again (4/7.5 ≥ ½): restored.
+        // The removed candidate never comes back, whatever its residual.
+        assert!(rw.update(&[1.0, 0.0, 3.5, 0.5]));
+        assert_eq!(rw.weights(), &[1.0, 0.0, 1.0, 1.0]);
+        // The same set twice: done. The reported weights are the posteriors
+        // at the final map, ≥ ½ exactly for the candidates solved with.
+        assert!(!rw.update(&[1.0, 0.0, 3.5, 0.5]));
+        assert!(!rw.full_solve());
+        let expected = [0.8, 0.0, 4.0 / 7.5, 4.0 / 4.5];
+        for (w, e) in rw.final_weights().iter().zip(expected) {
+            assert!((w - e).abs() < 1e-12, "{:?}", rw.final_weights());
+        }
+        assert!(!rw.update(&[1.0, 0.0, 3.5, 0.5]), "finished for good");
+    }
+
+    #[test]
+    fn em_judges_held_out_candidates_once_at_the_decided_map() {
+        let mut rw = Reweighter::new(em_options(), vec![0.5; 3]);
+        rw.hold_out(&[false, true, true]);
+        assert_eq!(rw.weights(), &[1.0, 0.0, 0.0]);
+        // Candidate 1 fits (r² = 1 < c² = 4), candidate 2 does not.
+        let r2 = [1.0, 1.0, 100.0];
+        let mut solves = 0;
+        while rw.update(&r2) {
+            solves += 1;
+            // Not weighed, not decided: out of every map until the rescue.
+            if rw.weights()[1] != 0.0 {
+                assert_eq!(rw.weights(), &[1.0, 1.0, 0.0], "rescued: one more solve");
+            }
+            assert!(solves < 20);
+        }
+        assert_eq!(rw.final_weights(), vec![0.8, 0.8, 0.0]);
+        assert_eq!(rw.rescued(), 1);
+        assert_eq!(rw.states()[2], CandidateState::Off);
+    }
+
+    #[test]
+    fn em_anneals_the_kernel_width_from_the_median_residual() {
+        let mut rw = Reweighter::new(em_options(), vec![0.5; 4]);
+        let r2 = [100.0, 100.0, 100.0, 1e6];
+        // First E-step: c² is widened to the median residual, 100 = 25·c².
+        assert!(rw.update(&r2));
+        assert!((rw.weights()[0] - 0.5).abs() < 1e-12);
+        assert_eq!(rw.states()[3], CandidateState::Off);
+        // Then it shrinks by ANNEAL_FACTOR a round: the weights fall although
+        // the residuals stay, until the width is c again.
+        let mut previous = rw.weights()[0];
+        let mut rounds = 1;
+        while !rw.full_solve() {
+            assert!(rw.update(&r2));
+            rounds += 1;
+            assert!(rw.weights()[0] <= previous + 1e-15);
+            previous = rw.weights()[0];
+            assert!(rounds < 30);
+        }
+        let annealing = (25.0f64.ln() / ANNEAL_FACTOR.ln()).ceil() as usize;
+        assert!(rounds > annealing, "{rounds} rounds");
+        // Decided at the plain width: 4/104 < ½ for all.
+        assert_eq!(rw.weights(), &[0.0; 4]);
+    }
+
+    #[test]
+    fn em_priors_shift_the_start_and_the_decision() {
+        assert_eq!(em_initial_weight(0.5), 1.0);
+        assert_eq!(em_initial_weight(0.9), 1.0);
+        assert!((em_initial_weight(0.2) - 0.25).abs() < 1e-12);
+        assert_eq!(em_initial_weight(0.0), 0.0);
+        let rw = Reweighter::new(em_options(), vec![0.5, 0.2]);
+        assert_eq!(rw.weights()[0], 1.0);
+        assert!((rw.weights()[1] - 0.25).abs() < 1e-12);
+        // Prior odds ¼: accepted only while r² ≤ c²/4 = 1.
+        let mut rw = Reweighter::new(em_options(), vec![0.5, 0.2, 0.2]);
+        let r2 = [0.5, 0.9, 1.2];
+        while rw.update(&r2) {}
+        assert_eq!(
+            rw.final_weights()
+                .iter()
+                .map(|&w| w >= 0.5)
+                .collect::<Vec<_>>(),
+            vec![true, true, false]
+        );
     }
 
     #[test]

@@ -298,6 +298,11 @@ pub struct CorruptionOptions {
     /// leaves the counts of existing candidates alone and gives wrong
     /// candidates no count.
     pub inliers: Option<InlierModel>,
+    /// The last this many existing non-sequential edges (in file order) are
+    /// known to be wrong, as in the max-mixture outlier files whose last
+    /// 1000 mixture edges are the injected outliers (default 0): they are
+    /// labelled wrong and get counts from the wrong-loop model.
+    pub known_wrong_last: usize,
 }
 
 impl Default for CorruptionOptions {
@@ -310,6 +315,7 @@ impl Default for CorruptionOptions {
             translation_scale: DEFAULT_OUTLIER_TRANSLATION,
             rotation_scale: DEFAULT_OUTLIER_ROTATION,
             inliers: Some(InlierModel::default()),
+            known_wrong_last: 0,
         }
     }
 }
@@ -373,6 +379,16 @@ pub enum SimulationError {
     /// they would copy.
     #[error("the graph has no edge to copy the information of wrong loops from")]
     NoInformationSource,
+    /// More known-wrong edges than the graph has non-sequential edges.
+    #[error(
+        "{asked} edges were said to be wrong, but the graph has only {available} non-sequential edges"
+    )]
+    TooManyKnownWrong {
+        /// `known_wrong_last`.
+        asked: usize,
+        /// Non-sequential edges in the graph.
+        available: usize,
+    },
     /// A pose type whose dimension is not that of SE(n).
     #[error("dimension {0} is not that of a rigid-body group SE(n)")]
     UnsupportedDimension(usize),
@@ -1135,13 +1151,45 @@ fn assemble<P: Pose<D>, const D: usize>(
 // Corrupting an existing graph
 // ---------------------------------------------------------------------------
 
+/// Writes which edges are wrong as CSV, `edge,from,to,wrong` (edge index in
+/// file order, the vertex ids, 1 for wrong and 0 otherwise), the labels of
+/// `pgo simulate --labels` and `pgo corrupt --labels`.
+///
+/// ```
+/// use pgo::simulate::{simulate_planar, write_labels, SimulationOptions};
+/// let sim = simulate_planar(&SimulationOptions { poses: 50, loops: 5, outliers: 2, ..Default::default() }).unwrap();
+/// let mut csv = Vec::new();
+/// write_labels(&sim.noisy, &sim.wrong, &mut csv).unwrap();
+/// let text = String::from_utf8(csv).unwrap();
+/// assert!(text.starts_with("edge,from,to,wrong\n0,"));
+/// assert_eq!(text.lines().filter(|l| l.ends_with(",1")).count(), 2);
+/// ```
+pub fn write_labels<P: Pose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    wrong: &[bool],
+    w: &mut impl std::io::Write,
+) -> std::io::Result<()> {
+    writeln!(w, "edge,from,to,wrong")?;
+    for (k, (e, wrong)) in graph.edges.iter().zip(wrong).enumerate() {
+        writeln!(
+            w,
+            "{k},{},{},{}",
+            graph.id(e.from),
+            graph.id(e.to),
+            u8::from(*wrong)
+        )?;
+    }
+    Ok(())
+}
+
 /// What [`corrupt`] did.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Corruption {
-    /// `wrong[k]`: whether edge `k` of the corrupted graph is a planted wrong
-    /// loop (the appended edges).
+    /// `wrong[k]`: whether edge `k` of the corrupted graph is a wrong loop
+    /// (the appended edges and the known-wrong existing ones).
     pub wrong: Vec<bool>,
-    /// Number of existing non-sequential edges marked as loop candidates.
+    /// Number of existing non-sequential edges marked as true loop
+    /// candidates (the known-wrong ones not counted).
     pub marked: usize,
 }
 
@@ -1149,7 +1197,9 @@ pub struct Corruption {
 ///
 /// 1. every existing non-sequential edge (`|idᵢ − idⱼ| ≠ 1`) becomes a loop
 ///    candidate, with an inlier count drawn from the true-loop model when an
-///    inlier model is given (without one, existing counts are kept);
+///    inlier model is given (without one, existing counts are kept) — except
+///    the last `options.known_wrong_last` of them, which are labelled wrong
+///    and drawn from the wrong-loop model;
 /// 2. `options.outliers` wrong loop candidates are appended by the policy,
 ///    between vertices that are neither consecutive in index nor in id, with
 ///    measurements `P::exp(ξ)` of a random tangent vector `ξ` (see
@@ -1207,6 +1257,16 @@ pub fn corrupt<P: Pose<D>, const D: usize>(
     let ids = graph.ids();
     let groups = wrong_pairs(&plan, ids.len(), |i, j| ids[i].abs_diff(ids[j]) == 1, rng)?;
     let loops: Vec<usize> = (0..sequential.len()).filter(|&k| !sequential[k]).collect();
+    if options.known_wrong_last > loops.len() {
+        return Err(SimulationError::TooManyKnownWrong {
+            asked: options.known_wrong_last,
+            available: loops.len(),
+        });
+    }
+    let mut wrong = vec![false; graph.edges.len()];
+    for &k in &loops[loops.len() - options.known_wrong_last..] {
+        wrong[k] = true;
+    }
     let sources = if loops.is_empty() {
         (0..sequential.len()).collect()
     } else {
@@ -1225,21 +1285,24 @@ pub fn corrupt<P: Pose<D>, const D: usize>(
     }
 
     let mut marked = 0;
-    for (edge, &seq) in graph.edges.iter_mut().zip(&sequential) {
+    for ((edge, &seq), &known_wrong) in graph.edges.iter_mut().zip(&sequential).zip(&wrong) {
         if seq {
             continue;
         }
-        marked += 1;
+        marked += usize::from(!known_wrong);
         edge.candidate = match (&options.inliers, edge.candidate) {
             (Some(model), _) => Some(LoopCandidate {
-                inliers: Some(model.sample_true(rng)),
+                inliers: Some(if known_wrong {
+                    model.sample_wrong(rng)
+                } else {
+                    model.sample_true(rng)
+                }),
             }),
             (None, Some(existing)) => Some(existing),
             (None, None) => Some(LoopCandidate { inliers: None }),
         };
     }
 
-    let mut wrong = vec![false; graph.edges.len()];
     for (from, to, measurement, information) in wrong_edges {
         let inliers = options
             .inliers
@@ -2025,6 +2088,61 @@ mod tests {
         {
             assert_ne!(graph.id(e.from).abs_diff(graph.id(e.to)), 1);
         }
+    }
+
+    #[test]
+    fn corrupt_labels_the_last_loops_known_wrong_with_wrong_counts() {
+        let sim = simulate_planar(&SimulationOptions {
+            poses: 800,
+            loops: 120,
+            ..Default::default()
+        })
+        .unwrap();
+        let mut graph = sim.noisy.clone();
+        let n = graph.edges.len();
+        let loops: Vec<usize> = (0..n).filter(|&k| !is_odometry(&graph.edges[k])).collect();
+        // Counts far apart, so that the model each was drawn from shows.
+        let model = InlierModel {
+            true_median: 1000.0,
+            true_sigma: 0.0,
+            wrong_median: 10.0,
+            wrong_sigma: 0.0,
+        };
+        let options = CorruptionOptions {
+            outliers: 0,
+            known_wrong_last: 20,
+            inliers: Some(model),
+            ..Default::default()
+        };
+        let corruption = corrupt(&mut graph, &options, &mut StdRng::seed_from_u64(2)).unwrap();
+        assert_eq!(corruption.marked, loops.len() - 20);
+        assert_eq!(graph.edges.len(), n);
+        for (k, e) in graph.edges.iter().enumerate() {
+            let known_wrong = loops[loops.len() - 20..].contains(&k);
+            assert_eq!(corruption.wrong[k], known_wrong, "edge {k}");
+            let expected = if is_odometry(e) {
+                None
+            } else if known_wrong {
+                Some(10)
+            } else {
+                Some(1000)
+            };
+            assert_eq!(e.candidate.and_then(|c| c.inliers), expected, "edge {k}");
+        }
+
+        let too_many = CorruptionOptions {
+            known_wrong_last: loops.len() + 1,
+            ..options
+        };
+        let mut untouched = sim.noisy.clone();
+        assert_eq!(
+            corrupt(&mut untouched, &too_many, &mut StdRng::seed_from_u64(2)),
+            Err(SimulationError::TooManyKnownWrong {
+                asked: loops.len() + 1,
+                available: loops.len()
+            })
+        );
+        assert_eq!(untouched.edges, sim.noisy.edges);
     }
 
     #[test]

@@ -7,6 +7,7 @@ mod datasets;
 mod faults;
 mod gating;
 mod hostile;
+mod robust;
 // SIGKILL, and /proc to tell which leftover temporaries are stale.
 #[cfg(target_os = "linux")]
 mod killed;

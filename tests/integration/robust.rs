@@ -1,0 +1,346 @@
+//! The robust back end through the pipeline: simulated graphs with planted
+//! wrong loop candidates whose labels the tests know.
+
+use crate::common::{sample, temp_dir};
+use pgo::gate::{DegeneratePolicy, GateMode};
+use pgo::geometry::Se2;
+use pgo::graph::{AnyPoseGraph, PoseGraph};
+use pgo::io::g2o;
+use pgo::pipeline::{self, OptimizeConfig};
+use pgo::report::Report;
+use pgo::robust::RobustMethod;
+use pgo::simulate::{InlierModel, OutlierPolicy, SimulationOptions, simulate_planar};
+use std::path::{Path, PathBuf};
+
+/// A simulated 2D graph written to `dir`: the noisy file, the clean file
+/// (the same without the wrong candidates), and for every loop candidate
+/// in file order whether it is wrong.
+struct Case {
+    noisy: PathBuf,
+    clean: PathBuf,
+    wrong: Vec<bool>,
+}
+
+fn case(dir: &Path, name: &str, options: SimulationOptions) -> Case {
+    let sim = simulate_planar(&options).expect("simulate");
+    let noisy = dir.join(format!("{name}.g2o"));
+    write(&sim.noisy, &noisy);
+    let mut clean_graph = sim.noisy.clone();
+    clean_graph.edges = sim
+        .noisy
+        .edges
+        .iter()
+        .zip(&sim.wrong)
+        .filter(|(_, w)| !**w)
+        .map(|(e, _)| e.clone())
+        .collect();
+    let clean = dir.join(format!("{name}_clean.g2o"));
+    write(&clean_graph, &clean);
+    let wrong = sim
+        .noisy
+        .edges
+        .iter()
+        .zip(&sim.wrong)
+        .filter(|(e, _)| e.is_candidate())
+        .map(|(_, w)| *w)
+        .collect();
+    Case {
+        noisy,
+        clean,
+        wrong,
+    }
+}
+
+fn write(graph: &PoseGraph<Se2, 3>, path: &Path) {
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).expect("create"));
+    g2o::write_graph(graph, &mut f).expect("write");
+}
+
+fn options(policy: OutlierPolicy, outliers: usize, seed: u64) -> SimulationOptions {
+    SimulationOptions {
+        poses: 400,
+        loops: 100,
+        outliers,
+        outlier_policy: policy,
+        inliers: Some(InlierModel::default()),
+        seed,
+        ..Default::default()
+    }
+}
+
+fn run(input: &Path, gate: GateMode, robust: RobustMethod, output: Option<&Path>) -> Report {
+    let config = OptimizeConfig {
+        gate,
+        robust,
+        output: output.map(Path::to_owned),
+        ..OptimizeConfig::new(input)
+    };
+    pipeline::run(&config, &mut |_| {}).expect("optimise")
+}
+
+/// Accepted (weight ≥ ½) true loops, accepted wrong ones, true loops that
+/// passed the gate.
+fn counts(report: &Report, wrong: &[bool]) -> (usize, usize, usize) {
+    assert_eq!(report.loops.len(), wrong.len());
+    let mut tp = 0;
+    let mut fp = 0;
+    let mut gated_true = 0;
+    for (l, &w) in report.loops.iter().zip(wrong) {
+        assert!((0.0..=1.0).contains(&l.weight), "weight {}", l.weight);
+        if !l.kept {
+            // Dropped by the gate: left out (0), or rescued by EM (≥ ½).
+            assert!(
+                l.weight == 0.0 || l.weight >= 0.5,
+                "a candidate the gate dropped has weight {}",
+                l.weight
+            );
+        }
+        let accepted = l.weight >= 0.5;
+        tp += usize::from(accepted && !w);
+        fp += usize::from(accepted && w);
+        gated_true += usize::from(l.kept && !w);
+    }
+    (tp, fp, gated_true)
+}
+
+/// RMS distance between the positions of two written graphs with the same
+/// gauge, and the diagonal of the bounding box of the second.
+fn position_rmse(a: &Path, b: &Path) -> (f64, f64) {
+    let positions = |p: &Path| match g2o::read(p, Default::default()).expect("read").graph {
+        AnyPoseGraph::Planar(g) => g.poses.iter().map(|x| x.translation()).collect::<Vec<_>>(),
+        AnyPoseGraph::Spatial(_) => unreachable!("2D"),
+    };
+    let (a, b) = (positions(a), positions(b));
+    let mse = a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (p - q).norm_squared())
+        .sum::<f64>()
+        / a.len() as f64;
+    let lo = b.iter().fold(b[0], |m, p| m.inf(p));
+    let hi = b.iter().fold(b[0], |m, p| m.sup(p));
+    (mse.sqrt(), (hi - lo).norm())
+}
+
+#[test]
+fn every_robust_method_down_weights_the_planted_wrong_loops() {
+    let dir = temp_dir("robust-methods");
+    let c = case(&dir, "random", options(OutlierPolicy::Random, 30, 11));
+    let n_true = c.wrong.iter().filter(|w| !**w).count();
+    // Without the gate every wrong candidate reaches the back end. Each
+    // method gives every wrong loop a weight below ½; the share of true
+    // loops it keeps at ≥ ½ depends on its kernel (DCS with Φ = 1 halves
+    // an inlier's weight already at r² ≈ 1.8, below the median of χ²₃).
+    for (method, min_recall) in [
+        (RobustMethod::Em, 0.97),
+        (RobustMethod::Gnc, 0.95),
+        (RobustMethod::Cauchy, 0.9),
+        (RobustMethod::Huber, 0.9),
+        (RobustMethod::Dcs, 0.3),
+    ] {
+        let r = run(&c.noisy, GateMode::Off, method, None);
+        assert_eq!(r.robust.method, method);
+        let (tp, fp, _) = counts(&r, &c.wrong);
+        for (l, &w) in r.loops.iter().zip(&c.wrong) {
+            if w {
+                assert!(
+                    l.weight < 0.5,
+                    "{method:?}: wrong loop {}–{} has weight {}",
+                    l.from,
+                    l.to,
+                    l.weight
+                );
+            }
+        }
+        assert_eq!(fp, 0);
+        assert!(
+            tp as f64 >= min_recall * n_true as f64,
+            "{method:?}: {tp} of {n_true} true loops accepted"
+        );
+        assert_eq!(r.robust.active_loops, tp);
+        assert_eq!(r.robust.rejected_loops, c.wrong.len() - tp);
+    }
+}
+
+#[test]
+fn gate_and_em_recover_the_clean_map_for_every_outlier_policy() {
+    let dir = temp_dir("robust-policies");
+    for (k, policy) in [
+        OutlierPolicy::Random,
+        OutlierPolicy::Local,
+        OutlierPolicy::Grouped,
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let name = format!("{policy:?}");
+        let c = case(&dir, &name, options(policy, 60, 20 + k as u64));
+        let out = dir.join(format!("{name}_out.g2o"));
+        let r = run(&c.noisy, GateMode::Auto, RobustMethod::Em, Some(&out));
+        assert!(!r.gate.degenerate, "{name}: {:?}", r.gate.reason);
+        let (tp, fp, gated_true) = counts(&r, &c.wrong);
+        assert_eq!(fp, 0, "{name}: wrong loops accepted");
+        assert!(
+            tp as f64 >= 0.97 * gated_true as f64,
+            "{name}: {tp} of the {gated_true} true loops that passed the gate accepted"
+        );
+        assert!(
+            r.chi2_test.as_ref().unwrap().passed,
+            "{name}: {:?}",
+            r.chi2_test
+        );
+        // The map is the clean graph's optimum to within 0.5 % of the
+        // trajectory's size (RMS, same gauge).
+        let reference = dir.join(format!("{name}_ref.g2o"));
+        run(
+            &c.clean,
+            GateMode::Off,
+            RobustMethod::None,
+            Some(&reference),
+        );
+        let (rmse, size) = position_rmse(&out, &reference);
+        assert!(
+            rmse < 0.005 * size,
+            "{name}: the robust map is {rmse} m (RMS) from the clean one, size {size} m"
+        );
+    }
+}
+
+#[test]
+fn the_chi2_test_fails_when_a_wrong_loop_is_kept() {
+    let dir = temp_dir("robust-chi2");
+    let c = case(&dir, "random", options(OutlierPolicy::Random, 40, 31));
+    // Every candidate in at full weight: the wrong loops are kept.
+    let forced = run(&c.noisy, GateMode::Fixed(0), RobustMethod::None, None);
+    assert_eq!(counts(&forced, &c.wrong).1, 40);
+    let test = forced
+        .chi2_test
+        .unwrap_or_else(|| panic!("{:?}", forced.warnings));
+    assert!(!test.passed, "D² = {} ≤ {}", test.d2, test.critical);
+    // The robust default rejects them and passes.
+    let robust = run(&c.noisy, GateMode::Auto, RobustMethod::Em, None);
+    assert_eq!(counts(&robust, &c.wrong).1, 0);
+    let test = robust
+        .chi2_test
+        .unwrap_or_else(|| panic!("{:?}", robust.warnings));
+    assert!(test.passed, "D² = {} > {}", test.d2, test.critical);
+    // The test counts exactly the accepted edges at their plain cost.
+    let edges = robust.edges as u64 - robust.loops.iter().filter(|l| l.weight < 0.5).count() as u64;
+    assert_eq!(test.dof_constraints, edges);
+}
+
+#[test]
+fn degenerate_counts_are_flagged_before_optimisation_or_fail_the_chi2_test() {
+    // 8 true loops among 200 wrong candidates whose counts look alike
+    // (g2o_samples/make.sh).
+    let input = PathBuf::from(sample("degenerate.g2o"));
+    let labels = std::fs::read_to_string(sample("degenerate_labels.csv")).expect("labels");
+    let wrong: Vec<bool> = labels
+        .lines()
+        .skip(1)
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let (a, b): (u64, u64) = (f[1].parse().unwrap(), f[2].parse().unwrap());
+            (a.abs_diff(b) != 1).then(|| f[3] == "1")
+        })
+        .collect();
+    // The default: flagged before optimisation, every candidate dropped.
+    let r = run(&input, GateMode::Auto, RobustMethod::Em, None);
+    assert!(r.gate.degenerate);
+    assert!(
+        r.warnings.iter().any(|w| w.contains("degenerate")),
+        "{:?}",
+        r.warnings
+    );
+    assert!(r.loops.iter().all(|l| l.weight == 0.0));
+    // Forcing the candidates in: whatever EM keeps, a kept wrong loop fails
+    // the χ² test; without a robust method the test fails.
+    for robust in [RobustMethod::Em, RobustMethod::None] {
+        let config = OptimizeConfig {
+            degenerate: DegeneratePolicy::KeepAll,
+            robust,
+            ..OptimizeConfig::new(&input)
+        };
+        let r = pipeline::run(&config, &mut |_| {}).expect("optimise");
+        let (_, fp, _) = counts(&r, &wrong);
+        let passed = r.chi2_test.as_ref().unwrap().passed;
+        assert!(
+            fp == 0 || !passed,
+            "{robust:?}: {fp} wrong loops kept and the χ² test passed"
+        );
+        if robust == RobustMethod::None {
+            assert!(fp > 0 && !passed);
+        }
+    }
+}
+
+#[test]
+fn em_rescues_the_true_loops_the_gate_dropped_and_no_wrong_one() {
+    let dir = temp_dir("robust-rescue");
+    // The default count models overlap: a few true loops fall below T_GV.
+    let c = case(&dir, "overlap", options(OutlierPolicy::Random, 60, 41));
+    let without = pipeline::run(
+        &OptimizeConfig {
+            rescue: false,
+            ..OptimizeConfig::new(&c.noisy)
+        },
+        &mut |_| {},
+    )
+    .expect("optimise");
+    let with = run(&c.noisy, GateMode::Auto, RobustMethod::Em, None);
+    let (tp_without, fp_without, gated_true) = counts(&without, &c.wrong);
+    let (tp_with, fp_with, _) = counts(&with, &c.wrong);
+    let n_true = c.wrong.iter().filter(|w| !**w).count();
+    assert!(gated_true < n_true, "the gate drops some true loops");
+    assert_eq!((fp_without, fp_with), (0, 0));
+    // Without the rescue a dropped candidate stays at weight 0.
+    assert!(without.loops.iter().all(|l| l.kept || l.weight == 0.0));
+    assert_eq!(without.robust.rescued_loops, 0);
+    // With it, the dropped true loops consistent with the map come back.
+    let rescued = with
+        .loops
+        .iter()
+        .filter(|l| !l.kept && l.weight >= 0.5)
+        .count();
+    assert_eq!(with.robust.rescued_loops, rescued);
+    assert!(rescued > 0);
+    assert_eq!(tp_with, tp_without + rescued);
+    assert!(
+        tp_with as f64 >= 0.97 * n_true as f64,
+        "{tp_with} of {n_true} true loops accepted"
+    );
+    // The wrong candidates the gate dropped stay out although some of them
+    // would fit a map bent by them: they never shape it.
+    for (l, &w) in with.loops.iter().zip(&c.wrong) {
+        if w {
+            assert_eq!(l.weight, 0.0, "wrong {}–{}", l.from, l.to);
+        }
+    }
+}
+
+#[test]
+fn the_soft_gate_recovers_true_loops_below_the_threshold() {
+    let dir = temp_dir("robust-soft");
+    // The default count models overlap: a few true loops fall below T_GV.
+    let c = case(&dir, "overlap", options(OutlierPolicy::Random, 60, 41));
+    let hard = pipeline::run(
+        &OptimizeConfig {
+            rescue: false,
+            ..OptimizeConfig::new(&c.noisy)
+        },
+        &mut |_| {},
+    )
+    .expect("optimise");
+    let soft = run(&c.noisy, GateMode::Soft, RobustMethod::Em, None);
+    let (hard_tp, hard_fp, gated_true) = counts(&hard, &c.wrong);
+    let (soft_tp, soft_fp, _) = counts(&soft, &c.wrong);
+    let n_true = c.wrong.iter().filter(|w| !**w).count();
+    assert!(gated_true < n_true, "the gate drops some true loops");
+    assert_eq!((hard_fp, soft_fp), (0, 0));
+    assert!(
+        soft_tp > hard_tp,
+        "soft {soft_tp}, hard {hard_tp} of {n_true}"
+    );
+    // Every candidate entered EM: none was dropped by the gate.
+    assert!(soft.loops.iter().all(|l| l.kept));
+}
