@@ -589,7 +589,7 @@ fn plot<P: G2oPose<D>, const D: usize>(
 /// candidates leave the sparsity pattern (wrong loops between distant poses
 /// fill the Cholesky factor), and the pattern, ordering and symbolic
 /// factorisation are rebuilt whenever the set of such edges changes.
-struct ActiveSolver<P, const D: usize> {
+struct ActiveSolver<P: crate::geometry::Pose<D>, const D: usize> {
     /// The optimiser of the current active set.
     optimizer: Optimizer<P, D>,
     /// The graph of the active edges (its poses are a working copy).
