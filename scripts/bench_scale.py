@@ -17,7 +17,7 @@ gate, initial guess, optimisation, report), peak RSS, the Cholesky factor's
 size (max_nnz_factor x 8 bytes: the largest factor of the run, the first
 pattern before robust weighting removed loops; the last one in parentheses),
 iterations and factorisations. --plot-only
-redraws the SVG from the JSON.
+redraws the SVG and prints the table from the JSON.
 """
 import argparse
 import json
@@ -99,7 +99,9 @@ def main():
     ap.add_argument("--plot-only", action="store_true")
     args = ap.parse_args()
     if args.plot_only:
-        plot(json.load(open(args.out)), args.svg)
+        results = json.load(open(args.out))
+        plot(results, args.svg)
+        table(results)
         return
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     results = json.load(open(args.out)) if os.path.exists(args.out) else []
@@ -115,6 +117,11 @@ def main():
             results = [x for x in results if not (x["world"] == world and x["poses"] == r["poses"])] + [r]
             json.dump(results, open(args.out, "w"), indent=1)
     plot(results, args.svg)
+    table(results)
+
+
+def table(results):
+    """The results as a Markdown table on stdout."""
     print("| world | poses | edges | candidates | pgo optimize wall (s) | optimiser (s) | iterations / "
           "factorisations | peak RSS (MB) | largest (last) factor (MB) | RSS / factor |")
     print("|---|---|---|---|---|---|---|---|---|---|")
