@@ -50,21 +50,8 @@ struct CorruptArgs {
         default_value_t = 100
     )]
     wrong: usize,
-    /// How wrong candidates are placed: any two poses, poses within 20 of
-    /// each other, or groups of consecutive mutually consistent wrong loops.
-    #[arg(long, visible_alias = "outlier-policy", value_enum, default_value_t = PolicyArg::Random)]
-    wrong_mode: PolicyArg,
-    /// Size of the groups of grouped wrong candidates.
-    #[arg(long, default_value_t = 10)]
-    group_size: usize,
-    /// Inlier counts of true loops (every existing edge with |i − j| ≠ 1):
-    /// median and σ of ln count [default: 150,0.5].
-    #[arg(long, visible_alias = "true-median", value_name = "MEDIAN[,SIGMA]", value_parser = parse_count_model)]
-    true_inliers: Option<CountModel>,
-    /// Inlier counts of wrong candidates: median and σ of ln count
-    /// [default: 25,0.5].
-    #[arg(long, visible_alias = "wrong-median", value_name = "MEDIAN[,SIGMA]", value_parser = parse_count_model)]
-    wrong_inliers: Option<CountModel>,
+    #[command(flatten)]
+    placement: WrongLoopArgs,
     /// The last N non-sequential edges of the input are known to be wrong (the
     /// max-mixture outlier files: the last 1000 mixture edges): they are
     /// labelled wrong and get wrong-loop counts.
@@ -106,26 +93,14 @@ struct SimulateArgs {
         default_value_t = 0
     )]
     wrong: usize,
-    /// How wrong candidates are placed: any two poses, poses within 20 of
-    /// each other, or groups of consecutive mutually consistent wrong loops.
-    #[arg(long, visible_alias = "outlier-policy", value_enum, default_value_t = PolicyArg::Random)]
-    wrong_mode: PolicyArg,
-    /// Size of the groups of grouped wrong candidates.
-    #[arg(long, default_value_t = 10)]
-    group_size: usize,
+    #[command(flatten)]
+    placement: WrongLoopArgs,
     /// Give every loop candidate an inlier count, log-normal: true loops
     /// with median 150 and σ 0.5 (of ln count), wrong ones with median 25
-    /// and σ 0.5, unless set below.
+    /// and σ 0.5, unless --true-inliers/--wrong-inliers say otherwise (either
+    /// implies --inliers).
     #[arg(long)]
     inliers: bool,
-    /// Inlier counts of true loops: median and σ of ln count (implies
-    /// --inliers).
-    #[arg(long, visible_alias = "true-median", value_name = "MEDIAN[,SIGMA]", value_parser = parse_count_model)]
-    true_inliers: Option<CountModel>,
-    /// Inlier counts of wrong candidates: median and σ of ln count (implies
-    /// --inliers).
-    #[arg(long, visible_alias = "wrong-median", value_name = "MEDIAN[,SIGMA]", value_parser = parse_count_model)]
-    wrong_inliers: Option<CountModel>,
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -178,18 +153,44 @@ struct CountModel {
     sigma: Option<f64>,
 }
 
-/// The inlier model of the command line, [`pgo::simulate::InlierModel`]'s
-/// defaults where a part is not given.
-fn inlier_model(
-    true_loops: Option<CountModel>,
-    wrong: Option<CountModel>,
-) -> pgo::simulate::InlierModel {
-    let d = pgo::simulate::InlierModel::default();
-    pgo::simulate::InlierModel {
-        true_median: true_loops.map_or(d.true_median, |m| m.median),
-        true_sigma: true_loops.and_then(|m| m.sigma).unwrap_or(d.true_sigma),
-        wrong_median: wrong.map_or(d.wrong_median, |m| m.median),
-        wrong_sigma: wrong.and_then(|m| m.sigma).unwrap_or(d.wrong_sigma),
+/// How wrong loop candidates are placed and what inlier counts candidates
+/// get: shared by `pgo simulate` and `pgo corrupt`.
+#[derive(clap::Args, Debug)]
+struct WrongLoopArgs {
+    /// How wrong candidates are placed: any two poses, poses within 20 of
+    /// each other, or groups of consecutive mutually consistent wrong loops.
+    #[arg(long, visible_alias = "outlier-policy", value_enum, default_value_t = PolicyArg::Random)]
+    wrong_mode: PolicyArg,
+    /// Size of the groups of grouped wrong candidates.
+    #[arg(long, default_value_t = 10)]
+    group_size: usize,
+    /// Inlier counts of true loops: median and σ of ln count [default:
+    /// 150,0.5].
+    #[arg(long, visible_alias = "true-median", value_name = "MEDIAN[,SIGMA]", value_parser = parse_count_model)]
+    true_inliers: Option<CountModel>,
+    /// Inlier counts of wrong candidates: median and σ of ln count
+    /// [default: 25,0.5].
+    #[arg(long, visible_alias = "wrong-median", value_name = "MEDIAN[,SIGMA]", value_parser = parse_count_model)]
+    wrong_inliers: Option<CountModel>,
+}
+
+impl WrongLoopArgs {
+    /// Whether either count model was given.
+    fn counts_given(&self) -> bool {
+        self.true_inliers.is_some() || self.wrong_inliers.is_some()
+    }
+
+    /// The inlier model, [`pgo::simulate::InlierModel`]'s defaults where a
+    /// part is not given.
+    fn inlier_model(&self) -> pgo::simulate::InlierModel {
+        let d = pgo::simulate::InlierModel::default();
+        let (t, w) = (self.true_inliers, self.wrong_inliers);
+        pgo::simulate::InlierModel {
+            true_median: t.map_or(d.true_median, |m| m.median),
+            true_sigma: t.and_then(|m| m.sigma).unwrap_or(d.true_sigma),
+            wrong_median: w.map_or(d.wrong_median, |m| m.median),
+            wrong_sigma: w.and_then(|m| m.sigma).unwrap_or(d.wrong_sigma),
+        }
     }
 }
 
@@ -438,10 +439,10 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
     };
     let options = CorruptionOptions {
         outliers: args.wrong,
-        policy: args.wrong_mode.into(),
-        group_size: args.group_size,
+        policy: args.placement.wrong_mode.into(),
+        group_size: args.placement.group_size,
         known_wrong_last: args.known_wrong_last,
-        inliers: Some(inlier_model(args.true_inliers, args.wrong_inliers)),
+        inliers: Some(args.placement.inlier_model()),
         ..CorruptionOptions::default()
     };
     let result = match &mut file.graph {
@@ -504,10 +505,10 @@ fn simulate(args: SimulateArgs) -> ExitCode {
         loops: args.loops,
         seed: args.seed,
         outliers: args.wrong,
-        outlier_policy: args.wrong_mode.into(),
-        group_size: args.group_size,
-        inliers: (args.inliers || args.true_inliers.is_some() || args.wrong_inliers.is_some())
-            .then(|| inlier_model(args.true_inliers, args.wrong_inliers)),
+        outlier_policy: args.placement.wrong_mode.into(),
+        group_size: args.placement.group_size,
+        inliers: (args.inliers || args.placement.counts_given())
+            .then(|| args.placement.inlier_model()),
     };
     let result = match simulate::simulate(&options) {
         Ok(AnySimulation::Planar(s)) => write_simulation(&s, &args),

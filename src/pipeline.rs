@@ -281,6 +281,13 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let kept: Vec<usize> = (0..candidates.edges.len())
         .filter(|&i| candidates.kept[i] || rescue)
         .collect();
+    // The edge of each weighed candidate, and how their weights go in.
+    let pool: Vec<usize> = kept.iter().map(|&i| candidates.edges[i]).collect();
+    let set_weights = |weights: &mut [f64], from: &[f64]| {
+        for (&k, &w) in pool.iter().zip(from) {
+            weights[k] = w;
+        }
+    };
     let mut init_weights = weights.clone();
     if method != RobustMethod::None {
         for &k in &candidates.edges {
@@ -341,9 +348,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     );
     let held_out: Vec<bool> = kept.iter().map(|&i| !candidates.kept[i]).collect();
     reweighter.hold_out(&held_out);
-    for (j, &i) in kept.iter().enumerate() {
-        weights[candidates.edges[i]] = reweighter.weights()[j];
-    }
+    set_weights(&mut weights, reweighter.weights());
     // Between reweighting rounds a few iterations are enough (generalised
     // EM: each M-step only has to improve); EM's hard decisions and the
     // last solve of the other methods run to full convergence.
@@ -354,16 +359,14 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         ..full.clone()
     };
     let candidate_r2 = |graph: &PoseGraph<P, D>| -> Vec<f64> {
-        kept.iter()
-            .map(|&i| graph.edge_chi2(&graph.edges[candidates.edges[i]]))
+        pool.iter()
+            .map(|&k| graph.edge_chi2(&graph.edges[k]))
             .collect()
     };
     if method == RobustMethod::Em {
         // EM's first E-step is at the initial guess.
         reweighter.update(&candidate_r2(graph));
-        for (j, &i) in kept.iter().enumerate() {
-            weights[candidates.edges[i]] = reweighter.weights()[j];
-        }
+        set_weights(&mut weights, reweighter.weights());
     }
     let mut solver = ActiveSolver::new(optimizer, graph, &weights);
     // EM's decisions solve to a moderate tolerance; the decided map is then
@@ -425,13 +428,11 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         if reweighter.full_solve() || !again {
             noise_scale = Some(s2).filter(|_| method == RobustMethod::Em);
         }
-        let changed = kept
+        let changed = pool
             .iter()
-            .enumerate()
-            .any(|(j, &i)| weights[candidates.edges[i]] != reweighter.weights()[j]);
-        for (j, &i) in kept.iter().enumerate() {
-            weights[candidates.edges[i]] = reweighter.weights()[j];
-        }
+            .zip(reweighter.weights())
+            .any(|(&k, &w)| weights[k] != w);
+        set_weights(&mut weights, reweighter.weights());
         if again && reweighter.take_restart() {
             // EM solves each decided set from the initial guess made with the
             // accepted loops (for the chordal guess, the relaxation of the
@@ -457,8 +458,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 if method == RobustMethod::Em {
                     let s2 = decision_scale(graph, &weights);
                     noise_scale = Some(s2);
-                    let r2: Vec<f64> = candidate_r2(graph).iter().map(|r| r / s2).collect();
-                    reweighter.refresh(&r2);
+                    reweighter.refresh(&candidate_r2(graph), s2);
                 }
             }
             break;
@@ -467,10 +467,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let optimizer = solver.optimizer;
     // EM reports its posteriors at the final map (≥ ½ exactly for the loops
     // the map was solved with); the others the weights of the last solve.
-    let final_weights = reweighter.final_weights();
-    for (j, &i) in kept.iter().enumerate() {
-        weights[candidates.edges[i]] = final_weights[j];
-    }
+    set_weights(&mut weights, &reweighter.final_weights());
     if graph.poses.iter().any(|p| !p.is_finite()) {
         return Err(PipelineError::NonFiniteResult {
             path: config.input.clone(),
@@ -485,10 +482,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             optimizer.max_nnz_factor(),
         );
     }
-    let accepted = kept
-        .iter()
-        .filter(|&&i| weights[candidates.edges[i]] >= 0.5)
-        .count();
+    let accepted = pool.iter().filter(|&&k| weights[k] >= 0.5).count();
     report.robust = RobustReport {
         method,
         c: robust_options.c,
@@ -669,16 +663,12 @@ impl<P: G2oPose<D>, const D: usize> ActiveSolver<P, D> {
     }
 }
 
-/// The noise scale of EM's decisions: the variance factor of the decided
-/// map, at most 1 (never more lenient than the information matrices say).
+/// The noise scale of EM's decisions: the a-posteriori variance factor
+/// `s² = Σ eₖᵀΩₖeₖ / (D·edges − D·free poses)` of the least-squares solution
+/// over the edges of non-zero weight at the graph's poses, at most 1 (never
+/// more lenient than the information matrices say); 1 when there is not one
+/// edge's worth of redundancy.
 fn decision_scale<P: G2oPose<D>, const D: usize>(graph: &PoseGraph<P, D>, weights: &[f64]) -> f64 {
-    variance_factor(graph, weights).min(1.0)
-}
-
-/// The a-posteriori variance factor `s² = Σ eₖᵀΩₖeₖ / (D·edges − D·free
-/// poses)` of a least-squares solution over the edges of non-zero weight at
-/// the graph's poses; 1 when there is not one edge's worth of redundancy.
-fn variance_factor<P: G2oPose<D>, const D: usize>(graph: &PoseGraph<P, D>, weights: &[f64]) -> f64 {
     let (d2, n) = graph
         .edges
         .iter()
@@ -689,7 +679,7 @@ fn variance_factor<P: G2oPose<D>, const D: usize>(graph: &PoseGraph<P, D>, weigh
         });
     let free = graph.num_vertices() - graph.gauge().len();
     if n > free && d2 > 0.0 {
-        d2 / (D * (n - free)) as f64
+        (d2 / (D * (n - free)) as f64).min(1.0)
     } else {
         1.0
     }

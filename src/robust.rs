@@ -397,12 +397,13 @@ impl Reweighter {
         self.options.method != RobustMethod::None && !self.weights.is_empty()
     }
 
-    /// EM: the posteriors at a map polished after the last decision (the
-    /// decisions and states stay).
-    pub fn refresh(&mut self, r2: &[f64]) {
+    /// EM: the posteriors at a map polished after the last decision, from
+    /// `r²/s²` as in [`Reweighter::update_scaled`] (the decisions and states
+    /// stay).
+    pub fn refresh(&mut self, r2: &[f64], s2: f64) {
         if self.options.method == RobustMethod::Em {
             let anneal = self.anneal.take();
-            self.posterior(r2);
+            self.posterior(&scaled(r2, s2));
             self.anneal = anneal;
         }
     }
@@ -462,11 +463,6 @@ impl Reweighter {
     /// hard decision in the deciding phase.
     fn em_step(&mut self, r2: &[f64], s2: f64, old: &[f64]) -> bool {
         let o = self.options;
-        let scaled: Vec<f64> = if s2 > 0.0 && s2.is_finite() && s2 != 1.0 {
-            r2.iter().map(|r| r / s2).collect()
-        } else {
-            r2.to_vec()
-        };
         let anneal = match self.anneal {
             // The first E-step: start wide enough that half the candidates
             // keep a weight ≥ ½ (the median residual), never below c².
@@ -485,7 +481,7 @@ impl Reweighter {
         if matches!(self.phase, EmPhase::Weighting) {
             self.posterior(r2);
         } else {
-            self.posterior(&scaled);
+            self.posterior(&scaled(r2, s2));
         }
         match self.phase {
             EmPhase::Done => false,
@@ -528,7 +524,7 @@ impl Reweighter {
                 // Decisions are taken at the plain kernel width.
                 self.phase = EmPhase::Deciding { rounds: 0 };
                 self.anneal = Some(1.0);
-                self.posterior(&scaled);
+                self.posterior(&scaled(r2, s2));
                 self.decide(old)
             }
             EmPhase::Deciding { .. } => self.decide(old),
@@ -620,6 +616,15 @@ pub fn em_initial_weight(prior: f64) -> f64 {
         1.0
     } else {
         (prior / (1.0 - prior)).max(0.0)
+    }
+}
+
+/// `r²/s²` (`r²` itself when `s²` is 1 or not a positive number).
+fn scaled(r2: &[f64], s2: f64) -> Vec<f64> {
+    if s2 > 0.0 && s2.is_finite() && s2 != 1.0 {
+        r2.iter().map(|r| r / s2).collect()
+    } else {
+        r2.to_vec()
     }
 }
 

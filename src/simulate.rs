@@ -1924,14 +1924,19 @@ mod tests {
         g
     }
 
-    #[test]
-    fn corrupt_marks_existing_loops_and_appends_exactly_the_wrong_ones() {
-        let sim = simulate_planar(&SimulationOptions {
+    /// An 800-pose simulated graph with 120 loops to corrupt.
+    fn corruptible_graph() -> Simulation<Se2, 3> {
+        simulate_planar(&SimulationOptions {
             poses: 800,
             loops: 120,
             ..Default::default()
         })
-        .unwrap();
+        .unwrap()
+    }
+
+    #[test]
+    fn corrupt_marks_existing_loops_and_appends_exactly_the_wrong_ones() {
+        let sim = corruptible_graph();
         let mut graph = sim.noisy.clone();
         let before = graph.edges.clone();
         let options = CorruptionOptions {
@@ -2092,12 +2097,7 @@ mod tests {
 
     #[test]
     fn corrupt_labels_the_last_loops_known_wrong_with_wrong_counts() {
-        let sim = simulate_planar(&SimulationOptions {
-            poses: 800,
-            loops: 120,
-            ..Default::default()
-        })
-        .unwrap();
+        let sim = corruptible_graph();
         let mut graph = sim.noisy.clone();
         let n = graph.edges.len();
         let loops: Vec<usize> = (0..n).filter(|&k| !is_odometry(&graph.edges[k])).collect();

@@ -78,6 +78,15 @@ fn run(input: &Path, gate: GateMode, robust: RobustMethod, output: Option<&Path>
     pipeline::run(&config, &mut |_| {}).expect("optimise")
 }
 
+/// The defaults (gate auto, EM) without the rescue of dropped candidates.
+fn run_without_rescue(input: &Path) -> Report {
+    let config = OptimizeConfig {
+        rescue: false,
+        ..OptimizeConfig::new(input)
+    };
+    pipeline::run(&config, &mut |_| {}).expect("optimise")
+}
+
 /// Accepted (weight ≥ ½) true loops, accepted wrong ones, true loops that
 /// passed the gate.
 fn counts(report: &Report, wrong: &[bool]) -> (usize, usize, usize) {
@@ -279,14 +288,7 @@ fn em_rescues_the_true_loops_the_gate_dropped_and_no_wrong_one() {
     let dir = temp_dir("robust-rescue");
     // The default count models overlap: a few true loops fall below T_GV.
     let c = case(&dir, "overlap", options(OutlierPolicy::Random, 60, 41));
-    let without = pipeline::run(
-        &OptimizeConfig {
-            rescue: false,
-            ..OptimizeConfig::new(&c.noisy)
-        },
-        &mut |_| {},
-    )
-    .expect("optimise");
+    let without = run_without_rescue(&c.noisy);
     let with = run(&c.noisy, GateMode::Auto, RobustMethod::Em, None);
     let (tp_without, fp_without, gated_true) = counts(&without, &c.wrong);
     let (tp_with, fp_with, _) = counts(&with, &c.wrong);
@@ -323,14 +325,7 @@ fn the_soft_gate_recovers_true_loops_below_the_threshold() {
     let dir = temp_dir("robust-soft");
     // The default count models overlap: a few true loops fall below T_GV.
     let c = case(&dir, "overlap", options(OutlierPolicy::Random, 60, 41));
-    let hard = pipeline::run(
-        &OptimizeConfig {
-            rescue: false,
-            ..OptimizeConfig::new(&c.noisy)
-        },
-        &mut |_| {},
-    )
-    .expect("optimise");
+    let hard = run_without_rescue(&c.noisy);
     let soft = run(&c.noisy, GateMode::Soft, RobustMethod::Em, None);
     let (hard_tp, hard_fp, gated_true) = counts(&hard, &c.wrong);
     let (soft_tp, soft_fp, _) = counts(&soft, &c.wrong);
