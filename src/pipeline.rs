@@ -263,7 +263,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     }
 
     // An unconstrained vertex makes every later step meaningless: say so first.
-    let optimizer =
+    let mut optimizer =
         Optimizer::new(graph, Some(&weights), config.solver.clone()).map_err(solve_error)?;
 
     // The robust method decides how much the initial guess may trust the
@@ -368,7 +368,6 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         reweighter.update(&candidate_r2(graph));
         set_weights(&mut weights, reweighter.weights());
     }
-    let mut solver = ActiveSolver::new(optimizer, graph, &weights);
     // EM's decisions solve to a moderate tolerance; the decided map is then
     // polished to the caller's.
     let deciding = SolverOptions {
@@ -404,9 +403,14 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             &partial
         };
         let used = total.as_ref().map_or(0, |t| t.iterations);
-        let summary = solver
-            .run(graph, &weights, within_budget(options, used), observer)
-            .map_err(solve_error)?;
+        let summary = solve(
+            &mut optimizer,
+            graph,
+            &weights,
+            within_budget(options, used),
+            observer,
+        )
+        .map_err(solve_error)?;
         let mut merged = merge_summaries(total, summary);
         let stop = !robust || exhausted(merged.iterations);
         if robust && stop {
@@ -451,9 +455,14 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             };
             let used = total.as_ref().map_or(0, |t| t.iterations);
             if polish && !exhausted(used) {
-                let summary = solver
-                    .run(graph, &weights, within_budget(&full, used), observer)
-                    .map_err(solve_error)?;
+                let summary = solve(
+                    &mut optimizer,
+                    graph,
+                    &weights,
+                    within_budget(&full, used),
+                    observer,
+                )
+                .map_err(solve_error)?;
                 total = Some(merge_summaries(total, summary));
                 if method == RobustMethod::Em {
                     let s2 = decision_scale(graph, &weights);
@@ -464,7 +473,6 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             break;
         }
     }
-    let optimizer = solver.optimizer;
     // EM reports its posteriors at the final map (≥ ½ exactly for the loops
     // the map was solved with); the others the weights of the last solve.
     set_weights(&mut weights, &reweighter.final_weights());
@@ -579,88 +587,20 @@ fn plot<P: G2oPose<D>, const D: usize>(
     Ok(())
 }
 
-/// The optimiser over the edges of non-zero weight only: switched-off
-/// candidates leave the sparsity pattern (wrong loops between distant poses
-/// fill the Cholesky factor), and the pattern, ordering and symbolic
-/// factorisation are rebuilt whenever the set of such edges changes.
-struct ActiveSolver<P: crate::geometry::Pose<D>, const D: usize> {
-    /// The optimiser of the current active set.
-    optimizer: Optimizer<P, D>,
-    /// The graph of the active edges (its poses are a working copy).
-    sub: Option<PoseGraph<P, D>>,
-    /// Edge of the full graph of each edge of `sub`.
-    active: Vec<usize>,
-    /// Weights of the edges of `sub`.
-    sub_weights: Vec<f64>,
-}
-
-impl<P: G2oPose<D>, const D: usize> ActiveSolver<P, D> {
-    /// Starts from an optimiser of the whole graph.
-    fn new(optimizer: Optimizer<P, D>, graph: &PoseGraph<P, D>, weights: &[f64]) -> Self {
-        let mut solver = Self {
-            optimizer,
-            sub: None,
-            active: (0..graph.edges.len()).collect(),
-            sub_weights: Vec::new(),
-        };
-        solver.rebuild(graph, weights);
-        solver
-    }
-
-    /// Rebuilds the optimiser when the edges of non-zero weight changed. If
-    /// the active edges leave a vertex unconstrained, keeps the whole graph
-    /// (the damping of LM copes, as before the robust rounds).
-    fn rebuild(&mut self, graph: &PoseGraph<P, D>, weights: &[f64]) {
-        let active: Vec<usize> = (0..graph.edges.len())
-            .filter(|&k| weights[k] != 0.0)
-            .collect();
-        if active == self.active {
-            return;
-        }
-        let mut sub = PoseGraph::clone(graph);
-        sub.edges = active.iter().map(|&k| graph.edges[k].clone()).collect();
-        let options = self.optimizer.options_mut().clone();
-        if let Ok(optimizer) = Optimizer::new(&sub, None, options) {
-            self.optimizer = optimizer;
-            self.sub = Some(sub);
-            self.active = active;
-        } else if self.sub.is_some() {
-            let options = self.optimizer.options_mut().clone();
-            if let Ok(optimizer) = Optimizer::new(graph, Some(weights), options) {
-                self.optimizer = optimizer;
-                self.sub = None;
-                self.active = (0..graph.edges.len()).collect();
-            }
-        }
-    }
-
-    /// Minimises the weighted objective from the graph's poses, leaving the
-    /// result in the graph.
-    fn run(
-        &mut self,
-        graph: &mut PoseGraph<P, D>,
-        weights: &[f64],
-        options: SolverOptions,
-        observer: &mut dyn FnMut(&IterationRecord),
-    ) -> Result<crate::solve::Summary, SolveError> {
-        self.rebuild(graph, weights);
-        *self.optimizer.options_mut() = options;
-        let mut observe = |r: &IterationRecord| observer(r);
-        match &mut self.sub {
-            None => self.optimizer.run(graph, Some(weights), &mut observe),
-            Some(sub) => {
-                sub.poses.clone_from(&graph.poses);
-                self.sub_weights.clear();
-                self.sub_weights
-                    .extend(self.active.iter().map(|&k| weights[k]));
-                let summary = self
-                    .optimizer
-                    .run(sub, Some(&self.sub_weights), &mut observe)?;
-                graph.poses.clone_from(&sub.poses);
-                Ok(summary)
-            }
-        }
-    }
+/// Minimises the weighted objective from the graph's poses with `options`,
+/// leaving the result in the graph. Edges of weight 0 (switched-off
+/// candidates) leave the optimiser's sparsity pattern when that pays
+/// ([`Optimizer::run`]): wrong loops between distant poses fill the factor.
+fn solve<P: G2oPose<D>, const D: usize>(
+    optimizer: &mut Optimizer<P, D>,
+    graph: &mut PoseGraph<P, D>,
+    weights: &[f64],
+    options: SolverOptions,
+    observer: &mut dyn FnMut(&IterationRecord),
+) -> Result<crate::solve::Summary, SolveError> {
+    *optimizer.options_mut() = options;
+    let mut observe = |r: &IterationRecord| observer(r);
+    optimizer.run(graph, Some(weights), &mut observe)
 }
 
 /// The noise scale of EM's decisions: the a-posteriori variance factor

@@ -306,19 +306,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 vertices: unconstrained.iter().map(|&k| graph.id(k)).collect(),
             });
         }
-        let n = graph.num_vertices();
-        let mut variable = vec![None; n];
-        let mut vertex_of = Vec::with_capacity(n);
-        let mut is_gauge = vec![false; n];
-        for &g in &gauge {
-            is_gauge[g] = true;
-        }
-        for k in 0..n {
-            if !is_gauge[k] {
-                variable[k] = Some(vertex_of.len());
-                vertex_of.push(k);
-            }
-        }
+        let mut vertex_of = Vec::new();
+        let variable = Self::variables(graph, weights, &mut vertex_of);
         let in_pattern: Vec<bool> = (0..graph.edges.len())
             .map(|k| weights.is_none_or(|w| w[k] != 0.0))
             .collect();
@@ -374,7 +363,10 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// left out of it now has a weight, or when edges in it have weight 0
     /// (loops a robust method removed) and a factorisation costs more than
     /// building the pattern did — wrong loops that join distant places are
-    /// the ones that cost the most fill.
+    /// the ones that cost the most fill. Vertices that the edges of non-zero
+    /// weight no longer connect to the gauge (a part of the map joined only
+    /// by rejected loops) are held at their poses until an edge joins them
+    /// again.
     fn update_pattern(
         &mut self,
         graph: &PoseGraph<P, D>,
@@ -383,17 +375,23 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let needed = |k: usize| weights.is_none_or(|w| w[k] != 0.0);
         let missing = (0..self.in_pattern.len()).any(|k| !self.in_pattern[k] && needed(k));
         let unused = (0..self.in_pattern.len()).any(|k| self.in_pattern[k] && !needed(k));
-        if !(missing || unused && self.factor_time > self.build_time) {
+        // Edges gone from the objective may also cut vertices off the gauge,
+        // which then have to leave the variables (`vertex_of` is sorted).
+        let cut_off = || {
+            graph
+                .unconstrained_vertices(weights)
+                .iter()
+                .any(|v| self.vertex_of.binary_search(v).is_ok())
+        };
+        if !(missing || unused && (self.factor_time > self.build_time || cut_off())) {
             return Ok(());
         }
         for k in 0..self.in_pattern.len() {
             self.in_pattern[k] = needed(k);
         }
-        let mut variable = vec![None; graph.num_vertices()];
-        for (block, &v) in self.vertex_of.iter().enumerate() {
-            variable[v] = Some(block);
-        }
         let start = Instant::now();
+        let variable = Self::variables(graph, weights, &mut self.vertex_of);
+        self.step.resize(self.vertex_of.len() * D, 0.0);
         // The old factor goes before the new pattern is built, so that the
         // two never take memory at the same time.
         self.system.release_factor();
@@ -407,6 +405,34 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         self.build_time = start.elapsed();
         self.max_nnz_factor = self.max_nnz_factor.max(self.system.nnz_factor());
         Ok(())
+    }
+
+    /// The variable block of each vertex: every vertex but the gauge and
+    /// those the edges of non-zero weight do not connect to it. Fills
+    /// `vertex_of` with the vertex of each block.
+    fn variables(
+        graph: &PoseGraph<P, D>,
+        weights: Option<&[f64]>,
+        vertex_of: &mut Vec<usize>,
+    ) -> Vec<Option<usize>> {
+        let n = graph.num_vertices();
+        let mut fixed = vec![false; n];
+        for k in graph
+            .gauge()
+            .into_iter()
+            .chain(graph.unconstrained_vertices(weights))
+        {
+            fixed[k] = true;
+        }
+        vertex_of.clear();
+        (0..n)
+            .map(|k| {
+                (!fixed[k]).then(|| {
+                    vertex_of.push(k);
+                    vertex_of.len() - 1
+                })
+            })
+            .collect()
     }
 
     /// The smallest piece of a parallel loop: everything in one piece
@@ -938,6 +964,36 @@ mod tests {
             opt.run(&mut g, Some(&w[..3]), &mut |_: &IterationRecord| {})
                 .is_err()
         );
+    }
+
+    #[test]
+    fn vertices_cut_off_by_weight_zero_are_held_and_come_back() {
+        // A second part (40, 41) joined to the square by one edge 2→40.
+        let mut g = square(0.0, 4);
+        let held = Se2::new(7.0, -3.0, 0.4);
+        g.add_vertex(40, held).unwrap();
+        g.add_vertex(41, Se2::new(9.0, -3.0, 0.4)).unwrap();
+        let z = Se2::new(1.0, 0.0, 0.0);
+        g.add_edge(2, 40, z, Matrix3::identity(), None).unwrap();
+        g.add_edge(40, 41, z, Matrix3::identity(), None).unwrap();
+        let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+        let mut w = vec![1.0; g.edges.len()];
+        w[4] = 0.0;
+        let s = opt
+            .run(&mut g, Some(&w), &mut |_: &IterationRecord| {})
+            .unwrap();
+        assert!(s.stop_reason.converged(), "{s:?}");
+        // The part cut off the gauge stays where it was.
+        assert_eq!(g.poses[4], held);
+        assert_eq!(g.poses[5], Se2::new(9.0, -3.0, 0.4));
+        // The joining edge back: the part moves next to pose 2.
+        w[4] = 1.0;
+        let s = opt
+            .run(&mut g, Some(&w), &mut |_: &IterationRecord| {})
+            .unwrap();
+        assert!(s.final_objective < 1e-16, "{s:?}");
+        let rel = g.poses[2].inverse().compose(&g.poses[4]);
+        assert!((rel.x - 1.0).abs() < 1e-9 && rel.y.abs() < 1e-9);
     }
 
     #[test]
