@@ -268,8 +268,6 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     factor_time: Duration,
     /// Values of the largest factor among the patterns built so far.
     max_nnz_factor: usize,
-    /// LM's damping at the end of the last run.
-    last_lambda: f64,
     options: SolverOptions,
     trial: Vec<P>,
     best: Vec<P>,
@@ -319,7 +317,6 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             in_pattern,
             build_time: start.elapsed(),
             factor_time: Duration::ZERO,
-            last_lambda: 0.0,
             step: vec![0.0; vertex_of.len() * D],
             vertex_of,
             trial: graph.poses.clone(),
@@ -519,14 +516,12 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         // λ = 0 until a step fails: near a minimum, where the Gauss–Newton
         // model is good, any damping only slows the convergence down (on
         // long trajectories the smallest eigenvalues of H are ~1e-6 of its
-        // diagonal, so even λ = 1e-6 halves their steps). A later run on the
-        // same optimiser (a robust reweighting round) starts from the damping
-        // the previous one ended with, instead of failing its way up again.
-        let mut lambda = if opts.method == Method::GaussNewton {
-            0.0
-        } else {
-            self.last_lambda
-        };
+        // diagonal, so even λ = 1e-6 halves their steps). Every run starts
+        // undamped: a robust round changed the weights, and carrying the
+        // previous run's damping over was measured to make EM's short
+        // M-steps crawl (10⁵-pose grid: 787 iterations instead of 319, and
+        // 2 % fewer true loops accepted).
+        let mut lambda = 0.0;
         let mut nu = 2.0;
         let raise = |lambda: &mut f64, nu: &mut f64| {
             if *lambda == 0.0 {
@@ -659,8 +654,6 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         summary.final_objective = objective;
         summary.stop_reason = stop;
         summary.time = start.elapsed();
-        // A run that gave up (λ beyond any use) does not pass that on.
-        self.last_lambda = if lambda <= 1e8 { lambda } else { 0.0 };
         Ok(summary)
     }
 
