@@ -441,7 +441,10 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             // EM solves each decided set from the initial guess made with the
             // accepted loops (for the chordal guess, the relaxation of the
             // trusted edges and the accepted loops), not from a map that
-            // wrong loops may have pulled into another basin.
+            // wrong loops may have pulled into another basin. The
+            // optimiser's factor is rebuilt by the next run anyway: it goes
+            // first, so that it never takes memory beside the guess's.
+            optimizer.system_mut().release_factor();
             initialize(graph, missing, config.initialization, Some(&weights))
                 .map_err(solve_error)?;
         }
