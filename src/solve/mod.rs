@@ -1059,6 +1059,39 @@ mod tests {
     }
 
     #[test]
+    fn every_run_starts_undamped() {
+        // A start where LM's first step is the undamped one, but later
+        // steps are damped and the run ends with λ > 0.
+        let mut found = None;
+        for seed in 0..500 {
+            let mut g = square(2.5, seed);
+            let start = g.poses.clone();
+            let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+            let mut records = Vec::new();
+            opt.run(&mut g, None, &mut |r: &IterationRecord| records.push(*r))
+                .unwrap();
+            let (Some(first), Some(last)) = (records.first(), records.last()) else {
+                continue;
+            };
+            if first.lambda == 0.0 && first.rejected == 0 && last.lambda > 0.0 {
+                found = Some((g, start, opt, *first));
+                break;
+            }
+        }
+        let (mut g, start, mut opt, first) = found.expect("no start needed damping");
+        // The same optimiser from the same start takes the same undamped
+        // first step: it does not carry the last run's λ over.
+        g.poses = start;
+        let mut again = None;
+        opt.run(&mut g, None, &mut |r: &IterationRecord| {
+            again.get_or_insert(*r);
+        })
+        .unwrap();
+        let again = again.unwrap();
+        assert_eq!((again.lambda, again.objective), (0.0, first.objective));
+    }
+
+    #[test]
     fn non_finite_start_is_an_error_not_a_nan_result() {
         let mut g = square(0.0, 5);
         g.poses[1].x = f64::NAN;
