@@ -164,18 +164,16 @@ impl Pose<6> for Se3 {
         xj: &Se3Prepared,
         z: &Se3Prepared,
     ) -> EdgeLinearization<6> {
-        let ri_t = xi.matrix.transpose();
-        let rz_t = z.matrix.transpose();
-        let r_a = ri_t * xj.matrix;
-        let r_e = rz_t * r_a;
-        let t_a = ri_t * (xj.translation - xi.translation);
-        let t_e = rz_t * (t_a - z.translation);
-        let q_e = relative_quaternion(xi, xj, z);
-        let error = Vector6::new(t_e.x, t_e.y, t_e.z, q_e.i, q_e.j, q_e.k);
-
-        // d vec(q_E ⊗ (1, φ/2)) / dφ = ½ (w I + [v]×), with q_E taken with w ≥ 0.
-        let v = Vector3::new(q_e.i, q_e.j, q_e.k);
-        let dq = (Matrix3::identity() * q_e.w + skew(&v)) * 0.5;
+        let EdgeGeometry {
+            rz_t,
+            r_a,
+            r_e,
+            t_a,
+            t_e,
+            v,
+            dq,
+        } = EdgeGeometry::new(xi, xj, z);
+        let error = Vector6::new(t_e.x, t_e.y, t_e.z, v.x, v.y, v.z);
 
         let mut jac_i = Matrix6::zeros();
         jac_i.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-rz_t));
@@ -205,6 +203,46 @@ impl Pose<6> for Se3 {
     }
 }
 
+/// The quantities of one edge's error `E = Z⁻¹·Xᵢ⁻¹Xⱼ` that its Jacobians
+/// and its normal blocks share (`A = Xᵢ⁻¹Xⱼ`).
+struct EdgeGeometry {
+    /// `R_zᵀ`.
+    rz_t: Matrix3<f64>,
+    /// `R_A`.
+    r_a: Matrix3<f64>,
+    /// `R_E = R_zᵀR_A`.
+    r_e: Matrix3<f64>,
+    /// `t_A`.
+    t_a: Vector3<f64>,
+    /// `t_E = R_zᵀ(t_A − t_z)`, the translation error.
+    t_e: Vector3<f64>,
+    /// The vector part of `q_E` (taken with `w ≥ 0`), the rotation error.
+    v: Vector3<f64>,
+    /// `d vec(q_E ⊗ (1, φ/2)) / dφ = ½ (w I + [v]×)`.
+    dq: Matrix3<f64>,
+}
+
+impl EdgeGeometry {
+    #[inline]
+    fn new(xi: &Se3Prepared, xj: &Se3Prepared, z: &Se3Prepared) -> Self {
+        let ri_t = xi.matrix.transpose();
+        let rz_t = z.matrix.transpose();
+        let r_a = ri_t * xj.matrix;
+        let t_a = ri_t * (xj.translation - xi.translation);
+        let q_e = relative_quaternion(xi, xj, z);
+        let v = Vector3::new(q_e.i, q_e.j, q_e.k);
+        Self {
+            rz_t,
+            r_a,
+            r_e: rz_t * r_a,
+            t_a,
+            t_e: rz_t * (t_a - z.translation),
+            v,
+            dq: (Matrix3::identity() * q_e.w + skew(&v)) * 0.5,
+        }
+    }
+}
+
 /// `Ad(A⁻¹)` of `A = Xᵢ⁻¹Xⱼ` as its blocks `[[P, Q], [0, P]]`: the first-order
 /// change of `Xᵢ⁻¹Xⱼ` under a right update of `Xᵢ` is that of `Xⱼ` under
 /// `−Ad(A⁻¹)·δᵢ`, so `J_i = −J_j·Ad(A⁻¹)` exactly (for the Jacobians of
@@ -227,15 +265,15 @@ impl Se3 {
         z: &Se3Prepared,
         omega: &Matrix6<f64>,
     ) -> NormalBlocks<6> {
-        let ri_t = xi.matrix.transpose();
-        let rz_t = z.matrix.transpose();
-        let r_a = ri_t * xj.matrix;
-        let e_rot = rz_t * r_a;
-        let t_a = ri_t * (xj.translation - xi.translation);
-        let t_e = rz_t * (t_a - z.translation);
-        let q_e = relative_quaternion(xi, xj, z);
-        let v = Vector3::new(q_e.i, q_e.j, q_e.k);
-        let dq = (Matrix3::identity() * q_e.w + skew(&v)) * 0.5;
+        let EdgeGeometry {
+            r_a,
+            r_e: e_rot,
+            t_a,
+            t_e,
+            v,
+            dq,
+            ..
+        } = EdgeGeometry::new(xi, xj, z);
         let block = |r: usize, c: usize| omega.fixed_view::<3, 3>(r, c).into_owned();
         let (o_tt, o_tr, o_rt, o_rr) = (block(0, 0), block(0, 3), block(3, 0), block(3, 3));
         // W = Ω·J_j and H_jj = J_jᵀ·W (lower blocks).

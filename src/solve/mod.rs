@@ -305,7 +305,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             });
         }
         let mut vertex_of = Vec::new();
-        let variable = Self::variables(graph, weights, &mut vertex_of);
+        let variable = Self::variables(graph, &unconstrained, &mut vertex_of);
         let in_pattern: Vec<bool> = (0..graph.edges.len())
             .map(|k| weights.is_none_or(|w| w[k] != 0.0))
             .collect();
@@ -374,20 +374,22 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let unused = (0..self.in_pattern.len()).any(|k| self.in_pattern[k] && !needed(k));
         // Edges gone from the objective may also cut vertices off the gauge,
         // which then have to leave the variables (`vertex_of` is sorted).
-        let cut_off = || {
-            graph
-                .unconstrained_vertices(weights)
-                .iter()
-                .any(|v| self.vertex_of.binary_search(v).is_ok())
+        let mut cut_off = None;
+        let mut newly_cut_off = || {
+            let cut = graph.unconstrained_vertices(weights);
+            let any = cut.iter().any(|v| self.vertex_of.binary_search(v).is_ok());
+            cut_off = Some(cut);
+            any
         };
-        if !(missing || unused && (self.factor_time > self.build_time || cut_off())) {
+        if !(missing || unused && (self.factor_time > self.build_time || newly_cut_off())) {
             return Ok(());
         }
+        let cut_off = cut_off.unwrap_or_else(|| graph.unconstrained_vertices(weights));
         for k in 0..self.in_pattern.len() {
             self.in_pattern[k] = needed(k);
         }
         let start = Instant::now();
-        let variable = Self::variables(graph, weights, &mut self.vertex_of);
+        let variable = Self::variables(graph, &cut_off, &mut self.vertex_of);
         self.step.resize(self.vertex_of.len() * D, 0.0);
         // The old factor goes before the new pattern is built, so that the
         // two never take memory at the same time.
@@ -405,20 +407,17 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// The variable block of each vertex: every vertex but the gauge and
-    /// those the edges of non-zero weight do not connect to it. Fills
-    /// `vertex_of` with the vertex of each block.
+    /// `cut_off` (those the edges of non-zero weight do not connect to it,
+    /// [`PoseGraph::unconstrained_vertices`]). Fills `vertex_of` with the
+    /// vertex of each block.
     fn variables(
         graph: &PoseGraph<P, D>,
-        weights: Option<&[f64]>,
+        cut_off: &[usize],
         vertex_of: &mut Vec<usize>,
     ) -> Vec<Option<usize>> {
         let n = graph.num_vertices();
         let mut fixed = vec![false; n];
-        for k in graph
-            .gauge()
-            .into_iter()
-            .chain(graph.unconstrained_vertices(weights))
-        {
+        for k in graph.gauge().into_iter().chain(cut_off.iter().copied()) {
             fixed[k] = true;
         }
         vertex_of.clear();
