@@ -487,30 +487,76 @@ pub fn learn_threshold(counts: &[u64], options: &MixtureOptions) -> ThresholdFit
 
     let y = log_normalized(counts, max_count);
     let floor = options.variance_floor.value(max_count);
-    let starts = em_starts(&y, floor);
-    let Some(mixture) = best_fit(&y, &starts, floor, options) else {
-        fit.degeneracy = Some(Degeneracy::Collapsed {
-            starts: starts.len(),
-        });
-        return fit;
-    };
+    let two = fit_two_normals(&y, floor, options);
+    fit.degeneracy = two.degeneracy;
+    fit.threshold = two.crossing_log.map(|y| Threshold::from_log(y, max_count));
+    fit.mixture = two.mixture;
+    fit.separation = two.separation;
+    fit
+}
 
-    let params = mixture.params();
-    let crossing = params.crossing_log();
+/// Two normals fitted by EM to values `y` (logs of a positive quantity), as
+/// [`learn_threshold`] fits them to `ln v`: the same starts, the variance
+/// `floor`, and the same degeneracy checks after the fit, with index 1 the
+/// component of the higher mean.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TwoNormals {
+    /// The fit, unless every EM start collapsed.
+    pub mixture: Option<LogNormalMixture>,
+    /// The numbers behind the degeneracy verdict, when there is a fit.
+    pub separation: Option<Separation>,
+    /// Where the weighted densities cross between the means, in `y`.
+    pub crossing_log: Option<f64>,
+    /// Why the fit is not trustworthy, or `None` when it is. Checks on the
+    /// data themselves (how many values) are the caller's.
+    pub degeneracy: Option<Degeneracy>,
+}
+
+/// Fits [`TwoNormals`] to `y` with the variance floor `floor` (see
+/// [`MixtureOptions`] for the checks; "loop component" there means the
+/// component of the higher mean). The gate fits `ln(count / max)`; the
+/// robust back end fits the logs of the candidates' residuals
+/// ([`crate::robust`]).
+///
+/// ```
+/// use pgo::gate::{fit_two_normals, MixtureOptions};
+/// // ln of two well-separated groups.
+/// let mut y: Vec<f64> = (0..200).map(|i| (i % 20) as f64 * 0.1).collect();
+/// y.extend((0..20).map(|i| 10.0 + (i % 5) as f64 * 0.2));
+/// let fit = fit_two_normals(&y, 1e-6, &MixtureOptions::default());
+/// assert!(fit.degeneracy.is_none());
+/// let t = fit.crossing_log.unwrap();
+/// assert!(t > 1.9 && t < 10.0);
+/// ```
+pub fn fit_two_normals(y: &[f64], floor: f64, options: &MixtureOptions) -> TwoNormals {
+    let floor = floor.max(MIN_VARIANCE_FLOOR);
+    let starts = em_starts(y, floor);
+    let Some(mixture) = best_fit(y, &starts, floor, options) else {
+        return TwoNormals {
+            mixture: None,
+            separation: None,
+            crossing_log: None,
+            degeneracy: Some(Degeneracy::Collapsed {
+                starts: starts.len(),
+            }),
+        };
+    };
+    let crossing_log = mixture.params().crossing_log();
     let n = y.len() as f64;
     let separation = Separation {
-        bic_one: bic(2, n, one_component_log_likelihood(&y, floor)),
+        bic_one: bic(2, n, one_component_log_likelihood(y, floor)),
         bic_two: bic(5, n, mixture.log_likelihood),
         ashman_d: mixture.ashman_d(),
         loop_weight: mixture.weight[1],
         loop_expected_size: mixture.weight[1] * n,
-        crossing_exists: crossing.is_some(),
+        crossing_exists: crossing_log.is_some(),
     };
-    fit.degeneracy = check_separation(&separation, &mixture, options);
-    fit.threshold = crossing.map(|y| Threshold::from_log(y, max_count));
-    fit.mixture = Some(mixture);
-    fit.separation = Some(separation);
-    fit
+    TwoNormals {
+        degeneracy: check_separation(&separation, &mixture, options),
+        mixture: Some(mixture),
+        separation: Some(separation),
+        crossing_log,
+    }
 }
 
 /// Degeneracies visible in the counts themselves, before any fitting.

@@ -283,10 +283,19 @@ struct OptimizeArgs {
     robust_c: Option<f64>,
     /// EM: do not rescue the candidates the gate dropped. By default each is
     /// held out of the weighting and accepted if its residual at the map made
-    /// from the kept candidates is that of an inlier (r² ≤ c² after the
-    /// variance factor); a wrong loop never shapes the map it is judged by.
+    /// from the kept candidates is that of an inlier (r²/s² ≤ c², or below
+    /// the learned width narrowed by its count's odds); a wrong loop never
+    /// shapes the map it is judged by.
     #[arg(long)]
     no_rescue: bool,
+    /// EM: decide at c instead of at the width learned from the residuals.
+    /// By default, once the decisions at c settle, two normals are fitted to
+    /// ln(r²/s²) of the candidates (consistent and inconsistent loops, as the
+    /// gate fits the counts) and the candidates are decided again where the
+    /// weighted densities cross, never below c (JSON: robust.decision_c,
+    /// robust.residual_mixture).
+    #[arg(long)]
+    no_learn_width: bool,
     /// Which edges are loop candidates: those with an inlier count, or also
     /// every edge between non-consecutive ids.
     #[arg(long, value_enum, default_value_t = CandidatesArg::Counted)]
@@ -684,6 +693,7 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
     };
     config.robust_c = args.robust_c;
     config.rescue = !args.no_rescue;
+    config.learn_width = !args.no_learn_width;
     config.plot = args.plot.clone();
     config.candidates = match args.candidates {
         CandidatesArg::Counted => CandidateRule::Counted,

@@ -55,6 +55,9 @@ pub struct OptimizeConfig {
     /// EM: rescue the candidates the gate dropped whose residual at the map
     /// of the kept ones is that of an inlier (default on).
     pub rescue: bool,
+    /// EM: learn the decision width from the residuals
+    /// ([`crate::robust::Reweighter::decision_c`]; default on).
+    pub learn_width: bool,
     /// Write SVG pictures (inlier-count histogram with the fitted mixture;
     /// trajectory before and after) into this directory.
     pub plot: Option<PathBuf>,
@@ -93,6 +96,7 @@ impl OptimizeConfig {
             robust_c: None,
             iteration_budget: None,
             rescue: true,
+            learn_width: true,
             plot: None,
         }
     }
@@ -339,6 +343,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         .as_ref()
         .map(|_| crate::plot::top_view(&graph.poses));
     let mut robust_options = RobustOptions::new(method, D);
+    robust_options.learn_width = config.learn_width;
     if let Some(c) = config.robust_c {
         robust_options.c = c;
     }
@@ -508,6 +513,8 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             .count(),
         variance_factor: noise_scale,
         rescued_loops: reweighter.rescued(),
+        decision_c: (method == RobustMethod::Em).then(|| reweighter.decision_c()),
+        residual_mixture: reweighter.residual_fit().cloned(),
     };
 
     chi2_test(graph, &weights, config, report);
@@ -680,9 +687,10 @@ fn gate_candidates<P: G2oPose<D>, const D: usize>(
     }
     // The soft gate hands the mixture's posterior on as a prior, and so does
     // the hard gate for the candidates it dropped (EM may rescue them, with
-    // the count's evidence against them); a kept candidate is known no
-    // better than ½ (nor is a dropped one under a fixed threshold without a
-    // fit). A zero count is no loop by definition: prior 0.
+    // the count's evidence against them beyond the calibrated width: see
+    // `Reweighter::decision_c`); a kept candidate is known no better than ½
+    // (nor is a dropped one under a fixed threshold without a fit). A zero
+    // count is no loop by definition: prior 0.
     let max = report.gate.max_inliers;
     let rescuable =
         matches!(config.gate, GateMode::Auto | GateMode::Fixed(_)) && !decision.degenerate;
@@ -699,7 +707,7 @@ fn gate_candidates<P: G2oPose<D>, const D: usize>(
         .zip(&decision.kept)
         .map(|(c, &kept)| match (config.gate, c) {
             (GateMode::Soft, Some(n)) if !decision.degenerate => posterior(*n),
-            (_, Some(0)) if rescuable && !kept => 0.0,
+            (_, Some(n)) if rescuable && !kept => posterior(*n),
             _ => 0.5,
         })
         .collect();

@@ -169,6 +169,13 @@ pub struct RobustReport {
     /// EM: candidates the gate dropped that were accepted at the map of the
     /// kept ones (`--rescue`).
     pub rescued_loops: usize,
+    /// EM: the kernel width of the last hard decision (`c`, or wider when
+    /// learned from the residuals); `null` for the other methods.
+    pub decision_c: Option<f64>,
+    /// EM: the two normals fitted to `ln(r²/s²)` of the weighed candidates
+    /// at the last decision (means, spreads, weights, degeneracy), when
+    /// there were enough residuals to fit.
+    pub residual_mixture: Option<crate::gate::TwoNormals>,
 }
 
 /// One loop candidate's fate.

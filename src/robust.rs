@@ -21,10 +21,13 @@
 //!   turned into hard decisions (accept iff `w ≥ ½` at `r²/s²`, `s²` the
 //!   variance factor of the decided map, re-decided until the set repeats),
 //!   so the map returned is the least-squares map of the accepted loops and
-//!   the χ² test tests it; and the candidates the gate dropped are judged
-//!   once at that map ([`Reweighter::hold_out`]). With a prior inlier
-//!   probability `p` per candidate (the soft gate), the E-step multiplies the
-//!   Cauchy odds `c²/r²` by the prior odds `p/(1 − p)`.
+//!   the χ² test tests it; once the decisions at `c` settle, the width of
+//!   the decisions is learned from the residuals as the gate learns `T_GV`
+//!   from the counts ([`Reweighter::decision_c`]); and the candidates the
+//!   gate dropped are judged once at the final map
+//!   ([`Reweighter::hold_out`]), with their counts' posteriors as priors.
+//!   With a prior inlier probability `p` per candidate, the E-step
+//!   multiplies the Cauchy odds `c²/r²` by the prior odds `p/(1 − p)`.
 //! * [`RobustMethod::Huber`]: `w = 1` for `r ≤ c`, else `c / r`.
 //! * [`RobustMethod::Cauchy`]: `w = c² / (c² + r²)`, plain IRLS (no switching).
 //! * [`RobustMethod::Dcs`]: dynamic covariance scaling (Agarwal et al.,
@@ -39,6 +42,7 @@
 //! inlier's `r²` is χ²_D-distributed when the information matrices are
 //! calibrated.
 
+use crate::gate::{MixtureOptions, TwoNormals, fit_two_normals};
 use serde::Serialize;
 
 /// A robust method for loop candidates.
@@ -95,6 +99,9 @@ pub struct RobustOptions {
     /// Most reweighting rounds (E-steps); EM's hard decisions after them
     /// are limited separately ([`MAX_DECISIONS`]).
     pub max_rounds: usize,
+    /// EM: learn the width of the hard decisions from the residuals
+    /// ([`Reweighter::decision_c`]) instead of deciding at `c`.
+    pub learn_width: bool,
 }
 
 impl RobustOptions {
@@ -108,6 +115,7 @@ impl RobustOptions {
             tolerance: 1e-3,
             max_rounds: 100,
             restart: true,
+            learn_width: true,
         }
     }
 }
@@ -270,6 +278,11 @@ pub struct Reweighter {
     anneal: Option<f64>,
     /// EM: a restart from a fresh initial guess was asked for.
     restart_pending: bool,
+    /// EM: the mixture of the residuals at the latest decision, and the
+    /// width learned from it (see [`Reweighter::decision_c`]).
+    residual_fit: Option<TwoNormals>,
+    decision_c: Option<f64>,
+    width_learned: bool,
 }
 
 /// EM: the kernel width's square is divided by this every round until it
@@ -283,6 +296,13 @@ pub const STABLE_ROUNDS: usize = 3;
 
 /// EM: most hard decisions (solves to convergence) in the deciding phase.
 pub const MAX_DECISIONS: usize = 8;
+
+/// EM: most hard decisions at the learned width, after those at `c`.
+pub const WIDE_DECISIONS: usize = 3;
+
+/// EM: the variance floor of the residual mixture (on `ln(r²/s²)`): a
+/// spread of 10⁻³ in the log, far below any real one.
+const RESIDUAL_VARIANCE_FLOOR: f64 = 1e-6;
 
 impl Reweighter {
     /// A reweighter for `priors.len()` candidates; `priors` are their prior
@@ -307,6 +327,9 @@ impl Reweighter {
             stable: 0,
             anneal: None,
             restart_pending: false,
+            residual_fit: None,
+            decision_c: None,
+            width_learned: false,
         }
     }
 
@@ -446,17 +469,83 @@ impl Reweighter {
         }
     }
 
-    /// The posterior weight of every candidate not removed (0 for removed),
-    /// at the current (annealed) kernel width.
+    /// The posterior weight of every candidate not removed (0 for removed):
+    /// while weighting, at the current (annealed) kernel width; once
+    /// deciding, at the decision width ([`Reweighter::decision_c`]), and for
+    /// a held-out candidate at least its plain Cauchy weight at `c` (an
+    /// inlier at the calibrated width needs no help from its count; beyond
+    /// it, its prior odds narrow the learned width).
     fn posterior(&mut self, r2: &[f64]) {
-        let c = self.options.c * self.anneal.unwrap_or(1.0).sqrt();
+        let deciding = !matches!(self.phase, EmPhase::Weighting);
+        let c = if deciding {
+            self.decision_c()
+        } else {
+            self.options.c * self.anneal.unwrap_or(1.0).sqrt()
+        };
         for k in 0..self.posteriors.len() {
             self.posteriors[k] = if self.states[k] == CandidateState::Removed {
                 0.0
+            } else if deciding && self.held_out[k] {
+                em_weight(r2[k], c, self.priors[k]).max(cauchy_weight(r2[k], self.options.c))
             } else {
                 em_weight(r2[k], c, self.priors[k])
             };
         }
+    }
+
+    /// EM: the kernel width of the hard decisions. With
+    /// [`RobustOptions::learn_width`], learned from the data as the gate
+    /// learns `T_GV`: two normals are fitted to `ln(r²/s²)` of the weighed
+    /// candidates at the map being decided on (the consistent loops and the
+    /// inconsistent ones; [`crate::gate::fit_two_normals`]) and the width
+    /// is where their weighted densities cross, never below `c`. Real loop
+    /// residuals are heavy-tailed (some true loops of parking-garage sit at
+    /// `r²/s²` ≈ 10³ at the clean optimum) while wrong ones are 10³–10⁸
+    /// (README, "Robust loops"); a fixed `c` cuts into that tail. A
+    /// degenerate fit (fewer than 8 residuals, one component, overlapping
+    /// components, an inconsistent component of fewer than 3 candidates, no
+    /// crossing) leaves `c`. `c` itself otherwise,
+    /// and before the first decision.
+    pub fn decision_c(&self) -> f64 {
+        self.decision_c.unwrap_or(self.options.c)
+    }
+
+    /// EM: the mixture of the weighed candidates' `ln(r²/s²)` at the last
+    /// decision, when one was fitted.
+    pub fn residual_fit(&self) -> Option<&TwoNormals> {
+        self.residual_fit.as_ref()
+    }
+
+    /// Learns the decision width from `r2` (already divided by `s²`).
+    fn learn_decision_width(&mut self, r2: &[f64]) {
+        if !self.options.learn_width {
+            return;
+        }
+        // An exact zero (a candidate nothing else constrains) has no
+        // logarithm and says nothing about the spread: left out.
+        let y: Vec<f64> = r2
+            .iter()
+            .zip(&self.held_out)
+            .filter(|(r, h)| !**h && **r > 0.0 && r.is_finite())
+            .map(|(r, _)| r.ln())
+            .collect();
+        // The inconsistent component may be small (a good gate leaves few
+        // wrong loops): only its size (≥ 3) and the separation count.
+        let options = MixtureOptions {
+            min_loop_weight: 0.0,
+            ..MixtureOptions::default()
+        };
+        if y.len() < options.min_counts {
+            self.residual_fit = None;
+            self.decision_c = None;
+            return;
+        }
+        let fit = fit_two_normals(&y, RESIDUAL_VARIANCE_FLOOR, &options);
+        self.decision_c = match (&fit.degeneracy, fit.crossing_log) {
+            (None, Some(t)) => Some((0.5 * t).exp().max(self.options.c)),
+            _ => None,
+        };
+        self.residual_fit = Some(fit);
     }
 
     /// One EM round: an E-step with switching off in the weighting phase, a
@@ -521,39 +610,56 @@ impl Reweighter {
                         self.posteriors[k] = 0.0;
                     }
                 }
-                // Decisions are taken at the plain kernel width.
+                // Decisions are taken at the decision width.
                 self.phase = EmPhase::Deciding { rounds: 0 };
                 self.anneal = Some(1.0);
-                self.posterior(&scaled(r2, s2));
-                self.decide(old)
+                let r2 = scaled(r2, s2);
+                self.posterior(&r2);
+                self.decide(old, &r2)
             }
-            EmPhase::Deciding { .. } => self.decide(old),
+            EmPhase::Deciding { .. } => self.decide(old, &scaled(r2, s2)),
         }
     }
 
     /// Accepts the candidates whose posterior is ≥ ½ (weight 1), leaves the
     /// others out (weight 0); returns whether the accepted set changed (and
     /// another solve is needed).
-    fn decide(&mut self, old: &[f64]) -> bool {
+    ///
+    /// `r2` are the residuals already divided by `s²`. When the set repeats
+    /// at `c` (the map is that of the loops consistent at the calibrated
+    /// width, which no wrong loop shaped), the decision width is learned at
+    /// that map ([`Reweighter::decision_c`]) and the candidates decided
+    /// again at it, once; it is not re-learned at the maps that follow,
+    /// where a wrong loop it let in could have widened it further.
+    fn decide(&mut self, old: &[f64], r2: &[f64]) -> bool {
         let EmPhase::Deciding { rounds } = self.phase else {
             return false;
         };
-        for k in 0..self.weights.len() {
-            // Held-out candidates wait for the rescue, at the final map.
-            let accept = !self.held_out[k] && self.posteriors[k] >= 0.5;
-            self.weights[k] = if accept { 1.0 } else { 0.0 };
-            if self.states[k] != CandidateState::Removed {
-                self.states[k] = if accept {
-                    CandidateState::Active
-                } else {
-                    CandidateState::Off
-                };
-            }
-        }
+        self.accept_by_posterior();
         // The first decision always needs a solve (the last one used
         // continuous weights); later ones only when the set changed.
-        let changed = rounds == 0 || old != self.weights.as_slice();
-        if changed && rounds < MAX_DECISIONS {
+        let mut changed = rounds == 0 || old != self.weights.as_slice();
+        // Learned once: when the set repeats at `c`, or when the decisions
+        // at `c` run out (they can shrink the set round after round: each
+        // true loop of the heavy tail that is left out lowers s² and so
+        // pushes the next ones out).
+        if (!changed || rounds >= MAX_DECISIONS) && !self.width_learned && self.options.learn_width
+        {
+            self.width_learned = true;
+            self.learn_decision_width(r2);
+            if self.decision_c.is_some() {
+                self.posterior(r2);
+                self.accept_by_posterior();
+                changed = old != self.weights.as_slice();
+            }
+        }
+        let limit = MAX_DECISIONS
+            + if self.width_learned {
+                WIDE_DECISIONS
+            } else {
+                0
+            };
+        if changed && rounds < limit {
             self.phase = EmPhase::Deciding { rounds: rounds + 1 };
             self.restart_pending = self.options.restart;
             return true;
@@ -564,6 +670,22 @@ impl Reweighter {
         }
         self.phase = EmPhase::Done;
         self.rescue()
+    }
+
+    /// Weight 1 for the candidates whose posterior is ≥ ½, 0 for the others;
+    /// held-out candidates wait for the rescue, at the final map.
+    fn accept_by_posterior(&mut self) {
+        for k in 0..self.weights.len() {
+            let accept = !self.held_out[k] && self.posteriors[k] >= 0.5;
+            self.weights[k] = if accept { 1.0 } else { 0.0 };
+            if self.states[k] != CandidateState::Removed {
+                self.states[k] = if accept {
+                    CandidateState::Active
+                } else {
+                    CandidateState::Off
+                };
+            }
+        }
     }
 
     /// Accepts the held-out candidates whose posterior at the decided map
@@ -789,6 +911,114 @@ mod tests {
         assert!(rounds > annealing, "{rounds} rounds");
         // Decided at the plain width: 4/104 < ½ for all.
         assert_eq!(rw.weights(), &[0.0; 4]);
+    }
+
+    /// 50 consistent loops whose `ln r²` spreads evenly over [−4, 4] (a
+    /// heavy tail: r² up to 55 with c² = 4) and 10 wrong ones at r² ≈ 10⁶.
+    fn heavy_tailed_residuals() -> Vec<f64> {
+        let mut r2: Vec<f64> = (0..50)
+            .map(|i| (-4.0 + 8.0 * i as f64 / 49.0).exp())
+            .collect();
+        r2.extend((0..10).map(|k| (14.0 + 0.5 * (k % 5) as f64).exp()));
+        r2
+    }
+
+    /// Runs EM on residuals that do not move with the weights (every solve
+    /// gives the same map) and returns the number of solves.
+    fn run_to_the_end(rw: &mut Reweighter, r2: &[f64]) -> usize {
+        let mut solves = 0;
+        while rw.update(r2) {
+            solves += 1;
+            assert!(solves < 100, "EM does not end");
+        }
+        solves
+    }
+
+    #[test]
+    fn em_learns_the_decision_width_where_the_residual_mixture_crosses() {
+        let r2 = heavy_tailed_residuals();
+        let mut rw = Reweighter::new(em_options(), vec![0.5; r2.len()]);
+        run_to_the_end(&mut rw, &r2);
+        // The crossing lies between the consistent tail (55) and the wrong
+        // loops (1.2·10⁶): every consistent loop accepted, no wrong one.
+        let c_d = rw.decision_c();
+        assert!(c_d * c_d > 55.0 && c_d * c_d < 1.2e6, "c_d = {c_d}");
+        let fit = rw.residual_fit().expect("a residual mixture");
+        assert!(fit.degeneracy.is_none(), "{:?}", fit.degeneracy);
+        let w = rw.final_weights();
+        assert!(w[..50].iter().all(|&w| w >= 0.5), "{w:?}");
+        assert!(w[50..].iter().all(|&w| w == 0.0), "{w:?}");
+
+        // At c alone the tail beyond c² = 4 (ln r² > 1.39: 17 loops) is
+        // rejected with the wrong ones.
+        let fixed = RobustOptions {
+            learn_width: false,
+            ..em_options()
+        };
+        let mut rw = Reweighter::new(fixed, vec![0.5; r2.len()]);
+        run_to_the_end(&mut rw, &r2);
+        assert_eq!(rw.decision_c(), 2.0);
+        let accepted = rw.final_weights().iter().filter(|&&w| w >= 0.5).count();
+        assert_eq!(accepted, 33);
+    }
+
+    #[test]
+    fn em_decision_width_is_c_without_two_populations() {
+        // One population (no wrong loop): the fit is degenerate, the width c.
+        let r2: Vec<f64> = (0..50)
+            .map(|i| (-4.0 + 8.0 * i as f64 / 49.0).exp())
+            .collect();
+        let mut rw = Reweighter::new(em_options(), vec![0.5; r2.len()]);
+        run_to_the_end(&mut rw, &r2);
+        assert!(rw.residual_fit().unwrap().degeneracy.is_some());
+        assert_eq!(rw.decision_c(), 2.0);
+        // Two populations that cross below c²: never narrower than c.
+        let mut r2: Vec<f64> = (0..50).map(|i| 1e-4 * (1.0 + i as f64 / 49.0)).collect();
+        r2.extend((0..10).map(|k| 0.5 + 0.1 * k as f64));
+        let mut rw = Reweighter::new(em_options(), vec![0.5; r2.len()]);
+        run_to_the_end(&mut rw, &r2);
+        assert!(rw.residual_fit().unwrap().degeneracy.is_none());
+        assert_eq!(rw.decision_c(), 2.0);
+        assert!(rw.final_weights().iter().all(|&w| w >= 0.5));
+        // Too few residuals to fit: no fit at all.
+        let mut rw = Reweighter::new(em_options(), vec![0.5; 4]);
+        run_to_the_end(&mut rw, &[1.0, 2.0, 1e6, 3.0]);
+        assert!(rw.residual_fit().is_none());
+        assert_eq!(rw.decision_c(), 2.0);
+    }
+
+    #[test]
+    fn em_rescue_beyond_c_needs_the_count_odds() {
+        // The kept candidates teach a width c_d; the held-out ones (the gate
+        // dropped them; their priors are their counts' posteriors) are
+        // accepted within c whatever their count, and beyond it when
+        // r² ≤ c_d² · p/(1 − p).
+        let mut r2 = heavy_tailed_residuals();
+        let mut priors = vec![0.5; r2.len()];
+        let mut rw = Reweighter::new(em_options(), priors.clone());
+        run_to_the_end(&mut rw, &r2);
+        let c_d2 = rw.decision_c().powi(2);
+        let held = [
+            (3.0, 0.001),      // within c² = 4: accepted
+            (0.2 * c_d2, 0.4), // odds 2/3 > 0.2: accepted
+            (0.2 * c_d2, 0.1), // odds 1/9 < 0.2: rejected
+            (2.0 * c_d2, 0.5), // beyond the width: rejected
+            (1.0, 0.0),        // zero count: never
+        ];
+        for &(r, p) in &held {
+            r2.push(r);
+            priors.push(p);
+        }
+        let mut rw = Reweighter::new(em_options(), priors);
+        let mut mask = vec![false; 60];
+        mask.extend([true; 5]);
+        rw.hold_out(&mask);
+        run_to_the_end(&mut rw, &r2);
+        assert!((rw.decision_c().powi(2) - c_d2).abs() < 1e-9 * c_d2);
+        let w = rw.final_weights();
+        let accepted: Vec<bool> = w[60..].iter().map(|&w| w >= 0.5).collect();
+        assert_eq!(accepted, [true, true, false, false, false]);
+        assert_eq!(rw.rescued(), 2);
     }
 
     #[test]

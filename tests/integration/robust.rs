@@ -339,3 +339,70 @@ fn the_soft_gate_recovers_true_loops_below_the_threshold() {
     // Every candidate entered EM: none was dropped by the gate.
     assert!(soft.loops.iter().all(|l| l.kept));
 }
+
+#[test]
+fn em_learns_its_decision_width_from_heavy_tailed_true_loops() {
+    use pgo::geometry::Pose;
+    let dir = temp_dir("robust-width");
+    // Ten true loops with ~11σ errors (r² ≈ 120 against c² = 30.7): true,
+    // but beyond the calibrated width; the wrong loops are far further out.
+    let mut sim = simulate_planar(&options(OutlierPolicy::Random, 60, 7)).expect("simulate");
+    let mut bent = Vec::new();
+    for (k, (e, &w)) in sim.noisy.edges.iter_mut().zip(&sim.wrong).enumerate() {
+        if e.is_candidate() && !w && bent.len() < 10 {
+            let d = nalgebra::Vector3::from_fn(|i, _| (40.0 / e.information[(i, i)]).sqrt());
+            e.measurement = e.measurement.compose(&Se2::exp(&d));
+            bent.push(k);
+        }
+    }
+    let path = dir.join("heavy.g2o");
+    write(&sim.noisy, &path);
+    let wrong: Vec<bool> = sim
+        .noisy
+        .edges
+        .iter()
+        .zip(&sim.wrong)
+        .filter(|(e, _)| e.is_candidate())
+        .map(|(_, w)| *w)
+        .collect();
+    // Candidate index of each bent loop.
+    let candidate_of: Vec<usize> = bent
+        .iter()
+        .map(|&k| {
+            sim.noisy.edges[..k]
+                .iter()
+                .filter(|e| e.is_candidate())
+                .count()
+        })
+        .collect();
+
+    let learned = run(&path, GateMode::Off, RobustMethod::Em, None);
+    let fixed = pipeline::run(
+        &OptimizeConfig {
+            gate: GateMode::Off,
+            learn_width: false,
+            ..OptimizeConfig::new(&path)
+        },
+        &mut |_| {},
+    )
+    .expect("optimise");
+    let c = learned.robust.c;
+    let c_d = learned.robust.decision_c.expect("EM reports its width");
+    let mixture = learned.robust.residual_mixture.as_ref().expect("a fit");
+    assert!(mixture.degeneracy.is_none(), "{:?}", mixture.degeneracy);
+    assert!(c_d > c, "learned {c_d}, c {c}");
+    assert_eq!(fixed.robust.decision_c, Some(c));
+    // Learned: every bent true loop accepted, no wrong one.
+    let (tp, fp, _) = counts(&learned, &wrong);
+    assert_eq!(fp, 0);
+    assert_eq!(tp, wrong.iter().filter(|w| !**w).count());
+    // At c some bent loops are rejected (4 of them; the others pull the map
+    // far enough to fit), still no wrong one.
+    let (_, fp_fixed, _) = counts(&fixed, &wrong);
+    assert_eq!(fp_fixed, 0);
+    let rejected = candidate_of
+        .iter()
+        .filter(|&&i| fixed.loops[i].weight < 0.5)
+        .count();
+    assert!(rejected >= 3, "{rejected} of 10 bent loops rejected at c");
+}
