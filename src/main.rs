@@ -290,9 +290,10 @@ struct OptimizeArgs {
     no_rescue: bool,
     /// EM: decide at c instead of at the width learned from the residuals.
     /// By default, once the decisions at c settle, two normals are fitted to
-    /// ln(r²/s²) of the candidates (consistent and inconsistent loops, as the
-    /// gate fits the counts) and the candidates are decided again where the
-    /// weighted densities cross, never below c (JSON: robust.decision_c,
+    /// ln(r²/s²) of the candidates (consistent and inconsistent loops, with
+    /// the gate's EM) and the candidates are decided again at the larger of
+    /// the consistent component's 1 − 10⁻⁶ quantile and the crossing of the
+    /// weighted densities, never below c (JSON: robust.decision_c,
     /// robust.residual_mixture).
     #[arg(long)]
     no_learn_width: bool,

@@ -22,8 +22,8 @@
 //!   variance factor of the decided map, re-decided until the set repeats),
 //!   so the map returned is the least-squares map of the accepted loops and
 //!   the χ² test tests it; once the decisions at `c` settle, the width of
-//!   the decisions is learned from the residuals as the gate learns `T_GV`
-//!   from the counts ([`Reweighter::decision_c`]); and the candidates the
+//!   the decisions is learned from the residuals with the gate's mixture
+//!   ([`Reweighter::decision_c`]); and the candidates the
 //!   gate dropped are judged once at the final map
 //!   ([`Reweighter::hold_out`]), with their counts' posteriors as priors.
 //!   With a prior inlier probability `p` per candidate, the E-step
@@ -143,7 +143,7 @@ pub fn default_c(method: RobustMethod, dim: usize) -> f64 {
             .unwrap_or(3.0)
     };
     match method {
-        RobustMethod::Em => quantile(1e-6),
+        RobustMethod::Em => quantile(EM_ALPHA),
         RobustMethod::Gnc | RobustMethod::None => quantile(0.01),
         RobustMethod::Huber | RobustMethod::Cauchy => quantile(0.05),
         RobustMethod::Dcs => 1.0,
@@ -296,6 +296,11 @@ pub const STABLE_ROUNDS: usize = 3;
 
 /// EM: most hard decisions (solves to convergence) in the deciding phase.
 pub const MAX_DECISIONS: usize = 8;
+
+/// EM: the probability that a true loop falls beyond the decision width:
+/// `c = √χ²_D(1 − EM_ALPHA)` ([`default_c`]), and the learned width is the
+/// same quantile of the learned distribution ([`Reweighter::decision_c`]).
+pub const EM_ALPHA: f64 = 1e-6;
 
 /// EM: most hard decisions at the learned width, after those at `c`.
 pub const WIDE_DECISIONS: usize = 3;
@@ -494,18 +499,27 @@ impl Reweighter {
     }
 
     /// EM: the kernel width of the hard decisions. With
-    /// [`RobustOptions::learn_width`], learned from the data as the gate
-    /// learns `T_GV`: two normals are fitted to `ln(r²/s²)` of the weighed
-    /// candidates at the map being decided on (the consistent loops and the
-    /// inconsistent ones; [`crate::gate::fit_two_normals`]) and the width
-    /// is where their weighted densities cross, never below `c`. Real loop
+    /// [`RobustOptions::learn_width`], learned from the data: `c` assumes
+    /// that a true loop's `r²/s²` is χ²_D-distributed, but real loop
     /// residuals are heavy-tailed (some true loops of parking-garage sit at
-    /// `r²/s²` ≈ 10³ at the clean optimum) while wrong ones are 10³–10⁸
-    /// (README, "Robust loops"); a fixed `c` cuts into that tail. A
-    /// degenerate fit (fewer than 8 residuals, one component, overlapping
-    /// components, an inconsistent component of fewer than 3 candidates, no
-    /// crossing) leaves `c`. `c` itself otherwise,
-    /// and before the first decision.
+    /// `r²/s²` ≈ 10³ at the clean optimum, while wrong ones are at 10⁶–10⁹;
+    /// README, "Robust loops"). So two normals are fitted to `ln(r²/s²)` of
+    /// the weighed candidates at the map being decided on (the gate's EM,
+    /// [`crate::gate::fit_two_normals`]); the lower one is the consistent
+    /// loops (log-normal `r²/s²`), and the width is the larger of
+    ///
+    /// * its upper [`EM_ALPHA`]-quantile, `exp(μ₀ + z σ₀)` with
+    ///   `z = Φ⁻¹(1 − EM_ALPHA)` — the quantile `c` takes of χ²_D, now of the
+    ///   learned distribution; used even when the fit is degenerate as a
+    ///   split into two populations (few wrong loops left: the upper
+    ///   component then sweeps up the few far ones, the lower one is still
+    ///   the bulk);
+    /// * where the weighted densities cross between the means (the gate's
+    ///   rule), when the fit is not degenerate: a loop there is more likely
+    ///   consistent than not;
+    ///
+    /// and never below `c`. `c` when there is no fit (fewer than 8
+    /// residuals, every EM start collapsed), and before the first decision.
     pub fn decision_c(&self) -> f64 {
         self.decision_c.unwrap_or(self.options.c)
     }
@@ -530,7 +544,7 @@ impl Reweighter {
             .map(|(r, _)| r.ln())
             .collect();
         // The inconsistent component may be small (a good gate leaves few
-        // wrong loops): only its size (≥ 3) and the separation count.
+        // wrong loops); its size and separation only go into the report.
         let options = MixtureOptions {
             min_loop_weight: 0.0,
             ..MixtureOptions::default()
@@ -541,10 +555,15 @@ impl Reweighter {
             return;
         }
         let fit = fit_two_normals(&y, RESIDUAL_VARIANCE_FLOOR, &options);
-        self.decision_c = match (&fit.degeneracy, fit.crossing_log) {
-            (None, Some(t)) => Some((0.5 * t).exp().max(self.options.c)),
-            _ => None,
+        let z = crate::stats::normal_upper_quantile(EM_ALPHA);
+        let crossing = match (&fit.degeneracy, fit.crossing_log) {
+            (None, Some(t)) => t,
+            _ => f64::NEG_INFINITY,
         };
+        self.decision_c = fit.mixture.as_ref().map(|m| {
+            let width2 = (m.mu[0] + z * m.sigma[0]).max(crossing).exp();
+            width2.sqrt().max(self.options.c)
+        });
         self.residual_fit = Some(fit);
     }
 
@@ -939,8 +958,10 @@ mod tests {
         let r2 = heavy_tailed_residuals();
         let mut rw = Reweighter::new(em_options(), vec![0.5; r2.len()]);
         run_to_the_end(&mut rw, &r2);
-        // The crossing lies between the consistent tail (55) and the wrong
-        // loops (1.2·10⁶): every consistent loop accepted, no wrong one.
+        // Two populations: the width is the larger of the consistent loops'
+        // quantile and the crossing, here between the consistent tail (55)
+        // and the wrong loops (1.2·10⁶): every consistent loop accepted, no
+        // wrong one.
         let c_d = rw.decision_c();
         assert!(c_d * c_d > 55.0 && c_d * c_d < 1.2e6, "c_d = {c_d}");
         let fit = rw.residual_fit().expect("a residual mixture");
@@ -963,24 +984,43 @@ mod tests {
     }
 
     #[test]
-    fn em_decision_width_is_c_without_two_populations() {
-        // One population (no wrong loop): the fit is degenerate, the width c.
-        let r2: Vec<f64> = (0..50)
-            .map(|i| (-4.0 + 8.0 * i as f64 / 49.0).exp())
+    fn em_decision_width_is_the_consistent_loops_quantile() {
+        // 200 consistent loops, ln r² at the normal quantiles of N(0, 1), and
+        // two wrong ones: too few for a second population (degenerate), so
+        // the width is the 1 − EM_ALPHA quantile of the lower component,
+        // r² = exp(0 + 4.75 · 1) ≈ 116, not the crossing.
+        let mut r2: Vec<f64> = (0..200)
+            .map(|i| {
+                let p = (i as f64 + 0.5) / 200.0;
+                crate::stats::normal_upper_quantile(1.0 - p).exp()
+            })
             .collect();
+        r2.extend([14f64.exp(), 15f64.exp()]);
         let mut rw = Reweighter::new(em_options(), vec![0.5; r2.len()]);
         run_to_the_end(&mut rw, &r2);
-        assert!(rw.residual_fit().unwrap().degeneracy.is_some());
-        assert_eq!(rw.decision_c(), 2.0);
-        // Two populations that cross below c²: never narrower than c.
-        let mut r2: Vec<f64> = (0..50).map(|i| 1e-4 * (1.0 + i as f64 / 49.0)).collect();
-        r2.extend((0..10).map(|k| 0.5 + 0.1 * k as f64));
-        let mut rw = Reweighter::new(em_options(), vec![0.5; r2.len()]);
+        let fit = rw.residual_fit().expect("a fit");
+        assert!(
+            fit.degeneracy.is_some(),
+            "two wrong loops are no population"
+        );
+        let z = crate::stats::normal_upper_quantile(EM_ALPHA);
+        let ln_width2 = 2.0 * rw.decision_c().ln();
+        assert!(
+            (ln_width2 - z).abs() < 0.3,
+            "ln c_d² = {ln_width2}, z = {z}"
+        );
+        let w = rw.final_weights();
+        assert!(w[..200].iter().all(|&w| w >= 0.5));
+        assert!(w[200..].iter().all(|&w| w == 0.0));
+        // Never narrower than c.
+        let wide = RobustOptions {
+            c: 20.0,
+            ..em_options()
+        };
+        let mut rw = Reweighter::new(wide, vec![0.5; r2.len()]);
         run_to_the_end(&mut rw, &r2);
-        assert!(rw.residual_fit().unwrap().degeneracy.is_none());
-        assert_eq!(rw.decision_c(), 2.0);
-        assert!(rw.final_weights().iter().all(|&w| w >= 0.5));
-        // Too few residuals to fit: no fit at all.
+        assert_eq!(rw.decision_c(), 20.0);
+        // Too few residuals to fit: no fit at all, c.
         let mut rw = Reweighter::new(em_options(), vec![0.5; 4]);
         run_to_the_end(&mut rw, &[1.0, 2.0, 1e6, 3.0]);
         assert!(rw.residual_fit().is_none());

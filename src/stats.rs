@@ -109,14 +109,23 @@ pub fn chi2_critical(dof: u64, alpha: f64) -> Result<f64, StatsError> {
     }
 }
 
+/// The upper-α standard normal quantile `z = Φ⁻¹(1 − α)`, written with
+/// erfc⁻¹ so that it stays accurate for tiny α.
+///
+/// ```
+/// let z = pgo::stats::normal_upper_quantile(0.025);
+/// assert!((z - 1.959964).abs() < 1e-6);
+/// ```
+pub fn normal_upper_quantile(alpha: f64) -> f64 {
+    SQRT_2 * erfc_inv(2.0 * alpha)
+}
+
 /// The Wilson–Hilferty approximation of the upper-α critical value:
 /// `(χ²/k)^(1/3)` is close to normal with mean `1 − 2/(9k)` and variance
 /// `2/(9k)`. Relative error is O(1/k); used as a start and as a check.
 /// May be ≤ 0 for small `k` and `alpha` near 1.
 fn wilson_hilferty(k: f64, alpha: f64) -> f64 {
-    // Upper-α standard normal quantile, z = Φ⁻¹(1 − α), written with erfc⁻¹
-    // so it stays accurate for tiny α.
-    let z = SQRT_2 * erfc_inv(2.0 * alpha);
+    let z = normal_upper_quantile(alpha);
     let h = 2.0 / (9.0 * k);
     k * (1.0 - h + z * h.sqrt()).powi(3)
 }
