@@ -358,8 +358,15 @@ impl Report {
                 } else {
                     String::new()
                 };
+                // EM's decision width, when learned wider than c.
+                let width = match self.robust.decision_c {
+                    Some(c_d) if c_d > self.robust.c => {
+                        format!(" at learned width {c_d:.3} (c {:.3})", self.robust.c)
+                    }
+                    _ => String::new(),
+                };
                 verdict.push(format!(
-                    "robust {}: accepted {}{rescued}, rejected {}",
+                    "robust {}{width}: accepted {}{rescued}, rejected {}",
                     self.robust.method.name(),
                     self.robust.active_loops,
                     self.robust.rejected_loops
