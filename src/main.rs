@@ -264,7 +264,7 @@ struct OptimizeArgs {
     #[arg(long, value_name = "auto|soft|off|N", default_value = "auto", value_parser = parse_gate)]
     gate: GateMode,
     /// What the learned gate does when the counts do not show two components.
-    #[arg(long, value_enum, default_value_t = DegenerateArg::DropAll)]
+    #[arg(long, value_enum, default_value_t = DegenerateArg::KeepAll)]
     degenerate: DegenerateArg,
     /// Significance level of the χ² test of the result.
     #[arg(long, default_value_t = 0.05, value_parser = parse_alpha)]
@@ -355,9 +355,10 @@ enum CandidatesArg {
 
 #[derive(Copy, Clone, Debug, ValueEnum)]
 enum DegenerateArg {
-    /// Keep every candidate.
+    /// Keep every candidate: the robust back end decides them by geometry.
     KeepAll,
-    /// Drop every counted candidate: no wrong loop gets in silently.
+    /// Drop every counted candidate: no wrong loop gets in (the choice with
+    /// --robust none).
     DropAll,
     /// Use the crossing anyway when there is one.
     Threshold,

@@ -679,7 +679,7 @@ fn gate_candidates<P: G2oPose<D>, const D: usize>(
                     DegeneratePolicy::DropAll =>
                         "every counted candidate dropped, the trusted edges optimised alone",
                     DegeneratePolicy::KeepAll =>
-                        "every candidate kept, left to the robust back end",
+                        "every candidate with a non-zero count kept, left to the robust back end",
                     DegeneratePolicy::Threshold => "the crossing used anyway where there is one",
                 }
             ));

@@ -132,7 +132,13 @@ fn degenerate_counts_are_reported_before_optimisation() {
     let r = report(&[&few]);
     assert_eq!(r["gate"]["degenerate"], true, "{}", r["gate"]);
     assert!(r["gate"]["reason"].as_str().is_some_and(|s| !s.is_empty()));
-    // The default policy drops every candidate: only odometry is optimised.
+    assert!(r["warnings"].to_string().contains("degenerate"));
+    // The default policy (keep-all) leaves them to EM.
+    assert_eq!(r["gate"]["policy"], "keep_all");
+    assert!(r["gate"]["kept"].as_u64().unwrap() > 0);
+    // drop-all drops every candidate: only odometry is optimised.
+    let r = report(&[&few, "--degenerate", "drop-all"]);
+    assert_eq!(r["gate"]["degenerate"], true, "{}", r["gate"]);
     assert_eq!(r["gate"]["kept"], 0);
     assert!(
         r["loops"]

@@ -253,7 +253,7 @@ fn degenerate_counts_are_flagged_before_optimisation_or_fail_the_chi2_test() {
             (a.abs_diff(b) != 1).then(|| f[3] == "1")
         })
         .collect();
-    // The default: flagged before optimisation, every candidate dropped.
+    // Flagged before optimisation, whatever the policy.
     let r = run(&input, GateMode::Auto, RobustMethod::Em, None);
     assert!(r.gate.degenerate);
     assert!(
@@ -261,12 +261,19 @@ fn degenerate_counts_are_flagged_before_optimisation_or_fail_the_chi2_test() {
         "{:?}",
         r.warnings
     );
+    // drop-all: every candidate dropped.
+    let config = OptimizeConfig {
+        degenerate: DegeneratePolicy::DropAll,
+        ..OptimizeConfig::new(&input)
+    };
+    let r = pipeline::run(&config, &mut |_| {}).expect("optimise");
+    assert!(r.gate.degenerate);
     assert!(r.loops.iter().all(|l| l.weight == 0.0));
-    // Forcing the candidates in: whatever EM keeps, a kept wrong loop fails
-    // the χ² test; without a robust method the test fails.
+    // keep-all (the default): whatever EM keeps, a kept wrong loop fails
+    // the χ² test; without a robust method the test fails. EM keeps the 8
+    // true loops and no wrong one.
     for robust in [RobustMethod::Em, RobustMethod::None] {
         let config = OptimizeConfig {
-            degenerate: DegeneratePolicy::KeepAll,
             robust,
             ..OptimizeConfig::new(&input)
         };
@@ -279,6 +286,9 @@ fn degenerate_counts_are_flagged_before_optimisation_or_fail_the_chi2_test() {
         );
         if robust == RobustMethod::None {
             assert!(fp > 0 && !passed);
+        } else {
+            let (tp, _, _) = counts(&r, &wrong);
+            assert_eq!((tp, fp), (8, 0));
         }
     }
 }
