@@ -278,8 +278,8 @@ pub struct Reweighter {
     anneal: Option<f64>,
     /// EM: a restart from a fresh initial guess was asked for.
     restart_pending: bool,
-    /// EM: the mixture of the residuals at the latest decision, and the
-    /// width learned from it (see [`Reweighter::decision_c`]).
+    /// EM: the mixture of the residuals at the map the width was learned
+    /// at, and the width (see [`Reweighter::decision_c`]).
     residual_fit: Option<TwoNormals>,
     decision_c: Option<f64>,
     width_learned: bool,
@@ -504,7 +504,8 @@ impl Reweighter {
     /// residuals are heavy-tailed (some true loops of parking-garage sit at
     /// `r²/s²` ≈ 10³ at the clean optimum, while wrong ones are at 10⁶–10⁹;
     /// README, "Robust loops"). So two normals are fitted to `ln(r²/s²)` of
-    /// the weighed candidates at the map being decided on (the gate's EM,
+    /// the weighed candidates at the map where the decisions at `c` settled
+    /// (see `decide`; the gate's EM,
     /// [`crate::gate::fit_two_normals`]); the lower one is the consistent
     /// loops (log-normal `r²/s²`), and the width is the larger of
     ///
@@ -524,8 +525,8 @@ impl Reweighter {
         self.decision_c.unwrap_or(self.options.c)
     }
 
-    /// EM: the mixture of the weighed candidates' `ln(r²/s²)` at the last
-    /// decision, when one was fitted.
+    /// EM: the mixture of the weighed candidates' `ln(r²/s²)` at the map the
+    /// decision width was learned at, when one was fitted.
     pub fn residual_fit(&self) -> Option<&TwoNormals> {
         self.residual_fit.as_ref()
     }
