@@ -511,10 +511,11 @@ impl Reweighter {
     ///
     /// * its upper [`EM_ALPHA`]-quantile, `exp(μ₀ + z σ₀)` with
     ///   `z = Φ⁻¹(1 − EM_ALPHA)` — the quantile `c` takes of χ²_D, now of the
-    ///   learned distribution; used even when the fit is degenerate as a
-    ///   split into two populations (few wrong loops left: the upper
-    ///   component then sweeps up the few far ones, the lower one is still
-    ///   the bulk);
+    ///   learned distribution; when the fit is degenerate as a split into
+    ///   two populations (few wrong loops left), that of the heavier
+    ///   component, the bulk of the loops (the other then sweeps up the few
+    ///   far ones, or is a thin, broad halo whose mean may lie lower: city10000
+    ///   with 10 wrong candidates, σ 4.5 against the bulk's 0.94);
     /// * where the weighted densities cross between the means (the gate's
     ///   rule), when the fit is not degenerate: a loop there is more likely
     ///   consistent than not;
@@ -557,12 +558,21 @@ impl Reweighter {
         }
         let fit = fit_two_normals(&y, RESIDUAL_VARIANCE_FLOOR, &options);
         let z = crate::stats::normal_upper_quantile(EM_ALPHA);
-        let crossing = match (&fit.degeneracy, fit.crossing_log) {
-            (None, Some(t)) => t,
+        let separated = fit.degeneracy.is_none();
+        let crossing = match fit.crossing_log {
+            Some(t) if separated => t,
             _ => f64::NEG_INFINITY,
         };
         self.decision_c = fit.mixture.as_ref().map(|m| {
-            let width2 = (m.mu[0] + z * m.sigma[0]).max(crossing).exp();
+            // Two populations: the lower one is the consistent loops. No
+            // clean split: the bulk (the heavier component), not a thin,
+            // broad halo whose mean happens to lie lower.
+            let k = if separated || m.weight[0] >= m.weight[1] {
+                0
+            } else {
+                1
+            };
+            let width2 = (m.mu[k] + z * m.sigma[k]).max(crossing).exp();
             width2.sqrt().max(self.options.c)
         });
         self.residual_fit = Some(fit);
@@ -1026,6 +1036,26 @@ mod tests {
         run_to_the_end(&mut rw, &[1.0, 2.0, 1e6, 3.0]);
         assert!(rw.residual_fit().is_none());
         assert_eq!(rw.decision_c(), 2.0);
+    }
+
+    #[test]
+    fn em_decision_width_follows_the_bulk_not_a_broad_halo() {
+        // 300 consistent loops (ln r² at the quantiles of N(0.2, 0.9)) and a
+        // thin halo of 8 spread over ln r² ∈ [−9, 7], mean below the bulk's:
+        // no clean split; the width is the bulk's quantile, ≈ exp(0.2 + 4.75
+        // · 0.9), not the halo's.
+        let mut r2: Vec<f64> = (0..300)
+            .map(|i| {
+                let p = (i as f64 + 0.5) / 300.0;
+                (0.2 + 0.9 * crate::stats::normal_upper_quantile(1.0 - p)).exp()
+            })
+            .collect();
+        r2.extend((0..8).map(|k| (-9.0 + 16.0 * k as f64 / 7.0).exp()));
+        let mut rw = Reweighter::new(em_options(), vec![0.5; r2.len()]);
+        run_to_the_end(&mut rw, &r2);
+        let ln_width2 = 2.0 * rw.decision_c().ln();
+        let bulk = 0.2 + 0.9 * crate::stats::normal_upper_quantile(EM_ALPHA);
+        assert!(ln_width2 < bulk + 1.0, "ln c_d² = {ln_width2}, bulk {bulk}");
     }
 
     #[test]
