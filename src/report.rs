@@ -173,8 +173,8 @@ pub struct RobustReport {
     /// learned from the residuals); `null` for the other methods.
     pub decision_c: Option<f64>,
     /// EM: the two normals fitted to `ln(r²/s²)` of the weighed candidates
-    /// at the last decision (means, spreads, weights, degeneracy), when
-    /// there were enough residuals to fit.
+    /// at the map the decision width was learned at (means, spreads,
+    /// weights, degeneracy), when there were enough residuals to fit.
     pub residual_mixture: Option<crate::gate::TwoNormals>,
 }
 

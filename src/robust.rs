@@ -534,9 +534,6 @@ impl Reweighter {
 
     /// Learns the decision width from `r2` (already divided by `s²`).
     fn learn_decision_width(&mut self, r2: &[f64]) {
-        if !self.options.learn_width {
-            return;
-        }
         // An exact zero (a candidate nothing else constrains) has no
         // logarithm and says nothing about the spread: left out.
         let y: Vec<f64> = r2

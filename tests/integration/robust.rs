@@ -36,19 +36,24 @@ fn case(dir: &Path, name: &str, options: SimulationOptions) -> Case {
         .collect();
     let clean = dir.join(format!("{name}_clean.g2o"));
     write(&clean_graph, &clean);
-    let wrong = sim
-        .noisy
-        .edges
-        .iter()
-        .zip(&sim.wrong)
-        .filter(|(e, _)| e.is_candidate())
-        .map(|(_, w)| *w)
-        .collect();
+    let wrong = candidate_labels(&sim.noisy, &sim.wrong);
     Case {
         noisy,
         clean,
         wrong,
     }
+}
+
+/// For every loop candidate in file order, whether it is wrong (`wrong` is
+/// per edge).
+fn candidate_labels(graph: &PoseGraph<Se2, 3>, wrong: &[bool]) -> Vec<bool> {
+    graph
+        .edges
+        .iter()
+        .zip(wrong)
+        .filter(|(e, _)| e.is_candidate())
+        .map(|(_, w)| *w)
+        .collect()
 }
 
 fn write(graph: &PoseGraph<Se2, 3>, path: &Path) {
@@ -357,34 +362,24 @@ fn em_learns_its_decision_width_from_heavy_tailed_true_loops() {
     // Ten true loops with ~11σ errors (r² ≈ 120 against c² = 30.7): true,
     // but beyond the calibrated width; the wrong loops are far further out.
     let mut sim = simulate_planar(&options(OutlierPolicy::Random, 60, 7)).expect("simulate");
-    let mut bent = Vec::new();
-    for (k, (e, &w)) in sim.noisy.edges.iter_mut().zip(&sim.wrong).enumerate() {
-        if e.is_candidate() && !w && bent.len() < 10 {
-            let d = nalgebra::Vector3::from_fn(|i, _| (40.0 / e.information[(i, i)]).sqrt());
+    // Candidate index (file order) of each bent loop.
+    let mut candidate_of = Vec::new();
+    let candidates = sim
+        .noisy
+        .edges
+        .iter_mut()
+        .zip(&sim.wrong)
+        .filter(|(e, _)| e.is_candidate());
+    for (i, (e, &w)) in candidates.enumerate() {
+        if !w && candidate_of.len() < 10 {
+            let d = nalgebra::Vector3::from_fn(|k, _| (40.0 / e.information[(k, k)]).sqrt());
             e.measurement = e.measurement.compose(&Se2::exp(&d));
-            bent.push(k);
+            candidate_of.push(i);
         }
     }
     let path = dir.join("heavy.g2o");
     write(&sim.noisy, &path);
-    let wrong: Vec<bool> = sim
-        .noisy
-        .edges
-        .iter()
-        .zip(&sim.wrong)
-        .filter(|(e, _)| e.is_candidate())
-        .map(|(_, w)| *w)
-        .collect();
-    // Candidate index of each bent loop.
-    let candidate_of: Vec<usize> = bent
-        .iter()
-        .map(|&k| {
-            sim.noisy.edges[..k]
-                .iter()
-                .filter(|e| e.is_candidate())
-                .count()
-        })
-        .collect();
+    let wrong = candidate_labels(&sim.noisy, &sim.wrong);
 
     let learned = run(&path, GateMode::Off, RobustMethod::Em, None);
     let fixed = pipeline::run(
