@@ -100,6 +100,11 @@ pub struct BlockSystem<const D: usize> {
     /// scratch.
     rhs: Vec<f64>,
     solve_work: Vec<f64>,
+    /// Scratch of [`BlockSystem::propagate`]: `D` right-hand sides (zero
+    /// between calls), the supernodes they reach, and a flag per supernode.
+    cov_rhs: Vec<f64>,
+    cov_reach: Vec<u32>,
+    cov_mark: Vec<bool>,
     lambda: f64,
     symbolic: Symbolic<D>,
     /// The factor's panels, allocated by the first factorisation (so that a
@@ -207,6 +212,9 @@ impl<const D: usize> BlockSystem<D> {
             gradient: vec![0.0; n],
             rhs: vec![0.0; n],
             solve_work: Vec::new(),
+            cov_rhs: Vec::new(),
+            cov_reach: Vec::new(),
+            cov_mark: Vec::new(),
             lambda: 0.0,
             symbolic,
             factor: Vec::new(),
@@ -484,6 +492,85 @@ impl<const D: usize> BlockSystem<D> {
         }
     }
 
+    /// `A·H⁻¹·Aᵀ` for the `D×(n·D)` matrix `A` whose only nonzero blocks are
+    /// `a_i` at variable block `i` and `a_j` at `j` (`None`: a fixed vertex,
+    /// no block), from the last factorisation (of `H + λ·diag H`: call
+    /// [`Self::factorize`] with `λ = 0` for `H` itself).
+    ///
+    /// With `A` an edge's Jacobian this is the covariance the solution's
+    /// uncertainty adds to the edge's predicted error: the error of an edge
+    /// left out of the solution has covariance `Ω⁻¹ + J·H⁻¹·Jᵀ` (its
+    /// *innovation* covariance). `H⁻¹` is never formed: `A·H⁻¹·Aᵀ = YᵀY`
+    /// with `L·Y = Aᵀ`, and `Aᵀ` is nonzero on two block rows only, so the
+    /// forward solve visits just the supernodes on their paths to the root
+    /// of the elimination tree.
+    ///
+    /// # Panics
+    /// If no factorisation succeeded before, or a block index is out of
+    /// range.
+    pub fn propagate(
+        &mut self,
+        i: Option<usize>,
+        a_i: &SMatrix<f64, D, D>,
+        j: Option<usize>,
+        a_j: &SMatrix<f64, D, D>,
+    ) -> SMatrix<f64, D, D> {
+        let mut out = SMatrix::<f64, D, D>::zeros();
+        let blocks: Vec<(usize, &SMatrix<f64, D, D>)> = [(i, a_i), (j, a_j)]
+            .into_iter()
+            .filter_map(|(b, a)| b.map(|b| (self.position[b], a)))
+            .collect();
+        if blocks.is_empty() || self.n_blocks == 0 {
+            return out;
+        }
+        assert!(
+            !self.factor.is_empty(),
+            "BlockSystem::propagate needs a factorisation first"
+        );
+        let n = self.n_blocks * D;
+        if self.cov_rhs.len() != D * n {
+            self.cov_rhs = vec![0.0; D * n];
+        }
+        let positions: Vec<usize> = blocks.iter().map(|&(p, _)| p).collect();
+        self.symbolic
+            .reach(&positions, &mut self.cov_mark, &mut self.cov_reach);
+        // Column a of Aᵀ: row a of each block, at its block row.
+        for a in 0..D {
+            let rhs = &mut self.cov_rhs[a * n..(a + 1) * n];
+            for &(p, block) in &blocks {
+                for r in 0..D {
+                    rhs[p * D + r] += block[(a, r)];
+                }
+            }
+            self.symbolic
+                .forward_sparse(&self.factor, rhs, &self.cov_reach, &mut self.solve_work);
+        }
+        // YᵀY over the columns the solves reached; the scratch is zeroed
+        // there for the next call.
+        for &s in &self.cov_reach {
+            let cols = self.symbolic.columns(s as usize);
+            let range = D * cols.start..D * cols.end;
+            for a in 0..D {
+                for b in 0..=a {
+                    let ya = &self.cov_rhs[a * n..(a + 1) * n][range.clone()];
+                    let yb = &self.cov_rhs[b * n..(b + 1) * n][range.clone()];
+                    let d: f64 = ya.iter().zip(yb).map(|(x, y)| x * y).sum();
+                    out[(a, b)] += d;
+                }
+            }
+        }
+        for a in 0..D {
+            for b in 0..a {
+                out[(b, a)] = out[(a, b)];
+            }
+            for &s in &self.cov_reach {
+                let cols = self.symbolic.columns(s as usize);
+                self.cov_rhs[a * n..(a + 1) * n][D * cols.start..D * cols.end].fill(0.0);
+            }
+        }
+        out
+    }
+
     /// The decrease of χ² that the quadratic model predicts for `step`
     /// (as returned by [`Self::solve`]): `−2δᵀb − δᵀHδ`, which for the damped
     /// solution equals `−δᵀb + λ·δᵀ diag(H) δ`.
@@ -686,6 +773,49 @@ mod tests {
             // Predicted decrease of the undamped model: −2δᵀb − δᵀHδ.
             let model = -2.0 * got.dot(&b) - got.dot(&(&h * &got));
             assert!((sys.predicted_decrease(&step) - model).abs() < 1e-9 * model.abs().max(1.0));
+        }
+    }
+
+    #[test]
+    fn propagate_is_a_h_inverse_a_transpose() {
+        use nalgebra::Matrix2;
+        for seed in 0..5 {
+            let (mut sys, h, _) = random_system(seed);
+            sys.factorize(0.0).unwrap();
+            let h_inv = h.clone().try_inverse().unwrap();
+            let n = sys.num_blocks();
+            let a_i = Matrix2::new(1.0, 0.5 + seed as f64, -2.0, 0.25);
+            let a_j = Matrix2::new(-1.0, 0.3, 0.7, 2.0);
+            // Every pair, one block only, none: the scratch must be clean
+            // between calls.
+            let mut pairs = vec![(Some(0), None), (None, None)];
+            for i in 0..n {
+                for j in 0..n {
+                    if i != j {
+                        pairs.push((Some(i), Some(j)));
+                    }
+                }
+            }
+            for (i, j) in pairs {
+                let mut a = DMatrix::<f64>::zeros(2, 2 * n);
+                if let Some(i) = i {
+                    a.view_mut((0, 2 * i), (2, 2)).copy_from(&a_i);
+                }
+                if let Some(j) = j {
+                    a.view_mut((0, 2 * j), (2, 2)).copy_from(&a_j);
+                }
+                let expected = &a * &h_inv * a.transpose();
+                let got = sys.propagate(i, &a_i, j, &a_j);
+                for r in 0..2 {
+                    for c in 0..2 {
+                        assert!(
+                            (got[(r, c)] - expected[(r, c)]).abs()
+                                < 1e-9 * expected.norm().max(1.0),
+                            "seed {seed}, blocks {i:?} {j:?}: {got} vs {expected}"
+                        );
+                    }
+                }
+            }
         }
     }
 

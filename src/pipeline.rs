@@ -433,7 +433,18 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         } else {
             1.0
         };
-        let again = reweighter.update_scaled(&r2, s2);
+        let mut again = reweighter.update_scaled(&r2, s2);
+        if let Some(which) = reweighter.innovation_request() {
+            // The rescue of the held-out candidates the plain residual left
+            // out judges their innovation at the decided map, with the set
+            // it was solved with (`Reweighter::rescue_by_innovation`). If
+            // that map's undamped normal matrix cannot be factorised, the
+            // plain rule's decision stands.
+            let edges: Vec<usize> = which.iter().map(|&c| pool[c]).collect();
+            if let Ok(nu2) = optimizer.innovation_chi2(graph, &weights, &edges) {
+                again |= reweighter.rescue_by_innovation(&which, &nu2, s2);
+            }
+        }
         if reweighter.full_solve() || !again {
             noise_scale = Some(s2).filter(|_| method == RobustMethod::Em);
         }

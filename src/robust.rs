@@ -283,6 +283,9 @@ pub struct Reweighter {
     residual_fit: Option<TwoNormals>,
     decision_c: Option<f64>,
     width_learned: bool,
+    /// EM: the held-out candidates are waiting to be judged by their
+    /// innovation ([`Reweighter::innovation_request`]).
+    innovation_pending: bool,
 }
 
 /// EM: the kernel width's square is divided by this every round until it
@@ -335,6 +338,7 @@ impl Reweighter {
             residual_fit: None,
             decision_c: None,
             width_learned: false,
+            innovation_pending: false,
         }
     }
 
@@ -629,10 +633,14 @@ impl Reweighter {
                 {
                     return true;
                 }
-                // The EM process converged: remove the lowest for good, then
-                // decide.
+                // The EM process converged: remove the lowest for good (not
+                // the held-out candidates: they are judged at the decided
+                // map), then decide.
                 for k in 0..self.weights.len() {
-                    if self.states[k] == CandidateState::Off && self.posteriors[k] < o.remove {
+                    if self.states[k] == CandidateState::Off
+                        && !self.held_out[k]
+                        && self.posteriors[k] < o.remove
+                    {
                         self.states[k] = CandidateState::Removed;
                         self.posteriors[k] = 0.0;
                     }
@@ -696,7 +704,9 @@ impl Reweighter {
             self.weights.copy_from_slice(old);
         }
         self.phase = EmPhase::Done;
-        self.rescue()
+        let rescued = self.rescue();
+        self.innovation_pending = self.held_out.iter().any(|&h| h);
+        rescued
     }
 
     /// Weight 1 for the candidates whose posterior is ≥ ½, 0 for the others;
@@ -716,16 +726,67 @@ impl Reweighter {
     }
 
     /// Accepts the held-out candidates whose posterior at the decided map
-    /// (which none of them shaped) is ≥ ½, once and for all; returns whether
-    /// any was (and the map is to be solved again with them).
+    /// (which none of them shaped) is ≥ ½, once and for all, never one of
+    /// zero prior (a zero count); returns whether any was (and the map is to
+    /// be solved again with them).
     fn rescue(&mut self) -> bool {
         let mut any = false;
         for k in 0..self.weights.len() {
             if self.held_out[k]
                 && self.states[k] != CandidateState::Removed
+                && self.priors[k] > 0.0
                 && self.posteriors[k] >= 0.5
             {
                 self.weights[k] = 1.0;
+                self.states[k] = CandidateState::Active;
+                any = true;
+            }
+        }
+        any
+    }
+
+    /// EM, once the decisions are done: the held-out candidates still left
+    /// out that only their innovation can rescue (not removed, a non-zero
+    /// prior), to be judged by [`Reweighter::rescue_by_innovation`]; `None`
+    /// when there are none or they were judged. Asking clears the request.
+    pub fn innovation_request(&mut self) -> Option<Vec<usize>> {
+        if !std::mem::take(&mut self.innovation_pending) {
+            return None;
+        }
+        let which: Vec<usize> = (0..self.weights.len())
+            .filter(|&k| {
+                self.held_out[k]
+                    && self.weights[k] == 0.0
+                    && self.states[k] != CandidateState::Removed
+                    && self.priors[k] > 0.0
+            })
+            .collect();
+        (!which.is_empty()).then_some(which)
+    }
+
+    /// EM: judges the held-out candidates `which` by their squared
+    /// innovation `ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e` at the decided map (the
+    /// Mahalanobis distance of the error of an edge the map was solved
+    /// without, the uncertainty of the map included), divided by `s²`: one
+    /// is accepted when its posterior at the learned width with its count
+    /// as prior, `em_weight(ν²/s², c_d, p)`, is ≥ ½ — the rule of the
+    /// rescue beyond `c`, with the statistic that fits a loop the map never
+    /// saw. Its residual `r²` at the map can be far larger than `ν²` where
+    /// the map is uncertain between its two poses (where the gate dropped
+    /// the loops that would have tied them). Returns whether any was
+    /// accepted (and the map is to be solved again with them).
+    pub fn rescue_by_innovation(&mut self, which: &[usize], innovation2: &[f64], s2: f64) -> bool {
+        let s2 = if s2 > 0.0 && s2.is_finite() { s2 } else { 1.0 };
+        let c = self.decision_c();
+        let mut any = false;
+        for (&k, &nu2) in which.iter().zip(innovation2) {
+            if !self.held_out[k] || self.states[k] == CandidateState::Removed {
+                continue;
+            }
+            let posterior = em_weight(nu2 / s2, c, self.priors[k]);
+            if posterior >= 0.5 {
+                self.weights[k] = 1.0;
+                self.posteriors[k] = posterior;
                 self.states[k] = CandidateState::Active;
                 any = true;
             }
@@ -1087,6 +1148,46 @@ mod tests {
         let accepted: Vec<bool> = w[60..].iter().map(|&w| w >= 0.5).collect();
         assert_eq!(accepted, [true, true, false, false, false]);
         assert_eq!(rw.rescued(), 2);
+    }
+
+    #[test]
+    fn em_rescue_by_innovation_needs_the_count_odds_at_the_learned_width() {
+        // Held-out candidates the plain rule left out are asked for once the
+        // decisions are done, and judged by their innovation ν²/s² with the
+        // rule beyond c: ν²/s² ≤ c_d² · p/(1 − p).
+        let mut r2 = heavy_tailed_residuals();
+        let mut priors = vec![0.5; r2.len()];
+        let mut rw = Reweighter::new(em_options(), priors.clone());
+        run_to_the_end(&mut rw, &r2);
+        let c_d2 = rw.decision_c().powi(2);
+        // All far beyond the width by their plain residual.
+        let held = [(0.4, true), (0.1, false), (0.4, false), (0.0, false)];
+        for &(p, _) in &held {
+            r2.push(10.0 * c_d2);
+            priors.push(p);
+        }
+        let mut rw = Reweighter::new(em_options(), priors);
+        let mut mask = vec![false; 60];
+        mask.extend([true; 4]);
+        rw.hold_out(&mask);
+        assert_eq!(rw.innovation_request(), None, "not before the decisions");
+        run_to_the_end(&mut rw, &r2);
+        assert_eq!(rw.rescued(), 0);
+        // The zero count is not asked for; the others are, once.
+        let which = rw.innovation_request().expect("held-out candidates left");
+        assert_eq!(which, [60, 61, 62]);
+        assert_eq!(rw.innovation_request(), None);
+        // s² = 2: ν² = 2 · 0.2 c_d² passes with odds 2/3, not with 1/9;
+        // ν² = 2 · 0.8 c_d² needs odds ≥ 0.8 (p = 0.4 has 2/3).
+        let nu2 = [0.4 * c_d2, 0.4 * c_d2, 1.6 * c_d2];
+        assert!(rw.rescue_by_innovation(&which, &nu2, 2.0));
+        // The map is solved once more with the rescued one; EM is done.
+        assert!(!rw.update(&r2));
+        let accepted: Vec<bool> = rw.final_weights()[60..].iter().map(|&w| w >= 0.5).collect();
+        assert_eq!(accepted, [true, false, false, false]);
+        assert_eq!(rw.rescued(), 1);
+        // A kept candidate is never judged this way.
+        assert!(!rw.rescue_by_innovation(&[0], &[0.0], 1.0));
     }
 
     #[test]

@@ -85,6 +85,9 @@ pub(super) struct Symbolic<const D: usize> {
     /// Updates received by each supernode: `updates[update_ptr[s]..update_ptr[s + 1]]`.
     update_ptr: Vec<usize>,
     updates: Vec<Update>,
+    /// Parent of each supernode in the elimination tree (`u32::MAX` for a
+    /// root).
+    parent: Vec<u32>,
     /// Children of each supernode in the elimination tree, and the roots.
     child_ptr: Vec<usize>,
     children: Vec<u32>,
@@ -332,6 +335,7 @@ impl<const D: usize> Symbolic<D> {
             update_ptr,
             updates,
             child_ptr,
+            parent,
             children,
             roots,
             subtree_flops,
@@ -644,40 +648,7 @@ impl<const D: usize> Symbolic<D> {
         let ns = self.supernodes();
         // L·y = b.
         for s in 0..ns {
-            let g = self.panel(s);
-            let (wc, ld) = (g.cols::<D>(), g.ld::<D>());
-            let panel = &values[self.val_ptr[s]..self.val_ptr[s + 1]];
-            let xs = &mut x[D * g.b0..D * g.b0 + wc];
-            for j in 0..wc {
-                let col = &panel[j * ld..j * ld + wc];
-                xs[j] /= col[j];
-                let xj = xs[j];
-                for i in j + 1..wc {
-                    xs[i] -= col[i] * xj;
-                }
-            }
-            let below = D * g.p;
-            if below == 0 {
-                continue;
-            }
-            let y = &mut gathered[..below];
-            y.fill(0.0);
-            for j in 0..wc {
-                let xj = xs[j];
-                let col = &panel[j * ld + wc..(j + 1) * ld];
-                for (yi, &l) in y.iter_mut().zip(col) {
-                    *yi += l * xj;
-                }
-            }
-            for (i, &r) in self.rows[self.row_ptr[s]..self.row_ptr[s + 1]]
-                .iter()
-                .enumerate()
-            {
-                let dst = &mut x[D * r as usize..][..D];
-                for a in 0..D {
-                    dst[a] -= y[D * i + a];
-                }
-            }
+            self.forward_supernode(s, values, x, gathered);
         }
         // Lᵀ·x = y.
         for s in (0..ns).rev() {
@@ -706,6 +677,96 @@ impl<const D: usize> Symbolic<D> {
                 xs[j] = v / col[j];
             }
         }
+    }
+}
+
+impl<const D: usize> Symbolic<D> {
+    /// The supernodes a right-hand side nonzero only in the given block
+    /// columns reaches in `L·y = b`: the paths from their supernodes to the
+    /// root of the elimination tree, in increasing order (children before
+    /// parents), written to `reach`; `mark` (one flag per supernode, all
+    /// false) is left all false.
+    pub(super) fn reach(&self, blocks: &[usize], mark: &mut Vec<bool>, reach: &mut Vec<u32>) {
+        let ns = self.supernodes();
+        if mark.len() < ns {
+            mark.resize(ns, false);
+        }
+        reach.clear();
+        for &b in blocks {
+            let mut s = self.supernode_of[b];
+            while s != u32::MAX && !mark[s as usize] {
+                mark[s as usize] = true;
+                reach.push(s);
+                s = self.parent[s as usize];
+            }
+        }
+        reach.sort_unstable();
+        for &s in reach.iter() {
+            mark[s as usize] = false;
+        }
+    }
+
+    /// The forward half of [`Symbolic::solve`], `L·y = b` in place, on the
+    /// supernodes of `reach` only ([`Symbolic::reach`] of the block columns
+    /// where `b` is nonzero; `x` must be zero on every other column the
+    /// reach touches). `y` is nonzero only on the columns of `reach`.
+    pub(super) fn forward_sparse(
+        &self,
+        values: &[f64],
+        x: &mut [f64],
+        reach: &[u32],
+        work: &mut Vec<f64>,
+    ) {
+        if work.len() < self.max_below {
+            work.resize(self.max_below, 0.0);
+        }
+        for &s in reach {
+            self.forward_supernode(s as usize, values, x, work);
+        }
+    }
+
+    /// One supernode's step of the forward solve: its diagonal block, then
+    /// the update of the rows below.
+    fn forward_supernode(&self, s: usize, values: &[f64], x: &mut [f64], work: &mut [f64]) {
+        let g = self.panel(s);
+        let (wc, ld) = (g.cols::<D>(), g.ld::<D>());
+        let panel = &values[self.val_ptr[s]..self.val_ptr[s + 1]];
+        let xs = &mut x[D * g.b0..D * g.b0 + wc];
+        for j in 0..wc {
+            let col = &panel[j * ld..j * ld + wc];
+            xs[j] /= col[j];
+            let xj = xs[j];
+            for i in j + 1..wc {
+                xs[i] -= col[i] * xj;
+            }
+        }
+        let below = D * g.p;
+        if below == 0 {
+            return;
+        }
+        let y = &mut work[..below];
+        y.fill(0.0);
+        for j in 0..wc {
+            let xj = xs[j];
+            let col = &panel[j * ld + wc..(j + 1) * ld];
+            for (yi, &l) in y.iter_mut().zip(col) {
+                *yi += l * xj;
+            }
+        }
+        for (i, &r) in self.rows[self.row_ptr[s]..self.row_ptr[s + 1]]
+            .iter()
+            .enumerate()
+        {
+            let dst = &mut x[D * r as usize..][..D];
+            for a in 0..D {
+                dst[a] -= y[D * i + a];
+            }
+        }
+    }
+
+    /// The block columns of supernode `s`.
+    pub(super) fn columns(&self, s: usize) -> std::ops::Range<usize> {
+        self.begin[s]..self.begin[s + 1]
     }
 }
 

@@ -688,6 +688,73 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             .sum()
     }
 
+    /// The squared *innovation* `ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e` of each of
+    /// `edges` at the graph's poses: the Mahalanobis distance of the error of
+    /// an edge the solution was made without, with the solution's own
+    /// uncertainty (`H` the normal matrix of the edges of non-zero `weights`
+    /// at these poses, undamped) added to the edge's. `ν² ≤ eᵀΩe`, and much
+    /// less where the solution is loosely tied between the edge's two poses.
+    /// An edge at a vertex that is held fixed because no edge of non-zero
+    /// weight ties it to the gauge gets its plain `eᵀΩe` (the solution
+    /// knows nothing of that vertex to add).
+    pub fn innovation_chi2(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        weights: &[f64],
+        edges: &[usize],
+    ) -> Result<Vec<f64>, SolveError> {
+        if weights.len() != graph.edges.len() {
+            return Err(SolveError::WeightCount {
+                weights: weights.len(),
+                edges: graph.edges.len(),
+            });
+        }
+        self.update_pattern(graph, Some(weights))?;
+        self.linearize(graph, Some(weights));
+        match self.system.factorize(0.0) {
+            Ok(()) => {}
+            Err(LinearError::NotPositiveDefinite { block }) => {
+                return Err(SolveError::NotPositiveDefinite {
+                    vertex: graph.id(self.vertex_of[block]),
+                });
+            }
+            Err(e) => return Err(e.into()),
+        }
+        let mut block = vec![None; graph.num_vertices()];
+        for (b, &v) in self.vertex_of.iter().enumerate() {
+            block[v] = Some(b);
+        }
+        let gauge = graph.gauge();
+        let known = |v: usize| block[v].is_some() || gauge.contains(&v);
+        Ok(edges
+            .iter()
+            .map(|&k| {
+                let e = &graph.edges[k];
+                let lin = P::error_and_jacobians(
+                    &graph.poses[e.from],
+                    &graph.poses[e.to],
+                    &e.measurement,
+                );
+                let plain = lin.error.dot(&(e.information * lin.error));
+                if !(known(e.from) && known(e.to)) {
+                    return plain;
+                }
+                let spread =
+                    self.system
+                        .propagate(block[e.from], &lin.jac_i, block[e.to], &lin.jac_j);
+                let innovation = e
+                    .information
+                    .try_inverse()
+                    .map(|sigma| sigma + spread)
+                    .and_then(|s| s.cholesky());
+                match innovation {
+                    Some(s) => lin.error.dot(&s.solve(&lin.error)).min(plain),
+                    None => plain,
+                }
+            })
+            .collect())
+    }
+
     /// Builds `H` and `b` at the graph's poses and returns the objective
     /// (public for benchmarks; [`Optimizer::run`] does this itself). Edges
     /// left out of the pattern ([`Optimizer::new`]) count in the objective
@@ -883,6 +950,51 @@ mod tests {
             "{}",
             s.final_objective
         );
+    }
+
+    #[test]
+    fn innovation_is_the_chi2_a_left_out_edge_adds_to_the_optimum() {
+        // The loop of `inconsistent_loop_matches_the_closed_form_optimum`,
+        // solved without its closing edge: the chain fits exactly, the
+        // closing edge's plain error there is 0.4² = 0.16, and adding it
+        // raises the optimum's χ² to 0.04 (the mismatch spread over four
+        // edges). That rise is its innovation: ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e
+        // with H of the chain (exact here: the problem is linear).
+        let mut g = PoseGraph::<Se2, 3>::new();
+        for k in 0..4 {
+            g.add_vertex(k, Se2::identity()).unwrap();
+        }
+        let i = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 1e8));
+        g.add_edge(0, 1, Se2::new(1.0, 0.0, 0.0), i, None).unwrap();
+        g.add_edge(1, 2, Se2::new(0.0, 1.0, 0.0), i, None).unwrap();
+        g.add_edge(2, 3, Se2::new(-1.0, 0.0, 0.0), i, None).unwrap();
+        g.add_edge(3, 0, Se2::new(0.4, -1.0, 0.0), i, None).unwrap();
+        let without = [1.0, 1.0, 1.0, 0.0];
+        let mut opt = Optimizer::new(&g, Some(&without), SolverOptions::default()).unwrap();
+        opt.run(&mut g, Some(&without), &mut |_: &IterationRecord| {})
+            .unwrap();
+        let plain = g.edge_chi2(&g.edges[3]);
+        assert!((plain - 0.16).abs() < 1e-9, "{plain}");
+        let nu2 = opt.innovation_chi2(&g, &without, &[3]).unwrap();
+        assert!((nu2[0] - 0.04).abs() < 1e-8, "{nu2:?}");
+        // An edge of the solution itself: J·H⁻¹·Jᵀ only adds, so ν² ≤ e²
+        // (0 here: the chain fits exactly).
+        let nu2 = opt.innovation_chi2(&g, &without, &[0, 1]).unwrap();
+        assert!(nu2.iter().all(|&v| v.abs() < 1e-12), "{nu2:?}");
+        // With the edge in the solution, the optimum's χ² is that rise.
+        let s = optimize(&mut g, &SolverOptions::default()).unwrap();
+        assert!((s.final_objective - 0.04).abs() < 1e-8);
+        // A vertex no edge of non-zero weight ties to the gauge is held
+        // fixed: the solution adds nothing to an edge at it.
+        let mut g2 = g.clone();
+        g2.add_vertex(9, Se2::new(5.0, 0.0, 0.0)).unwrap();
+        g2.add_edge(3, 9, Se2::new(1.0, 0.0, 0.0), i, None).unwrap();
+        let w = [1.0, 1.0, 1.0, 1.0, 0.0];
+        let mut opt = Optimizer::new(&g2, Some(&[1.0; 5]), SolverOptions::default()).unwrap();
+        let nu2 = opt.innovation_chi2(&g2, &w, &[4]).unwrap();
+        assert_eq!(nu2[0], g2.edge_chi2(&g2.edges[4]));
+        // Weights must match the edges.
+        assert!(opt.innovation_chi2(&g2, &w[..2], &[4]).is_err());
     }
 
     #[test]
