@@ -284,10 +284,19 @@ struct OptimizeArgs {
     /// EM: do not rescue the candidates the gate dropped. By default each is
     /// held out of the weighting and accepted if its residual at the map made
     /// from the kept candidates is that of an inlier (r²/s² ≤ c², or below
-    /// the learned width narrowed by its count's odds); a wrong loop never
-    /// shapes the map it is judged by.
+    /// the learned width narrowed by its count's odds), or its innovation is
+    /// (see --no-innovation); a wrong loop never shapes the map it is judged
+    /// by.
     #[arg(long)]
     no_rescue: bool,
+    /// EM: rescue on the plain residual only. By default a dropped candidate
+    /// the plain rule leaves out is judged again by its innovation
+    /// ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e (the map's uncertainty between its two
+    /// poses added to the edge's): accepted when its count's prior odds times
+    /// the likelihood ratio of ln(ν²/s²) — consistent loops (the residual
+    /// mixture) against the dropped population (weighted by 1 − p) — is ≥ 1.
+    #[arg(long)]
+    no_innovation: bool,
     /// EM: decide at c instead of at the width learned from the residuals.
     /// By default, once the decisions at c settle, two normals are fitted to
     /// ln(r²/s²) of the candidates (consistent and inconsistent loops, with
@@ -695,6 +704,7 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
     };
     config.robust_c = args.robust_c;
     config.rescue = !args.no_rescue;
+    config.innovation = !args.no_innovation;
     config.learn_width = !args.no_learn_width;
     config.plot = args.plot.clone();
     config.candidates = match args.candidates {

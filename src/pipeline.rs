@@ -55,6 +55,10 @@ pub struct OptimizeConfig {
     /// EM: rescue the candidates the gate dropped whose residual at the map
     /// of the kept ones is that of an inlier (default on).
     pub rescue: bool,
+    /// EM: judge the dropped candidates the plain residual leaves out by
+    /// their innovation at that map
+    /// ([`crate::robust::Reweighter::rescue_by_innovation`]; default on).
+    pub innovation: bool,
     /// EM: learn the decision width from the residuals
     /// ([`crate::robust::Reweighter::decision_c`]; default on).
     pub learn_width: bool,
@@ -96,6 +100,7 @@ impl OptimizeConfig {
             robust_c: None,
             iteration_budget: None,
             rescue: true,
+            innovation: true,
             learn_width: true,
             plot: None,
         }
@@ -434,7 +439,10 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             1.0
         };
         let mut again = reweighter.update_scaled(&r2, s2);
-        if let Some(which) = reweighter.innovation_request() {
+        if let Some(which) = reweighter
+            .innovation_request()
+            .filter(|_| config.innovation)
+        {
             // The rescue of the held-out candidates the plain residual left
             // out judges their innovation at the decided map, with the set
             // it was solved with (`Reweighter::rescue_by_innovation`). If
@@ -524,6 +532,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             .count(),
         variance_factor: noise_scale,
         rescued_loops: reweighter.rescued(),
+        innovation_rescued_loops: reweighter.innovation_rescued(),
         decision_c: (method == RobustMethod::Em).then(|| reweighter.decision_c()),
         residual_mixture: reweighter.residual_fit().cloned(),
     };

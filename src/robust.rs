@@ -286,6 +286,8 @@ pub struct Reweighter {
     /// EM: the held-out candidates are waiting to be judged by their
     /// innovation ([`Reweighter::innovation_request`]).
     innovation_pending: bool,
+    /// EM: candidates accepted by [`Reweighter::rescue_by_innovation`].
+    innovation_rescued: usize,
 }
 
 /// EM: the kernel width's square is divided by this every round until it
@@ -339,6 +341,7 @@ impl Reweighter {
             decision_c: None,
             width_learned: false,
             innovation_pending: false,
+            innovation_rescued: 0,
         }
     }
 
@@ -564,16 +567,8 @@ impl Reweighter {
             Some(t) if separated => t,
             _ => f64::NEG_INFINITY,
         };
-        self.decision_c = fit.mixture.as_ref().map(|m| {
-            // Two populations: the lower one is the consistent loops. No
-            // clean split: the bulk (the heavier component), not a thin,
-            // broad halo whose mean happens to lie lower.
-            let k = if separated || m.weight[0] >= m.weight[1] {
-                0
-            } else {
-                1
-            };
-            let width2 = (m.mu[k] + z * m.sigma[k]).max(crossing).exp();
+        self.decision_c = consistent_component(&fit).map(|(mu, sigma)| {
+            let width2 = (mu + z * sigma).max(crossing).exp();
             width2.sqrt().max(self.options.c)
         });
         self.residual_fit = Some(fit);
@@ -633,14 +628,10 @@ impl Reweighter {
                 {
                     return true;
                 }
-                // The EM process converged: remove the lowest for good (not
-                // the held-out candidates: they are judged at the decided
-                // map), then decide.
+                // The EM process converged: remove the lowest for good, then
+                // decide.
                 for k in 0..self.weights.len() {
-                    if self.states[k] == CandidateState::Off
-                        && !self.held_out[k]
-                        && self.posteriors[k] < o.remove
-                    {
+                    if self.states[k] == CandidateState::Off && self.posteriors[k] < o.remove {
                         self.states[k] = CandidateState::Removed;
                         self.posteriors[k] = 0.0;
                     }
@@ -745,53 +736,105 @@ impl Reweighter {
         any
     }
 
-    /// EM, once the decisions are done: the held-out candidates still left
-    /// out that only their innovation can rescue (not removed, a non-zero
-    /// prior), to be judged by [`Reweighter::rescue_by_innovation`]; `None`
-    /// when there are none or they were judged. Asking clears the request.
+    /// EM, once the decisions are done: the held-out candidates (the gate
+    /// dropped them; removed ones included), to be judged by
+    /// [`Reweighter::rescue_by_innovation`];
+    /// `None` when there are none or they were judged. Asking clears the
+    /// request.
     pub fn innovation_request(&mut self) -> Option<Vec<usize>> {
         if !std::mem::take(&mut self.innovation_pending) {
             return None;
         }
         let which: Vec<usize> = (0..self.weights.len())
-            .filter(|&k| {
-                self.held_out[k]
-                    && self.weights[k] == 0.0
-                    && self.states[k] != CandidateState::Removed
-                    && self.priors[k] > 0.0
-            })
+            .filter(|&k| self.held_out[k])
             .collect();
         (!which.is_empty()).then_some(which)
     }
 
-    /// EM: judges the held-out candidates `which` by their squared
-    /// innovation `ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e` at the decided map (the
+    /// EM: judges the held-out candidates `which` (all of them, from
+    /// [`Reweighter::innovation_request`]) by their squared *innovation*
+    /// `ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e` at the decided map, divided by `s²`: the
     /// Mahalanobis distance of the error of an edge the map was solved
-    /// without, the uncertainty of the map included), divided by `s²`: one
-    /// is accepted when its posterior at the learned width with its count
-    /// as prior, `em_weight(ν²/s², c_d, p)`, is ≥ ½ — the rule of the
-    /// rescue beyond `c`, with the statistic that fits a loop the map never
-    /// saw. Its residual `r²` at the map can be far larger than `ν²` where
-    /// the map is uncertain between its two poses (where the gate dropped
-    /// the loops that would have tied them). Returns whether any was
-    /// accepted (and the map is to be solved again with them).
+    /// without, the map's own uncertainty between the two poses included.
+    /// Where the map is loosely tied between them (where the gate dropped
+    /// the loops that would have tied it), `r²` at the map can be 10³ times
+    /// `ν²`, and the plain rule leaves true loops out.
+    ///
+    /// `ν²` alone cannot decide: a wrong loop between poses that only
+    /// odometry ties has a small innovation too. So each one left out with a
+    /// non-zero count is accepted when its count's prior odds times the
+    /// likelihood ratio of `y = ln(ν²/s²)` are ≥ 1:
+    ///
+    /// * consistent loops: the consistent component of the residual mixture
+    ///   ([`Reweighter::residual_fit`], the one the decision width comes
+    ///   from);
+    /// * wrong loops: one normal fitted to `y` of the held-out candidates,
+    ///   each weighted by `1 − p` (what its count says of it being wrong) —
+    ///   the population the gate dropped, mostly wrong, where a local wrong
+    ///   loop with a small innovation weighs as much as it is likely.
+    ///
+    /// Every held-out candidate is judged, those removed in the weighting
+    /// phase too (their plain residual at a map they never shaped was far
+    /// out, which is what the innovation looks at again); removal keeps
+    /// them from the plain rescue only. Nothing is rescued without a
+    /// residual fit or with fewer than 8 held-out candidates. Returns whether any was accepted (and the map is
+    /// to be solved again with them).
     pub fn rescue_by_innovation(&mut self, which: &[usize], innovation2: &[f64], s2: f64) -> bool {
+        let Some((mu_in, sigma_in)) = self.residual_fit.as_ref().and_then(consistent_component)
+        else {
+            return false;
+        };
+        if which.len() < MixtureOptions::default().min_counts {
+            return false;
+        }
         let s2 = if s2 > 0.0 && s2.is_finite() { s2 } else { 1.0 };
-        let c = self.decision_c();
+        let y: Vec<f64> = innovation2
+            .iter()
+            .map(|&v| (v / s2).max(f64::MIN_POSITIVE).ln())
+            .collect();
+        let wrongness: Vec<f64> = which.iter().map(|&k| 1.0 - self.priors[k]).collect();
+        let total: f64 = wrongness.iter().sum();
+        if total <= 0.0 {
+            return false;
+        }
+        let mu_out = y.iter().zip(&wrongness).map(|(y, w)| w * y).sum::<f64>() / total;
+        let var_out = y
+            .iter()
+            .zip(&wrongness)
+            .map(|(y, w)| w * (y - mu_out).powi(2))
+            .sum::<f64>()
+            / total;
+        let sigma_out = var_out.max(RESIDUAL_VARIANCE_FLOOR).sqrt();
+        let ln_normal =
+            |y: f64, mu: f64, sigma: f64| -0.5 * ((y - mu) / sigma).powi(2) - sigma.ln();
         let mut any = false;
-        for (&k, &nu2) in which.iter().zip(innovation2) {
-            if !self.held_out[k] || self.states[k] == CandidateState::Removed {
+        for (&k, &y) in which.iter().zip(&y) {
+            let p = self.priors[k];
+            if !self.held_out[k] || self.weights[k] > 0.0 || p <= 0.0 {
                 continue;
             }
-            let posterior = em_weight(nu2 / s2, c, self.priors[k]);
-            if posterior >= 0.5 {
+            let ln_prior_odds = if p >= 1.0 {
+                f64::INFINITY
+            } else {
+                (p / (1.0 - p)).ln()
+            };
+            let ln_ratio = ln_normal(y, mu_in, sigma_in) - ln_normal(y, mu_out, sigma_out);
+            let ln_odds = ln_prior_odds + ln_ratio;
+            if ln_odds >= 0.0 {
                 self.weights[k] = 1.0;
-                self.posteriors[k] = posterior;
+                self.posteriors[k] = 1.0 / (1.0 + (-ln_odds).exp());
                 self.states[k] = CandidateState::Active;
+                self.innovation_rescued += 1;
                 any = true;
             }
         }
         any
+    }
+
+    /// EM: held-out candidates accepted by their innovation
+    /// ([`Reweighter::rescue_by_innovation`]), among [`Reweighter::rescued`].
+    pub fn innovation_rescued(&self) -> usize {
+        self.innovation_rescued
     }
 
     /// One GNC step: weights at the current μ, then μ grows.
@@ -816,6 +859,21 @@ impl Reweighter {
         let binary = self.weights.iter().all(|&w| w == 0.0 || w == 1.0);
         !(binary && max_change(old, &self.weights) <= self.options.tolerance) && mu < 1e9
     }
+}
+
+/// The component of a residual mixture (on `ln(r²/s²)`) that stands for
+/// the consistent loops, as `(μ, σ)`: with two populations the lower one;
+/// without a clean split the bulk (the heavier component), not a thin,
+/// broad halo whose mean happens to lie lower. `None` without a fit.
+fn consistent_component(fit: &TwoNormals) -> Option<(f64, f64)> {
+    fit.mixture.as_ref().map(|m| {
+        let k = if fit.degeneracy.is_none() || m.weight[0] >= m.weight[1] {
+            0
+        } else {
+            1
+        };
+        (m.mu[k], m.sigma[k])
+    })
 }
 
 /// EM's starting weight for a candidate of prior inlier probability `p`:
@@ -1151,43 +1209,68 @@ mod tests {
     }
 
     #[test]
-    fn em_rescue_by_innovation_needs_the_count_odds_at_the_learned_width() {
-        // Held-out candidates the plain rule left out are asked for once the
-        // decisions are done, and judged by their innovation ν²/s² with the
-        // rule beyond c: ν²/s² ≤ c_d² · p/(1 − p).
+    fn em_rescue_by_innovation_weighs_the_count_against_the_dropped_population() {
+        // The kept candidates give the residual mixture (consistent loops at
+        // ln r² ∈ [−4, 4]). The gate dropped 20: 16 wrong ones (count
+        // posterior 0.02, innovations at ln ν² ∈ [6, 10]) and four whose
+        // plain residuals are as far out as theirs (e¹²), but:
+        //   A: p = 0.2, ln ν² = 1, a consistent innovation → accepted;
+        //   B: p = 0.001, ln ν² = 1, consistent too, but its count says
+        //      wrong (a local wrong loop the map cannot refute) → not;
+        //   C: p = 0.4, ln ν² = 8, among the wrong ones → not;
+        //   D: a zero count → never.
         let mut r2 = heavy_tailed_residuals();
         let mut priors = vec![0.5; r2.len()];
-        let mut rw = Reweighter::new(em_options(), priors.clone());
-        run_to_the_end(&mut rw, &r2);
-        let c_d2 = rw.decision_c().powi(2);
-        // All far beyond the width by their plain residual.
-        let held = [(0.4, true), (0.1, false), (0.4, false), (0.0, false)];
-        for &(p, _) in &held {
-            r2.push(10.0 * c_d2);
-            priors.push(p);
+        let mut nu2 = Vec::new();
+        for i in 0..16 {
+            r2.push(12f64.exp());
+            priors.push(0.02);
+            nu2.push((6.0 + 4.0 * i as f64 / 15.0).exp());
         }
-        let mut rw = Reweighter::new(em_options(), priors);
-        let mut mask = vec![false; 60];
-        mask.extend([true; 4]);
-        rw.hold_out(&mask);
+        for (p, ln_nu2) in [(0.2, 1.0), (0.001, 1.0), (0.4, 8.0), (0.0, 1.0)] {
+            r2.push(12f64.exp());
+            priors.push(p);
+            nu2.push(f64::exp(ln_nu2));
+        }
+        let held_out: Vec<bool> = (0..r2.len()).map(|k| k >= 60).collect();
+        let mut rw = Reweighter::new(em_options(), priors.clone());
+        rw.hold_out(&held_out);
         assert_eq!(rw.innovation_request(), None, "not before the decisions");
         run_to_the_end(&mut rw, &r2);
-        assert_eq!(rw.rescued(), 0);
-        // The zero count is not asked for; the others are, once.
-        let which = rw.innovation_request().expect("held-out candidates left");
-        assert_eq!(which, [60, 61, 62]);
+        assert_eq!(rw.rescued(), 0, "no plain rescue this far out");
+        // Every held-out candidate is asked for (the fit needs them all),
+        // once.
+        let which = rw.innovation_request().expect("held-out candidates");
+        assert_eq!(which, (60..80).collect::<Vec<_>>());
         assert_eq!(rw.innovation_request(), None);
-        // s² = 2: ν² = 2 · 0.2 c_d² passes with odds 2/3, not with 1/9;
-        // ν² = 2 · 0.8 c_d² needs odds ≥ 0.8 (p = 0.4 has 2/3).
-        let nu2 = [0.4 * c_d2, 0.4 * c_d2, 1.6 * c_d2];
-        assert!(rw.rescue_by_innovation(&which, &nu2, 2.0));
+        // s² = 2 scales ν² as it scales r².
+        let scaled: Vec<f64> = nu2.iter().map(|v| 2.0 * v).collect();
+        assert!(rw.rescue_by_innovation(&which, &scaled, 2.0));
         // The map is solved once more with the rescued one; EM is done.
         assert!(!rw.update(&r2));
-        let accepted: Vec<bool> = rw.final_weights()[60..].iter().map(|&w| w >= 0.5).collect();
-        assert_eq!(accepted, [true, false, false, false]);
-        assert_eq!(rw.rescued(), 1);
+        let accepted: Vec<usize> = (60..80).filter(|&k| rw.final_weights()[k] >= 0.5).collect();
+        assert_eq!(accepted, [76]);
+        assert_eq!((rw.rescued(), rw.innovation_rescued()), (1, 1));
         // A kept candidate is never judged this way.
-        assert!(!rw.rescue_by_innovation(&[0], &[0.0], 1.0));
+        assert!(!rw.rescue_by_innovation(&[0], &[1.0], 1.0));
+
+        // Too few held-out candidates to fit the dropped population: none.
+        let mut rw = Reweighter::new(em_options(), priors[..64].to_vec());
+        rw.hold_out(&held_out[..64]);
+        run_to_the_end(&mut rw, &r2[..64]);
+        let which = rw.innovation_request().expect("held-out candidates");
+        assert!(!rw.rescue_by_innovation(&which, &[f64::exp(1.0); 4], 1.0));
+        // No residual fit (fewer than 8 kept candidates): none.
+        let mut rw = Reweighter::new(em_options(), [vec![0.5; 4], priors[60..].to_vec()].concat());
+        let mask: Vec<bool> = (0..24).map(|k| k >= 4).collect();
+        rw.hold_out(&mask);
+        run_to_the_end(
+            &mut rw,
+            &[vec![1.0, 2.0, 3.0, 1.5], r2[60..].to_vec()].concat(),
+        );
+        assert!(rw.residual_fit().is_none());
+        let which = rw.innovation_request().expect("held-out candidates");
+        assert!(!rw.rescue_by_innovation(&which, &nu2, 1.0));
     }
 
     #[test]

@@ -336,6 +336,36 @@ fn em_rescues_the_true_loops_the_gate_dropped_and_no_wrong_one() {
 }
 
 #[test]
+fn em_rescues_by_innovation_true_loops_the_plain_residual_leaves_out() {
+    let dir = temp_dir("robust-innovation");
+    // A dropped true loop between two poses the kept loops tie loosely:
+    // far out by its plain residual, consistent once the map's uncertainty
+    // is added (its innovation), and its count is not that of a wrong loop.
+    let c = case(&dir, "loose", options(OutlierPolicy::Random, 60, 6));
+    let plain = pipeline::run(
+        &OptimizeConfig {
+            innovation: false,
+            ..OptimizeConfig::new(&c.noisy)
+        },
+        &mut |_| {},
+    )
+    .expect("optimise");
+    let with = run(&c.noisy, GateMode::Auto, RobustMethod::Em, None);
+    let (tp_plain, fp_plain, _) = counts(&plain, &c.wrong);
+    let (tp_with, fp_with, _) = counts(&with, &c.wrong);
+    assert_eq!(plain.robust.innovation_rescued_loops, 0);
+    let by_innovation = with.robust.innovation_rescued_loops;
+    assert!(by_innovation > 0);
+    assert_eq!((fp_plain, fp_with), (0, 0));
+    assert_eq!(tp_with, tp_plain + by_innovation);
+    assert_eq!(
+        with.robust.rescued_loops,
+        plain.robust.rescued_loops + by_innovation
+    );
+    assert_eq!(tp_with, c.wrong.iter().filter(|w| !**w).count());
+}
+
+#[test]
 fn the_soft_gate_recovers_true_loops_below_the_threshold() {
     let dir = temp_dir("robust-soft");
     // The default count models overlap: a few true loops fall below T_GV.
