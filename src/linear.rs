@@ -505,6 +505,23 @@ impl<const D: usize> BlockSystem<D> {
     /// forward solve visits just the supernodes on their paths to the root
     /// of the elimination tree.
     ///
+    /// ```
+    /// use nalgebra::{Matrix1, Vector1};
+    /// use pgo::linear::BlockSystem;
+    /// // H = [[2, −1], [−1, 1]], so H⁻¹ = [[1, 1], [1, 2]]; for the edge
+    /// // error e = x₁ − x₀, A = [−1, 1] and A·H⁻¹·Aᵀ = 1 − 2 + 2 = 1.
+    /// let mut sys = BlockSystem::<1>::new(2, &[(Some(0), Some(1)), (Some(0), None)], 0).unwrap();
+    /// sys.clear();
+    /// let one = Matrix1::new(1.0);
+    /// sys.add_edge(0, &one, &Matrix1::new(-1.0), &one, &Vector1::zeros(), &Vector1::zeros());
+    /// sys.add_edge(1, &one, &Matrix1::zeros(), &Matrix1::zeros(), &Vector1::zeros(), &Vector1::zeros());
+    /// sys.factorize(0.0).unwrap();
+    /// let m = sys.propagate(Some(0), &Matrix1::new(-1.0), Some(1), &one);
+    /// assert!((m[(0, 0)] - 1.0).abs() < 1e-12);
+    /// // The variance of x₁ alone: (H⁻¹)₁₁ = 2.
+    /// assert!((sys.propagate(None, &one, Some(1), &one)[(0, 0)] - 2.0).abs() < 1e-12);
+    /// ```
+    ///
     /// # Panics
     /// If no factorisation succeeded before, or a block index is out of
     /// range.
