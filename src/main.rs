@@ -289,12 +289,14 @@ struct OptimizeArgs {
     /// by.
     #[arg(long)]
     no_rescue: bool,
-    /// EM: rescue on the plain residual only. By default a dropped candidate
-    /// the plain rule leaves out is judged again by its innovation
-    /// ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e (the map's uncertainty between its two
-    /// poses added to the edge's): accepted when its count's prior odds times
-    /// the likelihood ratio of ln(ν²/s²) — consistent loops (the residual
-    /// mixture) against the dropped population (weighted by 1 − p) — is ≥ 1.
+    /// EM: decide on plain residuals only. By default the candidates the
+    /// decided map was solved without (dropped by the gate, rejected by EM)
+    /// are judged again by their innovation ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e (the
+    /// map's uncertainty between the two poses added to the edge's):
+    /// accepted when the prior odds (a dropped candidate's count posterior,
+    /// a kept one's ½) times the likelihood ratio of ln(ν²/s²) — consistent
+    /// loops (the residual mixture) against the dropped population
+    /// (weighted by 1 − p) — are ≥ 1.
     #[arg(long)]
     no_innovation: bool,
     /// EM: decide at c instead of at the width learned from the residuals.

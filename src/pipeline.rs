@@ -55,9 +55,9 @@ pub struct OptimizeConfig {
     /// EM: rescue the candidates the gate dropped whose residual at the map
     /// of the kept ones is that of an inlier (default on).
     pub rescue: bool,
-    /// EM: judge the dropped candidates the plain residual leaves out by
-    /// their innovation at that map
-    /// ([`crate::robust::Reweighter::rescue_by_innovation`]; default on).
+    /// EM: judge the candidates the decided map was solved without (dropped
+    /// by the gate, rejected by EM) by their innovation at that map
+    /// ([`crate::robust::Reweighter::accept_by_innovation`]; default on).
     pub innovation: bool,
     /// EM: learn the decision width from the residuals
     /// ([`crate::robust::Reweighter::decision_c`]; default on).
@@ -443,14 +443,14 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             .innovation_request()
             .filter(|_| config.innovation)
         {
-            // The rescue of the held-out candidates the plain residual left
-            // out judges their innovation at the decided map, with the set
-            // it was solved with (`Reweighter::rescue_by_innovation`). If
-            // that map's undamped normal matrix cannot be factorised, the
-            // plain rule's decision stands.
+            // The candidates the decided map was solved without (dropped by
+            // the gate, rejected by EM) are judged by their innovation at
+            // that map, with the set it was solved with
+            // (`Reweighter::accept_by_innovation`). If its undamped normal
+            // matrix cannot be factorised, the decisions stand.
             let edges: Vec<usize> = which.iter().map(|&c| pool[c]).collect();
             if let Ok(nu2) = optimizer.innovation_chi2(graph, &weights, &edges) {
-                again |= reweighter.rescue_by_innovation(&which, &nu2, s2);
+                again |= reweighter.accept_by_innovation(&which, &nu2, s2);
             }
         }
         if reweighter.full_solve() || !again {
@@ -532,7 +532,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             .count(),
         variance_factor: noise_scale,
         rescued_loops: reweighter.rescued(),
-        innovation_rescued_loops: reweighter.innovation_rescued(),
+        innovation_accepted_loops: reweighter.innovation_accepted(),
         decision_c: (method == RobustMethod::Em).then(|| reweighter.decision_c()),
         residual_mixture: reweighter.residual_fit().cloned(),
     };

@@ -169,9 +169,10 @@ pub struct RobustReport {
     /// EM: candidates the gate dropped that were accepted at the map of the
     /// kept ones (`--rescue`).
     pub rescued_loops: usize,
-    /// EM: of those, the ones accepted by their innovation (the map's
-    /// uncertainty added; `--no-innovation` turns it off).
-    pub innovation_rescued_loops: usize,
+    /// EM: candidates accepted by their innovation (the map's uncertainty
+    /// added): dropped by the gate (also counted in `rescued_loops`) or
+    /// rejected by EM's decisions; `--no-innovation` turns it off.
+    pub innovation_accepted_loops: usize,
     /// EM: the kernel width of the last hard decision (`c`, or wider when
     /// learned from the residuals); `null` for the other methods.
     pub decision_c: Option<f64>,
@@ -356,13 +357,23 @@ impl Report {
         if self.loop_candidates > 0 {
             verdict.push(self.gate.summary());
             if self.robust.method != RobustMethod::None {
-                let rescued = match (
-                    self.robust.rescued_loops,
-                    self.robust.innovation_rescued_loops,
-                ) {
-                    (0, _) => String::new(),
-                    (n, 0) => format!(" ({n} rescued below the gate)"),
-                    (n, m) => format!(" ({n} rescued below the gate, {m} by their innovation)"),
+                let mut notes = Vec::new();
+                if self.robust.rescued_loops > 0 {
+                    notes.push(format!(
+                        "{} rescued below the gate",
+                        self.robust.rescued_loops
+                    ));
+                }
+                if self.robust.innovation_accepted_loops > 0 {
+                    notes.push(format!(
+                        "{} by their innovation",
+                        self.robust.innovation_accepted_loops
+                    ));
+                }
+                let rescued = if notes.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", notes.join("; "))
                 };
                 // EM's decision width, when learned wider than c.
                 let width = match self.robust.decision_c {

@@ -286,8 +286,8 @@ pub struct Reweighter {
     /// EM: the held-out candidates are waiting to be judged by their
     /// innovation ([`Reweighter::innovation_request`]).
     innovation_pending: bool,
-    /// EM: candidates accepted by [`Reweighter::rescue_by_innovation`].
-    innovation_rescued: usize,
+    /// EM: candidates accepted by [`Reweighter::accept_by_innovation`].
+    innovation_accepted: usize,
 }
 
 /// EM: the kernel width's square is divided by this every round until it
@@ -341,7 +341,7 @@ impl Reweighter {
             decision_c: None,
             width_learned: false,
             innovation_pending: false,
-            innovation_rescued: 0,
+            innovation_accepted: 0,
         }
     }
 
@@ -736,34 +736,37 @@ impl Reweighter {
         any
     }
 
-    /// EM, once the decisions are done: the held-out candidates (the gate
-    /// dropped them; removed ones included), to be judged by
-    /// [`Reweighter::rescue_by_innovation`];
-    /// `None` when there are none or they were judged. Asking clears the
-    /// request.
+    /// EM, once the decisions are done: the candidates the decided map was
+    /// solved without — the held-out ones (the gate dropped them) and those
+    /// EM's decisions rejected, removed ones included — to be judged by
+    /// [`Reweighter::accept_by_innovation`]; `None` when there are no
+    /// held-out candidates (their population is the model of a wrong loop)
+    /// or they were judged. Asking clears the request.
     pub fn innovation_request(&mut self) -> Option<Vec<usize>> {
         if !std::mem::take(&mut self.innovation_pending) {
             return None;
         }
         let which: Vec<usize> = (0..self.weights.len())
-            .filter(|&k| self.held_out[k])
+            .filter(|&k| self.held_out[k] || self.weights[k] == 0.0)
             .collect();
         (!which.is_empty()).then_some(which)
     }
 
-    /// EM: judges the held-out candidates `which` (all of them, from
+    /// EM: judges the candidates `which` (from
     /// [`Reweighter::innovation_request`]) by their squared *innovation*
     /// `ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e` at the decided map, divided by `s²`: the
     /// Mahalanobis distance of the error of an edge the map was solved
     /// without, the map's own uncertainty between the two poses included.
     /// Where the map is loosely tied between them (where the gate dropped
-    /// the loops that would have tied it), `r²` at the map can be 10³ times
-    /// `ν²`, and the plain rule leaves true loops out.
+    /// the loops that would have tied it, or along a long loop), `r²` at
+    /// the map can be 10³ times `ν²`, and the plain residual leaves true
+    /// loops out.
     ///
     /// `ν²` alone cannot decide: a wrong loop between poses that only
     /// odometry ties has a small innovation too. So each one left out with a
-    /// non-zero count is accepted when its count's prior odds times the
-    /// likelihood ratio of `y = ln(ν²/s²)` are ≥ 1:
+    /// non-zero prior is accepted when its prior odds (a held-out
+    /// candidate's count posterior, a kept one's ½) times the likelihood
+    /// ratio of `y = ln(ν²/s²)` are ≥ 1:
     ///
     /// * consistent loops: the consistent component of the residual mixture
     ///   ([`Reweighter::residual_fit`], the one the decision width comes
@@ -773,34 +776,37 @@ impl Reweighter {
     ///   the population the gate dropped, mostly wrong, where a local wrong
     ///   loop with a small innovation weighs as much as it is likely.
     ///
-    /// Every held-out candidate is judged, those removed in the weighting
-    /// phase too (their plain residual at a map they never shaped was far
-    /// out, which is what the innovation looks at again); removal keeps
-    /// them from the plain rescue only. Nothing is rescued without a
-    /// residual fit or with fewer than 8 held-out candidates. Returns whether any was accepted (and the map is
-    /// to be solved again with them).
-    pub fn rescue_by_innovation(&mut self, which: &[usize], innovation2: &[f64], s2: f64) -> bool {
+    /// Held-out candidates removed in the weighting phase are judged too
+    /// (their plain residual at a map they never shaped was far out, which
+    /// is what the innovation looks at again); removal keeps them from the
+    /// plain rescue only. Nothing is accepted without a residual fit or with
+    /// fewer than 8 held-out candidates. Returns whether any was accepted
+    /// (and the map is to be solved again with them).
+    pub fn accept_by_innovation(&mut self, which: &[usize], innovation2: &[f64], s2: f64) -> bool {
         let Some((mu_in, sigma_in)) = self.residual_fit.as_ref().and_then(consistent_component)
         else {
             return false;
         };
-        if which.len() < MixtureOptions::default().min_counts {
-            return false;
-        }
         let s2 = if s2 > 0.0 && s2.is_finite() { s2 } else { 1.0 };
         let y: Vec<f64> = innovation2
             .iter()
             .map(|&v| (v / s2).max(f64::MIN_POSITIVE).ln())
             .collect();
-        let wrongness: Vec<f64> = which.iter().map(|&k| 1.0 - self.priors[k]).collect();
-        let total: f64 = wrongness.iter().sum();
-        if total <= 0.0 {
+        // The dropped population, each weighted by how wrong its count says
+        // it is.
+        let dropped: Vec<(f64, f64)> = which
+            .iter()
+            .zip(&y)
+            .filter(|(k, _)| self.held_out[**k])
+            .map(|(&k, &y)| (y, 1.0 - self.priors[k]))
+            .collect();
+        let total: f64 = dropped.iter().map(|(_, w)| w).sum();
+        if dropped.len() < MixtureOptions::default().min_counts || total <= 0.0 {
             return false;
         }
-        let mu_out = y.iter().zip(&wrongness).map(|(y, w)| w * y).sum::<f64>() / total;
-        let var_out = y
+        let mu_out = dropped.iter().map(|(y, w)| w * y).sum::<f64>() / total;
+        let var_out = dropped
             .iter()
-            .zip(&wrongness)
             .map(|(y, w)| w * (y - mu_out).powi(2))
             .sum::<f64>()
             / total;
@@ -810,7 +816,7 @@ impl Reweighter {
         let mut any = false;
         for (&k, &y) in which.iter().zip(&y) {
             let p = self.priors[k];
-            if !self.held_out[k] || self.weights[k] > 0.0 || p <= 0.0 {
+            if self.weights[k] > 0.0 || p <= 0.0 {
                 continue;
             }
             let ln_prior_odds = if p >= 1.0 {
@@ -824,17 +830,18 @@ impl Reweighter {
                 self.weights[k] = 1.0;
                 self.posteriors[k] = 1.0 / (1.0 + (-ln_odds).exp());
                 self.states[k] = CandidateState::Active;
-                self.innovation_rescued += 1;
+                self.innovation_accepted += 1;
                 any = true;
             }
         }
         any
     }
 
-    /// EM: held-out candidates accepted by their innovation
-    /// ([`Reweighter::rescue_by_innovation`]), among [`Reweighter::rescued`].
-    pub fn innovation_rescued(&self) -> usize {
-        self.innovation_rescued
+    /// EM: candidates accepted by their innovation
+    /// ([`Reweighter::accept_by_innovation`]): held-out ones (counted among
+    /// [`Reweighter::rescued`] too) and ones EM's decisions had rejected.
+    pub fn innovation_accepted(&self) -> usize {
+        self.innovation_accepted
     }
 
     /// One GNC step: weights at the current μ, then μ grows.
@@ -1209,19 +1216,25 @@ mod tests {
     }
 
     #[test]
-    fn em_rescue_by_innovation_weighs_the_count_against_the_dropped_population() {
+    fn em_accepts_by_innovation_weighing_the_prior_against_the_dropped_population() {
         // The kept candidates give the residual mixture (consistent loops at
-        // ln r² ∈ [−4, 4]). The gate dropped 20: 16 wrong ones (count
-        // posterior 0.02, innovations at ln ν² ∈ [6, 10]) and four whose
-        // plain residuals are as far out as theirs (e¹²), but:
+        // ln r² ∈ [−4, 4]); EM rejects the ten at ln r² ∈ [14, 16]. The gate
+        // dropped 20: 16 wrong ones (count posterior 0.02, innovations at
+        // ln ν² ∈ [6, 10]) and four whose plain residuals are as far out as
+        // theirs (e¹²), but:
         //   A: p = 0.2, ln ν² = 1, a consistent innovation → accepted;
         //   B: p = 0.001, ln ν² = 1, consistent too, but its count says
         //      wrong (a local wrong loop the map cannot refute) → not;
         //   C: p = 0.4, ln ν² = 8, among the wrong ones → not;
         //   D: a zero count → never.
+        // Of the ten EM rejected (prior ½), the last has a consistent
+        // innovation (a long loop the map is loose along) → accepted; the
+        // others' innovations are as far out as their residuals → not.
         let mut r2 = heavy_tailed_residuals();
         let mut priors = vec![0.5; r2.len()];
-        let mut nu2 = Vec::new();
+        let mut nu2: Vec<f64> = (50..60)
+            .map(|k| if k == 59 { 0.5f64.exp() } else { 14f64.exp() })
+            .collect();
         for i in 0..16 {
             r2.push(12f64.exp());
             priors.push(0.02);
@@ -1238,28 +1251,28 @@ mod tests {
         assert_eq!(rw.innovation_request(), None, "not before the decisions");
         run_to_the_end(&mut rw, &r2);
         assert_eq!(rw.rescued(), 0, "no plain rescue this far out");
-        // Every held-out candidate is asked for (the fit needs them all),
-        // once.
-        let which = rw.innovation_request().expect("held-out candidates");
-        assert_eq!(which, (60..80).collect::<Vec<_>>());
+        // Every candidate the map was solved without is asked for, once.
+        let which = rw.innovation_request().expect("candidates left out");
+        assert_eq!(which, (50..80).collect::<Vec<_>>());
         assert_eq!(rw.innovation_request(), None);
         // s² = 2 scales ν² as it scales r².
         let scaled: Vec<f64> = nu2.iter().map(|v| 2.0 * v).collect();
-        assert!(rw.rescue_by_innovation(&which, &scaled, 2.0));
-        // The map is solved once more with the rescued one; EM is done.
+        assert!(rw.accept_by_innovation(&which, &scaled, 2.0));
+        // Judged once: nothing more to accept.
+        assert!(!rw.accept_by_innovation(&which, &scaled, 2.0));
+        // The map is solved once more with the accepted ones; EM is done.
         assert!(!rw.update(&r2));
-        let accepted: Vec<usize> = (60..80).filter(|&k| rw.final_weights()[k] >= 0.5).collect();
-        assert_eq!(accepted, [76]);
-        assert_eq!((rw.rescued(), rw.innovation_rescued()), (1, 1));
-        // A kept candidate is never judged this way.
-        assert!(!rw.rescue_by_innovation(&[0], &[1.0], 1.0));
+        let accepted: Vec<usize> = (50..80).filter(|&k| rw.final_weights()[k] >= 0.5).collect();
+        assert_eq!(accepted, [59, 76]);
+        assert_eq!((rw.rescued(), rw.innovation_accepted()), (1, 2));
 
         // Too few held-out candidates to fit the dropped population: none.
         let mut rw = Reweighter::new(em_options(), priors[..64].to_vec());
         rw.hold_out(&held_out[..64]);
         run_to_the_end(&mut rw, &r2[..64]);
-        let which = rw.innovation_request().expect("held-out candidates");
-        assert!(!rw.rescue_by_innovation(&which, &[f64::exp(1.0); 4], 1.0));
+        let which = rw.innovation_request().expect("candidates left out");
+        assert_eq!(which.len(), 14);
+        assert!(!rw.accept_by_innovation(&which, &[0.5f64.exp(); 14], 1.0));
         // No residual fit (fewer than 8 kept candidates): none.
         let mut rw = Reweighter::new(em_options(), [vec![0.5; 4], priors[60..].to_vec()].concat());
         let mask: Vec<bool> = (0..24).map(|k| k >= 4).collect();
@@ -1269,8 +1282,9 @@ mod tests {
             &[vec![1.0, 2.0, 3.0, 1.5], r2[60..].to_vec()].concat(),
         );
         assert!(rw.residual_fit().is_none());
-        let which = rw.innovation_request().expect("held-out candidates");
-        assert!(!rw.rescue_by_innovation(&which, &nu2, 1.0));
+        let which = rw.innovation_request().expect("candidates left out");
+        assert_eq!(which, (4..24).collect::<Vec<_>>());
+        assert!(!rw.accept_by_innovation(&which, &nu2[10..], 1.0));
     }
 
     #[test]
