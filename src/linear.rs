@@ -533,10 +533,17 @@ impl<const D: usize> BlockSystem<D> {
         a_j: &SMatrix<f64, D, D>,
     ) -> SMatrix<f64, D, D> {
         let mut out = SMatrix::<f64, D, D>::zeros();
-        let blocks: Vec<(usize, &SMatrix<f64, D, D>)> = [(i, a_i), (j, a_j)]
-            .into_iter()
-            .filter_map(|(b, a)| b.map(|b| (self.position[b], a)))
-            .collect();
+        // The elimination positions of the blocks present (no allocation:
+        // this runs once per edge judged).
+        let mut blocks = [(0, a_i); 2];
+        let mut count = 0;
+        for (b, a) in [(i, a_i), (j, a_j)] {
+            if let Some(b) = b {
+                blocks[count] = (self.position[b], a);
+                count += 1;
+            }
+        }
+        let blocks = &blocks[..count];
         if blocks.is_empty() || self.n_blocks == 0 {
             return out;
         }
@@ -548,13 +555,13 @@ impl<const D: usize> BlockSystem<D> {
         if self.cov_rhs.len() != D * n {
             self.cov_rhs = vec![0.0; D * n];
         }
-        let positions: Vec<usize> = blocks.iter().map(|&(p, _)| p).collect();
+        let positions = [blocks[0].0, blocks[count - 1].0];
         self.symbolic
-            .reach(&positions, &mut self.cov_mark, &mut self.cov_reach);
+            .reach(&positions[..count], &mut self.cov_mark, &mut self.cov_reach);
         // Column a of Aᵀ: row a of each block, at its block row.
         for a in 0..D {
             let rhs = &mut self.cov_rhs[a * n..(a + 1) * n];
-            for &(p, block) in &blocks {
+            for &(p, block) in blocks {
                 for r in 0..D {
                     rhs[p * D + r] += block[(a, r)];
                 }
@@ -565,7 +572,7 @@ impl<const D: usize> BlockSystem<D> {
         // YᵀY over the columns the solves reached; the scratch is zeroed
         // there for the next call.
         for &s in &self.cov_reach {
-            let cols = self.symbolic.columns(s as usize);
+            let cols = self.symbolic.supernode_range(s as usize).0;
             let range = D * cols.start..D * cols.end;
             for a in 0..D {
                 for b in 0..=a {
@@ -581,7 +588,7 @@ impl<const D: usize> BlockSystem<D> {
                 out[(b, a)] = out[(a, b)];
             }
             for &s in &self.cov_reach {
-                let cols = self.symbolic.columns(s as usize);
+                let cols = self.symbolic.supernode_range(s as usize).0;
                 self.cov_rhs[a * n..(a + 1) * n][D * cols.start..D * cols.end].fill(0.0);
             }
         }

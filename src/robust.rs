@@ -759,7 +759,7 @@ impl Reweighter {
     /// without, the map's own uncertainty between the two poses included.
     /// Where the map is loosely tied between them (where the gate dropped
     /// the loops that would have tied it, or along a long loop), `r²` at
-    /// the map can be 10³ times `ν²`, and the plain residual leaves true
+    /// the map can be far larger than `ν²`, and the plain residual leaves true
     /// loops out.
     ///
     /// `ν²` alone cannot decide: a wrong loop between poses that only

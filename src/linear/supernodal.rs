@@ -763,11 +763,6 @@ impl<const D: usize> Symbolic<D> {
             }
         }
     }
-
-    /// The block columns of supernode `s`.
-    pub(super) fn columns(&self, s: usize) -> std::ops::Range<usize> {
-        self.begin[s]..self.begin[s + 1]
-    }
 }
 
 /// `Σ aᵢbᵢ` with eight partial sums (so that it vectorises).

@@ -929,21 +929,26 @@ mod tests {
         }
     }
 
-    #[test]
-    fn inconsistent_loop_matches_the_closed_form_optimum() {
-        // Four collinear-free translations around a loop that does not close
-        // by 0.4 in x, all rotations zero: the optimum spreads the error
-        // equally, objective = 0.4² / 4.
+    /// Four collinear-free translations around a loop that does not close
+    /// by 0.4 in x, all rotations zero, and the information of its edges
+    /// (rotations pinned by a huge information: the problem is linear).
+    fn open_loop() -> (PoseGraph<Se2, 3>, Matrix3<f64>) {
         let mut g = PoseGraph::<Se2, 3>::new();
         for k in 0..4 {
             g.add_vertex(k, Se2::identity()).unwrap();
         }
-        // Rotations pinned by a huge information: the problem is linear.
         let i = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 1e8));
         g.add_edge(0, 1, Se2::new(1.0, 0.0, 0.0), i, None).unwrap();
         g.add_edge(1, 2, Se2::new(0.0, 1.0, 0.0), i, None).unwrap();
         g.add_edge(2, 3, Se2::new(-1.0, 0.0, 0.0), i, None).unwrap();
         g.add_edge(3, 0, Se2::new(0.4, -1.0, 0.0), i, None).unwrap();
+        (g, i)
+    }
+
+    #[test]
+    fn inconsistent_loop_matches_the_closed_form_optimum() {
+        // The optimum spreads the error equally: objective = 0.4² / 4.
+        let (mut g, _) = open_loop();
         let s = optimize(&mut g, &SolverOptions::default()).unwrap();
         assert!(
             (s.final_objective - 0.04).abs() < 1e-8,
@@ -954,21 +959,13 @@ mod tests {
 
     #[test]
     fn innovation_is_the_chi2_a_left_out_edge_adds_to_the_optimum() {
-        // The loop of `inconsistent_loop_matches_the_closed_form_optimum`,
-        // solved without its closing edge: the chain fits exactly, the
-        // closing edge's plain error there is 0.4² = 0.16, and adding it
-        // raises the optimum's χ² to 0.04 (the mismatch spread over four
-        // edges). That rise is its innovation: ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e
-        // with H of the chain (exact here: the problem is linear).
-        let mut g = PoseGraph::<Se2, 3>::new();
-        for k in 0..4 {
-            g.add_vertex(k, Se2::identity()).unwrap();
-        }
-        let i = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 1e8));
-        g.add_edge(0, 1, Se2::new(1.0, 0.0, 0.0), i, None).unwrap();
-        g.add_edge(1, 2, Se2::new(0.0, 1.0, 0.0), i, None).unwrap();
-        g.add_edge(2, 3, Se2::new(-1.0, 0.0, 0.0), i, None).unwrap();
-        g.add_edge(3, 0, Se2::new(0.4, -1.0, 0.0), i, None).unwrap();
+        // The open loop solved without its closing edge: the chain fits
+        // exactly, the closing edge's plain error there is 0.4² = 0.16, and
+        // adding it raises the optimum's χ² to 0.04 (the mismatch spread
+        // over four edges). That rise is its innovation:
+        // ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e with H of the chain (exact here: the
+        // problem is linear).
+        let (mut g, i) = open_loop();
         let without = [1.0, 1.0, 1.0, 0.0];
         let mut opt = Optimizer::new(&g, Some(&without), SolverOptions::default()).unwrap();
         opt.run(&mut g, Some(&without), &mut |_: &IterationRecord| {})
