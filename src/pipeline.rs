@@ -9,7 +9,7 @@ use crate::io::inliers::{self, InlierCsvError};
 use crate::report::{
     GateReport, InitializationReport, LoopReport, OptimizerReport, Report, RobustReport,
 };
-use crate::robust::{CandidateState, Reweighter, RobustMethod, RobustOptions};
+use crate::robust::{CandidateState, MapFit, Reweighter, RobustMethod, RobustOptions};
 use crate::solve::init::{ChordalInit, Initialization, initialize};
 use crate::solve::{IterationRecord, Optimizer, SolveError, SolverOptions};
 use crate::stats::{Chi2Test, DofConvention};
@@ -431,14 +431,16 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         if stop {
             break;
         }
-        // EM decides on r²/s², s² the variance factor of the latest map.
+        // EM decides on r²/s², s² from the fit of the latest map
+        // (`Reweighter::update_fit`).
         let r2 = candidate_r2(graph);
-        let s2 = if method == RobustMethod::Em {
-            decision_scale(graph, &weights)
+        let (mut again, s2) = if method == RobustMethod::Em {
+            let fit = map_fit(graph, &weights);
+            let s2 = reweighter.decision_scale(fit);
+            (reweighter.update_fit(&r2, fit), s2)
         } else {
-            1.0
+            (reweighter.update(&r2), 1.0)
         };
-        let mut again = reweighter.update_scaled(&r2, s2);
         if let Some(which) = reweighter
             .innovation_request()
             .filter(|_| config.innovation)
@@ -492,7 +494,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 .map_err(solve_error)?;
                 total = Some(merge_summaries(total, summary));
                 if method == RobustMethod::Em {
-                    let s2 = decision_scale(graph, &weights);
+                    let s2 = reweighter.decision_scale(map_fit(graph, &weights));
                     noise_scale = Some(s2);
                     reweighter.refresh(&candidate_r2(graph), s2);
                 }
@@ -533,6 +535,8 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         variance_factor: noise_scale,
         rescued_loops: reweighter.rescued(),
         innovation_accepted_loops: reweighter.innovation_accepted(),
+        scale_search: (method == RobustMethod::Em).then(|| reweighter.scale_search().0),
+        scale_trials: reweighter.scale_search().1,
         decision_c: (method == RobustMethod::Em).then(|| reweighter.decision_c()),
         residual_mixture: reweighter.residual_fit().cloned(),
     };
@@ -633,13 +637,12 @@ fn solve<P: G2oPose<D>, const D: usize>(
     optimizer.run(graph, Some(weights), &mut observe)
 }
 
-/// The noise scale of EM's decisions: the a-posteriori variance factor
-/// `s² = Σ eₖᵀΩₖeₖ / (D·edges − D·free poses)` of the least-squares solution
-/// over the edges of non-zero weight at the graph's poses, at most 1 (never
-/// more lenient than the information matrices say); 1 when there is not one
-/// edge's worth of redundancy.
-fn decision_scale<P: G2oPose<D>, const D: usize>(graph: &PoseGraph<P, D>, weights: &[f64]) -> f64 {
-    let (d2, n) = graph
+/// How the map fits the file's noise model ([`MapFit`]): `Σ eₖᵀΩₖeₖ`
+/// over the edges of non-zero weight at the graph's poses, and their
+/// redundancy `D·edges − D·free poses` (0 when there is not one edge's
+/// worth).
+fn map_fit<P: G2oPose<D>, const D: usize>(graph: &PoseGraph<P, D>, weights: &[f64]) -> MapFit {
+    let (chi2, n) = graph
         .edges
         .iter()
         .zip(weights)
@@ -648,10 +651,9 @@ fn decision_scale<P: G2oPose<D>, const D: usize>(graph: &PoseGraph<P, D>, weight
             (d2 + graph.edge_chi2(e), n + 1)
         });
     let free = graph.num_vertices() - graph.gauge().len();
-    if n > free && d2 > 0.0 {
-        (d2 / (D * (n - free)) as f64).min(1.0)
-    } else {
-        1.0
+    MapFit {
+        chi2,
+        dof: D * n.saturating_sub(free),
     }
 }
 

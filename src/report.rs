@@ -5,7 +5,7 @@ use crate::gate::{DegeneratePolicy, GateDecision, GateMode, LogNormalMixture, Se
 use crate::graph::VertexId;
 use crate::io::g2o::G2oFile;
 use crate::linear::BlockSystem;
-use crate::robust::RobustMethod;
+use crate::robust::{RobustMethod, ScaleSearchOutcome};
 use crate::solve::init::Initialization;
 use crate::solve::{Method, StopReason, Summary};
 use crate::stats::Chi2Test;
@@ -173,6 +173,13 @@ pub struct RobustReport {
     /// added): dropped by the gate (also counted in `rescued_loops`) or
     /// rejected by EM's decisions; `--no-innovation` turns it off.
     pub innovation_accepted_loops: usize,
+    /// EM: whether a decided map failed to fit the file's information and
+    /// the noise scale was searched (`not_needed`, `found`, `undone`; see
+    /// [`crate::robust::Reweighter::update_fit`]); `null` for the other
+    /// methods.
+    pub scale_search: Option<crate::robust::ScaleSearchOutcome>,
+    /// EM: trial scales taken by that search.
+    pub scale_trials: usize,
     /// EM: the kernel width of the last hard decision (`c`, or wider when
     /// learned from the residuals); `null` for the other methods.
     pub decision_c: Option<f64>,
@@ -368,6 +375,16 @@ impl Report {
                     notes.push(format!(
                         "{} by their innovation",
                         self.robust.innovation_accepted_loops
+                    ));
+                }
+                if self.robust.scale_trials > 0 {
+                    let outcome = match self.robust.scale_search {
+                        Some(ScaleSearchOutcome::Found) => "found",
+                        _ => "undone",
+                    };
+                    notes.push(format!(
+                        "noise scale searched over {} trials, {outcome}",
+                        self.robust.scale_trials
                     ));
                 }
                 let rescued = if notes.is_empty() {

@@ -288,6 +288,46 @@ pub struct Reweighter {
     innovation_pending: bool,
     /// EM: candidates accepted by [`Reweighter::accept_by_innovation`].
     innovation_accepted: usize,
+    /// EM: the search for the noise scale when a decided map does not fit
+    /// the file's ([`Reweighter::update_fit`]).
+    scale_search: ScaleSearch,
+}
+
+/// EM's search for the noise scale of its decisions
+/// ([`Reweighter::update_fit`]).
+#[derive(Clone, Debug, Default)]
+enum ScaleSearch {
+    /// Not needed so far: every decided map fitted the file's information.
+    #[default]
+    Idle,
+    /// Deciding at the trial scale `scale`.
+    Trying {
+        scale: f64,
+        trials: usize,
+        /// The variance factor of the map the last trial was taken at.
+        last_v: f64,
+        /// The decided set before the first trial (weights, states).
+        before: (Vec<f64>, Vec<CandidateState>),
+    },
+    /// Over: a trial scale made a map that fits it, or none did and the
+    /// decisions went back to the file's scale.
+    Over { trials: usize, found: bool },
+}
+
+/// How EM's search for the noise scale ended ([`Reweighter::update_fit`]),
+/// for the report.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ScaleSearchOutcome {
+    /// Every decided map fitted the file's information: no trial.
+    NotNeeded,
+    /// A trial scale made a map that fits it; from there on the scale was
+    /// measured again.
+    Found,
+    /// No trial scale made a map that fits it while keeping half the
+    /// accepted loops: the decisions went back to the file's scale (an
+    /// over-confident file, or too few consistent loops).
+    Undone,
 }
 
 /// EM: the kernel width's square is divided by this every round until it
@@ -309,6 +349,50 @@ pub const EM_ALPHA: f64 = 1e-6;
 
 /// EM: most hard decisions at the learned width, after those at `c`.
 pub const WIDE_DECISIONS: usize = 3;
+
+/// EM: most trial scales ([`Reweighter::update_fit`]), each
+/// [`ANNEAL_FACTOR`] below the last: down to `1.4⁻³⁰ ≈ 4·10⁻⁵`, beyond the
+/// 20–20 000× under-confidence of square-root information (MANIFEST.md,
+/// quirk 1).
+pub const MAX_TRIALS: usize = 30;
+
+/// How a map fits the file's noise model: `Σ eᵀΩe` over the edges it was
+/// solved with (at their plain cost) and their redundancy (Σ edge
+/// dimensions − free pose parameters).
+///
+/// ```
+/// use pgo::robust::MapFit;
+/// let fit = MapFit { chi2: 450.0, dof: 500 };
+/// assert_eq!(fit.variance_factor(), 0.9);
+/// assert!(fit.fits(1.0)); // χ²₅₀₀(1 − 10⁻⁶) ≈ 673
+/// assert!(!fit.fits(0.5));
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapFit {
+    /// `Σ eᵀΩe` over the edges the map was solved with.
+    pub chi2: f64,
+    /// Degrees of freedom (0: no redundancy).
+    pub dof: usize,
+}
+
+impl MapFit {
+    /// The a-posteriori variance factor `χ²/dof` (1 without redundancy).
+    pub fn variance_factor(&self) -> f64 {
+        if self.dof > 0 && self.chi2 > 0.0 && self.chi2.is_finite() {
+            self.chi2 / self.dof as f64
+        } else {
+            1.0
+        }
+    }
+
+    /// Whether the map fits noise `s2` times the information's, at EM's
+    /// level: `χ² ≤ s2 · χ²_dof(1 − EM_ALPHA)`. Always without redundancy.
+    pub fn fits(&self, s2: f64) -> bool {
+        self.dof == 0
+            || crate::stats::chi2_critical(self.dof as u64, EM_ALPHA)
+                .map_or(true, |limit| self.chi2 <= s2 * limit)
+    }
+}
 
 /// EM: the variance floor of the residual mixture (on `ln(r²/s²)`): a
 /// spread of 10⁻³ in the log, far below any real one.
@@ -342,6 +426,7 @@ impl Reweighter {
             width_learned: false,
             innovation_pending: false,
             innovation_accepted: 0,
+            scale_search: ScaleSearch::Idle,
         }
     }
 
@@ -454,6 +539,63 @@ impl Reweighter {
     /// included, judge `r²/s²`; its weighting rounds and the other methods
     /// use `r²` as it is.
     pub fn update_scaled(&mut self, r2: &[f64], s2: f64) -> bool {
+        self.update_inner(r2, s2, None)
+    }
+
+    /// [`Reweighter::update_scaled`] given the latest map's fit
+    /// ([`MapFit`]) rather than its scale; EM decides on `r²/s²` with
+    /// [`Reweighter::decision_scale`]. The decision width `c` is on the
+    /// file's scale, capped at 1 because under-confident information must
+    /// not let wrong loops through; but when the wrong loops are many, the
+    /// weighting can end, at `c`, in a map they bent, whose accepted set
+    /// repeats — published intel with 1000 wrong candidates and no gate:
+    /// every one accepted, the map's χ²/dof 102. Such a map does not fit
+    /// the file's information ([`MapFit::fits`] at 1), which real files
+    /// (under-confident: χ²/dof 0.0004–0.6 at the standard datasets'
+    /// optima) do at their optimum. Then the scale is not known, and EM
+    /// searches it: each decision is taken at a trial scale [`ANNEAL_FACTOR`]
+    /// below the last (the annealing continued, one step per decided map),
+    /// until a decided map fits one step above its trial scale (the
+    /// resolution of the trials) and the last step no longer lowered its
+    /// variance factor by a step's factor (it no longer took out loops that
+    /// strained the map); from there on `s²` is measured again, and the
+    /// decision width is learned only then. If a trial would keep fewer than
+    /// half the loops accepted before the first, or [`MAX_TRIALS`] pass, the
+    /// search is undone (an over-confident file, whose consistent loops
+    /// fit no narrower scale) and the decisions go on at the file's scale.
+    pub fn update_fit(&mut self, r2: &[f64], fit: MapFit) -> bool {
+        let s2 = self.decision_scale(fit);
+        self.update_inner(r2, s2, Some(fit))
+    }
+
+    /// EM: the noise scale `s²` of the decisions at a map with this fit: a
+    /// trial scale while the maps do not fit it (see
+    /// [`Reweighter::update_fit`]), else the variance factor, at most 1.
+    pub fn decision_scale(&self, fit: MapFit) -> f64 {
+        match self.scale_search {
+            ScaleSearch::Trying { scale, .. } if !fit.fits(scale * ANNEAL_FACTOR) => scale,
+            _ => fit.variance_factor().min(1.0),
+        }
+    }
+
+    /// EM: how the search for the noise scale ended, and how many trial
+    /// scales it took.
+    pub fn scale_search(&self) -> (ScaleSearchOutcome, usize) {
+        match self.scale_search {
+            ScaleSearch::Idle => (ScaleSearchOutcome::NotNeeded, 0),
+            ScaleSearch::Trying { trials, .. }
+            | ScaleSearch::Over {
+                trials,
+                found: true,
+            } => (ScaleSearchOutcome::Found, trials),
+            ScaleSearch::Over {
+                trials,
+                found: false,
+            } => (ScaleSearchOutcome::Undone, trials),
+        }
+    }
+
+    fn update_inner(&mut self, r2: &[f64], s2: f64, fit: Option<MapFit>) -> bool {
         if !self.is_active() {
             return false;
         }
@@ -470,7 +612,7 @@ impl Reweighter {
             RobustMethod::Cauchy => self.apply(r2, |r2, _| cauchy_weight(r2, c)),
             RobustMethod::Dcs => self.apply(r2, |r2, _| dcs_weight(r2, c * c)),
             RobustMethod::Gnc => return self.gnc_step(r2, &old),
-            RobustMethod::Em => return self.em_step(r2, s2, &old),
+            RobustMethod::Em => return self.em_step(r2, s2, fit, &old),
         }
         max_change(&old, &self.weights) > self.options.tolerance
     }
@@ -576,7 +718,7 @@ impl Reweighter {
 
     /// One EM round: an E-step with switching off in the weighting phase, a
     /// hard decision in the deciding phase.
-    fn em_step(&mut self, r2: &[f64], s2: f64, old: &[f64]) -> bool {
+    fn em_step(&mut self, r2: &[f64], s2: f64, fit: Option<MapFit>, old: &[f64]) -> bool {
         let o = self.options;
         let anneal = match self.anneal {
             // The first E-step: start wide enough that half the candidates
@@ -639,11 +781,10 @@ impl Reweighter {
                 // Decisions are taken at the decision width.
                 self.phase = EmPhase::Deciding { rounds: 0 };
                 self.anneal = Some(1.0);
-                let r2 = scaled(r2, s2);
-                self.posterior(&r2);
-                self.decide(old, &r2)
+                self.posterior(&scaled(r2, s2));
+                self.decide(old, r2, s2, fit)
             }
-            EmPhase::Deciding { .. } => self.decide(old, &scaled(r2, s2)),
+            EmPhase::Deciding { .. } => self.decide(old, r2, s2, fit),
         }
     }
 
@@ -657,19 +798,30 @@ impl Reweighter {
     /// that map ([`Reweighter::decision_c`]) and the candidates decided
     /// again at it, once; it is not re-learned at the maps that follow,
     /// where a wrong loop it let in could have widened it further.
-    fn decide(&mut self, old: &[f64], r2: &[f64]) -> bool {
-        let EmPhase::Deciding { rounds } = self.phase else {
+    fn decide(&mut self, old: &[f64], r2: &[f64], mut s2: f64, fit: Option<MapFit>) -> bool {
+        let EmPhase::Deciding { mut rounds } = self.phase else {
             return false;
         };
         self.accept_by_posterior();
         // The first decision always needs a solve (the last one used
         // continuous weights); later ones only when the set changed.
         let mut changed = rounds == 0 || old != self.weights.as_slice();
+        if let Some(scale) = fit.and_then(|fit| self.search_scale(fit, r2)) {
+            // A trial scale, or back to the file's: its own decisions.
+            s2 = scale;
+            changed = true;
+            rounds = 0;
+        }
+        let r2 = &scaled(r2, s2);
         // Learned once: when the set repeats at `c`, or when the decisions
         // at `c` run out (they can shrink the set round after round: each
         // true loop of the heavy tail that is left out lowers s² and so
         // pushes the next ones out).
-        if (!changed || rounds >= MAX_DECISIONS) && !self.width_learned && self.options.learn_width
+        let searching = matches!(self.scale_search, ScaleSearch::Trying { .. });
+        if (!changed || rounds >= MAX_DECISIONS)
+            && !searching
+            && !self.width_learned
+            && self.options.learn_width
         {
             self.width_learned = true;
             self.learn_decision_width(r2);
@@ -698,6 +850,68 @@ impl Reweighter {
         let rescued = self.rescue();
         self.innovation_pending = self.held_out.iter().any(|&h| h);
         rescued
+    }
+
+    /// EM: one step of the search for the noise scale at a decided map
+    /// with this fit ([`Reweighter::update_fit`]); `r2` are the raw
+    /// residuals. When it
+    /// takes a trial, or undoes the search, the candidates are decided again
+    /// and the scale they were decided at is returned.
+    fn search_scale(&mut self, fit: MapFit, r2: &[f64]) -> Option<f64> {
+        if self.width_learned {
+            return None;
+        }
+        let v = fit.variance_factor();
+        let (scale, trials, before) = match std::mem::take(&mut self.scale_search) {
+            ScaleSearch::Idle if !fit.fits(1.0) => {
+                (1.0, 0, (self.weights.clone(), self.states.clone()))
+            }
+            ScaleSearch::Trying {
+                scale,
+                trials,
+                last_v,
+                before,
+            } => {
+                if fit.fits(scale * ANNEAL_FACTOR) && v * ANNEAL_FACTOR >= last_v {
+                    // Found: the decision just taken, at the measured scale,
+                    // stands.
+                    self.scale_search = ScaleSearch::Over {
+                        trials,
+                        found: true,
+                    };
+                    return None;
+                }
+                (scale, trials, before)
+            }
+            other => {
+                self.scale_search = other;
+                return None;
+            }
+        };
+        let accepted = |w: &[f64]| w.iter().filter(|&&w| w >= 0.5).count();
+        let floor = accepted(&before.0).div_ceil(2).max(1);
+        let t = scale / ANNEAL_FACTOR;
+        self.posterior(&scaled(r2, t));
+        self.accept_by_posterior();
+        if trials < MAX_TRIALS && accepted(&self.weights) >= floor {
+            self.scale_search = ScaleSearch::Trying {
+                scale: t,
+                trials: trials + 1,
+                last_v: v,
+                before,
+            };
+            return Some(t);
+        }
+        // Undone: back to the set decided before the first trial, at the
+        // file's scale.
+        (self.weights, self.states) = before;
+        let s2 = v.min(1.0);
+        self.posterior(&scaled(r2, s2));
+        self.scale_search = ScaleSearch::Over {
+            trials,
+            found: false,
+        };
+        Some(s2)
     }
 
     /// Weight 1 for the candidates whose posterior is ≥ ½, 0 for the others;
@@ -1018,6 +1232,101 @@ mod tests {
             assert!((w - e).abs() < 1e-12, "{:?}", rw.final_weights());
         }
         assert!(!rw.update(&[1.0, 0.0, 3.5, 0.5]), "finished for good");
+    }
+
+    /// EM at `c = 2` deciding at `c` (no learned width).
+    fn em_options_at_c() -> RobustOptions {
+        RobustOptions {
+            learn_width: false,
+            ..em_options()
+        }
+    }
+
+    #[test]
+    fn em_searches_the_noise_scale_when_the_decided_map_does_not_fit() {
+        let mut rw = Reweighter::new(em_options_at_c(), vec![0.5; 10]);
+        // Eight consistent candidates and two wrong ones that the file's
+        // (under-confident) scale lets in: r² ≤ c² = 4.
+        let mut r2 = vec![0.1; 10];
+        r2[8] = 3.0;
+        r2[9] = 3.5;
+        // The map they bent does not fit the information: χ²/dof = 10.
+        let bent = MapFit {
+            chi2: 1000.0,
+            dof: 100,
+        };
+        assert!(!bent.fits(1.0));
+        assert!(rw.update_fit(&r2, bent));
+        // The weights settle; the first decision, at the file's scale,
+        // accepts all ten, and the map does not fit: the next decision is
+        // at the trial scale 1/1.4, where the two wrong ones fall out
+        // (3/0.714 > 4).
+        assert!(rw.update_fit(&r2, bent));
+        let mut expected = vec![1.0; 10];
+        expected[8] = 0.0;
+        expected[9] = 0.0;
+        assert_eq!(rw.weights(), expected.as_slice());
+        assert_eq!(rw.scale_search(), (ScaleSearchOutcome::Found, 1));
+        assert!((rw.decision_scale(bent) - 1.0 / ANNEAL_FACTOR).abs() < 1e-12);
+        // Without them the map fits, and its variance factor fell by far
+        // more than a trial step: one more trial, then the map still fits
+        // and no longer improves — found; from there on s² is measured
+        // (0.1), and the wrong ones, far out now, stay out.
+        let fitting = MapFit {
+            chi2: 10.0,
+            dof: 100,
+        };
+        r2[8] = 50.0;
+        r2[9] = 60.0;
+        assert!(rw.update_fit(&r2, fitting));
+        assert_eq!(rw.scale_search(), (ScaleSearchOutcome::Found, 2));
+        assert!(!rw.update_fit(&r2, fitting));
+        assert_eq!(rw.weights(), expected.as_slice());
+        assert_eq!(rw.decision_scale(fitting), 0.1);
+        assert_eq!(rw.scale_search(), (ScaleSearchOutcome::Found, 2));
+    }
+
+    #[test]
+    fn em_undoes_the_scale_search_when_the_trials_only_trim_consistent_loops() {
+        // An over-confident file: the consistent loops' residuals spread up
+        // to c², and no narrower scale makes the map fit.
+        let r2 = [0.4, 0.8, 1.2, 1.6, 2.0, 2.4, 2.8, 3.2, 3.6, 3.9];
+        let over = MapFit {
+            chi2: 300.0,
+            dof: 100,
+        };
+        let mut rw = Reweighter::new(em_options_at_c(), vec![0.5; 10]);
+        assert!(rw.update_fit(&r2, over));
+        // All ten at the file's scale; the trials keep 7 (r² ≤ 4/1.4), then
+        // 5 (≤ 4/1.96), then would keep 3, fewer than half: undone, back to
+        // all ten at the file's scale, where the set repeats.
+        assert!(rw.update_fit(&r2, over));
+        assert_eq!(rw.weights().iter().filter(|&&w| w == 1.0).count(), 7);
+        assert!(rw.update_fit(&r2, over));
+        assert_eq!(rw.weights().iter().filter(|&&w| w == 1.0).count(), 5);
+        assert!(rw.update_fit(&r2, over));
+        assert_eq!(rw.weights(), &[1.0; 10]);
+        assert_eq!(rw.scale_search(), (ScaleSearchOutcome::Undone, 2));
+        assert_eq!(rw.decision_scale(over), 1.0);
+        assert!(!rw.update_fit(&r2, over));
+        assert_eq!(rw.weights(), &[1.0; 10]);
+    }
+
+    #[test]
+    fn em_does_not_search_when_the_decided_map_fits() {
+        let r2 = [0.4, 0.8, 1.2, 1.6, 2.0, 2.4, 2.8, 3.2, 3.6, 3.9];
+        let fitting = MapFit {
+            chi2: 90.0,
+            dof: 100,
+        };
+        let mut rw = Reweighter::new(em_options_at_c(), vec![0.5; 10]);
+        assert!(rw.update_fit(&r2, fitting));
+        // The first decision, at s² = 0.9: 3.6/0.9 = 4 is still in, 3.9/0.9
+        // is out; then the set repeats.
+        assert!(rw.update_fit(&r2, fitting));
+        assert_eq!(rw.weights().iter().filter(|&&w| w == 1.0).count(), 9);
+        assert!(!rw.update_fit(&r2, fitting));
+        assert_eq!(rw.scale_search(), (ScaleSearchOutcome::NotNeeded, 0));
     }
 
     #[test]

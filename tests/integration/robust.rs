@@ -8,7 +8,7 @@ use pgo::graph::{AnyPoseGraph, PoseGraph};
 use pgo::io::g2o;
 use pgo::pipeline::{self, OptimizeConfig};
 use pgo::report::Report;
-use pgo::robust::RobustMethod;
+use pgo::robust::{RobustMethod, ScaleSearchOutcome};
 use pgo::simulate::{InlierModel, OutlierPolicy, SimulationOptions, simulate_planar};
 use std::path::{Path, PathBuf};
 
@@ -439,4 +439,28 @@ fn em_learns_its_decision_width_from_heavy_tailed_true_loops() {
         .filter(|&&i| fixed.loops[i].weight < 0.5)
         .count();
     assert!(rejected >= 3, "{rejected} of 10 bent loops rejected at c");
+}
+
+#[test]
+fn em_without_the_gate_searches_the_noise_scale_of_under_confident_information() {
+    // As many wrong candidates as true loops, no gate, and information 100×
+    // under-confident (as square-root information is): at the file's scale
+    // the weighting ends in a map the wrong loops bent, whose accepted set
+    // repeats with all of them; that map does not fit the information, and
+    // the trial scales find the one at which it does.
+    let dir = temp_dir("robust-scale-search");
+    let mut sim = simulate_planar(&options(OutlierPolicy::Random, 100, 1)).expect("simulate");
+    for e in &mut sim.noisy.edges {
+        e.information *= 0.01;
+    }
+    let noisy = dir.join("under_confident.g2o");
+    write(&sim.noisy, &noisy);
+    let wrong = candidate_labels(&sim.noisy, &sim.wrong);
+    let report = run(&noisy, GateMode::Off, RobustMethod::Em, None);
+    let (tp, fp, true_loops) = counts(&report, &wrong);
+    assert_eq!(report.robust.scale_search, Some(ScaleSearchOutcome::Found));
+    assert!(report.robust.scale_trials > 0);
+    assert_eq!(fp, 0, "wrong loops accepted");
+    assert_eq!(tp, true_loops, "true loops rejected");
+    assert!(report.chi2_test.as_ref().expect("χ² test").passed);
 }
