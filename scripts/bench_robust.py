@@ -3,7 +3,7 @@
 robust kernels on pose graphs with wrong loop closures, in one run.
 
 usage: .venv/bin/python scripts/bench_robust.py [--only NAME ...] [--policies random local grouped]
-           [--outliers 100 1000] [--maxmix | --no-maxmix] [--scales published calibrated]
+           [--outliers 100 1000] [--maxmix | --no-maxmix] [--scales published calibrated overconfident]
            [--tools TOOL ...] [--timeout 300] [--seed 1] [--out bench-out/robust.json]
 
 Run it with the Python of the peers' virtual environment (scripts/setup_peers.sh
@@ -25,7 +25,10 @@ Cases
   that the clean graph's optimum has chi2/dof = 1 (dof = sum of edge
   dimensions - free pose parameters). Several files carry square-root
   information (MANIFEST.md, quirk 1) and are 20-20 000x under-confident, which
-  changes what every kernel of fixed width does.
+  changes what every kernel of fixed width does. `--scales overconfident`
+  adds a third run with the calibrated information multiplied by 10 (a file
+  10x over-confident, as front ends' covariances often are): the case EM's
+  search for the noise scale must leave alone.
 
 Tools (all on the same corrupted file)
   pgo               the default: gate auto (T_GV learned from the counts) + EM
@@ -361,7 +364,8 @@ def main():
     ap.add_argument("--policies", nargs="*", default=["random", "local", "grouped"])
     ap.add_argument("--outliers", nargs="*", type=int, default=[100, 1000])
     ap.add_argument("--maxmix", action=argparse.BooleanOptionalAction, default=True)
-    ap.add_argument("--scales", nargs="*", default=["published", "calibrated"])
+    ap.add_argument("--scales", nargs="*", default=["published", "calibrated"],
+                    choices=["published", "calibrated", "overconfident"])
     ap.add_argument("--tools", nargs="*", default=list(PGO_TOOLS) + list(PEER_TOOLS))
     ap.add_argument("--timeout", type=int, default=300)
     ap.add_argument("--pgo-flags", nargs="*", default=[], help="extra flags for every pgo run (e.g. --robust-c 4)")
@@ -393,12 +397,14 @@ def main():
         wrong = [w for _, _, w in labels]
         for scale in args.scales:
             path = c["path"]
-            if scale == "calibrated":
-                path = c["path"][:-4] + ".cal.g2o"
+            factor = {"published": 1.0, "calibrated": ref["factor"],
+                      "overconfident": 10 * ref["factor"]}[scale]
+            if scale != "published":
+                path = c["path"][:-4] + (".cal.g2o" if scale == "calibrated" else ".oc10.g2o")
                 if not os.path.exists(path):
-                    scale_information(c["path"], path, ref["factor"])
+                    scale_information(c["path"], path, factor)
             row = {"case": c["case"], "dataset": c["dataset"], "scale": scale,
-                   "factor": ref["factor"] if scale == "calibrated" else 1.0,
+                   "factor": factor,
                    "candidates": len(wrong), "wrong": sum(wrong), "tools": {}}
             for tool in args.tools:
                 # One scratch file per process: several runs may share --work.
@@ -463,7 +469,7 @@ def fmt(x, spec="%.3f"):
 def tables(results, tools):
     """Markdown: a summary per tool and scale, and a per-case table."""
     md = []
-    for scale in ("published", "calibrated"):
+    for scale in ("published", "calibrated", "overconfident"):
         rows = [r for r in results if r["scale"] == scale]
         if not rows:
             continue

@@ -308,6 +308,14 @@ struct OptimizeArgs {
     /// robust.residual_mixture).
     #[arg(long)]
     no_learn_width: bool,
+    /// EM: keep deciding at the file's scale (s² = χ²/dof ≤ 1) even when a
+    /// decided map does not fit the information. By default such a map
+    /// (χ² > χ²_dof(1 − 10⁻⁶)), which wrong loops bent, makes EM search the
+    /// scale: decisions at trial scales 1.4× apart until a decided map fits
+    /// its own; undone when a trial would keep fewer than half the loops
+    /// (JSON: robust.scale_search, robust.scale_trials).
+    #[arg(long)]
+    no_scale_search: bool,
     /// Which edges are loop candidates: those with an inlier count, or also
     /// every edge between non-consecutive ids.
     #[arg(long, value_enum, default_value_t = CandidatesArg::Counted)]
@@ -708,6 +716,7 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
     config.rescue = !args.no_rescue;
     config.innovation = !args.no_innovation;
     config.learn_width = !args.no_learn_width;
+    config.scale_search = !args.no_scale_search;
     config.plot = args.plot.clone();
     config.candidates = match args.candidates {
         CandidatesArg::Counted => CandidateRule::Counted,

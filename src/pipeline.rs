@@ -62,6 +62,10 @@ pub struct OptimizeConfig {
     /// EM: learn the decision width from the residuals
     /// ([`crate::robust::Reweighter::decision_c`]; default on).
     pub learn_width: bool,
+    /// EM: search the noise scale when a decided map does not fit the
+    /// file's information ([`crate::robust::Reweighter::update_fit`];
+    /// default on).
+    pub scale_search: bool,
     /// Write SVG pictures (inlier-count histogram with the fitted mixture;
     /// trajectory before and after) into this directory.
     pub plot: Option<PathBuf>,
@@ -102,6 +106,7 @@ impl OptimizeConfig {
             rescue: true,
             innovation: true,
             learn_width: true,
+            scale_search: true,
             plot: None,
         }
     }
@@ -349,6 +354,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         .map(|_| crate::plot::top_view(&graph.poses));
     let mut robust_options = RobustOptions::new(method, D);
     robust_options.learn_width = config.learn_width;
+    robust_options.scale_search = config.scale_search;
     if let Some(c) = config.robust_c {
         robust_options.c = c;
     }

@@ -102,6 +102,9 @@ pub struct RobustOptions {
     /// EM: learn the width of the hard decisions from the residuals
     /// ([`Reweighter::decision_c`]) instead of deciding at `c`.
     pub learn_width: bool,
+    /// EM: search the noise scale when a decided map does not fit the
+    /// file's information ([`Reweighter::update_fit`]).
+    pub scale_search: bool,
 }
 
 impl RobustOptions {
@@ -116,6 +119,7 @@ impl RobustOptions {
             max_rounds: 100,
             restart: true,
             learn_width: true,
+            scale_search: true,
         }
     }
 }
@@ -858,7 +862,7 @@ impl Reweighter {
     /// takes a trial, or undoes the search, the candidates are decided again
     /// and the scale they were decided at is returned.
     fn search_scale(&mut self, fit: MapFit, r2: &[f64]) -> Option<f64> {
-        if self.width_learned {
+        if self.width_learned || !self.options.scale_search {
             return None;
         }
         let v = fit.variance_factor();

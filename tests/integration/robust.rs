@@ -463,4 +463,18 @@ fn em_without_the_gate_searches_the_noise_scale_of_under_confident_information()
     assert_eq!(fp, 0, "wrong loops accepted");
     assert_eq!(tp, true_loops, "true loops rejected");
     assert!(report.chi2_test.as_ref().expect("χ² test").passed);
+    // Without the search, the wrong loops stay in, and the χ² test says so.
+    let config = OptimizeConfig {
+        gate: GateMode::Off,
+        scale_search: false,
+        ..OptimizeConfig::new(&noisy)
+    };
+    let report = pipeline::run(&config, &mut |_| {}).expect("optimise");
+    let (_, fp, _) = counts(&report, &wrong);
+    assert_eq!(
+        report.robust.scale_search,
+        Some(ScaleSearchOutcome::NotNeeded)
+    );
+    assert!(fp > 50, "{fp} wrong loops accepted without the search");
+    assert!(!report.chi2_test.as_ref().expect("χ² test").passed);
 }
