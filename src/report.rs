@@ -174,9 +174,9 @@ pub struct RobustReport {
     /// rejected by EM's decisions; `--no-innovation` turns it off.
     pub innovation_accepted_loops: usize,
     /// EM: whether a decided map failed to fit the file's information and
-    /// the noise scale was searched (`not_needed`, `found`, `undone`; see
-    /// [`crate::robust::Reweighter::update_fit`]); `null` for the other
-    /// methods.
+    /// the noise scale was searched (`not_needed`, `found`, `undone`,
+    /// `searching`; see [`crate::robust::Reweighter::update_fit`]); `null`
+    /// for the other methods.
     pub scale_search: Option<crate::robust::ScaleSearchOutcome>,
     /// EM: trial scales taken by that search.
     pub scale_trials: usize,
@@ -380,6 +380,7 @@ impl Report {
                 if self.robust.scale_trials > 0 {
                     let outcome = match self.robust.scale_search {
                         Some(ScaleSearchOutcome::Found) => "found",
+                        Some(ScaleSearchOutcome::Searching) => "out of budget",
                         _ => "undone",
                     };
                     notes.push(format!(

@@ -332,6 +332,8 @@ pub enum ScaleSearchOutcome {
     /// accepted loops: the decisions went back to the file's scale (an
     /// over-confident file, or too few consistent loops).
     Undone,
+    /// Stopped while searching (the iteration or time budget ran out).
+    Searching,
 }
 
 /// EM: the kernel width's square is divided by this every round until it
@@ -587,8 +589,8 @@ impl Reweighter {
     pub fn scale_search(&self) -> (ScaleSearchOutcome, usize) {
         match self.scale_search {
             ScaleSearch::Idle => (ScaleSearchOutcome::NotNeeded, 0),
-            ScaleSearch::Trying { trials, .. }
-            | ScaleSearch::Over {
+            ScaleSearch::Trying { trials, .. } => (ScaleSearchOutcome::Searching, trials),
+            ScaleSearch::Over {
                 trials,
                 found: true,
             } => (ScaleSearchOutcome::Found, trials),
@@ -858,9 +860,9 @@ impl Reweighter {
 
     /// EM: one step of the search for the noise scale at a decided map
     /// with this fit ([`Reweighter::update_fit`]); `r2` are the raw
-    /// residuals. When it
-    /// takes a trial, or undoes the search, the candidates are decided again
-    /// and the scale they were decided at is returned.
+    /// residuals. When it takes a trial, or undoes the search, the
+    /// candidates are decided again and the scale they were decided at is
+    /// returned.
     fn search_scale(&mut self, fit: MapFit, r2: &[f64]) -> Option<f64> {
         if self.width_learned || !self.options.scale_search {
             return None;
@@ -1270,7 +1272,7 @@ mod tests {
         expected[8] = 0.0;
         expected[9] = 0.0;
         assert_eq!(rw.weights(), expected.as_slice());
-        assert_eq!(rw.scale_search(), (ScaleSearchOutcome::Found, 1));
+        assert_eq!(rw.scale_search(), (ScaleSearchOutcome::Searching, 1));
         assert!((rw.decision_scale(bent) - 1.0 / ANNEAL_FACTOR).abs() < 1e-12);
         // Without them the map fits, and its variance factor fell by far
         // more than a trial step: one more trial, then the map still fits
@@ -1283,7 +1285,7 @@ mod tests {
         r2[8] = 50.0;
         r2[9] = 60.0;
         assert!(rw.update_fit(&r2, fitting));
-        assert_eq!(rw.scale_search(), (ScaleSearchOutcome::Found, 2));
+        assert_eq!(rw.scale_search(), (ScaleSearchOutcome::Searching, 2));
         assert!(!rw.update_fit(&r2, fitting));
         assert_eq!(rw.weights(), expected.as_slice());
         assert_eq!(rw.decision_scale(fitting), 0.1);
