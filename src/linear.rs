@@ -1,6 +1,7 @@
 //! The sparse linear algebra of one Gauss–Newton step: the block sparsity
 //! pattern of the normal equations `H δ = −b`, values written straight into
-//! that pattern, and a block-supernodal sparse Cholesky ([`supernodal`]).
+//! that pattern, and a block-supernodal sparse Cholesky (the private module
+//! `supernodal`).
 //!
 //! Everything that depends only on the graph's structure is done once in
 //! [`BlockSystem::new`]:
