@@ -310,7 +310,7 @@ struct OptimizeArgs {
     no_learn_width: bool,
     /// EM: keep deciding at the file's scale (s² = χ²/dof ≤ 1) even when a
     /// decided map does not fit the information. By default such a map
-    /// (χ² > χ²_dof(1 − 10⁻⁶)), which wrong loops bent, makes EM search the
+    /// (χ² > 1.4·χ²_dof(1 − 10⁻⁶)), which wrong loops bent, makes EM search the
     /// scale: decisions at trial scales 1.4× apart until a decided map fits
     /// its own; undone when a trial would keep fewer than half the loops
     /// (JSON: robust.scale_search, robust.scale_trials).

@@ -556,9 +556,10 @@ impl Reweighter {
     /// weighting can end, at `c`, in a map they bent, whose accepted set
     /// repeats — published intel with 1000 wrong candidates and no gate:
     /// every one accepted, the map's χ²/dof 102. Such a map does not fit
-    /// the file's information ([`MapFit::fits`] at 1), which real files
-    /// (under-confident: χ²/dof 0.0004–0.6 at the standard datasets'
-    /// optima) do at their optimum. Then the scale is not known, and EM
+    /// the file's information, even one trial step ([`ANNEAL_FACTOR`])
+    /// above it ([`MapFit::fits`] at 1.4), which real files (under-confident:
+    /// χ²/dof 0.0004–0.6 at the standard datasets' optima) do at their
+    /// optimum. Then the scale is not known, and EM
     /// searches it: each decision is taken at a trial scale [`ANNEAL_FACTOR`]
     /// below the last (the annealing continued, one step per decided map),
     /// until a decided map fits one step above its trial scale (the
@@ -869,7 +870,10 @@ impl Reweighter {
         }
         let v = fit.variance_factor();
         let (scale, trials, before) = match std::mem::take(&mut self.scale_search) {
-            ScaleSearch::Idle if !fit.fits(1.0) => {
+            // Not even one trial step above the file's scale: the tolerance
+            // of every fit below (a large graph's χ² test is tight, and a
+            // χ²/dof a little above 1 is a heavy tail, not a bent map).
+            ScaleSearch::Idle if !fit.fits(ANNEAL_FACTOR) => {
                 (1.0, 0, (self.weights.clone(), self.states.clone()))
             }
             ScaleSearch::Trying {
