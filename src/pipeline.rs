@@ -526,6 +526,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         );
     }
     let accepted = pool.iter().filter(|&&k| weights[k] >= 0.5).count();
+    let (scale_search, scale_trials) = reweighter.scale_search();
     report.robust = RobustReport {
         method,
         c: robust_options.c,
@@ -541,8 +542,8 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         variance_factor: noise_scale,
         rescued_loops: reweighter.rescued(),
         innovation_accepted_loops: reweighter.innovation_accepted(),
-        scale_search: (method == RobustMethod::Em).then(|| reweighter.scale_search().0),
-        scale_trials: reweighter.scale_search().1,
+        scale_search: (method == RobustMethod::Em).then_some(scale_search),
+        scale_trials,
         decision_c: (method == RobustMethod::Em).then(|| reweighter.decision_c()),
         residual_mixture: reweighter.residual_fit().cloned(),
     };

@@ -177,7 +177,7 @@ pub struct RobustReport {
     /// the noise scale was searched (`not_needed`, `found`, `undone`,
     /// `searching`; see [`crate::robust::Reweighter::update_fit`]); `null`
     /// for the other methods.
-    pub scale_search: Option<crate::robust::ScaleSearchOutcome>,
+    pub scale_search: Option<ScaleSearchOutcome>,
     /// EM: trial scales taken by that search.
     pub scale_trials: usize,
     /// EM: the kernel width of the last hard decision (`c`, or wider when

@@ -1296,11 +1296,13 @@ mod tests {
         assert_eq!(rw.scale_search(), (ScaleSearchOutcome::Found, 2));
     }
 
+    /// Ten consistent loops whose residuals spread up to `c² = 4`.
+    const SPREAD_UP_TO_C2: [f64; 10] = [0.4, 0.8, 1.2, 1.6, 2.0, 2.4, 2.8, 3.2, 3.6, 3.9];
+
     #[test]
     fn em_undoes_the_scale_search_when_the_trials_only_trim_consistent_loops() {
-        // An over-confident file: the consistent loops' residuals spread up
-        // to c², and no narrower scale makes the map fit.
-        let r2 = [0.4, 0.8, 1.2, 1.6, 2.0, 2.4, 2.8, 3.2, 3.6, 3.9];
+        // An over-confident file: no narrower scale makes the map fit.
+        let r2 = SPREAD_UP_TO_C2;
         let over = MapFit {
             chi2: 300.0,
             dof: 100,
@@ -1324,7 +1326,7 @@ mod tests {
 
     #[test]
     fn em_does_not_search_when_the_decided_map_fits() {
-        let r2 = [0.4, 0.8, 1.2, 1.6, 2.0, 2.4, 2.8, 3.2, 3.6, 3.9];
+        let r2 = SPREAD_UP_TO_C2;
         let fitting = MapFit {
             chi2: 90.0,
             dof: 100,
