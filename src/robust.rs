@@ -995,17 +995,21 @@ impl Reweighter {
     /// * consistent loops: the consistent component of the residual mixture
     ///   ([`Reweighter::residual_fit`], the one the decision width comes
     ///   from);
-    /// * wrong loops: one normal fitted to `y` of the held-out candidates,
-    ///   each weighted by `1 − p` (what its count says of it being wrong) —
-    ///   the population the gate dropped, mostly wrong, where a local wrong
-    ///   loop with a small innovation weighs as much as it is likely.
+    /// * wrong loops: the density of `y` among the held-out candidates
+    ///   nothing accepted — the population the gate dropped, mostly wrong —
+    ///   each weighted by `1 − p` (what its count says of it being wrong;
+    ///   a local wrong loop with a small innovation weighs as much as it is
+    ///   likely), the one judged left out ([`DroppedDensity`]). Those it
+    ///   accepts leave the population and the others are judged again,
+    ///   until the accepted set repeats (at most [`DROPPED_PASSES`] passes).
     ///
     /// Held-out candidates removed in the weighting phase are judged too
     /// (their plain residual at a map they never shaped was far out, which
     /// is what the innovation looks at again); removal keeps them from the
     /// plain rescue only. Nothing is accepted without a residual fit or with
-    /// fewer than 8 held-out candidates. Returns whether any was accepted
-    /// (and the map is to be solved again with them).
+    /// fewer than 8 held-out candidates left to model the wrong ones.
+    /// Returns whether any was accepted (and the map is to be solved again
+    /// with them).
     pub fn accept_by_innovation(&mut self, which: &[usize], innovation2: &[f64], s2: f64) -> bool {
         let Some((mu_in, sigma_in)) = self.residual_fit.as_ref().and_then(consistent_component)
         else {
@@ -1016,47 +1020,59 @@ impl Reweighter {
             .iter()
             .map(|&v| (v / s2).max(f64::MIN_POSITIVE).ln())
             .collect();
-        // The dropped population, each weighted by how wrong its count says
-        // it is.
-        let dropped: Vec<(f64, f64)> = which
+        // Judged: those left out with a non-zero prior; the dropped
+        // population: the held-out ones left out.
+        let judged: Vec<bool> = which
+            .iter()
+            .map(|&k| self.weights[k] == 0.0 && self.priors[k] > 0.0)
+            .collect();
+        let dropped: Vec<bool> = which
+            .iter()
+            .map(|&k| self.held_out[k] && self.weights[k] == 0.0)
+            .collect();
+        let held_y = which
             .iter()
             .zip(&y)
             .filter(|(k, _)| self.held_out[**k])
-            .map(|(&k, &y)| (y, 1.0 - self.priors[k]))
-            .collect();
-        let total: f64 = dropped.iter().map(|(_, w)| w).sum();
-        if dropped.len() < MixtureOptions::default().min_counts || total <= 0.0 {
-            return false;
-        }
-        let mu_out = dropped.iter().map(|(y, w)| w * y).sum::<f64>() / total;
-        let var_out = dropped
-            .iter()
-            .map(|(y, w)| w * (y - mu_out).powi(2))
-            .sum::<f64>()
-            / total;
-        let sigma_out = var_out.max(RESIDUAL_VARIANCE_FLOOR).sqrt();
-        let ln_normal =
-            |y: f64, mu: f64, sigma: f64| -0.5 * ((y - mu) / sigma).powi(2) - sigma.ln();
-        let mut any = false;
-        for (&k, &y) in which.iter().zip(&y) {
-            let p = self.priors[k];
-            if self.weights[k] > 0.0 || p <= 0.0 {
-                continue;
-            }
-            let ln_prior_odds = if p >= 1.0 {
-                f64::INFINITY
-            } else {
-                (p / (1.0 - p)).ln()
+            .map(|(_, &y)| y);
+        let (lo, hi) = held_y.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), y| {
+            (lo.min(y), hi.max(y))
+        });
+        let mut accepted = vec![false; which.len()];
+        let mut ln_odds = vec![f64::NEG_INFINITY; which.len()];
+        for _ in 0..DROPPED_PASSES {
+            let population: Vec<(usize, f64, f64)> = (0..which.len())
+                .filter(|&i| dropped[i] && !accepted[i])
+                .map(|i| (i, y[i], 1.0 - self.priors[which[i]]))
+                .collect();
+            let Some(density) = DroppedDensity::new(population, hi - lo) else {
+                break;
             };
-            let ln_ratio = ln_normal(y, mu_in, sigma_in) - ln_normal(y, mu_out, sigma_out);
-            let ln_odds = ln_prior_odds + ln_ratio;
-            if ln_odds >= 0.0 {
-                self.weights[k] = 1.0;
-                self.posteriors[k] = 1.0 / (1.0 + (-ln_odds).exp());
-                self.states[k] = CandidateState::Active;
-                self.innovation_accepted += 1;
-                any = true;
+            let mut next = vec![false; which.len()];
+            for i in (0..which.len()).filter(|&i| judged[i]) {
+                let p = self.priors[which[i]];
+                let ln_prior_odds = if p >= 1.0 {
+                    f64::INFINITY
+                } else {
+                    (p / (1.0 - p)).ln()
+                };
+                ln_odds[i] =
+                    ln_prior_odds + ln_normal(y[i], mu_in, sigma_in) - density.ln_density(y[i], i);
+                next[i] = ln_odds[i] >= 0.0;
             }
+            let repeated = next == accepted;
+            accepted = next;
+            if repeated {
+                break;
+            }
+        }
+        let mut any = false;
+        for (i, &k) in which.iter().enumerate().filter(|(i, _)| accepted[*i]) {
+            self.weights[k] = 1.0;
+            self.posteriors[k] = 1.0 / (1.0 + (-ln_odds[i]).exp());
+            self.states[k] = CandidateState::Active;
+            self.innovation_accepted += 1;
+            any = true;
         }
         any
     }
@@ -1089,6 +1105,78 @@ impl Reweighter {
         self.mu = Some(mu * 1.4);
         let binary = self.weights.iter().all(|&w| w == 0.0 || w == 1.0);
         !(binary && max_change(old, &self.weights) <= self.options.tolerance) && mu < 1e9
+    }
+}
+
+/// EM: most passes of [`Reweighter::accept_by_innovation`], each judging
+/// the candidates left out against the dropped population without those
+/// the last pass accepted.
+pub const DROPPED_PASSES: usize = 10;
+
+/// `ln` of the normal density `N(y; μ, σ²)`.
+fn ln_normal(y: f64, mu: f64, sigma: f64) -> f64 {
+    -0.5 * ((y - mu) / sigma).powi(2) - sigma.ln() - 0.5 * (2.0 * std::f64::consts::PI).ln()
+}
+
+/// The density of `y = ln(ν²/s²)` among the candidates the gate dropped
+/// (mostly wrong loops), for [`Reweighter::accept_by_innovation`]: a
+/// weighted Gaussian kernel density estimate (Silverman's bandwidth
+/// `1.06 σ n_eff^(−1/5)`), mixed with a uniform floor of one
+/// pseudo-observation over the range the held-out candidates span — a
+/// wrong loop may land anywhere in it, also where none of these did, so a
+/// candidate alone in a gap between them is not taken for a consistent one
+/// on the strength of the gap alone. A kernel estimate rather than one
+/// normal: the dropped population is not one (random wrong loops far out,
+/// local ones near the consistent loops, true loops with low counts among
+/// them), and one normal fitted to it puts density where none of it lies.
+struct DroppedDensity {
+    /// `(index into the judged list, y, weight)`.
+    points: Vec<(usize, f64, f64)>,
+    total: f64,
+    bandwidth: f64,
+    floor: f64,
+}
+
+impl DroppedDensity {
+    /// `None` with fewer than 8 points (too few to model the wrong loops)
+    /// or no weight.
+    fn new(points: Vec<(usize, f64, f64)>, range: f64) -> Option<Self> {
+        let total: f64 = points.iter().map(|p| p.2).sum();
+        if points.len() < MixtureOptions::default().min_counts || total <= 0.0 {
+            return None;
+        }
+        let mean = points.iter().map(|p| p.2 * p.1).sum::<f64>() / total;
+        let var = points
+            .iter()
+            .map(|p| p.2 * (p.1 - mean).powi(2))
+            .sum::<f64>()
+            / total;
+        let n_eff = total * total / points.iter().map(|p| p.2 * p.2).sum::<f64>();
+        let bandwidth = 1.06 * var.max(RESIDUAL_VARIANCE_FLOOR).sqrt() * n_eff.powf(-0.2);
+        let n = points.len() as f64;
+        let floor = 1.0 / (n * range.max(bandwidth));
+        Some(Self {
+            points,
+            total,
+            bandwidth,
+            floor,
+        })
+    }
+
+    /// `ln` of the density at `y`, the point of judged candidate `i` (if it
+    /// is one of the population) left out.
+    fn ln_density(&self, y: f64, i: usize) -> f64 {
+        let (mut sum, mut total) = (0.0, self.total);
+        for &(j, yj, w) in &self.points {
+            if j == i {
+                total -= w;
+            } else {
+                sum += w * ln_normal(y, yj, self.bandwidth).exp();
+            }
+        }
+        let kde = if total > 0.0 { sum / total } else { 0.0 };
+        let n = self.points.len() as f64;
+        ((1.0 - 1.0 / n) * kde + self.floor).ln()
     }
 }
 
@@ -1606,6 +1694,75 @@ mod tests {
         let which = rw.innovation_request().expect("candidates left out");
         assert_eq!(which, (4..24).collect::<Vec<_>>());
         assert!(!rw.accept_by_innovation(&which, &nu2[10..], 1.0));
+    }
+
+    #[test]
+    fn em_models_the_dropped_population_without_the_loops_already_accepted() {
+        // The gate dropped 122: 40 true loops the plain rescue takes back
+        // (count posterior 0.3, consistent residuals and innovations,
+        // ln ν² ∈ [−1, 1]); 80 wrong ones far out (0.02, ln ν² ∈ [12, 16]);
+        // T, a true loop whose residual is far out but whose innovation is
+        // not (p = 0.1, ln ν² = 3); and W, as consistent but with a count
+        // that says wrong (p = 0.001). One normal fitted to all the dropped
+        // ones (the rescued ones included) puts so much density at ln ν² = 3
+        // that T is rejected (log odds −1.4); the kernel density of those
+        // left out (the 80 wrong ones, T and W) has none there but its
+        // floor, and T is accepted (+2.2), W not (−2.6).
+        let mut r2 = heavy_tailed_residuals();
+        let mut priors = vec![0.5; r2.len()];
+        let mut nu2: Vec<f64> = vec![14f64.exp(); 10];
+        for i in 0..40 {
+            r2.push(1.0);
+            priors.push(0.3);
+            nu2.push((-1.0 + 2.0 * i as f64 / 39.0).exp());
+        }
+        for i in 0..80 {
+            r2.push(12f64.exp());
+            priors.push(0.02);
+            nu2.push((12.0 + 4.0 * i as f64 / 79.0).exp());
+        }
+        for p in [0.1, 0.001] {
+            r2.push(12f64.exp());
+            priors.push(p);
+            nu2.push(3f64.exp());
+        }
+        let held_out: Vec<bool> = (0..r2.len()).map(|k| k >= 60).collect();
+        let mut rw = Reweighter::new(em_options(), priors);
+        rw.hold_out(&held_out);
+        run_to_the_end(&mut rw, &r2);
+        assert_eq!(rw.rescued(), 40);
+        let which = rw.innovation_request().expect("candidates left out");
+        assert_eq!(which, (50..r2.len()).collect::<Vec<_>>());
+        assert!(rw.accept_by_innovation(&which, &nu2, 1.0));
+        assert!(!rw.update(&r2));
+        let w = rw.final_weights();
+        let accepted: Vec<usize> = (50..r2.len()).filter(|&k| w[k] >= 0.5).collect();
+        let expected: Vec<usize> = (60..100).chain([180]).collect();
+        assert_eq!(accepted, expected);
+        assert_eq!(rw.innovation_accepted(), 1);
+    }
+
+    #[test]
+    fn dropped_density_leaves_the_judged_point_out_and_keeps_a_floor() {
+        // Eight points of weight 1 at 0, 1 and 2, over a range of 10.
+        let density = DroppedDensity::new((0..8).map(|i| (i, (i % 3) as f64, 1.0)).collect(), 10.0)
+            .expect("8 points");
+        let n = 8.0;
+        // By hand: the mean and variance of 0, 1, 2, 0, 1, 2, 0, 1.
+        let ys = [0.0, 1.0, 2.0, 0.0, 1.0, 2.0, 0.0, 1.0];
+        let m = ys.iter().sum::<f64>() / n;
+        let v = ys.iter().map(|y| (y - m) * (y - m)).sum::<f64>() / n;
+        let h = 1.06 * v.sqrt() * n.powf(-0.2);
+        let k = |d: f64| (-0.5 * (d / h).powi(2)).exp() / (h * (2.0 * std::f64::consts::PI).sqrt());
+        // At 5 for point 0 (y = 0), which is left out.
+        let kde: f64 = ys[1..].iter().map(|&y| k(5.0 - y)).sum::<f64>() / 7.0;
+        let expected = (1.0 - 1.0 / n) * kde + 1.0 / (n * 10.0);
+        assert!((density.ln_density(5.0, 0) - expected.ln()).abs() < 1e-12);
+        // Far from every point only the floor is left.
+        let far = density.ln_density(1e3, 99);
+        assert!((far - (1.0 / (n * 10.0)).ln()).abs() < 1e-12);
+        // Too few points: no density.
+        assert!(DroppedDensity::new((0..7).map(|i| (i, 0.0, 1.0)).collect(), 1.0).is_none());
     }
 
     #[test]
