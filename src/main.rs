@@ -295,8 +295,9 @@ struct OptimizeArgs {
     /// map's uncertainty between the two poses added to the edge's):
     /// accepted when the prior odds (a dropped candidate's count posterior,
     /// a kept one's ½) times the likelihood ratio of ln(ν²/s²) — consistent
-    /// loops (the residual mixture) against the dropped population
-    /// (weighted by 1 − p) — are ≥ 1.
+    /// loops (the residual mixture) against the density of the dropped
+    /// candidates left out (a kernel estimate, each weighted by 1 − p) —
+    /// are ≥ 1.
     #[arg(long)]
     no_innovation: bool,
     /// EM: decide at c instead of at the width learned from the residuals.

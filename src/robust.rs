@@ -999,9 +999,17 @@ impl Reweighter {
     ///   nothing accepted — the population the gate dropped, mostly wrong —
     ///   each weighted by `1 − p` (what its count says of it being wrong;
     ///   a local wrong loop with a small innovation weighs as much as it is
-    ///   likely), the one judged left out ([`DroppedDensity`]). Those it
-    ///   accepts leave the population and the others are judged again,
-    ///   until the accepted set repeats (at most [`DROPPED_PASSES`] passes).
+    ///   likely), the one judged left out: a Gaussian kernel density
+    ///   estimate (Silverman's bandwidth `1.06 σ n_eff^(−1/5)`) mixed with
+    ///   a uniform floor of one pseudo-observation over the range the
+    ///   held-out candidates span — a wrong loop may land anywhere in it,
+    ///   also where none of these did, so a gap between them alone does not
+    ///   make a candidate consistent. A kernel estimate rather than one
+    ///   normal: the population is not one (random wrong loops far out,
+    ///   local ones near the consistent loops), and a normal fitted to it
+    ///   puts density where none of it lies. Those accepted leave the
+    ///   population and the others are judged again, until the accepted
+    ///   set repeats (at most [`DROPPED_PASSES`] passes).
     ///
     /// Held-out candidates removed in the weighting phase are judged too
     /// (their plain residual at a map they never shaped was far out, which
@@ -1119,16 +1127,9 @@ fn ln_normal(y: f64, mu: f64, sigma: f64) -> f64 {
 }
 
 /// The density of `y = ln(ν²/s²)` among the candidates the gate dropped
-/// (mostly wrong loops), for [`Reweighter::accept_by_innovation`]: a
-/// weighted Gaussian kernel density estimate (Silverman's bandwidth
-/// `1.06 σ n_eff^(−1/5)`), mixed with a uniform floor of one
-/// pseudo-observation over the range the held-out candidates span — a
-/// wrong loop may land anywhere in it, also where none of these did, so a
-/// candidate alone in a gap between them is not taken for a consistent one
-/// on the strength of the gap alone. A kernel estimate rather than one
-/// normal: the dropped population is not one (random wrong loops far out,
-/// local ones near the consistent loops, true loops with low counts among
-/// them), and one normal fitted to it puts density where none of it lies.
+/// (mostly wrong loops), for [`Reweighter::accept_by_innovation`] (which
+/// says why): a weighted Gaussian kernel density estimate, leave-one-out,
+/// mixed with a uniform floor of one pseudo-observation over a range.
 struct DroppedDensity {
     /// `(index into the judged list, y, weight)`.
     points: Vec<(usize, f64, f64)>,
