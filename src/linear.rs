@@ -537,14 +537,16 @@ impl<const D: usize> BlockSystem<D> {
         // The elimination positions of the blocks present (no allocation:
         // this runs once per edge judged).
         let mut blocks = [(0, a_i); 2];
+        let mut positions = [0; 2];
         let mut count = 0;
         for (b, a) in [(i, a_i), (j, a_j)] {
             if let Some(b) = b {
                 blocks[count] = (self.position[b], a);
+                positions[count] = self.position[b];
                 count += 1;
             }
         }
-        let blocks = &blocks[..count];
+        let (blocks, positions) = (&blocks[..count], &positions[..count]);
         if blocks.is_empty() || self.n_blocks == 0 {
             return out;
         }
@@ -556,9 +558,8 @@ impl<const D: usize> BlockSystem<D> {
         if self.cov_rhs.len() != D * n {
             self.cov_rhs = vec![0.0; D * n];
         }
-        let positions = [blocks[0].0, blocks[count - 1].0];
         self.symbolic
-            .reach(&positions[..count], &mut self.cov_mark, &mut self.cov_reach);
+            .reach(positions, &mut self.cov_mark, &mut self.cov_reach);
         // Column a of Aᵀ: row a of each block, at its block row.
         for a in 0..D {
             let rhs = &mut self.cov_rhs[a * n..(a + 1) * n];
