@@ -9,7 +9,9 @@ use crate::io::inliers::{self, InlierCsvError};
 use crate::report::{
     GateReport, InitializationReport, LoopReport, OptimizerReport, Report, RobustReport,
 };
-use crate::robust::{CandidateState, MapFit, Reweighter, RobustMethod, RobustOptions};
+use crate::robust::{
+    CandidateState, InnovationJudgement, MapFit, Reweighter, RobustMethod, RobustOptions,
+};
 use crate::solve::init::{ChordalInit, Initialization, initialize};
 use crate::solve::{IterationRecord, Optimizer, SolveError, SolverOptions};
 use crate::stats::{Chi2Test, DofConvention};
@@ -552,19 +554,25 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     if let (Some(dir), Some(before)) = (&config.plot, before) {
         plot(dir, graph, &before, &weights, &candidates, config, report)?;
     }
-    report.loops = candidates
-        .edges
-        .iter()
-        .zip(&candidates.kept)
-        .zip(&candidates.counts)
-        .map(|((&k, &kept), &inliers)| {
+    // The judgement by innovation of each candidate EM weighed.
+    let mut judgements = vec![None; candidates.edges.len()];
+    for (&i, &j) in kept.iter().zip(reweighter.judgements()) {
+        judgements[i] = j;
+    }
+    report.loops = (0..candidates.edges.len())
+        .map(|i| {
+            let k = candidates.edges[i];
             let e = &graph.edges[k];
+            let judgement: Option<InnovationJudgement> = judgements[i];
             LoopReport {
                 from: graph.id(e.from),
                 to: graph.id(e.to),
-                inliers,
-                kept,
+                inliers: candidates.counts[i],
+                kept: candidates.kept[i],
                 weight: weights[k],
+                prior: candidates.priors[i],
+                innovation: judgement.map(|j| j.innovation),
+                innovation_ln_odds: judgement.map(|j| j.ln_odds),
             }
         })
         .collect();

@@ -202,6 +202,19 @@ pub struct LoopReport {
     pub kept: bool,
     /// Its final weight in the optimisation, in [0, 1].
     pub weight: f64,
+    /// Its prior inlier probability for EM: the count's posterior
+    /// `P(true loop | count)` from the gate's mixture, capped at ½ (0 for a
+    /// zero count), for a candidate the soft gate passes or the hard gate
+    /// dropped (with a threshold learned or given); ½ for the others.
+    pub prior: f64,
+    /// EM: `ν²/s²`, its squared innovation at the decided map (solved
+    /// without it) over the noise scale, when it was judged by it; `null`
+    /// for the loops the map was solved with and for the other methods.
+    pub innovation: Option<f64>,
+    /// EM: with `innovation`, `ln` of its posterior odds there — prior odds
+    /// times the likelihood ratio of `ln(ν²/s²)`, consistent loops against
+    /// the candidates the gate dropped; accepted iff ≥ 0.
+    pub innovation_ln_odds: Option<f64>,
 }
 
 /// How the initial guess was made.

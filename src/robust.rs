@@ -292,6 +292,8 @@ pub struct Reweighter {
     innovation_pending: bool,
     /// EM: candidates accepted by [`Reweighter::accept_by_innovation`].
     innovation_accepted: usize,
+    /// EM: each candidate's latest judgement by its innovation.
+    judgements: Vec<Option<InnovationJudgement>>,
     /// EM: the search for the noise scale when a decided map does not fit
     /// the file's ([`Reweighter::update_fit`]).
     scale_search: ScaleSearch,
@@ -432,6 +434,7 @@ impl Reweighter {
             width_learned: false,
             innovation_pending: false,
             innovation_accepted: 0,
+            judgements: vec![None; n],
             scale_search: ScaleSearch::Idle,
         }
     }
@@ -1048,6 +1051,7 @@ impl Reweighter {
         });
         let mut accepted = vec![false; which.len()];
         let mut ln_odds = vec![f64::NEG_INFINITY; which.len()];
+        let mut evaluated = false;
         for _ in 0..DROPPED_PASSES {
             let population: Vec<(usize, f64, f64)> = (0..which.len())
                 .filter(|&i| dropped[i] && !accepted[i])
@@ -1056,6 +1060,7 @@ impl Reweighter {
             let Some(density) = DroppedDensity::new(population, hi - lo) else {
                 break;
             };
+            evaluated = true;
             let mut next = vec![false; which.len()];
             for i in (0..which.len()).filter(|&i| judged[i]) {
                 let p = self.priors[which[i]];
@@ -1074,6 +1079,14 @@ impl Reweighter {
                 break;
             }
         }
+        if evaluated {
+            for (i, &k) in which.iter().enumerate().filter(|(i, _)| judged[*i]) {
+                self.judgements[k] = Some(InnovationJudgement {
+                    innovation: y[i].exp(),
+                    ln_odds: ln_odds[i],
+                });
+            }
+        }
         let mut any = false;
         for (i, &k) in which.iter().enumerate().filter(|(i, _)| accepted[*i]) {
             self.weights[k] = 1.0;
@@ -1090,6 +1103,14 @@ impl Reweighter {
     /// [`Reweighter::rescued`] too) and ones EM's decisions had rejected.
     pub fn innovation_accepted(&self) -> usize {
         self.innovation_accepted
+    }
+
+    /// EM: each candidate's latest judgement by its innovation
+    /// ([`Reweighter::accept_by_innovation`]), `None` for those never
+    /// judged (the map was solved with them, or there was no population of
+    /// dropped candidates to judge them against).
+    pub fn judgements(&self) -> &[Option<InnovationJudgement>] {
+        &self.judgements
     }
 
     /// One GNC step: weights at the current μ, then μ grows.
@@ -1114,6 +1135,18 @@ impl Reweighter {
         let binary = self.weights.iter().all(|&w| w == 0.0 || w == 1.0);
         !(binary && max_change(old, &self.weights) <= self.options.tolerance) && mu < 1e9
     }
+}
+
+/// How [`Reweighter::accept_by_innovation`] judged a candidate the map was
+/// solved without, in its last pass.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InnovationJudgement {
+    /// Its squared innovation divided by the noise scale, `ν²/s²`.
+    pub innovation: f64,
+    /// `ln` of its posterior odds of being a consistent loop: its prior
+    /// odds times the likelihood ratio of `ln(ν²/s²)`, consistent loops
+    /// against the dropped population. Accepted iff ≥ 0.
+    pub ln_odds: f64,
 }
 
 /// EM: most passes of [`Reweighter::accept_by_innovation`], each judging
@@ -1753,6 +1786,20 @@ mod tests {
         let expected: Vec<usize> = (60..100).chain([180]).collect();
         assert_eq!(accepted, expected);
         assert_eq!(rw.innovation_accepted(), 1);
+
+        // The judgements: none for the loops the map was solved with (kept
+        // or rescued); ν²/s² and log odds of the decision's sign for the
+        // others (the 10 kept ones EM rejected, the wrong ones, T and W).
+        let j = rw.judgements();
+        let rejected = |j: &[Option<InnovationJudgement>]| {
+            j.iter().all(|j| j.is_some_and(|j| j.ln_odds < 0.0))
+        };
+        assert!(j[..50].iter().chain(&j[60..100]).all(Option::is_none));
+        assert!(rejected(&j[50..60]) && rejected(&j[100..180]));
+        let (t, w) = (j[180].expect("T judged"), j[181].expect("W judged"));
+        assert!((t.innovation - 3f64.exp()).abs() < 1e-9 * t.innovation);
+        assert_eq!(t.innovation, w.innovation);
+        assert!(t.ln_odds >= 0.0 && w.ln_odds < 0.0);
     }
 
     #[test]

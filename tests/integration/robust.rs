@@ -362,6 +362,33 @@ fn em_accepts_by_innovation_true_loops_the_plain_residual_leaves_out() {
     assert!(with.robust.rescued_loops > plain.robust.rescued_loops);
     assert!(with.robust.rescued_loops <= plain.robust.rescued_loops + by_innovation);
     assert_eq!(tp_with, c.wrong.iter().filter(|w| !**w).count());
+
+    // The report says how each was judged: a prior of ½ for the kept ones,
+    // the count's posterior (< ½) for the dropped ones; ν²/s² and log odds
+    // for those the map was solved without, ≥ 0 for the ones taken back
+    // (judged once: the map solved with them is the final one), < 0 for
+    // those left out; nothing for the others.
+    assert!(with.loops.iter().all(|l| {
+        let prior_ok = if l.kept {
+            l.prior == 0.5
+        } else {
+            l.prior < 0.5
+        };
+        prior_ok && l.innovation.is_some() == l.innovation_ln_odds.is_some()
+    }));
+    let judged: Vec<_> = with
+        .loops
+        .iter()
+        .filter(|l| l.innovation.is_some())
+        .collect();
+    let taken_back = judged.iter().filter(|l| l.weight >= 0.5).count();
+    assert_eq!(taken_back, by_innovation);
+    for l in &judged {
+        let (nu2, ln_odds) = (l.innovation.unwrap(), l.innovation_ln_odds.unwrap());
+        assert!(nu2 > 0.0 && nu2.is_finite());
+        assert_eq!(ln_odds >= 0.0, l.weight >= 0.5, "{}–{}", l.from, l.to);
+    }
+    assert!(plain.loops.iter().all(|l| l.innovation.is_none()));
 }
 
 #[test]
