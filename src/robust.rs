@@ -26,8 +26,14 @@
 //!   ([`Reweighter::decision_c`]); and the candidates the
 //!   gate dropped are judged once at the final map
 //!   ([`Reweighter::hold_out`]), with their counts' posteriors as priors.
-//!   With a prior inlier probability `p` per candidate, the E-step
-//!   multiplies the Cauchy odds `c²/r²` by the prior odds `p/(1 − p)`.
+//!   When a decided map does not fit the file's information, the noise
+//!   scale of the decisions is searched ([`Reweighter::update_fit`]); the
+//!   candidates the decided map was solved without are judged once more by
+//!   their innovation, against the population the gate dropped
+//!   ([`Reweighter::accept_by_innovation`], each judgement in
+//!   [`Reweighter::judgements`]). With a prior inlier probability `p` per
+//!   candidate, the E-step multiplies the Cauchy odds `c²/r²` by the prior
+//!   odds `p/(1 − p)`.
 //! * [`RobustMethod::Huber`]: `w = 1` for `r ≤ c`, else `c / r`.
 //! * [`RobustMethod::Cauchy`]: `w = c² / (c² + r²)`, plain IRLS (no switching).
 //! * [`RobustMethod::Dcs`]: dynamic covariance scaling (Agarwal et al.,
