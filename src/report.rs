@@ -127,6 +127,9 @@ impl GateReport {
         let rule = match (self.mode, self.threshold) {
             (GateMode::Off, _) => "off".to_string(),
             (GateMode::Fixed(n), _) => format!("fixed threshold {n} inliers"),
+            // Nothing to learn from (a public benchmark, `--candidates
+            // non-sequential`): not a degenerate fit, there was none.
+            _ if self.counted == 0 => "no inlier counts".to_string(),
             (GateMode::Soft, _) if !self.degenerate => {
                 "soft (each candidate's P(true loop | count) is its robust prior)".to_string()
             }
@@ -443,5 +446,49 @@ impl Report {
             s += &format!("wrote {out}\n");
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gate::{MixtureOptions, gate};
+
+    fn summary(counts: &[Option<u64>], mode: GateMode) -> String {
+        let policy = DegeneratePolicy::default();
+        let decision = gate(counts, mode, policy, &MixtureOptions::default());
+        GateReport::new(&decision, counts).summary()
+    }
+
+    #[test]
+    fn the_gate_summary_says_what_the_gate_had_to_go_on() {
+        assert_eq!(summary(&[], GateMode::Auto), "gate: no loop candidates");
+        assert_eq!(
+            summary(&[None; 5], GateMode::Auto),
+            "gate: no inlier counts; kept 5 of 5 loop candidates"
+        );
+        assert_eq!(
+            summary(&[None; 5], GateMode::Off),
+            "gate: off; kept 5 of 5 loop candidates"
+        );
+        // One count value only: a degenerate fit, which is said.
+        let same = vec![Some(40); 30];
+        assert_eq!(
+            summary(&same, GateMode::Auto),
+            "gate: degenerate counts (policy keep-all); kept 30 of 30 loop candidates"
+        );
+        // Two well-separated populations: a learned threshold.
+        let two: Vec<Option<u64>> = (0..60)
+            .map(|i| {
+                Some(if i % 2 == 0 {
+                    8 + i % 7
+                } else {
+                    200 + 3 * (i % 11)
+                })
+            })
+            .collect();
+        let line = summary(&two, GateMode::Auto);
+        assert!(line.starts_with("gate: T_GV = "), "{line}");
+        assert!(line.ends_with("kept 30 of 60 loop candidates"), "{line}");
     }
 }
