@@ -300,6 +300,13 @@ struct OptimizeArgs {
     /// are ≥ 1.
     #[arg(long)]
     no_innovation: bool,
+    /// EM: report in the JSON each loop candidate's innovation ν²/s²
+    /// against the final map without it (loops[].innovation): for a loop
+    /// the map was solved with, its deleted residual eᵀ(Ω⁻¹ − J·H⁻¹·Jᵀ)⁻¹e,
+    /// large where the other loops contradict it; for one left out, its
+    /// innovation. Off by default: one covariance solve per loop.
+    #[arg(long)]
+    innovations: bool,
     /// EM: decide at c instead of at the width learned from the residuals.
     /// By default, once the decisions at c settle, two normals are fitted to
     /// ln(r²/s²) of the candidates (consistent and inconsistent loops, with
@@ -716,6 +723,7 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
     config.robust_c = args.robust_c;
     config.rescue = !args.no_rescue;
     config.innovation = !args.no_innovation;
+    config.loop_innovations = args.innovations;
     config.learn_width = !args.no_learn_width;
     config.scale_search = !args.no_scale_search;
     config.plot = args.plot.clone();

@@ -9,9 +9,7 @@ use crate::io::inliers::{self, InlierCsvError};
 use crate::report::{
     GateReport, InitializationReport, LoopReport, OptimizerReport, Report, RobustReport,
 };
-use crate::robust::{
-    CandidateState, InnovationJudgement, MapFit, Reweighter, RobustMethod, RobustOptions,
-};
+use crate::robust::{CandidateState, MapFit, Reweighter, RobustMethod, RobustOptions};
 use crate::solve::init::{ChordalInit, Initialization, initialize};
 use crate::solve::{IterationRecord, Optimizer, SolveError, SolverOptions};
 use crate::stats::{Chi2Test, DofConvention};
@@ -61,6 +59,11 @@ pub struct OptimizeConfig {
     /// by the gate, rejected by EM) by their innovation at that map
     /// ([`crate::robust::Reweighter::accept_by_innovation`]; default on).
     pub innovation: bool,
+    /// EM: report every weighed candidate's innovation against the final
+    /// map without it (`loops[].innovation`,
+    /// [`crate::solve::Optimizer::leave_one_out_chi2`]; default off: one
+    /// covariance solve per loop).
+    pub loop_innovations: bool,
     /// EM: learn the decision width from the residuals
     /// ([`crate::robust::Reweighter::decision_c`]; default on).
     pub learn_width: bool,
@@ -107,6 +110,7 @@ impl OptimizeConfig {
             iteration_budget: None,
             rescue: true,
             innovation: true,
+            loop_innovations: false,
             learn_width: true,
             scale_search: true,
             plot: None,
@@ -510,6 +514,16 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             break;
         }
     }
+    // EM, on request: each candidate's innovation against the final map
+    // without it, on the scale of the decisions (a diagnostic: the
+    // decisions are made).
+    let mut innovations = vec![None; pool.len()];
+    if method == RobustMethod::Em && config.loop_innovations {
+        let s2 = noise_scale.unwrap_or(1.0);
+        if let Ok(nu2) = optimizer.leave_one_out_chi2(graph, &weights, &pool) {
+            innovations = nu2.into_iter().map(|v| v.map(|v| v / s2)).collect();
+        }
+    }
     // EM reports its posteriors at the final map (≥ ½ exactly for the loops
     // the map was solved with); the others the weights of the last solve.
     set_weights(&mut weights, &reweighter.final_weights());
@@ -554,16 +568,16 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     if let (Some(dir), Some(before)) = (&config.plot, before) {
         plot(dir, graph, &before, &weights, &candidates, config, report)?;
     }
-    // The judgement by innovation of each candidate EM weighed.
-    let mut judgements = vec![None; candidates.edges.len()];
-    for (&i, &j) in kept.iter().zip(reweighter.judgements()) {
-        judgements[i] = j;
+    // The innovation and the judgement by it of each candidate EM weighed.
+    let mut judgements = vec![(None, None); candidates.edges.len()];
+    for ((&i, &j), &nu2) in kept.iter().zip(reweighter.judgements()).zip(&innovations) {
+        judgements[i] = (nu2, j);
     }
     report.loops = (0..candidates.edges.len())
         .map(|i| {
             let k = candidates.edges[i];
             let e = &graph.edges[k];
-            let judgement: Option<InnovationJudgement> = judgements[i];
+            let (innovation, judgement) = judgements[i];
             LoopReport {
                 from: graph.id(e.from),
                 to: graph.id(e.to),
@@ -571,8 +585,8 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 kept: candidates.kept[i],
                 weight: weights[k],
                 prior: candidates.priors[i],
-                innovation: judgement.map(|j| j.innovation),
-                innovation_ln_odds: judgement.map(|j| j.ln_odds),
+                innovation,
+                judgement,
             }
         })
         .collect();

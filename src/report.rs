@@ -5,7 +5,7 @@ use crate::gate::{DegeneratePolicy, GateDecision, GateMode, LogNormalMixture, Se
 use crate::graph::VertexId;
 use crate::io::g2o::G2oFile;
 use crate::linear::BlockSystem;
-use crate::robust::{RobustMethod, ScaleSearchOutcome};
+use crate::robust::{InnovationJudgement, RobustMethod, ScaleSearchOutcome};
 use crate::solve::init::Initialization;
 use crate::solve::{Method, StopReason, Summary};
 use crate::stats::Chi2Test;
@@ -210,14 +210,21 @@ pub struct LoopReport {
     /// zero count), for a candidate the soft gate passes or the hard gate
     /// dropped (with a threshold learned or given); ½ for the others.
     pub prior: f64,
-    /// EM: `ν²/s²`, its squared innovation at the decided map (solved
-    /// without it) over the noise scale, when it was judged by it; `null`
-    /// for the loops the map was solved with and for the other methods.
+    /// EM: `ν²/s²`, its squared innovation against the final map without
+    /// it, over the noise scale of the decisions: for a loop the map was
+    /// solved with, its deleted residual (Baarda's; large for a loop the
+    /// others contradict); for one it was solved without, its innovation
+    /// ([`crate::solve::Optimizer::leave_one_out_chi2`]). Only with
+    /// `--innovations`; `null` otherwise, for the other methods and for a
+    /// loop nothing else checks (a bridge).
     pub innovation: Option<f64>,
-    /// EM: with `innovation`, `ln` of its posterior odds there — prior odds
-    /// times the likelihood ratio of `ln(ν²/s²)`, consistent loops against
-    /// the candidates the gate dropped; accepted iff ≥ 0.
-    pub innovation_ln_odds: Option<f64>,
+    /// EM: how the acceptance by innovation judged it, if it did (a
+    /// candidate the decided map was solved without): its `innovation`
+    /// (`ν²/s²` at that map) and `ln_odds`, `ln` of its posterior odds
+    /// there — prior odds times the likelihood ratio of `ln(ν²/s²)`,
+    /// consistent loops against the candidates the gate dropped; accepted
+    /// iff ≥ 0.
+    pub judgement: Option<InnovationJudgement>,
 }
 
 /// How the initial guess was made.

@@ -1145,7 +1145,7 @@ impl Reweighter {
 
 /// How [`Reweighter::accept_by_innovation`] judged a candidate the map was
 /// solved without, in its last pass.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct InnovationJudgement {
     /// Its squared innovation divided by the noise scale, `ν²/s²`.
     pub innovation: f64,

@@ -703,6 +703,114 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         weights: &[f64],
         edges: &[usize],
     ) -> Result<Vec<f64>, SolveError> {
+        let block = self.factor_undamped(graph, weights)?;
+        let gauge = graph.gauge();
+        Ok(edges
+            .iter()
+            .map(|&k| self.left_out_chi2(graph, &block, &gauge, k))
+            .collect())
+    }
+
+    /// The squared innovation of each of `edges` against the solution
+    /// without it, whether the solution was made without it (weight 0 in
+    /// `weights`: [`Optimizer::innovation_chi2`]) or with it (weight 1):
+    /// then Baarda's deleted residual `eᵀ(Ω⁻¹ − J·H⁻¹·Jᵀ)⁻¹e`, `H` as there.
+    /// `Ω⁻¹ − J·H⁻¹·Jᵀ` is the covariance of the edge's residual at the
+    /// optimum, and the number is, to first order (exactly for a linear
+    /// problem), the innovation the edge would have against the optimum of
+    /// the others — so the two kinds compare like with like. `None` for an
+    /// edge of another weight, or one of the solution that the others do
+    /// not determine in some direction (a bridge: the whitened redundancy
+    /// `I − Ω^½·J·H⁻¹·Jᵀ·Ω^½` has an eigenvalue below `1e-9`).
+    pub fn leave_one_out_chi2(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        weights: &[f64],
+        edges: &[usize],
+    ) -> Result<Vec<Option<f64>>, SolveError> {
+        let block = self.factor_undamped(graph, weights)?;
+        let gauge = graph.gauge();
+        Ok(edges
+            .iter()
+            .map(|&k| match weights[k] {
+                0.0 => Some(self.left_out_chi2(graph, &block, &gauge, k)),
+                1.0 => self.deleted_chi2(graph, &block, k),
+                _ => None,
+            })
+            .collect())
+    }
+
+    /// [`Optimizer::innovation_chi2`] of edge `k`, at the factor of
+    /// [`Optimizer::factor_undamped`] (`block`) with the graph's `gauge`.
+    fn left_out_chi2(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        block: &[Option<usize>],
+        gauge: &[usize],
+        k: usize,
+    ) -> f64 {
+        let e = &graph.edges[k];
+        let lin = P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
+        let plain = lin.error.dot(&(e.information * lin.error));
+        let known = |v: usize| block[v].is_some() || gauge.contains(&v);
+        if !(known(e.from) && known(e.to)) {
+            return plain;
+        }
+        let spread = self
+            .system
+            .propagate(block[e.from], &lin.jac_i, block[e.to], &lin.jac_j);
+        let innovation = e
+            .information
+            .try_inverse()
+            .map(|sigma| sigma + spread)
+            .and_then(|s| s.cholesky());
+        match innovation {
+            Some(s) => lin.error.dot(&s.solve(&lin.error)).min(plain),
+            None => plain,
+        }
+    }
+
+    /// The deleted residual of edge `k`, one of the solution
+    /// ([`Optimizer::leave_one_out_chi2`]).
+    fn deleted_chi2(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        block: &[Option<usize>],
+        k: usize,
+    ) -> Option<f64> {
+        let e = &graph.edges[k];
+        let lin = P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
+        let spread = self
+            .system
+            .propagate(block[e.from], &lin.jac_i, block[e.to], &lin.jac_j);
+        // Whitened: Ω = LLᵀ, ẽ = Lᵀe, R = I − Lᵀ·spread·L.
+        let l = e.information.cholesky()?.unpack();
+        let whitened = l.transpose() * lin.error;
+        let redundancy = SMatrix::<f64, D, D>::identity() - l.transpose() * spread * l;
+        // (Dynamic: nalgebra's eigen solver is not generic in D.)
+        let eig =
+            nalgebra::DMatrix::from_column_slice(D, D, redundancy.as_slice()).symmetric_eigen();
+        if eig.eigenvalues.min() < 1e-9 {
+            return None;
+        }
+        let projected = eig.eigenvectors.transpose() * whitened;
+        Some(
+            projected
+                .iter()
+                .zip(eig.eigenvalues.iter())
+                .map(|(p, lambda)| p * p / lambda)
+                .sum(),
+        )
+    }
+
+    /// Factorises the undamped normal matrix of the edges of non-zero
+    /// `weights` at the graph's poses; returns each vertex's block (`None`
+    /// for a vertex held fixed).
+    fn factor_undamped(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        weights: &[f64],
+    ) -> Result<Vec<Option<usize>>, SolveError> {
         if weights.len() != graph.edges.len() {
             return Err(SolveError::WeightCount {
                 weights: weights.len(),
@@ -724,35 +832,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         for (b, &v) in self.vertex_of.iter().enumerate() {
             block[v] = Some(b);
         }
-        let gauge = graph.gauge();
-        let known = |v: usize| block[v].is_some() || gauge.contains(&v);
-        Ok(edges
-            .iter()
-            .map(|&k| {
-                let e = &graph.edges[k];
-                let lin = P::error_and_jacobians(
-                    &graph.poses[e.from],
-                    &graph.poses[e.to],
-                    &e.measurement,
-                );
-                let plain = lin.error.dot(&(e.information * lin.error));
-                if !(known(e.from) && known(e.to)) {
-                    return plain;
-                }
-                let spread =
-                    self.system
-                        .propagate(block[e.from], &lin.jac_i, block[e.to], &lin.jac_j);
-                let innovation = e
-                    .information
-                    .try_inverse()
-                    .map(|sigma| sigma + spread)
-                    .and_then(|s| s.cholesky());
-                match innovation {
-                    Some(s) => lin.error.dot(&s.solve(&lin.error)).min(plain),
-                    None => plain,
-                }
-            })
-            .collect())
+        Ok(block)
     }
 
     /// Builds `H` and `b` at the graph's poses and returns the objective
@@ -992,6 +1072,44 @@ mod tests {
         assert_eq!(nu2[0], g2.edge_chi2(&g2.edges[4]));
         // Weights must match the edges.
         assert!(opt.innovation_chi2(&g2, &w[..2], &[4]).is_err());
+    }
+
+    #[test]
+    fn leave_one_out_innovation_is_the_innovation_without_the_edge() {
+        // The open loop closed: any one edge left out leaves a chain that
+        // fits exactly, and adding it back raises χ² by 0.04 (above). So
+        // each edge's deleted residual at the optimum of all four is 0.04,
+        // the innovation of the closing edge left out.
+        let (mut g, i) = open_loop();
+        optimize(&mut g, &SolverOptions::default()).unwrap();
+        let all = [1.0; 4];
+        let mut opt = Optimizer::new(&g, Some(&all), SolverOptions::default()).unwrap();
+        let nu2 = opt.leave_one_out_chi2(&g, &all, &[0, 1, 2, 3]).unwrap();
+        for v in &nu2 {
+            let v = v.expect("every edge of a loop is checked by the others");
+            assert!((v - 0.04).abs() < 1e-8, "{nu2:?}");
+        }
+        // Its plain residual at that optimum is far smaller: (0.4/4)².
+        assert!((g.edge_chi2(&g.edges[3]) - 0.01).abs() < 1e-8);
+        // A bridge (the only edge to vertex 9, or edge 0 with the closing
+        // edge left out) is checked by nothing.
+        let mut g2 = g.clone();
+        g2.add_vertex(9, Se2::new(5.0, 0.0, 0.0)).unwrap();
+        g2.add_edge(3, 9, Se2::new(1.0, 0.0, 0.0), i, None).unwrap();
+        let w = [1.0, 1.0, 1.0, 0.0, 1.0];
+        let mut opt = Optimizer::new(&g2, Some(&w), SolverOptions::default()).unwrap();
+        let nu2 = opt.leave_one_out_chi2(&g2, &w, &[0, 4]).unwrap();
+        assert_eq!(nu2, [None, None]);
+        // An edge left out gets the innovation `innovation_chi2` gives it;
+        // one of another weight nothing.
+        let left_out = opt.leave_one_out_chi2(&g2, &w, &[3]).unwrap()[0];
+        assert_eq!(
+            left_out,
+            Some(opt.innovation_chi2(&g2, &w, &[3]).unwrap()[0])
+        );
+        let half = [1.0, 1.0, 1.0, 0.5, 1.0];
+        assert_eq!(opt.leave_one_out_chi2(&g2, &half, &[3]).unwrap(), [None]);
+        assert!(opt.leave_one_out_chi2(&g2, &w[..2], &[4]).is_err());
     }
 
     #[test]

@@ -369,26 +369,65 @@ fn em_accepts_by_innovation_true_loops_the_plain_residual_leaves_out() {
     // (judged once: the map solved with them is the final one), < 0 for
     // those left out; nothing for the others.
     assert!(with.loops.iter().all(|l| {
-        let prior_ok = if l.kept {
+        if l.kept {
             l.prior == 0.5
         } else {
             l.prior < 0.5
-        };
-        prior_ok && l.innovation.is_some() == l.innovation_ln_odds.is_some()
+        }
     }));
     let judged: Vec<_> = with
         .loops
         .iter()
-        .filter(|l| l.innovation.is_some())
+        .filter_map(|l| Some((l, l.judgement?)))
         .collect();
-    let taken_back = judged.iter().filter(|l| l.weight >= 0.5).count();
+    let taken_back = judged.iter().filter(|(l, _)| l.weight >= 0.5).count();
     assert_eq!(taken_back, by_innovation);
-    for l in &judged {
-        let (nu2, ln_odds) = (l.innovation.unwrap(), l.innovation_ln_odds.unwrap());
-        assert!(nu2 > 0.0 && nu2.is_finite());
-        assert_eq!(ln_odds >= 0.0, l.weight >= 0.5, "{}–{}", l.from, l.to);
+    for (l, j) in &judged {
+        assert!(j.innovation > 0.0 && j.innovation.is_finite());
+        assert_eq!(j.ln_odds >= 0.0, l.weight >= 0.5, "{}–{}", l.from, l.to);
     }
+    assert!(plain.loops.iter().all(|l| l.judgement.is_none()));
+}
+
+#[test]
+fn loop_innovations_set_the_wrong_loops_apart() {
+    let dir = temp_dir("robust-loop-innovations");
+    // Local wrong loops (within 20 poses): some pass the gate and some
+    // fit a map that odometry alone ties; the innovation against the map
+    // without each one says which ones the others contradict.
+    let c = case(&dir, "local", options(OutlierPolicy::Local, 60, 11));
+    let plain = run(&c.noisy, GateMode::Auto, RobustMethod::Em, None);
     assert!(plain.loops.iter().all(|l| l.innovation.is_none()));
+    let r = pipeline::run(
+        &OptimizeConfig {
+            loop_innovations: true,
+            ..OptimizeConfig::new(&c.noisy)
+        },
+        &mut |_| {},
+    )
+    .expect("optimise");
+    // The report is the same but for the innovations.
+    let weights = |r: &Report| r.loops.iter().map(|l| l.weight).collect::<Vec<_>>();
+    assert_eq!(weights(&r), weights(&plain));
+    // Every candidate EM weighed has one: the loops of a simulated map all
+    // close cycles, so none is a bridge.
+    assert!(
+        r.loops
+            .iter()
+            .all(|l| l.innovation.is_some_and(|v| v >= 0.0))
+    );
+    let (true_max, wrong_min) =
+        r.loops
+            .iter()
+            .zip(&c.wrong)
+            .fold((0.0f64, f64::INFINITY), |(t, w), (l, &wrong)| {
+                let v = l.innovation.unwrap();
+                if wrong { (t, w.min(v)) } else { (t.max(v), w) }
+            });
+    // A true loop's ν²/s² is χ²₃-like (below ~40 for 1 in 10⁶); every wrong
+    // one is beyond it.
+    assert!(true_max < 40.0, "true loops up to {true_max}");
+    assert!(wrong_min > true_max, "wrong loops from {wrong_min}");
 }
 
 #[test]
