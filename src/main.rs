@@ -304,7 +304,8 @@ struct OptimizeArgs {
     /// against the final map without it (loops[].innovation): for a loop
     /// the map was solved with, its deleted residual eᵀ(Ω⁻¹ − J·H⁻¹·Jᵀ)⁻¹e,
     /// large where the other loops contradict it; for one left out, its
-    /// innovation. Off by default: one covariance solve per loop.
+    /// innovation. Off by default: it takes a selected inversion of the
+    /// normal matrix (about one more factorisation, and its memory).
     #[arg(long)]
     innovations: bool,
     /// EM: decide at c instead of at the width learned from the residuals.

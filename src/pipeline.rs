@@ -61,8 +61,8 @@ pub struct OptimizeConfig {
     pub innovation: bool,
     /// EM: report every weighed candidate's innovation against the final
     /// map without it (`loops[].innovation`,
-    /// [`crate::solve::Optimizer::leave_one_out_chi2`]; default off: one
-    /// covariance solve per loop).
+    /// [`crate::solve::Optimizer::leave_one_out_chi2`]; default off: it
+    /// takes a selected inversion of the normal matrix).
     pub loop_innovations: bool,
     /// EM: learn the decision width from the residuals
     /// ([`crate::robust::Reweighter::decision_c`]; default on).

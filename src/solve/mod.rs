@@ -10,7 +10,7 @@ pub mod init;
 
 use crate::geometry::{NormalBlocks, Pose};
 use crate::graph::{PoseGraph, VertexId};
-use crate::linear::{BlockSystem, LinearError};
+use crate::linear::{BlockSystem, LinearError, SelectedInverse};
 use nalgebra::SMatrix;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -730,11 +730,17 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     ) -> Result<Vec<Option<f64>>, SolveError> {
         let block = self.factor_undamped(graph, weights)?;
         let gauge = graph.gauge();
+        // The edges of the solution read H⁻¹ from its selected inverse (one
+        // pass over the factor), not from a solve each.
+        let inverse = edges
+            .iter()
+            .any(|&k| weights[k] == 1.0)
+            .then(|| self.system.selected_inverse());
         Ok(edges
             .iter()
-            .map(|&k| match weights[k] {
-                0.0 => Some(self.left_out_chi2(graph, &block, &gauge, k)),
-                1.0 => self.deleted_chi2(graph, &block, k),
+            .map(|&k| match (weights[k], &inverse) {
+                (0.0, _) => Some(self.left_out_chi2(graph, &block, &gauge, k)),
+                (1.0, Some(z)) => self.deleted_chi2(graph, &block, z, k),
                 _ => None,
             })
             .collect())
@@ -771,18 +777,24 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// The deleted residual of edge `k`, one of the solution
-    /// ([`Optimizer::leave_one_out_chi2`]).
+    /// ([`Optimizer::leave_one_out_chi2`]), with `H⁻¹` from its selected
+    /// `inverse`.
     fn deleted_chi2(
-        &mut self,
+        &self,
         graph: &PoseGraph<P, D>,
         block: &[Option<usize>],
+        inverse: &SelectedInverse,
         k: usize,
     ) -> Option<f64> {
         let e = &graph.edges[k];
         let lin = P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
-        let spread = self
-            .system
-            .propagate(block[e.from], &lin.jac_i, block[e.to], &lin.jac_j);
+        let spread = self.system.propagate_selected(
+            inverse,
+            block[e.from],
+            &lin.jac_i,
+            block[e.to],
+            &lin.jac_j,
+        )?;
         // Whitened: Ω = LLᵀ, ẽ = Lᵀe, R = I − Lᵀ·spread·L.
         let l = e.information.cholesky()?.unpack();
         let whitened = l.transpose() * lin.error;
