@@ -19,6 +19,11 @@
 //! Each iteration then only refills the slots, copies them (with the
 //! damping) into the factor's panels, factorises — the independent subtrees
 //! in parallel — and runs the two triangular solves.
+//!
+//! Covariances: [`BlockSystem::propagate`] gives `A·H⁻¹·Aᵀ` for any two
+//! blocks by a sparse solve; [`BlockSystem::selected_inverse`] gives every
+//! block of `H⁻¹` on the factor's pattern at once, for the blocks that an
+//! edge of `H` ties ([`BlockSystem::propagate_selected`]).
 
 mod supernodal;
 
