@@ -520,8 +520,11 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let mut innovations = vec![None; pool.len()];
     if method == RobustMethod::Em && config.loop_innovations {
         let s2 = noise_scale.unwrap_or(1.0);
-        if let Ok(nu2) = optimizer.leave_one_out_chi2(graph, &weights, &pool) {
-            innovations = nu2.into_iter().map(|v| v.map(|v| v / s2)).collect();
+        match optimizer.leave_one_out_chi2(graph, &weights, &pool) {
+            Ok(nu2) => innovations = nu2.into_iter().map(|v| v.map(|v| v / s2)).collect(),
+            Err(e) => report
+                .warnings
+                .push(format!("--innovations: none reported: {e}")),
         }
     }
     // EM reports its posteriors at the final map (≥ ½ exactly for the loops
