@@ -638,18 +638,14 @@ impl<const D: usize> BlockSystem<D> {
         j: Option<usize>,
         a_j: &SMatrix<f64, D, D>,
     ) -> Option<SMatrix<f64, D, D>> {
-        let terms = [(i, a_i), (j, a_j)];
+        // The blocks present, at their elimination positions.
+        let present = [(i, a_i), (j, a_j)]
+            .into_iter()
+            .filter_map(|(b, a)| Some((self.position[b?], a)));
         let mut out = SMatrix::<f64, D, D>::zeros();
-        for (p, a) in terms
-            .iter()
-            .filter_map(|(b, a)| Some((self.position[(*b)?], a)))
-        {
-            for (q, b) in terms
-                .iter()
-                .filter_map(|(b, a)| Some((self.position[(*b)?], a)))
-            {
-                let zpq = self.symbolic.inverse_block(&z.values, p, q)?;
-                out += *a * zpq * b.transpose();
+        for (p, a) in present.clone() {
+            for (q, b) in present.clone() {
+                out += a * self.symbolic.inverse_block(&z.values, p, q)? * b.transpose();
             }
         }
         Some(out)

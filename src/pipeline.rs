@@ -571,16 +571,17 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     if let (Some(dir), Some(before)) = (&config.plot, before) {
         plot(dir, graph, &before, &weights, &candidates, config, report)?;
     }
-    // The innovation and the judgement by it of each candidate EM weighed.
-    let mut judgements = vec![(None, None); candidates.edges.len()];
-    for ((&i, &j), &nu2) in kept.iter().zip(reweighter.judgements()).zip(&innovations) {
-        judgements[i] = (nu2, j);
+    // Where each candidate EM weighed is in its list.
+    let mut weighed = vec![None; candidates.edges.len()];
+    for (c, &i) in kept.iter().enumerate() {
+        weighed[i] = Some(c);
     }
     report.loops = (0..candidates.edges.len())
         .map(|i| {
             let k = candidates.edges[i];
             let e = &graph.edges[k];
-            let (innovation, judgement) = judgements[i];
+            let innovation = weighed[i].and_then(|c| innovations[c]);
+            let judgement = weighed[i].and_then(|c| reweighter.judgements()[c]);
             LoopReport {
                 from: graph.id(e.from),
                 to: graph.id(e.to),

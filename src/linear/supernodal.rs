@@ -374,18 +374,35 @@ impl<const D: usize> Symbolic<D> {
     /// block `(row, b)` starts (`row ≥ b`, in the pattern): the offset of its
     /// first entry and the panel's leading dimension.
     pub(super) fn block_offset(&self, row: usize, b: usize) -> (usize, usize) {
+        // Cannot fail for a block of the pattern.
+        let local = self
+            .local_row(row, b)
+            .unwrap_or_else(|first_below| first_below);
+        self.offset(b, local)
+    }
+
+    /// The first scalar row of block row `row` in the panel of block column
+    /// `b`; if it is not on the pattern, `Err` with the first row below the
+    /// diagonal block.
+    fn local_row(&self, row: usize, b: usize) -> Result<usize, usize> {
+        let s = self.supernode_of[b] as usize;
+        let g = self.panel(s);
+        if row < g.b0 + g.w {
+            return Ok(D * (row - g.b0));
+        }
+        let r = &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]];
+        r.binary_search(&(row as u32))
+            .map(|i| D * (g.w + i))
+            .map_err(|_| D * g.w)
+    }
+
+    /// Where the entries of block column `b` at scalar row `local` of its
+    /// panel start, and the panel's leading dimension.
+    fn offset(&self, b: usize, local: usize) -> (usize, usize) {
         let s = self.supernode_of[b] as usize;
         let g = self.panel(s);
         let ld = g.ld::<D>();
-        let local_row = if row < g.b0 + g.w {
-            D * (row - g.b0)
-        } else {
-            let r = &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]];
-            // Cannot fail for a block of the pattern.
-            let i = r.binary_search(&(row as u32)).unwrap_or(0);
-            D * (g.w + i)
-        };
-        (self.val_ptr[s] + D * (b - g.b0) * ld + local_row, ld)
+        (self.val_ptr[s] + D * (b - g.b0) * ld + local, ld)
     }
 
     /// The block columns of supernode `s`, where its panel starts and its
@@ -856,16 +873,7 @@ impl<const D: usize> Symbolic<D> {
         if row < col {
             return self.inverse_block(z, col, row).map(|m| m.transpose());
         }
-        let s = self.supernode_of[col] as usize;
-        let g = self.panel(s);
-        let in_pattern = row < g.b0 + g.w
-            || self.rows[self.row_ptr[s]..self.row_ptr[s + 1]]
-                .binary_search(&(row as u32))
-                .is_ok();
-        if !in_pattern {
-            return None;
-        }
-        let (off, ld) = self.block_offset(row, col);
+        let (off, ld) = self.offset(col, self.local_row(row, col).ok()?);
         Some(nalgebra::SMatrix::from_fn(|a, b| z[off + b * ld + a]))
     }
 
@@ -1045,19 +1053,18 @@ mod tests {
         (later, a)
     }
 
-    fn factor_and_solve(
+    /// The factor of `a` (pattern `later`) on `sym`.
+    fn factor_dense(
+        sym: &Symbolic<2>,
         later: &[Vec<usize>],
         a: &DMatrix<f64>,
         threads: usize,
         grain: Option<f64>,
-        scratch: usize,
     ) -> Vec<f64> {
         const D: usize = 2;
-        let sym = Symbolic::<D>::with_update_scratch(later, scratch).unwrap();
         let mut values = vec![0.0; sym.len_values()];
         let load = |s: usize, panel: &mut [f64]| {
             let (cols, start, _) = sym.supernode_range(s);
-            let _ = panel.len();
             for b in cols {
                 for row in std::iter::once(b).chain(later[b].iter().copied()) {
                     let (off, ld) = sym.block_offset(row, b);
@@ -1071,7 +1078,19 @@ mod tests {
         };
         sym.factorize_with_grain(&mut values, &load, threads, grain)
             .unwrap();
-        let mut x: Vec<f64> = (0..D * later.len()).map(|i| i as f64 - 3.0).collect();
+        values
+    }
+
+    fn factor_and_solve(
+        later: &[Vec<usize>],
+        a: &DMatrix<f64>,
+        threads: usize,
+        grain: Option<f64>,
+        scratch: usize,
+    ) -> Vec<f64> {
+        let sym = Symbolic::<2>::with_update_scratch(later, scratch).unwrap();
+        let values = factor_dense(&sym, later, a, threads, grain);
+        let mut x: Vec<f64> = (0..2 * later.len()).map(|i| i as f64 - 3.0).collect();
         sym.solve(&values, &mut x, &mut Vec::new());
         x
     }
@@ -1111,21 +1130,7 @@ mod tests {
         for seed in 0..4 {
             let (later, a) = random_problem(seed, 30 + 25 * seed as usize);
             let sym = Symbolic::<D>::new(&later).unwrap();
-            let mut values = vec![0.0; sym.len_values()];
-            let load = |s: usize, panel: &mut [f64]| {
-                let (cols, start, _) = sym.supernode_range(s);
-                for b in cols {
-                    for row in std::iter::once(b).chain(later[b].iter().copied()) {
-                        let (off, ld) = sym.block_offset(row, b);
-                        for y in 0..D {
-                            for x in 0..D {
-                                panel[off - start + y * ld + x] = a[(D * row + x, D * b + y)];
-                            }
-                        }
-                    }
-                }
-            };
-            sym.factorize(&mut values, &load, 1).unwrap();
+            let values = factor_dense(&sym, &later, &a, 1, None);
             let z = sym.selected_inverse(&values);
             let inverse = a.clone().try_inverse().unwrap();
             // Every block of L's pattern: each supernode's columns, its

@@ -74,21 +74,23 @@ fn options(policy: OutlierPolicy, outliers: usize, seed: u64) -> SimulationOptio
 }
 
 fn run(input: &Path, gate: GateMode, robust: RobustMethod, output: Option<&Path>) -> Report {
-    let config = OptimizeConfig {
+    run_config(OptimizeConfig {
         gate,
         robust,
         output: output.map(Path::to_owned),
         ..OptimizeConfig::new(input)
-    };
-    pipeline::run(&config, &mut |_| {}).expect("optimise")
+    })
 }
 
 /// The defaults (gate auto, EM) without the rescue of dropped candidates.
 fn run_without_rescue(input: &Path) -> Report {
-    let config = OptimizeConfig {
+    run_config(OptimizeConfig {
         rescue: false,
         ..OptimizeConfig::new(input)
-    };
+    })
+}
+
+fn run_config(config: OptimizeConfig) -> Report {
     pipeline::run(&config, &mut |_| {}).expect("optimise")
 }
 
@@ -342,14 +344,10 @@ fn em_accepts_by_innovation_true_loops_the_plain_residual_leaves_out() {
     // far out by its plain residual, consistent once the map's uncertainty
     // is added (its innovation), and its count is not that of a wrong loop.
     let c = case(&dir, "loose", options(OutlierPolicy::Random, 60, 6));
-    let plain = pipeline::run(
-        &OptimizeConfig {
-            innovation: false,
-            ..OptimizeConfig::new(&c.noisy)
-        },
-        &mut |_| {},
-    )
-    .expect("optimise");
+    let plain = run_config(OptimizeConfig {
+        innovation: false,
+        ..OptimizeConfig::new(&c.noisy)
+    });
     let with = run(&c.noisy, GateMode::Auto, RobustMethod::Em, None);
     let (tp_plain, fp_plain, _) = counts(&plain, &c.wrong);
     let (tp_with, fp_with, _) = counts(&with, &c.wrong);
@@ -398,14 +396,10 @@ fn loop_innovations_set_the_wrong_loops_apart() {
     let c = case(&dir, "local", options(OutlierPolicy::Local, 60, 11));
     let plain = run(&c.noisy, GateMode::Auto, RobustMethod::Em, None);
     assert!(plain.loops.iter().all(|l| l.innovation.is_none()));
-    let r = pipeline::run(
-        &OptimizeConfig {
-            loop_innovations: true,
-            ..OptimizeConfig::new(&c.noisy)
-        },
-        &mut |_| {},
-    )
-    .expect("optimise");
+    let r = run_config(OptimizeConfig {
+        loop_innovations: true,
+        ..OptimizeConfig::new(&c.noisy)
+    });
     // The report is the same but for the innovations.
     let weights = |r: &Report| r.loops.iter().map(|l| l.weight).collect::<Vec<_>>();
     assert_eq!(weights(&r), weights(&plain));
@@ -477,15 +471,11 @@ fn em_learns_its_decision_width_from_heavy_tailed_true_loops() {
     let wrong = candidate_labels(&sim.noisy, &sim.wrong);
 
     let learned = run(&path, GateMode::Off, RobustMethod::Em, None);
-    let fixed = pipeline::run(
-        &OptimizeConfig {
-            gate: GateMode::Off,
-            learn_width: false,
-            ..OptimizeConfig::new(&path)
-        },
-        &mut |_| {},
-    )
-    .expect("optimise");
+    let fixed = run_config(OptimizeConfig {
+        gate: GateMode::Off,
+        learn_width: false,
+        ..OptimizeConfig::new(&path)
+    });
     let c = learned.robust.c;
     let c_d = learned.robust.decision_c.expect("EM reports its width");
     let mixture = learned.robust.residual_mixture.as_ref().expect("a fit");
