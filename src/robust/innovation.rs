@@ -49,14 +49,20 @@ impl Reweighter {
     ///   each weighted by `1 − p` (what its count says of it being wrong;
     ///   a local wrong loop with a small innovation weighs as much as it is
     ///   likely), the one judged left out: a Gaussian kernel density
-    ///   estimate (Silverman's bandwidth `1.06 σ n_eff^(−1/5)`) mixed with
-    ///   a uniform floor of one pseudo-observation over the range the
-    ///   held-out candidates span — a wrong loop may land anywhere in it,
-    ///   also where none of these did, so a gap between them alone does not
-    ///   make a candidate consistent. A kernel estimate rather than one
-    ///   normal: the population is not one (random wrong loops far out,
-    ///   local ones near the consistent loops), and a normal fitted to it
-    ///   puts density where none of it lies. Those accepted leave the
+    ///   estimate (Silverman's bandwidth `1.06 σ n_eff^(−1/5)`); within the
+    ///   population's span mixed with a uniform floor of one
+    ///   pseudo-observation over the range the held-out candidates span (a
+    ///   wrong loop may land in a gap between the others, so such a gap
+    ///   alone does not make a candidate consistent); below its lowest
+    ///   points, the larger of the kernel estimate and an exponential tail
+    ///   fitted to those points. The tail says how fast the wrong loops thin
+    ///   out towards the consistent ones: where they stop abruptly (random
+    ///   wrong loops), a candidate well below them is unlike any of them;
+    ///   where local wrong loops straggle down, it reaches far. A kernel
+    ///   estimate rather than one normal: the population is not one (random
+    ///   wrong loops far out, local ones near the consistent loops), and a
+    ///   normal fitted to it puts density where none of it lies. Those
+    ///   accepted leave the
     ///   population and the others are judged again, until the accepted
     ///   set repeats (at most [`DROPPED_PASSES`] passes).
     ///
@@ -184,26 +190,47 @@ fn ln_normal(y: f64, mu: f64, sigma: f64) -> f64 {
 
 /// The density of `y = ln(ν²/s²)` among the candidates the gate dropped
 /// (mostly wrong loops), for [`Reweighter::accept_by_innovation`] (which
-/// says why): a weighted Gaussian kernel density estimate, leave-one-out,
-/// mixed with a uniform floor of one pseudo-observation over a range.
+/// says why): a weighted Gaussian kernel density estimate, leave-one-out;
+/// within the population's span mixed with a uniform floor of one
+/// pseudo-observation over a range, below it an exponential lower tail.
 struct DroppedDensity {
-    /// `(index into the judged list, y, weight)`.
+    /// `(index into the judged list, y, weight)`, by increasing `y`.
     points: Vec<(usize, f64, f64)>,
     total: f64,
     bandwidth: f64,
     /// The kernel's normalisation `1 / (h √(2π))`.
     scale: f64,
     floor: f64,
+    /// How many of the lowest points the lower tail is fitted to.
+    tail_len: usize,
+}
+
+/// The population's density below its `k` lowest points
+/// ([`DroppedDensity::lower_tail`]): their weight `mass` (a share of the
+/// population), spread below the highest of them, `edge`, as an
+/// exponential of scale `scale`.
+struct LowerTail {
+    edge: f64,
+    scale: f64,
+    mass: f64,
+}
+
+impl LowerTail {
+    fn density(&self, y: f64) -> f64 {
+        self.mass / self.scale * (-(self.edge - y) / self.scale).exp()
+    }
 }
 
 impl DroppedDensity {
     /// `None` with fewer than 8 points (too few to model the wrong loops)
     /// or no weight.
-    fn new(points: Vec<(usize, f64, f64)>, range: f64) -> Option<Self> {
+    fn new(mut points: Vec<(usize, f64, f64)>, range: f64) -> Option<Self> {
         let total: f64 = points.iter().map(|p| p.2).sum();
-        if points.len() < MixtureOptions::default().min_counts || total <= 0.0 {
+        let min_points = MixtureOptions::default().min_counts;
+        if points.len() < min_points || total <= 0.0 {
             return None;
         }
+        points.sort_by(|a, b| a.1.total_cmp(&b.1));
         let mean = points.iter().map(|p| p.2 * p.1).sum::<f64>() / total;
         let var = points
             .iter()
@@ -214,17 +241,21 @@ impl DroppedDensity {
         let bandwidth = 1.06 * var.max(RESIDUAL_VARIANCE_FLOOR).sqrt() * n_eff.powf(-0.2);
         let n = points.len() as f64;
         let floor = 1.0 / (n * range.max(bandwidth));
+        let tail_len = (n.sqrt().ceil() as usize).max(min_points);
         Some(Self {
             points,
             total,
             bandwidth,
             scale: 1.0 / (bandwidth * (2.0 * std::f64::consts::PI).sqrt()),
             floor,
+            tail_len,
         })
     }
 
     /// `ln` of the density at `y`, the point of judged candidate `i` (if it
-    /// is one of the population) left out.
+    /// is one of the population) left out: the kernel estimate, plus below
+    /// the population's lowest points their exponential tail
+    /// ([`DroppedDensity::lower_tail`]), elsewhere the floor.
     fn ln_density(&self, y: f64, i: usize) -> f64 {
         let (mut sum, mut total) = (0.0, self.total);
         for &(j, yj, w) in &self.points {
@@ -240,7 +271,46 @@ impl DroppedDensity {
             0.0
         };
         let n = self.points.len() as f64;
-        ((1.0 - 1.0 / n) * kde + self.floor).ln()
+        let body = (1.0 - 1.0 / n) * kde;
+        match self.lower_tail(i, total) {
+            Some(tail) if y < tail.edge => body.max(tail.density(y)).ln(),
+            _ => (body + self.floor).ln(),
+        }
+    }
+
+    /// The population's lower tail, candidate `i` left out (`total`: the
+    /// weight of the others): a peaks-over-threshold model of its `k`
+    /// lowest points (`k = max(8, ⌈√n⌉)`), exponential below the highest of
+    /// them with their mean weighted distance below it as its scale (at
+    /// least the kernel's bandwidth). Where the wrong loops nearest the
+    /// consistent ones lie close together, the tail falls off fast and a
+    /// candidate well below them is unlike any of them; where they straggle
+    /// towards the consistent ones (local wrong loops), it reaches far.
+    /// `None` when no point is left or the others weigh nothing.
+    fn lower_tail(&self, i: usize, total: f64) -> Option<LowerTail> {
+        let lowest: Vec<(f64, f64)> = self
+            .points
+            .iter()
+            .filter(|p| p.0 != i)
+            .take(self.tail_len)
+            .map(|p| (p.1, p.2))
+            .collect();
+        let &(edge, _) = lowest.last()?;
+        if total <= 0.0 {
+            return None;
+        }
+        let below = &lowest[..lowest.len() - 1];
+        let weight: f64 = below.iter().map(|p| p.1).sum();
+        let mean_depth = if weight > 0.0 {
+            below.iter().map(|p| p.1 * (edge - p.0)).sum::<f64>() / weight
+        } else {
+            0.0
+        };
+        Some(LowerTail {
+            edge,
+            scale: mean_depth.max(self.bandwidth),
+            mass: lowest.iter().map(|p| p.1).sum::<f64>() / total,
+        })
     }
 }
 
@@ -323,16 +393,19 @@ mod tests {
 
     #[test]
     fn em_models_the_dropped_population_without_the_loops_already_accepted() {
-        // The gate dropped 122: 40 true loops the plain rescue takes back
+        // The gate dropped 128: 40 true loops the plain rescue takes back
         // (count posterior 0.3, consistent residuals and innovations,
-        // ln ν² ∈ [−1, 1]); 80 wrong ones far out (0.02, ln ν² ∈ [12, 16]);
-        // T, a true loop whose residual is far out but whose innovation is
-        // not (p = 0.1, ln ν² = 3); and W, as consistent but with a count
-        // that says wrong (p = 0.001). One normal fitted to all the dropped
-        // ones (the rescued ones included) puts so much density at ln ν² = 3
-        // that T was rejected (the rule before this one); the kernel density
-        // of those left out (the 80 wrong ones, T and W) has none there but
-        // its floor, and T is accepted, W not.
+        // ln ν² ∈ [−1, 1]); 80 wrong ones far out (0.02, ln ν² ∈ [12, 16])
+        // and 6 that straggle towards the consistent ones (local wrong
+        // loops: 0.02, ln ν² ∈ [5, 7.5]); T, a true loop whose residual is
+        // far out but whose innovation is not (p = 0.1, ln ν² = 3); and W,
+        // as consistent but with a count that says wrong (p = 0.001). One
+        // normal fitted to all the dropped ones (the rescued ones included)
+        // puts so much density at ln ν² = 3 that T was rejected (the rule
+        // before this one); the density of those left out (the wrong ones,
+        // T and W) is, at 3, the stragglers' lower tail, and T is accepted,
+        // W not. Without the stragglers nothing wrong lies near 3 and W is
+        // taken too: its innovation is unlike any wrong loop's.
         let mut r2 = heavy_tailed_residuals();
         let mut priors = vec![0.5; r2.len()];
         let mut nu2: Vec<f64> = vec![14f64.exp(); 10];
@@ -346,23 +419,34 @@ mod tests {
             priors.push(0.02);
             nu2.push((12.0 + 4.0 * i as f64 / 79.0).exp());
         }
+        for i in 0..6 {
+            r2.push(12f64.exp());
+            priors.push(0.02);
+            nu2.push((5.0 + 0.5 * i as f64).exp());
+        }
         for p in [0.1, 0.001] {
             r2.push(12f64.exp());
             priors.push(p);
             nu2.push(3f64.exp());
         }
+        let (t, w) = (r2.len() - 2, r2.len() - 1);
         let held_out: Vec<bool> = (0..r2.len()).map(|k| k >= 60).collect();
-        let mut rw = Reweighter::new(em_options(), priors);
-        rw.hold_out(&held_out);
-        run_to_the_end(&mut rw, &r2);
-        assert_eq!(rw.rescued(), 40);
-        let which = rw.innovation_request().expect("candidates left out");
-        assert_eq!(which, (50..r2.len()).collect::<Vec<_>>());
-        assert!(rw.accept_by_innovation(&which, &nu2, 1.0));
-        assert!(!rw.update(&r2));
-        let w = rw.final_weights();
-        let accepted: Vec<usize> = (50..r2.len()).filter(|&k| w[k] >= 0.5).collect();
-        let expected: Vec<usize> = (60..100).chain([180]).collect();
+        let judge = |r2: &[f64], priors: &[f64], nu2: &[f64], held_out: &[bool]| {
+            let mut rw = Reweighter::new(em_options(), priors.to_vec());
+            rw.hold_out(held_out);
+            run_to_the_end(&mut rw, r2);
+            assert_eq!(rw.rescued(), 40);
+            let which = rw.innovation_request().expect("candidates left out");
+            assert_eq!(which, (50..r2.len()).collect::<Vec<_>>());
+            assert!(rw.accept_by_innovation(&which, nu2, 1.0));
+            assert!(!rw.update(r2));
+            rw
+        };
+        let rw = judge(&r2, &priors, &nu2, &held_out);
+        let accepted: Vec<usize> = (50..r2.len())
+            .filter(|&k| rw.final_weights()[k] >= 0.5)
+            .collect();
+        let expected: Vec<usize> = (60..100).chain([t]).collect();
         assert_eq!(accepted, expected);
         assert_eq!(rw.innovation_accepted(), 1);
 
@@ -374,11 +458,31 @@ mod tests {
             j.iter().all(|j| j.is_some_and(|j| j.ln_odds < 0.0))
         };
         assert!(j[..50].iter().chain(&j[60..100]).all(Option::is_none));
-        assert!(rejected(&j[50..60]) && rejected(&j[100..180]));
-        let (t, w) = (j[180].expect("T judged"), j[181].expect("W judged"));
-        assert!((t.innovation - 3f64.exp()).abs() < 1e-9 * t.innovation);
-        assert_eq!(t.innovation, w.innovation);
-        assert!(t.ln_odds >= 0.0 && w.ln_odds < 0.0);
+        assert!(rejected(&j[50..60]) && rejected(&j[100..t]));
+        let (jt, jw) = (j[t].expect("T judged"), j[w].expect("W judged"));
+        assert!((jt.innovation - 3f64.exp()).abs() < 1e-9 * jt.innovation);
+        assert_eq!(jt.innovation, jw.innovation);
+        assert!(jt.ln_odds >= 0.0 && jw.ln_odds < 0.0);
+
+        // Without the stragglers, W is nine units below every wrong loop
+        // left, whose lowest lie close together: it is taken too.
+        // (`nu2` starts at candidate 50.)
+        let keep = |v: &[f64], first: usize| -> Vec<f64> {
+            v.iter()
+                .enumerate()
+                .filter(|(k, _)| !(180..186).contains(&(k + first)))
+                .map(|(_, &x)| x)
+                .collect()
+        };
+        let rw = judge(
+            &keep(&r2, 0),
+            &keep(&priors, 0),
+            &keep(&nu2, 50),
+            &held_out[6..],
+        );
+        let w = rw.final_weights();
+        assert!(w[t - 6] >= 0.5 && w[w.len() - 1] >= 0.5);
+        assert_eq!(rw.innovation_accepted(), 2);
     }
 
     #[test]
@@ -402,5 +506,44 @@ mod tests {
         assert!((far - (1.0 / (n * 10.0)).ln()).abs() < 1e-12);
         // Too few points: no density.
         assert!(DroppedDensity::new((0..7).map(|i| (i, 0.0, 1.0)).collect(), 1.0).is_none());
+    }
+
+    #[test]
+    fn dropped_density_below_the_population_is_its_exponential_lower_tail() {
+        // Twenty points of weight 1 at 10, 10.05, …, 10.95, over a range
+        // of 20: the tail is fitted to the lowest k = max(8, ⌈√20⌉) = 8.
+        let ys: Vec<f64> = (0..20).map(|i| 10.0 + 0.05 * i as f64).collect();
+        let points = ys.iter().enumerate().map(|(i, &y)| (i, y, 1.0)).collect();
+        let density = DroppedDensity::new(points, 20.0).expect("20 points");
+        let (n, m) = (20.0, ys.iter().sum::<f64>() / 20.0);
+        let v = ys.iter().map(|y| (y - m) * (y - m)).sum::<f64>() / n;
+        let h = 1.06 * v.sqrt() * n.powf(-0.2);
+        // By hand, the judged point `skip` left out: the edge is the 8th
+        // lowest of the others, the scale the mean depth of the 7 below it
+        // (0.2 either way; the bandwidth is 0.17), the mass 8 of the others.
+        let tail = |y: f64, lowest: &[f64], others: f64| {
+            let edge = lowest[7];
+            let depth = lowest[..7].iter().map(|l| edge - l).sum::<f64>() / 7.0;
+            let scale = depth.max(h);
+            8.0 / others / scale * (-(edge - y) / scale).exp()
+        };
+        let at_9 = density.ln_density(9.0, 99);
+        assert!((at_9 - tail(9.0, &ys[..8], 20.0).ln()).abs() < 1e-9);
+        let lowest_left_out = density.ln_density(9.0, 0);
+        assert!((lowest_left_out - tail(9.0, &ys[1..9], 19.0).ln()).abs() < 1e-9);
+        // Far below it falls under the floor, which is only for the span.
+        let floor = (1.0 / (n * 20.0)).ln();
+        assert!(density.ln_density(5.0, 99) < floor - 10.0);
+        assert!((density.ln_density(40.0, 99) - floor).abs() < 1e-12);
+
+        // Five stragglers at 6…8 (local wrong loops): the tail reaches
+        // down and at 5 the density is far above the tight population's.
+        let straggling: Vec<(usize, f64, f64)> = (0..20)
+            .map(|i| (i, ys[i], 1.0))
+            .chain((0..5).map(|i| (20 + i, 6.0 + 0.5 * i as f64, 1.0)))
+            .collect();
+        let straggling = DroppedDensity::new(straggling, 20.0).expect("25 points");
+        assert!(straggling.ln_density(5.0, 99) > density.ln_density(5.0, 99) + 20.0);
+        assert!(straggling.ln_density(5.0, 99) > floor);
     }
 }
