@@ -62,9 +62,8 @@ impl Reweighter {
     ///   estimate rather than one normal: the population is not one (random
     ///   wrong loops far out, local ones near the consistent loops), and a
     ///   normal fitted to it puts density where none of it lies. Those
-    ///   accepted leave the
-    ///   population and the others are judged again, until the accepted
-    ///   set repeats (at most [`DROPPED_PASSES`] passes).
+    ///   accepted leave the population and the others are judged again,
+    ///   until the accepted set repeats (at most [`DROPPED_PASSES`] passes).
     ///
     /// Held-out candidates removed in the weighting phase are judged too
     /// (their plain residual at a map they never shaped was far out, which
@@ -253,9 +252,10 @@ impl DroppedDensity {
     }
 
     /// `ln` of the density at `y`, the point of judged candidate `i` (if it
-    /// is one of the population) left out: the kernel estimate, plus below
-    /// the population's lowest points their exponential tail
-    /// ([`DroppedDensity::lower_tail`]), elsewhere the floor.
+    /// is one of the population) left out: below the population's lowest
+    /// points the larger of the kernel estimate and their exponential tail
+    /// ([`DroppedDensity::lower_tail`]), elsewhere the kernel estimate plus
+    /// the floor.
     fn ln_density(&self, y: f64, i: usize) -> f64 {
         let (mut sum, mut total) = (0.0, self.total);
         for &(j, yj, w) in &self.points {
