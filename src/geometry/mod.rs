@@ -227,12 +227,23 @@ pub(crate) mod testing {
             d[k] = h;
             let ep = P::error(&xi.retract(&d), xj, z);
             let em = P::error(&xi.retract(&(-d)), xj, z);
-            ji.set_column(k, &((ep - em) / (2.0 * h)));
+            ji.set_column(k, &(wrapped_difference(&ep, &em) / (2.0 * h)));
             let ep = P::error(xi, &xj.retract(&d), z);
             let em = P::error(xi, &xj.retract(&(-d)), z);
-            jj.set_column(k, &((ep - em) / (2.0 * h)));
+            jj.set_column(k, &(wrapped_difference(&ep, &em) / (2.0 * h)));
         }
         (ji, jj)
+    }
+
+    /// `a − b`, each component taken modulo 2π into (−π, π]: an angle of the
+    /// error that wraps at ±π between the two evaluations (an error near π)
+    /// jumps by 2π, which is no derivative. Other components never differ
+    /// by more than π over a step of 1e-6.
+    fn wrapped_difference<const D: usize>(
+        a: &SVector<f64, D>,
+        b: &SVector<f64, D>,
+    ) -> SVector<f64, D> {
+        (a - b).map(wrap_angle)
     }
 
     /// Asserts that the analytic Jacobians match central differences.
