@@ -734,11 +734,10 @@ pub enum GateMode {
 #[serde(rename_all = "snake_case")]
 pub enum DegeneratePolicy {
     /// Keep every candidate with a positive count (a zero count is no loop)
-    /// and leave them to the robust back end, which
-    /// decides them by their residuals (the default: EM; measured on the
-    /// outlier benchmark, README "Robust loops": with 10 wrong among
-    /// hundreds of true loops the counts show one component, and dropping
-    /// them all threw every true loop away). The degeneracy is reported.
+    /// and leave them to the robust back end, which decides them by their
+    /// residuals. Counts with few wrong loops among many true ones show one
+    /// component, and dropping them all would throw every true loop away.
+    /// The degeneracy is reported.
     #[default]
     KeepAll,
     /// Drop every candidate with a count, so a wrong loop can never get in;
