@@ -15,9 +15,10 @@
 //! [`MAX_LOOP_SEGMENTS`] loops are drawn, sampled evenly; the caption says
 //! when either happened.
 
-use crate::gate::{Component, LogNormalMixture, ThresholdFit};
+use crate::gate::{Component, LogNormalMixture, Threshold, ThresholdFit};
 use crate::geometry::Pose;
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::collections::HashSet;
@@ -265,21 +266,87 @@ fn clip(points: &[(f64, f64)], top: f64) -> Vec<(f64, f64)> {
     points.iter().map(|&(v, d)| (v, d.min(top))).collect()
 }
 
+/// The chart of the counts picture: `v` on x, density on y.
+type CountsChart<'a, 'b> =
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The heights of the counts picture.
+struct CountsScale {
+    /// Where bars and curves end: the tallest of them, or the clip height.
+    data_top: f64,
+    /// The top of the y axis, with head room for the legend.
+    y_top: f64,
+    /// Whether the curves are clipped at [`CURVE_CLIP`] times the tallest
+    /// bar.
+    clipped: bool,
+}
+
+impl CountsScale {
+    fn new(histogram: &CountHistogram, curves: Option<&Curves>) -> Self {
+        let bars_top = histogram.tallest();
+        let curves_top = curves.map_or(0.0, Curves::tallest);
+        let (data_top, clipped) = if bars_top > 0.0 && curves_top > CURVE_CLIP * bars_top {
+            (CURVE_CLIP * bars_top, true)
+        } else {
+            (bars_top.max(curves_top), false)
+        };
+        let y_top = if data_top > 0.0 {
+            data_top * HEADROOM
+        } else {
+            1.0
+        };
+        CountsScale {
+            data_top,
+            y_top,
+            clipped,
+        }
+    }
+}
+
 fn render_counts(histogram: &CountHistogram, fit: &ThresholdFit) -> DrawResult<String> {
     let curves = fit.mixture.as_ref().map(Curves::new);
-    let bars_top = histogram.tallest();
-    let curves_top = curves.as_ref().map_or(0.0, Curves::tallest);
-    let (data_top, clipped) = if bars_top > 0.0 && curves_top > CURVE_CLIP * bars_top {
-        (CURVE_CLIP * bars_top, true)
-    } else {
-        (bars_top.max(curves_top), false)
-    };
-    let y_top = if data_top > 0.0 {
-        data_top * HEADROOM
-    } else {
-        1.0
-    };
+    let scale = CountsScale::new(histogram, curves.as_ref());
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, COUNTS_SIZE).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (header, body) = root.split_vertically(76);
+        draw_counts_header(&header, fit, scale.clipped)?;
+        let mut chart = draw_counts_axes(&body, scale.y_top)?;
+        draw_histogram(&mut chart, histogram)?;
+        if let (Some(curves), Some(m)) = (&curves, &fit.mixture) {
+            draw_mixture(&mut chart, curves, m, scale.data_top)?;
+        }
+        if let Some(t) = &fit.threshold {
+            draw_threshold(&mut chart, t, scale.data_top)?;
+        }
+        if histogram.nonzero == 0 {
+            chart.draw_series(std::iter::once(Text::new(
+                "no non-zero counts to show",
+                (0.5, scale.y_top / 2.0),
+                text_style(18, BLACK).pos(Pos::new(HPos::Center, VPos::Center)),
+            )))?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .margin(12)
+            .label_font((FONT, 14))
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK.mix(0.4))
+            .draw()?;
+        root.present()?;
+    }
+    Ok(svg)
+}
 
+/// The title, and a subtitle with `T_GV` and Ashman's D, or why the fit is
+/// degenerate, and whether the curves are clipped.
+fn draw_counts_header(
+    area: &DrawingArea<SVGBackend<'_>, Shift>,
+    fit: &ThresholdFit,
+    clipped: bool,
+) -> DrawResult<()> {
     let title = format!(
         "Inlier counts of {} loop-closure candidates and the learned threshold",
         fit.total_counts
@@ -304,154 +371,133 @@ fn render_counts(histogram: &CountHistogram, fit: &ThresholdFit) -> DrawResult<S
     } else {
         subtitle
     };
+    area.draw_text(&title, &text_style(22, BLACK), (24, 14))?;
+    area.draw_text(&subtitle, &text_style(15, subtitle_colour), (24, 48))?;
+    Ok(())
+}
 
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, COUNTS_SIZE).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (header, body) = root.split_vertically(76);
-        header.draw_text(&title, &text_style(22, BLACK), (24, 14))?;
-        header.draw_text(&subtitle, &text_style(15, subtitle_colour), (24, 48))?;
+/// The axes of the counts chart: `v` over `[0, 1]`, density up to `y_top`.
+fn draw_counts_axes<'a, 'b>(
+    area: &'a DrawingArea<SVGBackend<'b>, Shift>,
+    y_top: f64,
+) -> DrawResult<CountsChart<'a, 'b>> {
+    let mut chart = ChartBuilder::on(area)
+        .margin(24)
+        .x_label_area_size(56)
+        .y_label_area_size(72)
+        .build_cartesian_2d(0.0..1.0, 0.0..y_top)?;
+    chart
+        .configure_mesh()
+        .x_desc("normalised inlier count v = n / max")
+        .y_desc("density")
+        .axis_desc_style((FONT, 17))
+        .label_style((FONT, 14))
+        .light_line_style(TRANSPARENT)
+        .bold_line_style(BLACK.mix(0.08))
+        .draw()?;
+    Ok(chart)
+}
 
-        let mut chart = ChartBuilder::on(&body)
-            .margin(24)
-            .x_label_area_size(56)
-            .y_label_area_size(72)
-            .build_cartesian_2d(0.0..1.0, 0.0..y_top)?;
-        chart
-            .configure_mesh()
-            .x_desc("normalised inlier count v = n / max")
-            .y_desc("density")
-            .axis_desc_style((FONT, 17))
-            .label_style((FONT, 14))
-            .light_line_style(TRANSPARENT)
-            .bold_line_style(BLACK.mix(0.08))
-            .draw()?;
+/// The bars of the histogram (filled, then outlined), with their legend
+/// entry.
+fn draw_histogram(chart: &mut CountsChart<'_, '_>, histogram: &CountHistogram) -> DrawResult<()> {
+    let label = if histogram.zeros > 0 {
+        format!(
+            "non-zero counts (n = {}; {} zero counts not shown)",
+            histogram.nonzero, histogram.zeros
+        )
+    } else {
+        format!("non-zero counts (n = {})", histogram.nonzero)
+    };
+    let w = histogram.width;
+    let bars: Vec<(f64, f64, f64)> = histogram
+        .density
+        .iter()
+        .enumerate()
+        .filter(|(_, d)| **d > 0.0)
+        .map(|(j, &d)| (j as f64 * w, (j + 1) as f64 * w, d))
+        .collect();
+    chart
+        .draw_series(
+            bars.iter()
+                .map(|&(x0, x1, d)| Rectangle::new([(x0, 0.0), (x1, d)], BAR_FILL.filled())),
+        )?
+        .label(label)
+        .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 18, y + 6)], BAR_FILL.filled()));
+    chart.draw_series(
+        bars.iter()
+            .map(|&(x0, x1, d)| Rectangle::new([(x0, 0.0), (x1, d)], BAR_EDGE.stroke_width(1))),
+    )?;
+    Ok(())
+}
 
-        let bars_label = if histogram.zeros > 0 {
-            format!(
-                "non-zero counts (n = {}; {} zero counts not shown)",
-                histogram.nonzero, histogram.zeros
-            )
-        } else {
-            format!("non-zero counts (n = {})", histogram.nonzero)
-        };
-        let w = histogram.width;
-        let bars: Vec<(f64, f64, f64)> = histogram
-            .density
-            .iter()
-            .enumerate()
-            .filter(|(_, d)| **d > 0.0)
-            .map(|(j, &d)| (j as f64 * w, (j + 1) as f64 * w, d))
-            .collect();
+/// The two weighted components, shaded so that they show where the sum
+/// runs along them, and their sum, clipped at `top`, with legend entries.
+fn draw_mixture(
+    chart: &mut CountsChart<'_, '_>,
+    curves: &Curves,
+    m: &LogNormalMixture,
+    top: f64,
+) -> DrawResult<()> {
+    let label = |name: &str, k: usize| {
+        format!(
+            "{name}: π = {:.3}, μ = {:.2}, σ = {} (ln v)",
+            m.weight[k],
+            m.mu[k],
+            short(m.sigma[k])
+        )
+    };
+    let components = [
+        (&curves.not_loop, NOT_LOOP_COLOUR, label("not a loop", 0)),
+        (&curves.true_loop, LOOP_COLOUR, label("true loop", 1)),
+    ];
+    for (points, colour, label) in components {
         chart
             .draw_series(
-                bars.iter()
-                    .map(|&(x0, x1, d)| Rectangle::new([(x0, 0.0), (x1, d)], BAR_FILL.filled())),
+                AreaSeries::new(clip(points, top), 0.0, colour.mix(0.22))
+                    .border_style(colour.stroke_width(2)),
             )?
-            .label(bars_label)
-            .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 18, y + 6)], BAR_FILL.filled()));
-        chart
-            .draw_series(bars.iter().map(|&(x0, x1, d)| {
-                Rectangle::new([(x0, 0.0), (x1, d)], BAR_EDGE.stroke_width(1))
-            }))?;
-
-        if let (Some(curves), Some(m)) = (&curves, &fit.mixture) {
-            let components = [
-                (
-                    &curves.not_loop,
-                    NOT_LOOP_COLOUR,
-                    format!(
-                        "not a loop: π = {:.3}, μ = {:.2}, σ = {} (ln v)",
-                        m.weight[0],
-                        m.mu[0],
-                        short(m.sigma[0])
-                    ),
-                ),
-                (
-                    &curves.true_loop,
-                    LOOP_COLOUR,
-                    format!(
-                        "true loop: π = {:.3}, μ = {:.2}, σ = {} (ln v)",
-                        m.weight[1],
-                        m.mu[1],
-                        short(m.sigma[1])
-                    ),
-                ),
-            ];
-            // The components shaded, so that they show where the sum runs
-            // along them.
-            for (points, colour, label) in components {
-                chart
-                    .draw_series(
-                        AreaSeries::new(clip(points, data_top), 0.0, colour.mix(0.22))
-                            .border_style(colour.stroke_width(2)),
-                    )?
-                    .label(label)
-                    .legend(move |(x, y)| {
-                        Rectangle::new([(x, y - 6), (x + 18, y + 6)], colour.mix(0.22).filled())
-                    });
-            }
-            chart
-                .draw_series(LineSeries::new(
-                    clip(&curves.sum, data_top),
-                    SUM_COLOUR.stroke_width(1),
-                ))?
-                .label("mixture (sum)")
-                .legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], SUM_COLOUR.stroke_width(1))
-                });
-        }
-
-        if let Some(t) = &fit.threshold {
-            chart
-                .draw_series(LineSeries::new(
-                    vec![(t.normalized, 0.0), (t.normalized, data_top)],
-                    THRESHOLD_COLOUR.stroke_width(2),
-                ))?
-                .label(threshold_label(t.count, t.normalized))
-                .legend(|(x, y)| {
-                    PathElement::new(
-                        vec![(x + 9, y - 7), (x + 9, y + 7)],
-                        THRESHOLD_COLOUR.stroke_width(2),
-                    )
-                });
-        }
-
-        if let Some(t) = &fit.threshold {
-            // The label beside the top of the line, on the side with room.
-            let h = if t.normalized < 0.75 {
-                HPos::Left
-            } else {
-                HPos::Right
-            };
-            let dx = if t.normalized < 0.75 { 0.006 } else { -0.006 };
-            chart.draw_series(std::iter::once(Text::new(
-                format!("T_GV = {:.1}", t.count),
-                (t.normalized + dx, data_top),
-                text_style(14, THRESHOLD_COLOUR).pos(Pos::new(h, VPos::Top)),
-            )))?;
-        }
-
-        if histogram.nonzero == 0 {
-            chart.draw_series(std::iter::once(Text::new(
-                "no non-zero counts to show",
-                (0.5, y_top / 2.0),
-                text_style(18, BLACK).pos(Pos::new(HPos::Center, VPos::Center)),
-            )))?;
-        }
-
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .margin(12)
-            .label_font((FONT, 14))
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK.mix(0.4))
-            .draw()?;
-        root.present()?;
+            .label(label)
+            .legend(move |(x, y)| {
+                Rectangle::new([(x, y - 6), (x + 18, y + 6)], colour.mix(0.22).filled())
+            });
     }
-    Ok(svg)
+    chart
+        .draw_series(LineSeries::new(
+            clip(&curves.sum, top),
+            SUM_COLOUR.stroke_width(1),
+        ))?
+        .label("mixture (sum)")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], SUM_COLOUR.stroke_width(1)));
+    Ok(())
+}
+
+/// The vertical line at `v_T` up to `top`, with its legend entry, and its
+/// label beside the top of the line, on the side with room.
+fn draw_threshold(chart: &mut CountsChart<'_, '_>, t: &Threshold, top: f64) -> DrawResult<()> {
+    chart
+        .draw_series(LineSeries::new(
+            vec![(t.normalized, 0.0), (t.normalized, top)],
+            THRESHOLD_COLOUR.stroke_width(2),
+        ))?
+        .label(threshold_label(t.count, t.normalized))
+        .legend(|(x, y)| {
+            PathElement::new(
+                vec![(x + 9, y - 7), (x + 9, y + 7)],
+                THRESHOLD_COLOUR.stroke_width(2),
+            )
+        });
+    let (h, dx) = if t.normalized < 0.75 {
+        (HPos::Left, 0.006)
+    } else {
+        (HPos::Right, -0.006)
+    };
+    chart.draw_series(std::iter::once(Text::new(
+        format!("T_GV = {:.1}", t.count),
+        (t.normalized + dx, top),
+        text_style(14, THRESHOLD_COLOUR).pos(Pos::new(h, VPos::Top)),
+    )))?;
+    Ok(())
 }
 
 /// Two decimals, or two significant digits for a small number.
@@ -807,6 +853,12 @@ fn render_trajectory(
     Ok(svg)
 }
 
+/// The chart of a trajectory panel: x and y in metres.
+type PanelChart<'a, 'b> =
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// One panel: the loops kept (weight ≥ ½) over the odometry over the loops
+/// dropped, the first pose circled.
 fn draw_panel(
     area: &DrawingArea<SVGBackend<'_>, Shift>,
     caption: &str,
@@ -814,7 +866,46 @@ fn draw_panel(
     scene: &Scene,
 ) -> DrawResult<()> {
     let area = area.titled(caption, (FONT, 18))?;
-    let mut builder = ChartBuilder::on(&area);
+    let mut chart = draw_panel_axes(&area, points)?;
+    let at = |k: usize| -> Option<(f64, f64)> {
+        let p = points.get(k)?;
+        (p[0].is_finite() && p[1].is_finite()).then_some((p[0], p[1]))
+    };
+    let mut seen: HashSet<SegmentKey> = HashSet::new();
+    let dropped = loop_segments(&chart, scene, false, &at, &mut seen);
+    let kept = loop_segments(&chart, scene, true, &at, &mut seen);
+    chart.draw_series(dropped)?;
+    chart.draw_series(
+        odometry_lines(scene, &at)
+            .into_iter()
+            .map(|l| PathElement::new(l, ODOMETRY_COLOUR.stroke_width(1))),
+    )?;
+    chart.draw_series(kept)?;
+    if let Some(first) = (0..points.len()).find_map(at) {
+        chart.draw_series(std::iter::once(Circle::new(
+            first,
+            5,
+            ODOMETRY_COLOUR.stroke_width(2),
+        )))?;
+    }
+    if points.is_empty() {
+        let (x, y) = (chart.x_range(), chart.y_range());
+        chart.draw_series(std::iter::once(Text::new(
+            "no poses",
+            ((x.start + x.end) / 2.0, (y.start + y.end) / 2.0),
+            text_style(18, BLACK).pos(Pos::new(HPos::Center, VPos::Center)),
+        )))?;
+    }
+    Ok(())
+}
+
+/// The axes of a panel, around the finite `points` with equal scales on x
+/// and y.
+fn draw_panel_axes<'a, 'b>(
+    area: &'a DrawingArea<SVGBackend<'b>, Shift>,
+    points: &[[f64; 2]],
+) -> DrawResult<PanelChart<'a, 'b>> {
+    let mut builder = ChartBuilder::on(area);
     builder
         .margin(16)
         .x_label_area_size(44)
@@ -836,31 +927,41 @@ fn draw_panel(
         .light_line_style(TRANSPARENT)
         .bold_line_style(BLACK.mix(0.08))
         .draw()?;
+    Ok(chart)
+}
 
-    let at = |k: usize| -> Option<(f64, f64)> {
-        let p = points.get(k)?;
-        (p[0].is_finite() && p[1].is_finite()).then_some((p[0], p[1]))
-    };
-    let mut seen: HashSet<SegmentKey> = HashSet::new();
-    let mut loop_segments = |kept: bool| -> Vec<PathElement<(f64, f64)>> {
-        scene
-            .loops
-            .iter()
-            .filter(|l| (l.weight >= 0.5) == kept)
-            .filter_map(|l| {
-                let (a, b) = (at(l.from)?, at(l.to)?);
-                let w = quantised_weight(l.weight);
-                let (pa, pb) = (chart.backend_coord(&a), chart.backend_coord(&b));
-                let key = (pa.min(pb), pa.max(pb), (w * WEIGHT_LEVELS) as u32);
-                (pa != pb && seen.insert(key))
-                    .then(|| PathElement::new(vec![a, b], weight_colour(w).stroke_width(1)))
-            })
-            .collect()
-    };
-    let dropped = loop_segments(false);
-    let kept = loop_segments(true);
+/// The segments of the loops that are `kept` (weight ≥ ½) or not, in the
+/// scene's order, coloured by weight; a segment on a single pixel, or on
+/// the pixels and colour of one already in `seen`, is left out. `at` gives
+/// a pose's finite position.
+fn loop_segments(
+    chart: &PanelChart<'_, '_>,
+    scene: &Scene,
+    kept: bool,
+    at: &impl Fn(usize) -> Option<(f64, f64)>,
+    seen: &mut HashSet<SegmentKey>,
+) -> Vec<PathElement<(f64, f64)>> {
+    scene
+        .loops
+        .iter()
+        .filter(|l| (l.weight >= 0.5) == kept)
+        .filter_map(|l| {
+            let (a, b) = (at(l.from)?, at(l.to)?);
+            let w = quantised_weight(l.weight);
+            let (pa, pb) = (chart.backend_coord(&a), chart.backend_coord(&b));
+            let key = (pa.min(pb), pa.max(pb), (w * WEIGHT_LEVELS) as u32);
+            (pa != pb && seen.insert(key))
+                .then(|| PathElement::new(vec![a, b], weight_colour(w).stroke_width(1)))
+        })
+        .collect()
+}
 
-    chart.draw_series(dropped)?;
+/// The odometry polylines with at least two points, broken where a pose
+/// has no finite position (`at` gives a pose's finite position).
+fn odometry_lines(
+    scene: &Scene,
+    at: &impl Fn(usize) -> Option<(f64, f64)>,
+) -> Vec<Vec<(f64, f64)>> {
     let mut lines: Vec<Vec<(f64, f64)>> = Vec::new();
     for chain in &scene.odometry.chains {
         let mut line = Vec::new();
@@ -872,29 +973,8 @@ fn draw_panel(
         }
         lines.push(line);
     }
-    chart.draw_series(
-        lines
-            .into_iter()
-            .filter(|l| l.len() >= 2)
-            .map(|l| PathElement::new(l, ODOMETRY_COLOUR.stroke_width(1))),
-    )?;
-    chart.draw_series(kept)?;
-    if let Some(first) = (0..points.len()).find_map(at) {
-        chart.draw_series(std::iter::once(Circle::new(
-            first,
-            5,
-            ODOMETRY_COLOUR.stroke_width(2),
-        )))?;
-    }
-    if points.is_empty() {
-        let (x, y) = (chart.x_range(), chart.y_range());
-        chart.draw_series(std::iter::once(Text::new(
-            "no poses",
-            ((x.start + x.end) / 2.0, (y.start + y.end) / 2.0),
-            text_style(18, BLACK).pos(Pos::new(HPos::Center, VPos::Center)),
-        )))?;
-    }
-    Ok(())
+    lines.retain(|l| l.len() >= 2);
+    lines
 }
 
 /// The key under the panels: odometry, first pose, and the weight colours.

@@ -1,0 +1,531 @@
+//! Mixtures of `K` normal distributions on the real line,
+//! `p(y) = Σ_k π_k N(y | μ_k, σ_k)`, fitted to data by
+//! expectation–maximisation (EM).
+//!
+//! * The E-step works with log densities and log-sum-exp, so the posterior
+//!   of a component never underflows however far a value lies from it.
+//! * The M-step takes each variance around the component's *new* mean, and
+//!   never lets it fall below a floor ([`EmOptions::variance_floor`]): with
+//!   tied values a component can shrink onto one of them, where the
+//!   likelihood grows without bound.
+//! * EM finds a local maximum, so it is run from several starts
+//!   ([`quantile_start`], [`kmeans_start`], or any start the caller knows)
+//!   and the best fit that did not collapse wins ([`best_fit`]).
+//! * [`bic`] compares fits with different numbers of components.
+
+use serde::Serialize;
+
+/// `ln √(2π)`, the constant of the normal log-density.
+const LN_SQRT_2PI: f64 = 0.918_938_533_204_672_8;
+
+/// The smallest variance any component may have, whatever floor is asked
+/// for: σ ≥ 1e-6. On the logarithm of a positive quantity that is a
+/// relative spread of one part in a million.
+pub const MIN_VARIANCE_FLOOR: f64 = 1e-12;
+
+/// A variance within this factor of the floor counts as "at the floor"
+/// (the floor times a few units of rounding, as `max(var, floor)` may leave
+/// it).
+const AT_FLOOR: f64 = 1.0 + 1e-9;
+
+/// Why a mixture could not be made.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum MixtureError {
+    /// A mixture needs at least one component.
+    #[error("a mixture needs at least one component")]
+    NoComponents,
+    /// A component's weight or σ is not positive and finite, or its mean is
+    /// not finite.
+    #[error(
+        "component {index} is invalid: weight {weight}, mean {mean}, sigma {sigma} \
+         (weight and sigma must be positive and finite, the mean finite)"
+    )]
+    InvalidComponent {
+        /// Its position in the list.
+        index: usize,
+        /// Its weight π.
+        weight: f64,
+        /// Its mean μ.
+        mean: f64,
+        /// Its standard deviation σ.
+        sigma: f64,
+    },
+}
+
+/// One component of a normal mixture: its weight π, mean μ and standard
+/// deviation σ.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct NormalComponent {
+    /// Mixing weight π.
+    pub weight: f64,
+    /// Mean μ.
+    pub mean: f64,
+    /// Standard deviation σ.
+    pub sigma: f64,
+}
+
+impl NormalComponent {
+    /// `ln(π N(y | μ, σ))`, the log of the component's weighted density at
+    /// `y`.
+    pub fn log_weighted_density(&self, y: f64) -> f64 {
+        self.weight.ln() + log_normal_pdf(y, self.mean, self.sigma)
+    }
+
+    fn is_valid(&self) -> bool {
+        let positive = |x: f64| x.is_finite() && x > 0.0;
+        positive(self.weight) && positive(self.sigma) && self.mean.is_finite()
+    }
+
+    fn is_finite(&self) -> bool {
+        self.weight.is_finite() && self.mean.is_finite() && self.sigma.is_finite()
+    }
+
+    /// The largest change of π, μ or σ from `other`.
+    fn max_abs_change(&self, other: &NormalComponent) -> f64 {
+        (self.weight - other.weight)
+            .abs()
+            .max((self.mean - other.mean).abs())
+            .max((self.sigma - other.sigma).abs())
+    }
+}
+
+/// A mixture of normal distributions, `p(y) = Σ_k π_k N(y | μ_k, σ_k)`.
+///
+/// Every component has a positive, finite weight and σ and a finite mean.
+/// The weights of a fitted mixture sum to 1; a mixture made with
+/// [`NormalMixture::new`] has the weights it was given.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct NormalMixture {
+    components: Vec<NormalComponent>,
+}
+
+impl NormalMixture {
+    /// A mixture of these components, in this order. Errors when there is
+    /// none or one is invalid (see [`MixtureError`]).
+    ///
+    /// ```
+    /// use pgo::stats::mixture::{NormalComponent, NormalMixture};
+    /// let c = |weight, mean, sigma| NormalComponent { weight, mean, sigma };
+    /// let m = NormalMixture::new(vec![c(0.5, -2.0, 1.0), c(0.5, 1.0, 1.0)]).unwrap();
+    /// assert_eq!(m.len(), 2);
+    /// assert!(NormalMixture::new(vec![c(0.0, 0.0, 1.0)]).is_err());
+    /// ```
+    pub fn new(components: Vec<NormalComponent>) -> Result<Self, MixtureError> {
+        if components.is_empty() {
+            return Err(MixtureError::NoComponents);
+        }
+        if let Some((index, c)) = components.iter().enumerate().find(|(_, c)| !c.is_valid()) {
+            return Err(MixtureError::InvalidComponent {
+                index,
+                weight: c.weight,
+                mean: c.mean,
+                sigma: c.sigma,
+            });
+        }
+        Ok(NormalMixture { components })
+    }
+
+    /// The maximum-likelihood single normal of `y`: its mean, and its
+    /// population variance raised to `floor` (at least
+    /// [`MIN_VARIANCE_FLOOR`]). For no data, mean 0 and σ at the floor.
+    pub fn moments(y: &[f64], floor: f64) -> Self {
+        let (mean, var) = mean_and_variance(y);
+        let sigma = var.max(floor.max(MIN_VARIANCE_FLOOR)).sqrt();
+        NormalMixture {
+            components: vec![NormalComponent {
+                weight: 1.0,
+                mean,
+                sigma,
+            }],
+        }
+    }
+
+    /// The components, in order.
+    pub fn components(&self) -> &[NormalComponent] {
+        &self.components
+    }
+
+    /// The number of components `K` (at least 1).
+    pub fn len(&self) -> usize {
+        self.components.len()
+    }
+
+    /// Always false: a mixture has at least one component.
+    pub fn is_empty(&self) -> bool {
+        self.components.is_empty()
+    }
+
+    /// `ln p(y)`.
+    pub fn log_density(&self, y: f64) -> f64 {
+        self.log_terms(y, &mut vec![0.0; self.len()])
+    }
+
+    /// The log-likelihood `Σ_n ln p(y_n)` of the data.
+    pub fn log_likelihood(&self, y: &[f64]) -> f64 {
+        let mut terms = vec![0.0; self.len()];
+        y.iter().map(|&v| self.log_terms(v, &mut terms)).sum()
+    }
+
+    /// The posterior probability of each component given `y`,
+    /// `π_k N(y | μ_k, σ_k) / p(y)`, in the order of the components; they
+    /// sum to 1.
+    pub fn posteriors(&self, y: f64) -> Vec<f64> {
+        let mut terms = vec![0.0; self.len()];
+        let log_p = self.log_terms(y, &mut terms);
+        terms.iter().map(|t| (t - log_p).exp()).collect()
+    }
+
+    /// `ln(π_k N_k(y)) − ln(π_j N_j(y))`: positive where component `k`
+    /// explains `y` better than component `j`. NaN when either index is
+    /// out of range.
+    pub fn log_odds(&self, k: usize, j: usize, y: f64) -> f64 {
+        match (self.components.get(k), self.components.get(j)) {
+            (Some(a), Some(b)) => a.log_weighted_density(y) - b.log_weighted_density(y),
+            _ => f64::NAN,
+        }
+    }
+
+    /// The same mixture with its components in increasing order of mean
+    /// (equal means keep their order).
+    pub fn sorted_by_mean(mut self) -> Self {
+        self.components.sort_by(|a, b| {
+            a.mean
+                .partial_cmp(&b.mean)
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
+        self
+    }
+
+    /// Whether a fit to `n` values ended in a useless place: a component
+    /// with less than one value's worth of weight (`π_k n < 1`), or one
+    /// pinned at the variance `floor` (sitting on a single tied value)
+    /// while holding fewer than `min_size` values.
+    pub fn is_collapsed(&self, n: usize, floor: f64, min_size: f64) -> bool {
+        if !self.components.iter().all(NormalComponent::is_finite) {
+            return true;
+        }
+        self.components.iter().any(|c| {
+            let size = c.weight * n as f64;
+            let pinned = c.sigma * c.sigma <= floor * AT_FLOOR;
+            size < 1.0 || (pinned && size < min_size)
+        })
+    }
+
+    /// Fills `terms` with `ln(π_k N_k(y))` and returns their log-sum-exp
+    /// `ln p(y)`.
+    fn log_terms(&self, y: f64, terms: &mut [f64]) -> f64 {
+        for (t, c) in terms.iter_mut().zip(&self.components) {
+            *t = c.log_weighted_density(y);
+        }
+        log_sum_exp(terms)
+    }
+
+    fn max_abs_change(&self, other: &NormalMixture) -> f64 {
+        self.components
+            .iter()
+            .zip(&other.components)
+            .map(|(a, b)| a.max_abs_change(b))
+            .fold(0.0, f64::max)
+    }
+}
+
+/// `ln Σ eᵗ` of non-empty `terms`, shifted by the largest so that nothing
+/// overflows or underflows; −∞ when every term is.
+fn log_sum_exp(terms: &[f64]) -> f64 {
+    let Some((&first, rest)) = terms.split_first() else {
+        return f64::NEG_INFINITY;
+    };
+    let top = rest.iter().copied().fold(first, f64::max);
+    if top == f64::NEG_INFINITY {
+        return top;
+    }
+    top + terms.iter().map(|t| (t - top).exp()).sum::<f64>().ln()
+}
+
+/// The Bayesian information criterion `k ln n − 2 ln L` of a mixture of
+/// `components` normals (`k = 3K − 1` free parameters: K means, K σ and
+/// K − 1 weights) with log-likelihood `log_likelihood` on `n` values.
+/// Lower is better.
+pub fn bic(components: usize, n: f64, log_likelihood: f64) -> f64 {
+    let parameters = (3 * components).saturating_sub(1) as f64;
+    parameters * n.ln() - 2.0 * log_likelihood
+}
+
+/// Settings of an EM run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EmOptions {
+    /// EM stops when no π, μ or σ changes by more than this.
+    pub tolerance: f64,
+    /// EM stops after this many iterations at the latest.
+    pub max_iterations: usize,
+    /// No component's variance falls below this (nor below
+    /// [`MIN_VARIANCE_FLOOR`]).
+    pub variance_floor: f64,
+}
+
+impl EmOptions {
+    fn floor(&self) -> f64 {
+        self.variance_floor.max(MIN_VARIANCE_FLOOR)
+    }
+}
+
+/// The result of one EM run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EmFit {
+    /// The fitted mixture, components in the order of the start.
+    pub mixture: NormalMixture,
+    /// EM iterations run.
+    pub iterations: usize,
+    /// Whether EM met the tolerance (rather than the iteration limit).
+    pub converged: bool,
+    /// Log-likelihood of the data under [`EmFit::mixture`].
+    pub log_likelihood: f64,
+}
+
+/// EM on `y` from `start` until no parameter changes by more than the
+/// tolerance or the iteration limit is hit. Each iteration is an E-step
+/// (the posteriors of the components) and an M-step (each component's
+/// weight, mean, and variance around that new mean, floored).
+///
+/// `None` when an M-step finds a component with no weight or a non-finite
+/// parameter. `observe` sees the log-likelihood before every M-step, then
+/// that of the final mixture; EM never lets it decrease (up to rounding).
+///
+/// ```
+/// use pgo::stats::mixture::{em, quantile_start, EmOptions};
+/// let y: Vec<f64> = (0..100).map(|i| if i < 60 { -2.0 } else { 3.0 } + (i % 7) as f64 * 0.1).collect();
+/// let options = EmOptions { tolerance: 1e-9, max_iterations: 500, variance_floor: 1e-6 };
+/// let fit = em(&y, quantile_start(&y, 2, 1e-6).unwrap(), &options, |_| {}).unwrap();
+/// let c = fit.mixture.components();
+/// assert!((c[0].weight - 0.6).abs() < 1e-6 && (c[1].mean - 3.3).abs() < 0.05);
+/// ```
+pub fn em(
+    y: &[f64],
+    start: NormalMixture,
+    options: &EmOptions,
+    mut observe: impl FnMut(f64),
+) -> Option<EmFit> {
+    let floor = options.floor();
+    let k = start.len();
+    let mut mixture = start;
+    let mut responsibilities = vec![0.0; y.len() * k];
+    let mut converged = false;
+    let mut iterations = 0;
+    while iterations < options.max_iterations {
+        iterations += 1;
+        observe(e_step(y, &mixture, &mut responsibilities));
+        let next = m_step(y, &responsibilities, k, floor)?;
+        let change = mixture.max_abs_change(&next);
+        mixture = next;
+        if change < options.tolerance {
+            converged = true;
+            break;
+        }
+    }
+    let log_likelihood = mixture.log_likelihood(y);
+    observe(log_likelihood);
+    Some(EmFit {
+        mixture,
+        iterations,
+        converged,
+        log_likelihood,
+    })
+}
+
+/// E-step: `r(n,k) = exp(ln π_k N_k(y_n) − ln p(y_n))` into
+/// `responsibilities` (`K` per value, value-major). Returns the
+/// log-likelihood of `mixture`.
+fn e_step(y: &[f64], mixture: &NormalMixture, responsibilities: &mut [f64]) -> f64 {
+    let mut log_likelihood = 0.0;
+    for (&v, r) in y
+        .iter()
+        .zip(responsibilities.chunks_exact_mut(mixture.len()))
+    {
+        let log_p = mixture.log_terms(v, r);
+        for t in r.iter_mut() {
+            *t = (*t - log_p).exp();
+        }
+        log_likelihood += log_p;
+    }
+    log_likelihood
+}
+
+/// M-step: each component's weighted mean, weighted variance around that
+/// *new* mean (raised to `floor`), and weight. `None` when a component has
+/// no mass or a parameter is not finite.
+fn m_step(y: &[f64], responsibilities: &[f64], k: usize, floor: f64) -> Option<NormalMixture> {
+    let n = y.len() as f64;
+    let rows = || responsibilities.chunks_exact(k);
+    let mut components = Vec::with_capacity(k);
+    for j in 0..k {
+        let mass: f64 = rows().map(|r| r[j]).sum();
+        if !(mass > 0.0 && mass.is_finite()) {
+            return None;
+        }
+        let weighted = || rows().map(move |r| r[j]).zip(y);
+        let mean = weighted().map(|(r, v)| r * v).sum::<f64>() / mass;
+        let var = weighted().map(|(r, v)| r * (v - mean).powi(2)).sum::<f64>() / mass;
+        components.push(NormalComponent {
+            weight: mass / n,
+            mean,
+            sigma: var.max(floor).sqrt(),
+        });
+    }
+    components
+        .iter()
+        .all(NormalComponent::is_finite)
+        .then_some(NormalMixture { components })
+}
+
+/// A start for `k` components: means at the quantiles `(j + ½)/k` of `y`
+/// (the quartiles for `k = 2`), every σ the spread of all of `y` (at least
+/// `√floor`), equal weights. `None` when those quantiles are not strictly
+/// increasing (too many tied values) or `k = 0`.
+pub fn quantile_start(y: &[f64], k: usize, floor: f64) -> Option<NormalMixture> {
+    if k == 0 {
+        return None;
+    }
+    let mut sorted = y.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let means: Vec<f64> = (0..k)
+        .map(|j| quantile(&sorted, (j as f64 + 0.5) / k as f64))
+        .collect();
+    if means.windows(2).any(|w| w[0] >= w[1]) {
+        return None;
+    }
+    let min_sigma = floor.max(MIN_VARIANCE_FLOOR).sqrt();
+    let sigma = mean_and_variance(y).1.sqrt().max(min_sigma);
+    let weight = 1.0 / k as f64;
+    let components = means.into_iter().map(|mean| NormalComponent {
+        weight,
+        mean,
+        sigma,
+    });
+    NormalMixture::new(components.collect()).ok()
+}
+
+/// A start for `k` components from a split of the sorted `y` into `k`
+/// groups of consecutive values (1-D k-means by bisection: the whole is
+/// split in two where the between-group sum of squares is largest, then
+/// the group whose best split gains most, until there are `k`; for `k = 2`
+/// this is the optimal 2-means split). Each component takes its group's
+/// mean, spread (variance at least `floor`) and share. `None` when `y` has
+/// fewer than `k` distinct values or `k = 0`.
+pub fn kmeans_start(y: &[f64], k: usize, floor: f64) -> Option<NormalMixture> {
+    if k == 0 {
+        return None;
+    }
+    let mut sorted = y.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    // Group g is sorted[bounds[g]..bounds[g + 1]].
+    let mut bounds = vec![0, sorted.len()];
+    while bounds.len() <= k {
+        let mut best: Option<(usize, f64)> = None;
+        for w in bounds.windows(2) {
+            if let Some((split, gain)) = two_means_split(&sorted[w[0]..w[1]]) {
+                if best.is_none_or(|(_, g)| gain > g) {
+                    best = Some((w[0] + split, gain));
+                }
+            }
+        }
+        let (at, _) = best?;
+        bounds.insert(bounds.partition_point(|&b| b < at), at);
+    }
+    let floor = floor.max(MIN_VARIANCE_FLOOR);
+    let components = bounds.windows(2).map(|w| {
+        let group = &sorted[w[0]..w[1]];
+        let (mean, var) = mean_and_variance(group);
+        NormalComponent {
+            weight: group.len() as f64 / sorted.len() as f64,
+            mean,
+            sigma: var.max(floor).sqrt(),
+        }
+    });
+    NormalMixture::new(components.collect()).ok()
+}
+
+/// Runs EM from every start and keeps the result with the highest
+/// log-likelihood (the earlier start on ties) among those that did not
+/// collapse ([`NormalMixture::is_collapsed`] with `min_size`) and have a
+/// finite log-likelihood. The winner's components are sorted by mean; its
+/// start's label comes with it. `None` when every start failed or
+/// collapsed.
+pub fn best_fit<S: Copy>(
+    y: &[f64],
+    starts: &[(S, NormalMixture)],
+    options: &EmOptions,
+    min_size: f64,
+) -> Option<(S, EmFit)> {
+    let mut best: Option<(S, EmFit)> = None;
+    for (label, start) in starts {
+        let Some(mut fit) = em(y, start.clone(), options, |_| {}) else {
+            continue;
+        };
+        fit.mixture = fit.mixture.sorted_by_mean();
+        if fit.mixture.is_collapsed(y.len(), options.floor(), min_size)
+            || !fit.log_likelihood.is_finite()
+        {
+            continue;
+        }
+        if best
+            .as_ref()
+            .is_none_or(|(_, b)| fit.log_likelihood > b.log_likelihood)
+        {
+            best = Some((*label, fit));
+        }
+    }
+    best
+}
+
+/// Linear-interpolated quantile of sorted data (`p` in [0, 1]); 0 for no
+/// data.
+fn quantile(sorted: &[f64], p: f64) -> f64 {
+    let Some(&last) = sorted.last() else {
+        return 0.0;
+    };
+    let pos = p * (sorted.len() - 1) as f64;
+    let (i, frac) = (pos.floor() as usize, pos.fract());
+    let next = sorted.get(i + 1).copied().unwrap_or(last);
+    sorted.get(i).map_or(last, |&lo| lo + frac * (next - lo))
+}
+
+/// The split index `s` of sorted data into `[..s]` and `[s..]` that
+/// maximises the between-group sum of squares `n_l n_r / n · (m_r − m_l)²`
+/// (equivalently minimises the within-group one), only between distinct
+/// values, with that sum. `None` when all values are equal.
+fn two_means_split(sorted: &[f64]) -> Option<(usize, f64)> {
+    let n = sorted.len() as f64;
+    let total: f64 = sorted.iter().sum();
+    let mut left_sum = 0.0;
+    let mut best: Option<(usize, f64)> = None;
+    for s in 1..sorted.len() {
+        left_sum += sorted[s - 1];
+        if sorted[s - 1] >= sorted[s] {
+            continue;
+        }
+        let (nl, nr) = (s as f64, n - s as f64);
+        let gap = (total - left_sum) / nr - left_sum / nl;
+        let between = nl * nr / n * gap * gap;
+        if best.is_none_or(|(_, b)| between > b) {
+            best = Some((s, between));
+        }
+    }
+    best
+}
+
+/// Mean and population variance (0 and 0 for no data).
+fn mean_and_variance(y: &[f64]) -> (f64, f64) {
+    let n = y.len().max(1) as f64;
+    let mean = y.iter().sum::<f64>() / n;
+    let var = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+    (mean, var)
+}
+
+/// `ln N(y | μ, σ)`.
+fn log_normal_pdf(y: f64, mu: f64, sigma: f64) -> f64 {
+    let z = (y - mu) / sigma;
+    -0.5 * z * z - sigma.ln() - LN_SQRT_2PI
+}
+
+#[cfg(test)]
+mod tests;
