@@ -1,0 +1,142 @@
+//! Assembling a simulation: odometry, true loops and wrong loops on a true
+//! trajectory, and the noisy and truth graphs built from them.
+
+use super::noise::{ErrorCoordinates, perturb};
+use super::world::{Trajectory, find_loops};
+use super::wrong::{
+    DEFAULT_LOCAL_WINDOW, DEFAULT_OUTLIER_ROTATION, DEFAULT_OUTLIER_TRANSLATION, WrongLoopPlan,
+    random_measurement, wrong_pairs,
+};
+use super::{Simulation, SimulationError, SimulationOptions};
+use crate::geometry::Pose;
+use crate::graph::{LoopCandidate, PoseGraph, VertexId};
+use nalgebra::{SMatrix, Vector3};
+use rand::Rng;
+
+/// An edge before the graphs are built.
+struct PlannedEdge<P> {
+    from: usize,
+    to: usize,
+    measurement: P,
+    /// The noise-free measurement; `None` for a wrong loop.
+    truth: Option<P>,
+    candidate: Option<LoopCandidate>,
+    odometry: bool,
+}
+
+/// Adds odometry, true loops and wrong loops to the trajectory and builds
+/// the noisy and truth graphs.
+pub(super) fn simulate_on<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
+    options: &SimulationOptions,
+    trajectory: Trajectory<P>,
+    rng: &mut R,
+) -> Result<Simulation<P, D>, SimulationError> {
+    let truth = trajectory.poses;
+    let (sigma_t, sigma_r) = (options.translation_noise, options.rotation_noise);
+    let noisy_edge = |from: usize, to: usize, candidate, odometry, rng: &mut R| {
+        let exact = truth[from].inverse().compose(&truth[to]);
+        let e = P::sample_error(sigma_t, sigma_r, rng);
+        PlannedEdge {
+            from,
+            to,
+            measurement: perturb(&exact, &e),
+            truth: Some(exact),
+            candidate,
+            odometry,
+        }
+    };
+
+    let mut edges: Vec<PlannedEdge<P>> = (1..truth.len())
+        .map(|k| noisy_edge(k - 1, k, None, true, rng))
+        .collect();
+    let guess = dead_reckoning(&edges);
+
+    // True loops are candidates when there is something to tell them from
+    // (wrong loops) or a count to attach; otherwise they are trusted, as in
+    // the public datasets.
+    let positions: Vec<Vector3<f64>> = truth.iter().map(Pose::position).collect();
+    for (i, j) in find_loops(&positions, trajectory.loop_radius, options.loops, rng) {
+        let candidate = match &options.inliers {
+            Some(model) => Some(LoopCandidate {
+                inliers: Some(model.sample_true(rng)),
+            }),
+            None if options.outliers > 0 => Some(LoopCandidate { inliers: None }),
+            None => None,
+        };
+        edges.push(noisy_edge(i, j, candidate, false, rng));
+    }
+
+    let plan = WrongLoopPlan {
+        count: options.outliers,
+        policy: options.outlier_policy,
+        group_size: options.group_size,
+        local_window: DEFAULT_LOCAL_WINDOW,
+        translation_scale: DEFAULT_OUTLIER_TRANSLATION,
+        rotation_scale: DEFAULT_OUTLIER_ROTATION,
+    };
+    for group in wrong_pairs(&plan, truth.len(), |i, j| i.abs_diff(j) == 1, rng)? {
+        let measurement = random_measurement::<P, D, R>(&plan, rng)?;
+        for (from, to) in group {
+            let inliers = options
+                .inliers
+                .as_ref()
+                .map(|model| model.sample_wrong(rng));
+            edges.push(PlannedEdge {
+                from,
+                to,
+                measurement,
+                truth: None,
+                candidate: Some(LoopCandidate { inliers }),
+                odometry: false,
+            });
+        }
+    }
+
+    // Order as the public datasets do: by the later vertex, odometry first.
+    edges.sort_by_key(|e| (e.from.max(e.to), !e.odometry));
+    assemble(&truth, &guess, &edges, P::information(sigma_t, sigma_r))
+}
+
+/// The composition of the odometry measurements from the identity (the
+/// odometry edges come first, in order).
+fn dead_reckoning<P: Pose<D>, const D: usize>(odometry: &[PlannedEdge<P>]) -> Vec<P> {
+    let mut guess = Vec::with_capacity(odometry.len() + 1);
+    let mut at = P::identity();
+    guess.push(at);
+    for edge in odometry {
+        at = at.compose(&edge.measurement);
+        guess.push(at);
+    }
+    guess
+}
+
+/// Builds the noisy graph (dead-reckoning poses, all edges) and the truth
+/// graph (true poses, edges that are not wrong with exact measurements).
+fn assemble<P: Pose<D>, const D: usize>(
+    truth_poses: &[P],
+    guess: &[P],
+    edges: &[PlannedEdge<P>],
+    information: SMatrix<f64, D, D>,
+) -> Result<Simulation<P, D>, SimulationError> {
+    let mut noisy = PoseGraph::new();
+    let mut truth = PoseGraph::new();
+    for (k, (t, g)) in truth_poses.iter().zip(guess).enumerate() {
+        let id = k as VertexId;
+        noisy.add_vertex(id, *g)?;
+        truth.add_vertex(id, *t)?;
+    }
+    let mut wrong = Vec::with_capacity(edges.len());
+    for e in edges {
+        let (from, to) = (e.from as VertexId, e.to as VertexId);
+        noisy.add_edge(from, to, e.measurement, information, e.candidate)?;
+        if let Some(exact) = e.truth {
+            truth.add_edge(from, to, exact, information, e.candidate)?;
+        }
+        wrong.push(e.truth.is_none());
+    }
+    Ok(Simulation {
+        noisy,
+        truth,
+        wrong,
+    })
+}
