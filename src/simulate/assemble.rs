@@ -1,11 +1,12 @@
 //! Assembling a simulation: odometry, true loops and wrong loops on a true
 //! trajectory, and the noisy and truth graphs built from them.
 
+use super::counts::sample_wrong_candidate;
 use super::noise::{ErrorCoordinates, perturb};
 use super::world::{Trajectory, find_loops};
 use super::wrong::{
     DEFAULT_LOCAL_WINDOW, DEFAULT_OUTLIER_ROTATION, DEFAULT_OUTLIER_TRANSLATION, WrongLoopPlan,
-    random_measurement, wrong_pairs,
+    random_measurement, wrong_groups,
 };
 use super::{Simulation, SimulationError, SimulationOptions};
 use crate::geometry::Pose;
@@ -31,31 +32,55 @@ pub(super) fn simulate_on<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Size
     trajectory: Trajectory<P>,
     rng: &mut R,
 ) -> Result<Simulation<P, D>, SimulationError> {
-    let truth = trajectory.poses;
-    let (sigma_t, sigma_r) = (options.translation_noise, options.rotation_noise);
-    let noisy_edge = |from: usize, to: usize, candidate, odometry, rng: &mut R| {
-        let exact = truth[from].inverse().compose(&truth[to]);
-        let e = P::sample_error(sigma_t, sigma_r, rng);
-        PlannedEdge {
-            from,
-            to,
-            measurement: perturb(&exact, &e),
-            truth: Some(exact),
-            candidate,
-            odometry,
-        }
-    };
-
+    let truth = &trajectory.poses;
     let mut edges: Vec<PlannedEdge<P>> = (1..truth.len())
-        .map(|k| noisy_edge(k - 1, k, None, true, rng))
+        .map(|k| noisy_edge(truth, (k - 1, k), options, None, rng))
         .collect();
     let guess = dead_reckoning(&edges);
+    edges.extend(true_loops(options, &trajectory, rng));
+    edges.extend(wrong_loops(options, &trajectory, rng)?);
 
-    // True loops are candidates when there is something to tell them from
-    // (wrong loops) or a count to attach; otherwise they are trusted, as in
-    // the public datasets.
+    // Order as the public datasets do: by the later vertex, odometry first.
+    edges.sort_by_key(|e| (e.from.max(e.to), !e.odometry));
+    let information = P::information(options.translation_noise, options.rotation_noise);
+    assemble(truth, &guess, &edges, information)
+}
+
+/// The edge `from → to` whose measurement is the true relative pose with
+/// noise in error coordinates; odometry when `candidate` is `None` and the
+/// vertices are consecutive.
+fn noisy_edge<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
+    truth: &[P],
+    (from, to): (usize, usize),
+    options: &SimulationOptions,
+    candidate: Option<LoopCandidate>,
+    rng: &mut R,
+) -> PlannedEdge<P> {
+    let exact = truth[from].inverse().compose(&truth[to]);
+    let e = P::sample_error(options.translation_noise, options.rotation_noise, rng);
+    PlannedEdge {
+        from,
+        to,
+        measurement: perturb(&exact, &e),
+        truth: Some(exact),
+        candidate,
+        odometry: to == from + 1 && candidate.is_none(),
+    }
+}
+
+/// The true loop closures. They are candidates when there is something to
+/// tell them from (wrong loops) or a count to attach; otherwise they are
+/// trusted, as in the public datasets.
+fn true_loops<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
+    options: &SimulationOptions,
+    trajectory: &Trajectory<P>,
+    rng: &mut R,
+) -> Vec<PlannedEdge<P>> {
+    let truth = &trajectory.poses;
     let positions: Vec<Vector3<f64>> = truth.iter().map(Pose::position).collect();
-    for (i, j) in find_loops(&positions, trajectory.loop_radius, options.loops, rng) {
+    let pairs = find_loops(&positions, trajectory.loop_radius, options.loops, rng);
+    let mut edges = Vec::with_capacity(pairs.len());
+    for pair in pairs {
         let candidate = match &options.inliers {
             Some(model) => Some(LoopCandidate {
                 inliers: Some(model.sample_true(rng)),
@@ -63,24 +88,50 @@ pub(super) fn simulate_on<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Size
             None if options.outliers > 0 => Some(LoopCandidate { inliers: None }),
             None => None,
         };
-        edges.push(noisy_edge(i, j, candidate, false, rng));
+        edges.push(noisy_edge(truth, pair, options, candidate, rng));
     }
+    edges
+}
 
+/// The wrong loops, placed by the policy: one random measurement per group,
+/// or for aliased groups, the true relative pose to the aliased vertex with
+/// the usual noise per candidate (all the group's noise is drawn before its
+/// counts). Counts by the inlier model, if any.
+fn wrong_loops<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
+    options: &SimulationOptions,
+    trajectory: &Trajectory<P>,
+    rng: &mut R,
+) -> Result<Vec<PlannedEdge<P>>, SimulationError> {
+    let truth = &trajectory.poses;
     let plan = WrongLoopPlan {
         count: options.outliers,
         policy: options.outlier_policy,
         group_size: options.group_size,
         local_window: DEFAULT_LOCAL_WINDOW,
+        alias_offsets: options.alias_offsets,
         translation_scale: DEFAULT_OUTLIER_TRANSLATION,
         rotation_scale: DEFAULT_OUTLIER_ROTATION,
     };
-    for group in wrong_pairs(&plan, truth.len(), |i, j| i.abs_diff(j) == 1, rng)? {
-        let measurement = random_measurement::<P, D, R>(&plan, rng)?;
-        for (from, to) in group {
+    // An aliased vertex within the loop radius would close a true loop.
+    let radius = trajectory.loop_radius;
+    let distinct = |j: usize, t: usize| (truth[j].position() - truth[t].position()).norm() > radius;
+    let consecutive = |i: usize, j: usize| i.abs_diff(j) == 1;
+    let groups = wrong_groups(&plan, truth.len(), consecutive, distinct, rng)?;
+    let mut edges = Vec::with_capacity(options.outliers);
+    for group in groups {
+        let measurements: Vec<P> = match &group.alias {
+            None => vec![random_measurement::<P, D, R>(&plan, rng)?; group.pairs.len()],
+            Some(alias) => (group.pairs.iter().zip(&alias.targets))
+                .map(|(&(from, _), &target)| {
+                    noisy_edge(truth, (from, target), options, None, rng).measurement
+                })
+                .collect(),
+        };
+        for (&(from, to), measurement) in group.pairs.iter().zip(measurements) {
             let inliers = options
                 .inliers
                 .as_ref()
-                .map(|model| model.sample_wrong(rng));
+                .map(|model| sample_wrong_candidate(model, options.true_like_share, rng));
             edges.push(PlannedEdge {
                 from,
                 to,
@@ -91,10 +142,7 @@ pub(super) fn simulate_on<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Size
             });
         }
     }
-
-    // Order as the public datasets do: by the later vertex, odometry first.
-    edges.sort_by_key(|e| (e.from.max(e.to), !e.odometry));
-    assemble(&truth, &guess, &edges, P::information(sigma_t, sigma_r))
+    Ok(edges)
 }
 
 /// The composition of the odometry measurements from the identity (the

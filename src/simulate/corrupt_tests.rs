@@ -3,6 +3,8 @@
 
 use super::tests::{check_grouped, is_odometry};
 use super::*;
+use crate::geometry::{Pose, Se2};
+use crate::graph::{LoopCandidate, PoseGraph};
 use nalgebra::{Matrix3, Vector3};
 use rand::{SeedableRng, rngs::StdRng};
 

@@ -57,6 +57,23 @@ impl InlierModel {
     }
 }
 
+/// Draws the count of a wrong candidate: from the true-loop model with
+/// probability `true_like_share` (a wrong candidate that passes geometric
+/// verification, as aliased places do), from the wrong-loop model
+/// otherwise. A share of zero draws nothing more than the wrong count, so
+/// that it reproduces the draws of the model alone.
+pub(super) fn sample_wrong_candidate<R: Rng + ?Sized>(
+    model: &InlierModel,
+    true_like_share: f64,
+    rng: &mut R,
+) -> u64 {
+    if true_like_share > 0.0 && rng.random_bool(true_like_share) {
+        model.sample_true(rng)
+    } else {
+        model.sample_wrong(rng)
+    }
+}
+
 /// `round(exp(ln median + σ·z))`; the float-to-integer cast saturates, so
 /// absurd σ's give `u64::MAX` rather than wrapping.
 fn log_normal_count<R: Rng + ?Sized>(median: f64, sigma: f64, rng: &mut R) -> u64 {

@@ -15,9 +15,13 @@
 //!   least [`MIN_LOOP_SEPARATION`] apart in time, with the same noise model.
 //! * **Wrong loop candidates** ([`OutlierPolicy`]), as in the Vertigo /
 //!   max-mixture outlier sets: random pairs, pairs close in time, or groups
-//!   of mutually consistent wrong loops.
+//!   of mutually consistent wrong loops; and perceptual aliasing, candidates
+//!   whose measurement is right for a place a few steps away
+//!   ([`AliasOffsets`]), scattered or in groups sharing the offset.
 //! * **Inlier counts** ([`InlierModel`]) for every loop candidate: log-normal
-//!   with a high median for true loops and a low median for wrong ones.
+//!   with a high median for true loops and a low median for wrong ones; a
+//!   share of the wrong candidates may draw from the true-loop model
+//!   (aliases pass geometric verification).
 //!
 //! The noisy graph starts from the dead-reckoning guess (the composition of
 //! the noisy odometry from the identity); the truth graph holds the true
@@ -52,12 +56,30 @@
 //! datasets. (Trusting them beside planted wrong candidates would let a
 //! method reject every candidate and lose nothing.)
 //!
+//! # Ranges
+//!
+//! Every numeric option has a range, checked by the options' `validate()`
+//! (see [`SimulationOptions`] and [`CorruptionOptions`]), so that every
+//! graph written can be read back: [`MIN_NOISE`], [`MAX_LENGTH`],
+//! [`MAX_ROTATION_NOISE`], [`MAX_POSES`].
+//!
+//! # Layout
+//!
+//! `world` (trajectories and true-loop search), `noise` (error-coordinate
+//! noise and information), `counts` (inlier-count models), `wrong`
+//! (placement of wrong candidates), `assemble` (the simulated graphs),
+//! `corrupt` (the steps of [`corrupt`]), `labels` (the labels CSV),
+//! `options`.
+//!
 //! # Determinism
 //!
 //! The same options give the same graphs, for a given version of `rand`
-//! (whose `StdRng` algorithm may change between releases).
+//! (whose `StdRng` algorithm may change between releases). Options added
+//! later keep, at their defaults, the random draws and so the graphs of the
+//! options before them.
 
 mod assemble;
+mod corrupt;
 mod counts;
 mod labels;
 mod noise;
@@ -68,20 +90,22 @@ mod wrong;
 pub use counts::InlierModel;
 pub use labels::write_labels;
 pub use noise::ErrorCoordinates;
-pub use options::{CorruptionOptions, MAX_ROTATION_NOISE, SimulationOptions};
+pub use options::{
+    CorruptionOptions, MAX_LENGTH, MAX_POSES, MAX_ROTATION_NOISE, MIN_NOISE, SimulationOptions,
+};
 pub use world::{
     GRID_LOOP_RADIUS, GRID_TURN_PROBABILITY, MIN_LOOP_SEPARATION, RING_LOOP_RADIUS, World,
 };
 pub use wrong::{
-    DEFAULT_LOCAL_WINDOW, DEFAULT_OUTLIER_ROTATION, DEFAULT_OUTLIER_TRANSLATION, OutlierPolicy,
+    AliasOffsets, DEFAULT_ALIAS_OFFSET_MAX, DEFAULT_ALIAS_OFFSET_MIN, DEFAULT_LOCAL_WINDOW,
+    DEFAULT_OUTLIER_ROTATION, DEFAULT_OUTLIER_TRANSLATION, OutlierPolicy,
 };
 
-use crate::geometry::{Pose, Se2, Se3};
-use crate::graph::{GraphError, LoopCandidate, PoseGraph};
+use crate::geometry::{Se2, Se3};
+use crate::graph::{GraphError, PoseGraph};
 use assemble::simulate_on;
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use world::{grid_trajectory, sphere_trajectory, torus_trajectory};
-use wrong::{WrongLoopPlan, random_measurement, wrong_pairs};
 
 /// Errors from bad options or graphs that cannot hold what was asked.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -89,7 +113,19 @@ pub enum SimulationError {
     /// Fewer than two poses.
     #[error("a simulation needs at least 2 poses, got {0}")]
     TooFewPoses(usize),
-    /// A numeric option out of its range.
+    /// A numeric option outside its range `[min, max]`.
+    #[error("option {name} = {} is outside its range [{}, {}]", Number(*.value), Number(*.min), Number(*.max))]
+    OutOfRange {
+        /// The option's name.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// The smallest value accepted.
+        min: f64,
+        /// The largest value accepted.
+        max: f64,
+    },
+    /// A numeric option that breaks a rule other than a range.
     #[error("option {name} = {value} must be {requirement}")]
     InvalidOption {
         /// The option's name.
@@ -132,12 +168,40 @@ pub enum SimulationError {
         /// Non-sequential edges in the graph.
         available: usize,
     },
+    /// The information matrix of an existing edge, copied to an aliased
+    /// wrong loop, cannot draw its noise: it is not positive definite, or
+    /// leaves the rotation so uncertain that the draws fall outside the
+    /// error coordinates.
+    #[error(
+        "the information of edge {edge} cannot draw measurement noise (not positive definite, or its rotation is all but unknown)"
+    )]
+    UnusableInformation {
+        /// Index of the edge whose information was copied.
+        edge: usize,
+    },
     /// A pose type whose dimension is not that of SE(n).
     #[error("dimension {0} is not that of a rigid-body group SE(n)")]
     UnsupportedDimension(usize),
     /// Building the graph failed.
     #[error(transparent)]
     Graph(#[from] GraphError),
+}
+
+/// A number in a message: integers in full, others shortest, in scientific
+/// notation when very large or small.
+struct Number(f64);
+
+impl std::fmt::Display for Number {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = self.0;
+        if v.fract() == 0.0 && v.abs() < 1e16 {
+            write!(f, "{v:.0}")
+        } else if v.is_finite() && v != 0.0 && !(1e-4..1e16).contains(&v.abs()) {
+            write!(f, "{v:e}")
+        } else {
+            write!(f, "{v}")
+        }
+    }
 }
 
 /// A simulated pose graph with its ground truth.
@@ -266,13 +330,16 @@ pub struct Corruption {
 ///    candidate, with an inlier count drawn from the true-loop model when an
 ///    inlier model is given (without one, existing counts are kept) — except
 ///    the last `options.known_wrong_last` of them, which are labelled wrong
-///    and drawn from the wrong-loop model;
+///    and drawn as wrong candidates' counts;
 /// 2. `options.outliers` wrong loop candidates are appended by the policy,
 ///    between vertices that are neither consecutive in index nor in id, with
-///    measurements `P::exp(ξ)` of a random tangent vector `ξ` (see
-///    [`CorruptionOptions`]), the information of a random existing loop edge
-///    (of an odometry edge when there is none; one per group), and counts
-///    from the wrong-loop model.
+///    the information of a random existing loop edge (of an odometry edge
+///    when there is none; one per group) and measurements `P::exp(ξ)` of a
+///    random tangent vector `ξ` (see [`CorruptionOptions`]) — or, aliased,
+///    the relative pose of the graph's poses from `i` to `j + s` with noise
+///    drawn from that information;
+/// 3. wrong candidates' counts come from the wrong-loop model, or with
+///    probability `options.true_like_share` from the true-loop model.
 ///
 /// The graph is left unchanged when an error is returned.
 ///
@@ -300,7 +367,7 @@ pub struct Corruption {
 /// assert_eq!(corruption.wrong.iter().filter(|&&w| w).count(), 10);
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
-pub fn corrupt<P: Pose<D>, const D: usize>(
+pub fn corrupt<P: ErrorCoordinates<D>, const D: usize>(
     graph: &mut PoseGraph<P, D>,
     options: &CorruptionOptions,
     rng: &mut impl Rng,
@@ -313,16 +380,8 @@ pub fn corrupt<P: Pose<D>, const D: usize>(
         .collect();
 
     // Plan everything that can fail before touching the graph.
-    let plan = WrongLoopPlan {
-        count: options.outliers,
-        policy: options.policy,
-        group_size: options.group_size,
-        local_window: options.local_window,
-        translation_scale: options.translation_scale,
-        rotation_scale: options.rotation_scale,
-    };
-    let ids = graph.ids();
-    let groups = wrong_pairs(&plan, ids.len(), |i, j| ids[i].abs_diff(ids[j]) == 1, rng)?;
+    let plan = corrupt::plan(options);
+    let groups = corrupt::place(graph, &plan, &sequential, rng)?;
     let loops: Vec<usize> = (0..sequential.len()).filter(|&k| !sequential[k]).collect();
     if options.known_wrong_last > loops.len() {
         return Err(SimulationError::TooManyKnownWrong {
@@ -342,56 +401,24 @@ pub fn corrupt<P: Pose<D>, const D: usize>(
     if !groups.is_empty() && sources.is_empty() {
         return Err(SimulationError::NoInformationSource);
     }
-    let mut wrong_edges = Vec::with_capacity(options.outliers);
-    for group in &groups {
-        let information = graph.edges[sources[rng.random_range(0..sources.len())]].information;
-        let measurement = random_measurement::<P, D, _>(&plan, rng)?;
-        for &(from, to) in group {
-            wrong_edges.push((from, to, measurement, information));
-        }
-    }
+    let planned = corrupt::measure(graph, &plan, &groups, &sources, rng)?;
 
-    let mut marked = 0;
-    for ((edge, &seq), &known_wrong) in graph.edges.iter_mut().zip(&sequential).zip(&wrong) {
-        if seq {
-            continue;
-        }
-        marked += usize::from(!known_wrong);
-        edge.candidate = match (&options.inliers, edge.candidate) {
-            (Some(model), _) => Some(LoopCandidate {
-                inliers: Some(if known_wrong {
-                    model.sample_wrong(rng)
-                } else {
-                    model.sample_true(rng)
-                }),
-            }),
-            (None, Some(existing)) => Some(existing),
-            (None, None) => Some(LoopCandidate { inliers: None }),
-        };
-    }
-
-    for (from, to, measurement, information) in wrong_edges {
-        let inliers = options
-            .inliers
-            .as_ref()
-            .map(|model| model.sample_wrong(rng));
-        let (from, to) = (graph.id(from), graph.id(to));
-        graph.add_edge(
-            from,
-            to,
-            measurement,
-            information,
-            Some(LoopCandidate { inliers }),
-        )?;
-        wrong.push(true);
-    }
+    let marked = corrupt::mark_candidates(graph, options, &sequential, &wrong, rng);
+    wrong.resize(wrong.len() + planned.len(), true);
+    corrupt::append(graph, planned, options, rng)?;
     Ok(Corruption { wrong, marked })
 }
 
 #[cfg(test)]
+mod aliasing_tests;
+#[cfg(test)]
 mod corrupt_tests;
 #[cfg(test)]
+mod identity_tests;
+#[cfg(test)]
 mod noise_tests;
+#[cfg(test)]
+mod options_tests;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
