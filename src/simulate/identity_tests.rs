@@ -1,7 +1,7 @@
-//! The outputs of the policies that existed before aliasing must not
-//! change: the benchmark caches results keyed on files made by `pgo
-//! corrupt`, and g2o_samples/ holds files made by `pgo simulate`. These
-//! tests redo both as the CLI does and compare bytes.
+//! The outputs of the random, local and grouped policies must not change:
+//! the benchmark caches results keyed on files made by `pgo corrupt`, and
+//! g2o_samples/ holds files made by `pgo simulate`. These tests redo both
+//! as the CLI does and compare bytes.
 
 use super::*;
 use crate::graph::AnyPoseGraph;

@@ -31,7 +31,7 @@
 //!
 //! For an edge `i → j` with true relative pose `A = Xᵢ⁻¹·Xⱼ`, an error vector
 //! `e ~ N(0, Ω⁻¹)` is drawn in the error coordinates of
-//! [`Pose::error`] and turned into the pose `E`
+//! [`Pose::error`](crate::geometry::Pose::error) and turned into the pose `E`
 //! whose error coordinates are `e`; the measurement is `Z = A·E⁻¹`, so that
 //! `error(Xᵢ, Xⱼ, Z) = e` exactly. With translation noise `σₜ` (metres) and
 //! rotation noise `σᵣ` (radians):
@@ -74,9 +74,10 @@
 //! # Determinism
 //!
 //! The same options give the same graphs, for a given version of `rand`
-//! (whose `StdRng` algorithm may change between releases). Options added
-//! later keep, at their defaults, the random draws and so the graphs of the
-//! options before them.
+//! (whose `StdRng` algorithm may change between releases). A zero
+//! `true_like_share` draws no random number, and the alias offsets are
+//! drawn only by [`OutlierPolicy::Aliased`], so neither changes the graphs
+//! of the other policies.
 
 mod assemble;
 mod corrupt;

@@ -10,7 +10,9 @@ use std::f64::consts::PI;
 
 /// Poses whose edge error can be inverted: given error coordinates `e`, the
 /// pose `E` with exactly those coordinates, and the Gaussian noise model in
-/// them.
+/// them. Implemented for [`Se2`] and [`Se3`]; the simulator draws all its
+/// measurement noise through it, and [`corrupt`](super::corrupt) the noise
+/// of aliased candidates.
 pub trait ErrorCoordinates<const D: usize>: Pose<D> {
     /// The information matrix of the noise drawn by [`Self::sample_error`].
     fn information(translation_sigma: f64, rotation_sigma: f64) -> SMatrix<f64, D, D>;
