@@ -2,8 +2,8 @@
 """Outlier benchmark: pgo's gate and robust back ends against GTSAM's and g2o's
 robust kernels on pose graphs with wrong loop closures, in one run.
 
-usage: .venv/bin/python scripts/bench_robust.py [--only NAME ...] [--policies random local grouped]
-           [--outliers 100 1000] [--maxmix | --no-maxmix] [--scales published calibrated overconfident]
+usage: .venv/bin/python scripts/bench_robust.py [--only NAME ...] [--policies random local grouped aliased]
+           [--alias-group-size 5] [--alias-true-like 0.5] [--outliers 100 1000] [--maxmix | --no-maxmix] [--scales published calibrated overconfident]
            [--tools TOOL ...] [--timeout 300] [--seed 1] [--out bench-out/robust.json]
 
 Run it with the Python of the peers' virtual environment (scripts/setup_peers.sh
@@ -17,6 +17,14 @@ Cases
     every existing edge with |i - j| != 1 is a true loop candidate. Every
     candidate gets an inlier count: log-normal, median 150 for true loops and
     25 for wrong ones, sigma 0.5 in log space (pgo corrupt's defaults);
+    `--policies aliased` (not in the default list) adds perceptual aliasing:
+    candidates i-j measuring the file's pose j+s from i (|s| in 5..40 steps,
+    pgo corrupt's default), in groups of --alias-group-size (default 5; 1 =
+    scattered) sharing s, a share --alias-true-like (default 0.5) of them with
+    counts from the true-loop model (aliases pass geometric verification).
+    Aliased cases take their seeds from a counter of their own, so that adding
+    them leaves every other case's file (and the peers' cached results on it)
+    unchanged;
   * the public max-mixture outlier files (*-maxmix-*.g2o; component 0 of every
     mixture edge; the last 1000 mixture edges are the outliers, MANIFEST.md),
     counts assigned the same way (`pgo corrupt --wrong 0 --known-wrong-last 1000`).
@@ -100,6 +108,10 @@ PEER_TOOLS = {
 CHI2_95 = {3: 7.814727903251178, 6: 12.591587243743977}
 CHI2_99 = {3: 11.344866730144373, 6: 16.811893829770927}
 EDGE_LAYOUT = {"EDGE_SE2": (3, 6), "EDGE_SE3:QUAT": (7, 21)}
+POLICIES = ["random", "local", "grouped", "aliased"]
+# Aliased cases count their seeds from here, apart from the other cases'
+# counter (which advances once per case, far fewer than this many times).
+ALIAS_SEED_OFFSET = 1_000_000
 
 
 def log(msg):
@@ -292,6 +304,7 @@ def prepare(args, work):
     """Corrupted files, labels, clean references: a list of cases."""
     cases = []
     seed = args.seed
+    alias_seed = args.seed + ALIAS_SEED_OFFSET
     for name in CLEAN:
         if args.only and name not in args.only:
             continue
@@ -301,6 +314,16 @@ def prepare(args, work):
             continue
         for policy in args.policies:
             for n in args.outliers:
+                if policy == "aliased":
+                    alias_seed += 1
+                    case = "%s aliased %d" % (name, n)
+                    stem = os.path.join(work, "%s-aliased-g%d-t%g-%d" % (
+                        name, args.alias_group_size, args.alias_true_like, n))
+                    flags = ["--wrong", str(n), "--wrong-mode", "aliased", "--seed", str(alias_seed),
+                             "--group-size", str(args.alias_group_size),
+                             "--true-like-counts", repr(args.alias_true_like)]
+                    cases.append(corrupt_case(args, case, name, src, stem, flags, clean=src))
+                    continue
                 seed += 1
                 case = "%s %s %d" % (name, policy, n)
                 stem = os.path.join(work, "%s-%s-%d" % (name, policy, n))
@@ -361,7 +384,11 @@ def main():
     ap.add_argument("--work", default=os.path.join(ROOT, "bench-out/robust"))
     ap.add_argument("--out", default=os.path.join(ROOT, "bench-out/robust.json"))
     ap.add_argument("--only", nargs="*", default=None, help="datasets (clean names, maxmix names or bases)")
-    ap.add_argument("--policies", nargs="*", default=["random", "local", "grouped"])
+    ap.add_argument("--policies", nargs="*", default=["random", "local", "grouped"], choices=POLICIES)
+    ap.add_argument("--alias-group-size", type=int, default=5,
+                    help="aliased candidates per group sharing one offset (1: scattered)")
+    ap.add_argument("--alias-true-like", type=float, default=0.5,
+                    help="share of aliased candidates with counts from the true-loop model")
     ap.add_argument("--outliers", nargs="*", type=int, default=[100, 1000])
     ap.add_argument("--maxmix", action=argparse.BooleanOptionalAction, default=True)
     ap.add_argument("--scales", nargs="*", default=["published", "calibrated"],

@@ -134,6 +134,9 @@ enum PolicyArg {
     Local,
     /// Groups of consecutive pairs sharing one wrong transform.
     Grouped,
+    /// Perceptual aliasing: pairs i–j measuring the pose of j+s from i, in
+    /// groups of consecutive pairs sharing the offset s.
+    Aliased,
 }
 
 impl From<PolicyArg> for pgo::simulate::OutlierPolicy {
@@ -142,6 +145,7 @@ impl From<PolicyArg> for pgo::simulate::OutlierPolicy {
             PolicyArg::Random => Self::Random,
             PolicyArg::Local => Self::Local,
             PolicyArg::Grouped => Self::Grouped,
+            PolicyArg::Aliased => Self::Aliased,
         }
     }
 }
@@ -158,12 +162,23 @@ struct CountModel {
 #[derive(clap::Args, Debug)]
 struct WrongLoopArgs {
     /// How wrong candidates are placed: any two poses, poses within 20 of
-    /// each other, or groups of consecutive mutually consistent wrong loops.
+    /// each other, groups of consecutive mutually consistent wrong loops,
+    /// or aliases (i–j measuring the pose of j+s from i).
     #[arg(long, visible_alias = "outlier-policy", value_enum, default_value_t = PolicyArg::Random)]
     wrong_mode: PolicyArg,
-    /// Size of the groups of grouped wrong candidates.
+    /// Size of the groups of grouped and aliased wrong candidates (1:
+    /// scattered aliases).
     #[arg(long, default_value_t = 10)]
     group_size: usize,
+    /// Range of |s|, the offset in steps of aliased candidates (either
+    /// sign), 1 ≤ MIN ≤ MAX [default: 5,40].
+    #[arg(long, value_name = "MIN,MAX", value_parser = parse_alias_offsets)]
+    alias_offset: Option<pgo::simulate::AliasOffsets>,
+    /// Share of the wrong candidates whose inlier counts are drawn from the
+    /// true-loop model (each with this probability), 0 ≤ SHARE ≤ 1; in
+    /// `simulate`, a positive share implies --inliers.
+    #[arg(long, value_name = "SHARE", default_value_t = 0.0)]
+    true_like_counts: f64,
     /// Inlier counts of true loops: median and σ of ln count [default:
     /// 150,0.5].
     #[arg(long, visible_alias = "true-median", value_name = "MEDIAN[,SIGMA]", value_parser = parse_count_model)]
@@ -175,9 +190,14 @@ struct WrongLoopArgs {
 }
 
 impl WrongLoopArgs {
-    /// Whether either count model was given.
+    /// Whether either count model or a share of true-like counts was given.
     fn counts_given(&self) -> bool {
-        self.true_inliers.is_some() || self.wrong_inliers.is_some()
+        self.true_inliers.is_some() || self.wrong_inliers.is_some() || self.true_like_counts > 0.0
+    }
+
+    /// The alias offsets, the library's defaults unless given.
+    fn alias_offsets(&self) -> pgo::simulate::AliasOffsets {
+        self.alias_offset.unwrap_or_default()
     }
 
     /// The inlier model, [`pgo::simulate::InlierModel`]'s defaults where a
@@ -192,6 +212,16 @@ impl WrongLoopArgs {
             wrong_sigma: w.and_then(|m| m.sigma).unwrap_or(d.wrong_sigma),
         }
     }
+}
+
+fn parse_alias_offsets(s: &str) -> Result<pgo::simulate::AliasOffsets, String> {
+    let bad = || format!("expected MIN,MAX with whole numbers of steps, got '{s}'");
+    let (min, max) = s.split_once(',').ok_or_else(bad)?;
+    let number = |t: &str| t.trim().parse::<usize>().map_err(|_| bad());
+    Ok(pgo::simulate::AliasOffsets {
+        min: number(min)?,
+        max: number(max)?,
+    })
 }
 
 fn parse_count_model(s: &str) -> Result<CountModel, String> {
@@ -480,8 +510,10 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
         outliers: args.wrong,
         policy: args.placement.wrong_mode.into(),
         group_size: args.placement.group_size,
+        alias_offsets: args.placement.alias_offsets(),
         known_wrong_last: args.known_wrong_last,
         inliers: Some(args.placement.inlier_model()),
+        true_like_share: args.placement.true_like_counts,
         ..CorruptionOptions::default()
     };
     let result = match &mut file.graph {
@@ -507,7 +539,9 @@ fn corrupt_graph<P, const D: usize>(
     args: &CorruptArgs,
 ) -> Result<String, (u8, String)>
 where
-    P: pgo::io::g2o::G2oPose<D> + pgo::solve::init::ChordalInit<D>,
+    P: pgo::io::g2o::G2oPose<D>
+        + pgo::solve::init::ChordalInit<D>
+        + pgo::simulate::ErrorCoordinates<D>,
 {
     use pgo::io::{g2o::write_graph, write_atomically};
     use rand::SeedableRng;
@@ -546,6 +580,8 @@ fn simulate(args: SimulateArgs) -> ExitCode {
         outliers: args.wrong,
         outlier_policy: args.placement.wrong_mode.into(),
         group_size: args.placement.group_size,
+        alias_offsets: args.placement.alias_offsets(),
+        true_like_share: args.placement.true_like_counts,
         inliers: (args.inliers || args.placement.counts_given())
             .then(|| args.placement.inlier_model()),
     };
