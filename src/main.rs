@@ -5,13 +5,13 @@
 use clap::{Parser, Subcommand, ValueEnum};
 use pgo::gate::{DegeneratePolicy, GateMode};
 use pgo::io::console;
-use pgo::io::output::{OutputError, Target};
+use pgo::io::output::{CheckError, OutputError, check_files};
 use pgo::pipeline::{self, CandidateRule, OptimizeConfig};
 use pgo::robust::RobustMethod;
 use pgo::solve::init::Initialization;
 use pgo::solve::{IterationRecord, Method};
 use pgo::stats::DofConvention;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -459,45 +459,6 @@ fn main() -> ExitCode {
     }
 }
 
-/// Checks, before anything is read or written, the files a command is to
-/// read (`inputs`) and write (`outputs`, each with the option that names
-/// it): every output must be writable by the rules of [`pgo::io::output`]
-/// (a regular file or a link to one, a new file, or `-`), none may be an
-/// input (through links, `..` and hard links too: only `--in-place`
-/// overwrites its input, and it is not passed here as an input), no two
-/// outputs may be the same file or both stdout, and stdin (`-`) can be read
-/// once only. The message names the paths.
-fn check_files(inputs: &[&Path], outputs: &[(&str, &Path)]) -> Result<(), String> {
-    let stdin_readers = inputs.iter().filter(|p| p.as_os_str() == "-").count();
-    if stdin_readers > 1 {
-        return Err("stdin (-) can be read only once: give the other inputs as files".into());
-    }
-    let mut targets: Vec<(&str, &Path, Target)> = Vec::new();
-    for &(option, path) in outputs {
-        let target = Target::resolve(path).map_err(|e| e.to_string())?;
-        if let Some(input) = inputs.iter().find(|i| target.is_file(i)) {
-            return Err(format!(
-                "{}: the output is the input file {}; pgo overwrites its input only with --in-place",
-                path.display(),
-                input.display()
-            ));
-        }
-        if let Some((first, first_path, _)) = targets.iter().find(|(_, _, t)| t.same_as(&target)) {
-            return Err(if matches!(target, Target::Stdout) {
-                format!("{first} and {option} both write to stdout (-)")
-            } else {
-                format!(
-                    "{}: {option} is the same file as {first} ({}); each output needs a file of its own",
-                    path.display(),
-                    first_path.display()
-                )
-            });
-        }
-        targets.push((option, path, target));
-    }
-    Ok(())
-}
-
 /// The exit status after an output could not be written: 141, quietly, if
 /// it was stdout and its reader went away; else 1, with the message.
 fn output_failure(e: &OutputError) -> ExitCode {
@@ -862,18 +823,20 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
 fn check_optimize_files(args: &OptimizeArgs) -> Result<(), String> {
     let mut inputs = vec![args.input.as_path()];
     inputs.extend(args.inliers.as_deref());
-    if args.in_place {
+    let checked: Result<(), CheckError> = if args.in_place {
         if args.input.as_os_str() == "-" {
             return Err("--in-place needs an input file, not stdin (-)".into());
         }
-        return check_files(&inputs[1..], &[("--in-place", &args.input)])
-            .and_then(|_| check_files(&inputs, &[]));
-    }
-    let Some(output) = &args.output else {
-        return check_files(&inputs, &[]);
+        check_files(&inputs[1..], &[("--in-place", &args.input)])
+            .and_then(|_| check_files(&inputs, &[]))
+    } else {
+        match &args.output {
+            Some(o) if args.json && o.as_os_str() == "-" => {
+                return Err("-o - and --json both write to stdout: give -o a file".into());
+            }
+            Some(o) => check_files(&inputs, &[("-o", o)]),
+            None => check_files(&inputs, &[]),
+        }
     };
-    if args.json && output.as_os_str() == "-" {
-        return Err("-o - and --json both write to stdout: give -o a file".into());
-    }
-    check_files(&inputs, &[("-o", output)])
+    checked.map_err(|e| e.to_string())
 }

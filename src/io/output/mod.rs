@@ -31,7 +31,7 @@
 //! * **No output is an input.** The command line refuses, before reading
 //!   anything, an output that is one of its inputs (through links, `..` and
 //!   hard links too) unless `--in-place`, and two outputs that are the same
-//!   file or both stdout ([`Target::is_file`], [`Target::same_as`]).
+//!   file or both stdout ([`check_files`]).
 //! * **Interrupted runs.** A killed run can leave its temporary beside the
 //!   target; it is never read. A run holds an `flock` on its temporary while
 //!   it writes; each write into a directory first removes the temporaries
@@ -46,9 +46,12 @@
 //!   line defined after the last vertex line. When the input's text cannot
 //!   be had again unchanged, nothing is replaced.
 
+mod check;
 mod temporary;
 #[cfg(test)]
 mod tests;
+
+pub use check::{CheckError, check_files};
 
 use std::fmt;
 use std::fs::{self, File};
