@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs each cargo-fuzz target (libFuzzer) for a bounded time.
 #
-#   scripts/fuzz.sh [SECONDS] [TARGET...]     # default: 600 s each, targets parse and optimize
+#   scripts/fuzz.sh [SECONDS] [TARGET...]     # default: 600 s each, targets parse, optimize and write
 #
 # Needs cargo-fuzz (`cargo install cargo-fuzz`). cargo-fuzz wants nightly
 # flags; on a stable toolchain RUSTC_BOOTSTRAP=1 lets them through.
@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 seconds=${1:-600}
 shift || true
 targets=("$@")
-[ ${#targets[@]} -gt 0 ] || targets=(parse optimize)
+[ ${#targets[@]} -gt 0 ] || targets=(parse optimize write)
 command -v cargo-fuzz >/dev/null || { echo "cargo-fuzz not found: cargo install cargo-fuzz" >&2; exit 1; }
 export RUSTC_BOOTSTRAP=1
 
@@ -32,9 +32,10 @@ done
 for t in "${targets[@]}"; do
     echo "== fuzzing $t for $seconds s"
     # The optimize target skips inputs above 8 KiB; parse gets up to 64 KiB
-    # so that the line-length limit is reachable.
+    # so that the line-length limit is reachable; write, 16 KiB.
     max_len=8192
     [ "$t" = parse ] && max_len=70000
+    [ "$t" = write ] && max_len=16384
     cargo fuzz run "$t" "fuzz/corpus/$t" -- \
         -max_total_time="$seconds" -max_len="$max_len" -timeout=10 -rss_limit_mb=2048 \
         -print_final_stats=1

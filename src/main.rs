@@ -4,6 +4,8 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use pgo::gate::{DegeneratePolicy, GateMode};
+use pgo::io::console;
+use pgo::io::output::{CheckError, OutputError, check_files};
 use pgo::pipeline::{self, CandidateRule, OptimizeConfig};
 use pgo::robust::RobustMethod;
 use pgo::solve::init::Initialization;
@@ -12,6 +14,14 @@ use pgo::stats::DofConvention;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
+
+/// A line on stderr, best effort: printing never panics (see
+/// [`pgo::io::console`]).
+macro_rules! say {
+    ($($arg:tt)*) => {
+        console::err_line(format_args!($($arg)*))
+    };
+}
 
 /// Pose-graph optimisation with unsupervised loop-closure gating.
 #[derive(Parser, Debug)]
@@ -463,8 +473,12 @@ fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => {
-            let _ = e.print();
-            return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
+            return match e.print() {
+                Err(p) if p.kind() == std::io::ErrorKind::BrokenPipe => {
+                    ExitCode::from(console::BROKEN_PIPE_STATUS)
+                }
+                _ => ExitCode::from(if e.use_stderr() { 2 } else { 0 }),
+            };
         }
     };
     match cli.command {
@@ -475,34 +489,35 @@ fn main() -> ExitCode {
     }
 }
 
-/// The output must not be the input (through links or `..` too): only
-/// `--in-place` overwrites the input.
-fn refuse_to_overwrite_input(
-    input: &std::path::Path,
-    output: &std::path::Path,
-) -> Result<(), String> {
-    if pgo::io::same_file(input, output) {
-        Err(format!(
-            "{}: the output is the input file {}; pgo overwrites its input only with --in-place",
-            output.display(),
-            input.display()
-        ))
-    } else {
-        Ok(())
+/// The exit status after an output could not be written: 141, quietly, if
+/// it was stdout and its reader went away; else 1, with the message.
+fn output_failure(e: &OutputError) -> ExitCode {
+    if e.is_broken_pipe() {
+        return ExitCode::from(console::BROKEN_PIPE_STATUS);
     }
+    say!("error: {e}");
+    ExitCode::from(1)
+}
+
+/// Prints `text` and a newline on stdout; on failure, the exit status to
+/// end with (see [`console::stdout_failure`]).
+fn print_result(text: &str) -> Result<(), ExitCode> {
+    console::out_line(text).map_err(|e| ExitCode::from(console::stdout_failure(&e)))
 }
 
 fn corrupt(args: CorruptArgs) -> ExitCode {
     use pgo::graph::AnyPoseGraph;
     use pgo::simulate::CorruptionOptions;
-    if let Err(message) = refuse_to_overwrite_input(&args.input, &args.output) {
-        eprintln!("error: {message}");
+    let mut outputs = vec![("-o", args.output.as_path())];
+    outputs.extend(args.labels.as_deref().map(|l| ("--labels", l)));
+    if let Err(message) = check_files(&[&args.input], &outputs) {
+        say!("error: {message}");
         return ExitCode::from(2);
     }
     let mut file = match pgo::io::g2o::read(&args.input, Default::default()) {
         Ok(f) => f,
         Err(e) => {
-            eprintln!("error: {e}");
+            say!("error: {e}");
             return ExitCode::from(2);
         }
     };
@@ -522,14 +537,21 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
     };
     match result {
         Ok(message) => {
-            eprintln!("{message}");
+            say!("{message}");
             ExitCode::SUCCESS
         }
-        Err((code, message)) => {
-            eprintln!("error: {message}");
-            ExitCode::from(code)
+        Err(CorruptFailure::Output(e)) => output_failure(&e),
+        Err(CorruptFailure::Input(message)) => {
+            say!("error: {message}");
+            ExitCode::from(2)
         }
     }
+}
+
+/// Why `pgo corrupt` failed: its input (exit status 2) or an output.
+enum CorruptFailure {
+    Input(String),
+    Output(OutputError),
 }
 
 fn corrupt_graph<P, const D: usize>(
@@ -537,24 +559,23 @@ fn corrupt_graph<P, const D: usize>(
     missing: &[usize],
     options: &pgo::simulate::CorruptionOptions,
     args: &CorruptArgs,
-) -> Result<String, (u8, String)>
+) -> Result<String, CorruptFailure>
 where
     P: pgo::io::g2o::G2oPose<D>
         + pgo::solve::init::ChordalInit<D>
         + pgo::simulate::ErrorCoordinates<D>,
 {
-    use pgo::io::{g2o::write_graph, write_atomically};
+    use pgo::io::{g2o::write_graph, output};
     use rand::SeedableRng;
     pgo::solve::init::initialize(g, missing, Initialization::File, None)
-        .map_err(|e| (2, format!("{}: {e}", args.input.display())))?;
+        .map_err(|e| CorruptFailure::Input(format!("{}: {e}", args.input.display())))?;
     let mut rng = rand::rngs::StdRng::seed_from_u64(args.seed);
-    let corruption =
-        pgo::simulate::corrupt(g, options, &mut rng).map_err(|e| (2, e.to_string()))?;
-    write_atomically(&args.output, |w| write_graph(g, w))
-        .map_err(|e| (1, format!("{}: {e}", args.output.display())))?;
+    let corruption = pgo::simulate::corrupt(g, options, &mut rng)
+        .map_err(|e| CorruptFailure::Input(e.to_string()))?;
+    output::write(&args.output, |w| write_graph(g, w)).map_err(CorruptFailure::Output)?;
     if let Some(l) = &args.labels {
-        write_atomically(l, |w| pgo::simulate::write_labels(g, &corruption.wrong, w))
-            .map_err(|e| (1, format!("{}: {e}", l.display())))?;
+        output::write(l, |w| pgo::simulate::write_labels(g, &corruption.wrong, w))
+            .map_err(CorruptFailure::Output)?;
     }
     Ok(format!(
         "wrote {}: {} true loop candidates with counts, {} wrong candidates",
@@ -585,44 +606,43 @@ fn simulate(args: SimulateArgs) -> ExitCode {
         inliers: (args.inliers || args.placement.counts_given())
             .then(|| args.placement.inlier_model()),
     };
+    let mut outputs = vec![("-o", args.output.as_path())];
+    outputs.extend(args.truth.as_deref().map(|t| ("--truth", t)));
+    outputs.extend(args.labels.as_deref().map(|l| ("--labels", l)));
+    if let Err(message) = check_files(&[], &outputs) {
+        say!("error: {message}");
+        return ExitCode::from(2);
+    }
     let result = match simulate::simulate(&options) {
         Ok(AnySimulation::Planar(s)) => write_simulation(&s, &args),
         Ok(AnySimulation::Spatial(s)) => write_simulation(&s, &args),
         Err(e) => {
-            eprintln!("error: {e}");
+            say!("error: {e}");
             return ExitCode::from(2);
         }
     };
     match result {
         Ok(summary) => {
-            eprintln!("{summary}");
+            say!("{summary}");
             ExitCode::SUCCESS
         }
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(1)
-        }
+        Err(e) => output_failure(&e),
     }
 }
 
 fn write_simulation<P: pgo::io::g2o::G2oPose<D>, const D: usize>(
     sim: &pgo::simulate::Simulation<P, D>,
     args: &SimulateArgs,
-) -> Result<String, String> {
-    use pgo::io::{g2o::write_graph, write_atomically};
-    let write = |path: &PathBuf, g: &pgo::graph::PoseGraph<P, D>| {
-        write_atomically(path, |w| write_graph(g, w))
-            .map_err(|e| format!("{}: {e}", path.display()))
-    };
-    write(&args.output, &sim.noisy)?;
+) -> Result<String, OutputError> {
+    use pgo::io::{g2o::write_graph, output};
+    output::write(&args.output, |w| write_graph(&sim.noisy, w))?;
     if let Some(t) = &args.truth {
-        write(t, &sim.truth)?;
+        output::write(t, |w| write_graph(&sim.truth, w))?;
     }
     if let Some(l) = &args.labels {
-        write_atomically(l, |w| {
+        output::write(l, |w| {
             pgo::simulate::write_labels(&sim.noisy, &sim.wrong, w)
-        })
-        .map_err(|e| format!("{}: {e}", l.display()))?;
+        })?;
     }
     Ok(format!(
         "wrote {}: {} poses, {} edges, {} loop candidates ({} wrong)",
@@ -638,16 +658,20 @@ fn gate(args: GateArgs) -> ExitCode {
     let counts = match read_counts(args.counts.as_deref()) {
         Ok(c) => c,
         Err(message) => {
-            eprintln!("error: {message}");
+            say!("error: {message}");
             return ExitCode::from(2);
         }
     };
     let fit = pgo::gate::learn_threshold(&counts, &pgo::gate::MixtureOptions::default());
     if args.json {
         match serde_json::to_string_pretty(&fit) {
-            Ok(text) => println!("{text}"),
+            Ok(text) => {
+                if let Err(code) = print_result(&text) {
+                    return code;
+                }
+            }
             Err(e) => {
-                eprintln!("error: cannot serialise the fit: {e}");
+                say!("error: cannot serialise the fit: {e}");
                 return ExitCode::from(1);
             }
         }
@@ -655,20 +679,26 @@ fn gate(args: GateArgs) -> ExitCode {
     match (&fit.degeneracy, &fit.threshold) {
         (None, Some(t)) => {
             if !args.json {
-                println!("{}", t.count);
+                if let Err(code) = print_result(&t.count.to_string()) {
+                    return code;
+                }
             }
-            eprintln!(
+            say!(
                 "T_GV = {:.3} inliers (v_T = {:.4} of max {}); {} counts, {} zero",
-                t.count, t.normalized, t.max_count, fit.total_counts, fit.zero_counts
+                t.count,
+                t.normalized,
+                t.max_count,
+                fit.total_counts,
+                fit.zero_counts
             );
             ExitCode::SUCCESS
         }
         (Some(reason), _) => {
-            eprintln!("degenerate: {reason}");
+            say!("degenerate: {reason}");
             ExitCode::from(1)
         }
         (None, None) => {
-            eprintln!("degenerate: no threshold");
+            say!("degenerate: no threshold");
             ExitCode::from(1)
         }
     }
@@ -715,11 +745,9 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
             .num_threads(args.threads)
             .build_global();
     }
-    if let Some(out) = &args.output {
-        if let Err(message) = refuse_to_overwrite_input(&args.input, out) {
-            eprintln!("error: {message}");
-            return ExitCode::from(2);
-        }
+    if let Err(message) = check_optimize_files(&args) {
+        say!("error: {message}");
+        return ExitCode::from(2);
     }
     let mut config = OptimizeConfig::new(&args.input);
     config.output = if args.in_place {
@@ -775,7 +803,7 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
     config.solver.threads = args.threads;
     if let Some(t) = args.time_limit {
         if !(t >= 0.0 && t.is_finite()) {
-            eprintln!("error: --time-limit must be a non-negative number of seconds");
+            say!("error: --time-limit must be a non-negative number of seconds");
             return ExitCode::from(2);
         }
         config.solver.time_limit = Some(Duration::from_secs_f64(t));
@@ -783,31 +811,68 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
     let verbose = args.verbose && !args.quiet;
     let mut observer = |r: &IterationRecord| {
         if verbose {
-            eprintln!(
+            say!(
                 "iteration {:>3}: χ² {:.10e}  λ {:.1e}  rejected {}  |δ|∞ {:.2e}",
-                r.iteration, r.objective, r.lambda, r.rejected, r.step_max
+                r.iteration,
+                r.objective,
+                r.lambda,
+                r.rejected,
+                r.step_max
             );
         }
     };
     match pipeline::run(&config, &mut observer) {
         Ok(report) => {
             if !args.quiet {
-                eprint!("{}", report.human_summary());
+                console::err(format_args!("{}", report.human_summary()));
             }
             if args.json {
                 match serde_json::to_string_pretty(&report) {
-                    Ok(text) => println!("{text}"),
+                    Ok(text) => {
+                        if let Err(code) = print_result(&text) {
+                            return code;
+                        }
+                    }
                     Err(e) => {
-                        eprintln!("error: cannot serialise the report: {e}");
+                        say!("error: cannot serialise the report: {e}");
                         return ExitCode::from(1);
                     }
                 }
             }
             ExitCode::SUCCESS
         }
+        // `-o -`: a reader that went away (141, quietly), or a full stdout.
+        Err(pipeline::PipelineError::Write { path, source }) if path.as_os_str() == "-" => {
+            ExitCode::from(console::stdout_failure(&source))
+        }
         Err(e) => {
-            eprintln!("error: {e}");
+            say!("error: {e}");
             ExitCode::from(e.exit_code() as u8)
         }
     }
+}
+
+/// [`check_files`] for `pgo optimize`: the input (`-`: stdin) and
+/// `--inliers` are read; `-o` is written, or with `--in-place` the input
+/// itself (which must then be a file), and `-o -` leaves stdout to the
+/// graph (no `--json`).
+fn check_optimize_files(args: &OptimizeArgs) -> Result<(), String> {
+    let mut inputs = vec![args.input.as_path()];
+    inputs.extend(args.inliers.as_deref());
+    let checked: Result<(), CheckError> = if args.in_place {
+        if args.input.as_os_str() == "-" {
+            return Err("--in-place needs an input file, not stdin (-)".into());
+        }
+        check_files(&inputs[1..], &[("--in-place", &args.input)])
+            .and_then(|_| check_files(&inputs, &[]))
+    } else {
+        match &args.output {
+            Some(o) if args.json && o.as_os_str() == "-" => {
+                return Err("-o - and --json both write to stdout: give -o a file".into());
+            }
+            Some(o) => check_files(&inputs, &[("-o", o)]),
+            None => check_files(&inputs, &[]),
+        }
+    };
+    checked.map_err(|e| e.to_string())
 }

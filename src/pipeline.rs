@@ -802,8 +802,10 @@ fn chi2_test<P: G2oPose<D>, const D: usize>(
 }
 
 fn write_output(file: &G2oFile, out: &Path) -> Result<(), PipelineError> {
-    crate::io::write_atomically(out, |w| file.write(w)).map_err(|source| PipelineError::Write {
-        path: out.to_owned(),
-        source,
+    crate::io::write_atomically(out, |w| Ok(file.rewrite(w)?)).map_err(|source| {
+        PipelineError::Write {
+            path: out.to_owned(),
+            source,
+        }
     })
 }

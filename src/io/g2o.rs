@@ -28,7 +28,17 @@
 //!   caller can initialise them (see [`crate::solve::init`]).
 //! * Lines longer than [`MAX_LINE_BYTES`] are rejected, and the file is read
 //!   line by line, never whole.
+//! * Two writers: [`G2oFile::rewrite`] writes the input's own text back with
+//!   the new poses (every other byte kept: comments, unknown tags, landmark
+//!   lines, line ends; see [`rewrite`]), which is what `pgo optimize -o`
+//!   and `--in-place` do; [`G2oFile::write`] and [`write_graph`] write the
+//!   model alone, in pgo's own layout.
 
+mod rewrite;
+
+pub use rewrite::RewriteError;
+
+use super::source::{Fingerprint, Fingerprinter, Input, Original};
 use super::{LineError, LineReader};
 use crate::geometry::{Pose, Se2, Se3};
 use crate::graph::{
@@ -40,6 +50,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// The longest line the reader accepts, in bytes.
 pub const MAX_LINE_BYTES: usize = 1 << 16;
@@ -253,6 +264,13 @@ pub struct G2oFile {
     records: Vec<Record>,
     /// Original text of mixture edges, by edge index (written back as read).
     mixture_lines: HashMap<usize, String>,
+    /// The input's name in messages.
+    name: PathBuf,
+    /// What the text that was parsed looked like.
+    fingerprint: Fingerprint,
+    /// The text, to be read again for [`G2oFile::rewrite`] (`None` when it
+    /// was read from memory by [`read_from`]).
+    original: Option<Arc<Original>>,
 }
 
 /// The g2o tags and pose syntax of one pose type.
@@ -317,18 +335,35 @@ fn push_numbers(out: &mut String, values: &[f64]) {
     }
 }
 
-/// Reads a g2o file.
+/// Reads a g2o file; `-` reads stdin (named `<stdin>` in messages). The
+/// text stays available to [`G2oFile::rewrite`] (see [`super::source`]):
+/// a regular file stays open, anything else is copied as it is read.
 pub fn read(path: &Path, options: ReadOptions) -> Result<G2oFile, ReadError> {
-    let file = std::fs::File::open(path).map_err(|source| ReadError::Io {
+    let input = Input::open(path).map_err(|source| ReadError::Io {
         path: path.to_owned(),
         source,
     })?;
-    read_from(file, path, options)
+    let name = input.name().to_owned();
+    let mut lines = LineReader::new(input, MAX_LINE_BYTES);
+    let mut file = parse(&mut lines, &name, options)?;
+    file.original = Some(Arc::new(lines.into_inner().into_original()));
+    Ok(file)
 }
 
-/// Reads g2o text from any reader; `path` is only used in messages.
+/// Reads g2o text from any reader; `path` is only used in messages. The
+/// text is not kept: write the result with [`G2oFile::rewrite_from`] (given
+/// the same text again) or [`G2oFile::write`].
 pub fn read_from<R: Read>(
     reader: R,
+    path: &Path,
+    options: ReadOptions,
+) -> Result<G2oFile, ReadError> {
+    parse(&mut LineReader::new(reader, MAX_LINE_BYTES), path, options)
+}
+
+/// Parses the lines of `lines` to the end, fingerprinting them.
+fn parse<R: Read>(
+    lines: &mut LineReader<R>,
     path: &Path,
     options: ReadOptions,
 ) -> Result<G2oFile, ReadError> {
@@ -339,9 +374,9 @@ pub fn read_from<R: Read>(
         summary: ReadSummary::default(),
         lines: 0,
     };
-    let mut lines = LineReader::new(reader, MAX_LINE_BYTES);
-    while let Some((line_no, text)) = lines.next_line() {
-        let text = text.map_err(|e| match e {
+    let mut fingerprint = Fingerprinter::default();
+    while let Some((line_no, line)) = lines.next_raw() {
+        let line = line.map_err(|e| match e {
             LineError::Io(source) => ReadError::Io {
                 path: path.to_owned(),
                 source,
@@ -354,10 +389,14 @@ pub fn read_from<R: Read>(
             ),
             LineError::NotText => parser.error(line_no, LineProblem::NotText),
         })?;
+        fingerprint.add(line.raw);
         parser.lines = line_no;
-        parser.line(line_no, text)?;
+        parser.line(line_no, line.text)?;
     }
-    parser.finish()
+    let mut file = parser.finish()?;
+    file.name = path.to_owned();
+    file.fingerprint = fingerprint.finish();
+    Ok(file)
 }
 
 enum State {
@@ -734,6 +773,9 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
             summary,
             records: self.records,
             mixture_lines: self.mixture_lines,
+            name: PathBuf::new(),
+            fingerprint: Fingerprint::default(),
+            original: None,
         })
     }
 }
@@ -799,9 +841,12 @@ fn min_eigenvalue<const D: usize>(m: &SMatrix<f64, D, D>) -> f64 {
 }
 
 impl G2oFile {
-    /// Writes the file back: the same tags, edge order and inlier counts,
-    /// with the graph's current vertex estimates. Vertices that no line
-    /// defined are written first, in index order. Numbers use the shortest
+    /// Writes the model back in pgo's own layout: the same tags, edge order
+    /// and inlier counts, with the graph's current vertex estimates; lines
+    /// pgo does not model (comments, unknown tags) are not written, and
+    /// numbers are reformatted. (To write the input's own text with the new
+    /// poses, use [`G2oFile::rewrite`].) Vertices that no line defined are
+    /// written first, in index order. Numbers use the shortest
     /// representation that reads back to the same bits, so read → write →
     /// read gives the same graph.
     pub fn write(&self, out: &mut impl Write) -> io::Result<()> {

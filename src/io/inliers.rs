@@ -69,14 +69,26 @@ fn line_error(path: &Path, line: usize, e: LineError) -> InlierCsvError {
     }
 }
 
-/// Reads `from,to,inliers` rows. Blank lines and `#` lines are skipped; a
-/// first line that does not start with a number is taken as a header.
+/// Reads `from,to,inliers` rows from the file `path` (`-`: stdin, named
+/// `<stdin>` in messages). Blank lines and `#` lines are skipped; a first
+/// line that does not start with a number is taken as a header.
 pub fn read_csv(path: &Path) -> Result<Vec<InlierRow>, InlierCsvError> {
-    let io_err = |source| InlierCsvError::Io {
+    if path.as_os_str() == "-" {
+        return read_csv_from(io::stdin().lock(), Path::new(super::source::STDIN_NAME));
+    }
+    let file = std::fs::File::open(path).map_err(|source| InlierCsvError::Io {
         path: path.to_owned(),
         source,
-    };
-    let mut lines = LineReader::new(std::fs::File::open(path).map_err(io_err)?, MAX_LINE_BYTES);
+    })?;
+    read_csv_from(file, path)
+}
+
+/// [`read_csv`] from any reader; `path` is only used in messages.
+pub fn read_csv_from<R: io::Read>(
+    reader: R,
+    path: &Path,
+) -> Result<Vec<InlierRow>, InlierCsvError> {
+    let mut lines = LineReader::new(reader, MAX_LINE_BYTES);
     let mut rows = Vec::new();
     while let Some((line_no, line)) = lines.next_line() {
         let text = line.map_err(|e| line_error(path, line_no, e))?.trim();

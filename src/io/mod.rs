@@ -1,15 +1,20 @@
 //! Reading and writing pose graphs: the g2o format (with the inlier-count
-//! annotation of loop candidates), inlier counts kept in a CSV beside it, and
-//! atomic file replacement.
+//! annotation of loop candidates), inlier counts kept in a CSV beside it,
+//! the input's text kept for rewriting ([`source`]), the one place that
+//! opens output files ([`output`]), and fallible printing for the command
+//! line ([`console`]).
 
+pub mod console;
 pub mod g2o;
 pub mod inliers;
+pub mod output;
 #[cfg(test)]
 mod roundtrip_tests;
+pub mod source;
 
-use std::fs::{self, File};
-use std::io::{self, BufRead, BufReader, BufWriter, Read, Write};
-use std::path::{Path, PathBuf};
+use std::fs;
+use std::io::{self, BufRead, BufReader, Read};
+use std::path::Path;
 
 /// Why a line of text could not be had.
 #[derive(Debug)]
@@ -22,11 +27,20 @@ pub(crate) enum LineError {
     NotText,
 }
 
+/// One line as read: its bytes exactly as in the input (a byte-order mark
+/// and the line end included), and its text (without the byte-order mark).
+pub(crate) struct RawLine<'a> {
+    /// The bytes of the line, as in the input.
+    pub raw: &'a [u8],
+    /// The line as text: `raw` without a leading byte-order mark.
+    pub text: &'a str,
+}
+
 /// Reads text one line at a time, holding at most one line (of at most
 /// `limit` bytes) in memory: memory stays bounded whatever the input, and a
 /// line that is too long or not UTF-8 is reported with its number. A UTF-8
-/// byte-order mark at the start of the first line is dropped; the line end
-/// (`\n` or `\r\n`) is part of the returned text.
+/// byte-order mark at the start of the first line is dropped from the text
+/// (kept in the raw bytes); the line end (`\n` or `\r\n`) is part of both.
 pub(crate) struct LineReader<R> {
     reader: BufReader<R>,
     buf: Vec<u8>,
@@ -46,6 +60,12 @@ impl<R: Read> LineReader<R> {
 
     /// The next line and its 1-based number, `None` at the end of the input.
     pub(crate) fn next_line(&mut self) -> Option<(usize, Result<&str, LineError>)> {
+        self.next_raw().map(|(n, line)| (n, line.map(|l| l.text)))
+    }
+
+    /// The next line, its bytes and its text, with its 1-based number;
+    /// `None` at the end of the input.
+    pub(crate) fn next_raw(&mut self) -> Option<(usize, Result<RawLine<'_>, LineError>)> {
         self.buf.clear();
         self.line += 1;
         let read = (&mut self.reader)
@@ -63,15 +83,25 @@ impl<R: Read> LineReader<R> {
             (1, Some(rest)) => rest,
             _ => &self.buf[..],
         };
-        Some((
-            self.line,
-            std::str::from_utf8(bytes).map_err(|_| LineError::NotText),
-        ))
+        let line = std::str::from_utf8(bytes)
+            .map(|text| RawLine {
+                raw: &self.buf,
+                text,
+            })
+            .map_err(|_| LineError::NotText);
+        Some((self.line, line))
+    }
+
+    /// The reader underneath (what it had buffered but not returned is
+    /// lost: call this at the end of the input).
+    pub(crate) fn into_inner(self) -> R {
+        self.reader.into_inner()
     }
 }
 
 /// Whether `a` and `b` name the same existing file (through links, `.` and
-/// `..` too). False when either does not exist.
+/// `..` too). False when either does not exist. (For outputs, which may not
+/// exist yet, see [`output::Target::same_as`].)
 pub fn same_file(a: &Path, b: &Path) -> bool {
     match (fs::canonicalize(a), fs::canonicalize(b)) {
         (Ok(x), Ok(y)) => x == y,
@@ -79,106 +109,27 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
-/// Writes a file atomically: the content goes to a temporary file in the
-/// same directory (`.NAME.pgo-tmp-PID`), which is flushed, synced to disk
-/// (`fsync`) and then renamed over `path`; the directory is synced after the
-/// rename so that the rename itself survives a crash. A failure at any point
-/// leaves `path` as it was (and removes the temporary file), so a reader sees
-/// either the old file or the complete new one, never a half-written one.
-///
-/// A process killed before the rename cannot remove its temporary file; the
-/// next write to the same `path` removes such leftovers of processes that no
-/// longer exist (on systems with `/proc`). An existing `path` keeps its
-/// permissions.
+/// Writes an output file by the rules of [`output`] (atomic replacement of
+/// a regular file, `-` for stdout, links followed, devices refused): the
+/// same as [`output::write`], with the problem as an [`io::Error`] of the
+/// same kind that does not repeat the path (callers that name the path
+/// themselves use this one).
 ///
 /// ```
-/// let dir = std::env::temp_dir().join(format!("pgo-doc-{}", std::process::id()));
-/// std::fs::create_dir_all(&dir).unwrap();
-/// let path = dir.join("out.txt");
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("out.txt");
 /// pgo::io::write_atomically(&path, |w| {
 ///     use std::io::Write;
 ///     writeln!(w, "hello")
 /// })
 /// .unwrap();
 /// assert_eq!(std::fs::read_to_string(&path).unwrap(), "hello\n");
-/// # std::fs::remove_dir_all(&dir).unwrap();
 /// ```
 pub fn write_atomically<F>(path: &Path, write: F) -> io::Result<()>
 where
-    F: FnOnce(&mut BufWriter<File>) -> io::Result<()>,
+    F: FnOnce(&mut output::Sink<'_>) -> io::Result<()>,
 {
-    let temp = temporary_path(path);
-    remove_stale_temporaries(path);
-    let result = (|| {
-        let file = File::create(&temp)?;
-        if let Ok(old) = fs::metadata(path) {
-            file.set_permissions(old.permissions())?;
-        }
-        let mut writer = BufWriter::with_capacity(1 << 20, file);
-        write(&mut writer)?;
-        writer.flush()?;
-        let file = writer.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        drop(file);
-        fs::rename(&temp, path)?;
-        // Make the rename itself durable.
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            if let Ok(d) = File::open(dir) {
-                let _ = d.sync_all();
-            }
-        }
-        Ok(())
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&temp);
-    }
-    result
-}
-
-/// The prefix of the temporary files of `path`: `.NAME.pgo-tmp-`.
-fn temporary_prefix(path: &Path) -> String {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".into());
-    format!(".{name}.pgo-tmp-")
-}
-
-/// `dir/.NAME.pgo-tmp-PID` beside `path`.
-fn temporary_path(path: &Path) -> PathBuf {
-    path.with_file_name(format!("{}{}", temporary_prefix(path), std::process::id()))
-}
-
-/// Removes the temporary files of `path` left by killed processes: those
-/// whose process id no longer exists. Only where `/proc` tells which
-/// processes exist; errors are ignored (a leftover is harmless: it is never
-/// read).
-fn remove_stale_temporaries(path: &Path) {
-    let proc = Path::new("/proc");
-    if !proc.join("self").exists() {
-        return;
-    }
-    let prefix = temporary_prefix(path);
-    let dir = match path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        Some(d) => d.to_owned(),
-        None => PathBuf::from("."),
-    };
-    let Ok(entries) = fs::read_dir(&dir) else {
-        return;
-    };
-    for entry in entries.flatten() {
-        let name = entry.file_name();
-        let Some(pid) = name
-            .to_str()
-            .and_then(|n| n.strip_prefix(prefix.as_str()))
-            .and_then(|p| p.parse::<u32>().ok())
-        else {
-            continue;
-        };
-        if pid != std::process::id() && !proc.join(pid.to_string()).exists() {
-            let _ = fs::remove_file(entry.path());
-        }
-    }
+    output::write(path, write).map_err(output::OutputError::into_io)
 }
 
 #[cfg(test)]
@@ -186,53 +137,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn failed_write_leaves_the_old_file_and_no_temporary() {
-        let dir = std::env::temp_dir().join(format!("pgo-atomic-{}", std::process::id()));
-        fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("graph.g2o");
-        fs::write(&path, "old").unwrap();
-        let err = write_atomically(&path, |w| {
-            w.write_all(b"partial")?;
-            Err(io::Error::other("interrupted"))
-        });
-        assert!(err.is_err());
-        assert_eq!(fs::read_to_string(&path).unwrap(), "old");
-        let leftovers: Vec<_> = fs::read_dir(&dir).unwrap().collect();
-        assert_eq!(leftovers.len(), 1, "temporary file left behind");
-        write_atomically(&path, |w| w.write_all(b"new")).unwrap();
-        assert_eq!(fs::read_to_string(&path).unwrap(), "new");
-        fs::remove_dir_all(&dir).unwrap();
-    }
-
-    #[test]
-    #[cfg(target_os = "linux")]
-    fn leftovers_of_dead_processes_are_removed_and_permissions_kept() {
-        use std::os::unix::fs::PermissionsExt;
-        let dir = std::env::temp_dir().join(format!("pgo-stale-{}", std::process::id()));
-        fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("graph.g2o");
-        fs::write(&path, "old").unwrap();
-        fs::set_permissions(&path, fs::Permissions::from_mode(0o640)).unwrap();
-        // A process id above the kernel's maximum (4194304) never exists.
-        let dead = dir.join(".graph.g2o.pgo-tmp-4294967");
-        // Our own parent is alive: its leftover-looking file stays.
-        let alive = dir.join(format!(
-            ".graph.g2o.pgo-tmp-{}",
-            std::os::unix::process::parent_id()
-        ));
-        let other = dir.join(".other.g2o.pgo-tmp-4294967");
-        for p in [&dead, &alive, &other] {
-            fs::write(p, "partial").unwrap();
-        }
-        write_atomically(&path, |w| w.write_all(b"new")).unwrap();
-        assert_eq!(fs::read_to_string(&path).unwrap(), "new");
-        assert_eq!(
-            fs::metadata(&path).unwrap().permissions().mode() & 0o777,
-            0o640
-        );
-        assert!(!dead.exists());
-        assert!(alive.exists() && other.exists());
-        fs::remove_dir_all(&dir).unwrap();
+    fn raw_lines_keep_the_byte_order_mark_and_the_line_end() {
+        let text: &[u8] = b"\xEF\xBB\xBFa b\r\n\xEF\xBB\xBFc";
+        let mut r = LineReader::new(text, 16);
+        let (n, line) = r.next_raw().unwrap();
+        let line = line.unwrap();
+        assert_eq!((n, line.raw, line.text), (1, &text[..8], "a b\r\n"));
+        // Only the first line's mark is one: later it is text.
+        let (n, line) = r.next_raw().unwrap();
+        let line = line.unwrap();
+        assert_eq!((n, line.raw, line.text), (2, &text[8..], "\u{feff}c"));
+        assert!(r.next_raw().is_none());
     }
 
     #[test]

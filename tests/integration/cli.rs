@@ -245,3 +245,167 @@ fn plot_writes_the_count_histogram_and_the_trajectory() {
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(r["plots"].as_array().unwrap().len(), 1);
 }
+
+/// Runs `pgo ARGS` with `input` on stdin; kills it after 60 s.
+fn pgo_stdin(args: &[&str], input: &[u8]) -> std::process::Output {
+    use std::io::Write;
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_pgo"))
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let input = input.to_vec();
+    let feeder = std::thread::spawn(move || stdin.write_all(&input));
+    let out = child.wait_with_output().unwrap();
+    let _ = feeder.join();
+    out
+}
+
+const NOTED: &str = "# noted\r\nVERTEX_SE2 0 0 0 0\r\nVERTEX_SE2 1 1.2 0 0\r\nVERTEX_XY 7 1 1\r\n\
+EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\r\nEDGE_SE2_XY 1 7 0 1 1 0 1\r\n";
+
+#[test]
+fn dash_reads_stdin_and_writes_stdout_with_every_line_kept() {
+    let dir = temp_dir("dash");
+    let input = write(&dir, "noted.g2o", NOTED);
+    let i = input.to_str().unwrap();
+    let file_out = dir.join("out.g2o");
+    let out = pgo(&["optimize", i, "-q", "-o", file_out.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let expected = std::fs::read_to_string(&file_out).unwrap();
+    assert!(
+        expected.contains("VERTEX_XY 7 1 1\r\nEDGE_SE2 0 1 "),
+        "{expected}"
+    );
+    // -o -: the same text on stdout.
+    let out = pgo(&["optimize", i, "-q", "-o", "-"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert_eq!(String::from_utf8(out.stdout).unwrap(), expected);
+    // An input of -: stdin, copied to be rewritten.
+    let piped = dir.join("piped.g2o");
+    let out = pgo_stdin(
+        &["optimize", "-", "-q", "-o", piped.to_str().unwrap()],
+        NOTED.as_bytes(),
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert_eq!(std::fs::read_to_string(&piped).unwrap(), expected);
+    // Both: a filter.
+    let out = pgo_stdin(&["optimize", "-", "-q", "-o", "-"], NOTED.as_bytes());
+    assert_eq!(String::from_utf8(out.stdout).unwrap(), expected);
+    // Errors in stdin are named <stdin>.
+    let out = pgo_stdin(&["optimize", "-"], b"VERTEX_SE2 0 0 0\n");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("<stdin>:1: VERTEX_SE2 needs 5 tokens"),
+        "{}",
+        stderr(&out)
+    );
+    // simulate and corrupt write to - too; gate and --inliers read it.
+    let out = pgo(&["simulate", "--poses", "20", "--loops", "3", "-o", "-"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(
+        String::from_utf8(out.stdout)
+            .unwrap()
+            .starts_with("VERTEX_SE2 0 ")
+    );
+    let clean = std::fs::read(sample("grid2d_clean.g2o")).unwrap();
+    let out = pgo_stdin(&["corrupt", "-", "--wrong", "1", "-o", "-"], &clean);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(String::from_utf8(out.stdout).unwrap().contains("EDGE_SE2 "));
+    let square = write(&dir, "square.g2o", &SQUARE.replace(" 57\n", "\n"));
+    let out = pgo_stdin(
+        &[
+            "optimize",
+            square.to_str().unwrap(),
+            "--inliers",
+            "-",
+            "--json",
+            "-q",
+        ],
+        b"from,to,inliers\n3,0,99\n",
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r["loop_candidates"], 1);
+}
+
+#[test]
+fn dash_misuses_are_usage_errors_before_reading() {
+    let dir = temp_dir("dash-misuse");
+    let input = write(&dir, "g.g2o", NOTED);
+    let i = input.to_str().unwrap();
+    for (args, problem) in [
+        (
+            vec!["optimize", i, "-o", "-", "--json"],
+            "-o - and --json both write to stdout",
+        ),
+        (
+            vec!["optimize", "-", "--in-place"],
+            "--in-place needs an input file, not stdin",
+        ),
+        (
+            vec!["optimize", "-", "--inliers", "-"],
+            "stdin (-) can be read only once",
+        ),
+    ] {
+        let out = pgo_stdin(&args, NOTED.as_bytes());
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(stderr(&out).contains(problem), "{args:?}: {}", stderr(&out));
+        assert!(out.stdout.is_empty());
+    }
+    assert_eq!(std::fs::read_to_string(&input).unwrap(), NOTED);
+}
+
+#[test]
+#[cfg(unix)]
+fn a_fifo_input_is_read_once_and_rewritten_from_a_copy() {
+    let dir = temp_dir("fifo-input");
+    let fifo = dir.join("graph.fifo");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    if !made.is_ok_and(|s| s.success()) {
+        eprintln!("skipped: mkfifo unavailable");
+        return;
+    }
+    let writer = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::write(fifo, NOTED))
+    };
+    let output = dir.join("out.g2o");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_pgo"))
+        .args([
+            "optimize",
+            fifo.to_str().unwrap(),
+            "-q",
+            "-o",
+            output.to_str().unwrap(),
+        ])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while child.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("pgo waited on the FIFO");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let done = child.wait_with_output().unwrap();
+    writer.join().unwrap().unwrap();
+    assert_eq!(
+        done.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&done.stderr)
+    );
+    let text = std::fs::read_to_string(&output).unwrap();
+    assert!(
+        text.starts_with("# noted\r\nVERTEX_SE2 0 0 0 0\r\n"),
+        "{text}"
+    );
+    assert!(text.contains("VERTEX_XY 7 1 1\r\n"), "{text}");
+}

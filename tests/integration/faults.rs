@@ -2,7 +2,9 @@
 //! step with a non-finite χ² is never taken, overflowing or singular
 //! problems are named errors, and `--max-iters` / `--time-limit` stop the
 //! whole optimisation (robust rounds included) with the best estimate so far
-//! written and the stop reason in the report.
+//! written and the stop reason in the report. I/O faults: a reader that goes
+//! away (exit 141, quietly), a full or closed stdout or stderr, a full disk
+//! (the old output kept, the error naming it): never a panic.
 
 use crate::common::{pgo, sample, stderr, temp_dir, write};
 use nalgebra::Matrix3;
@@ -270,4 +272,198 @@ proptest! {
             Err(e) => prop_assert!(false, "unexpected error {e}"),
         }
     }
+}
+
+/// Runs `pgo ARGS` with stdout and stderr as given; stdin empty.
+fn run_with(
+    args: &[&str],
+    stdout: std::process::Stdio,
+    stderr: std::process::Stdio,
+) -> std::process::Child {
+    std::process::Command::new(env!("CARGO_BIN_EXE_pgo"))
+        .args(args)
+        .stdin(std::process::Stdio::null())
+        .stdout(stdout)
+        .stderr(stderr)
+        .spawn()
+        .expect("start pgo")
+}
+
+fn no_panic(err: &str, status: Option<i32>, what: &str) {
+    assert_ne!(status, Some(101), "{what}: {err}");
+    assert!(!err.contains("panicked"), "{what}: {err}");
+}
+
+#[test]
+fn a_reader_that_goes_away_ends_the_run_quietly_with_status_141() {
+    use std::process::Stdio;
+    let dir = temp_dir("faults-broken-pipe");
+    let out = dir.join("out.g2o");
+    let graph = sample("grid2d.g2o");
+    let o = out.to_str().expect("utf-8");
+    for args in [
+        vec!["optimize", graph.as_str(), "--json", "-o", o],
+        vec!["optimize", graph.as_str(), "-o", "-"],
+        vec!["gate", graph.as_str()],
+        vec!["gate", graph.as_str(), "--json"],
+        vec!["simulate", "--poses", "200", "--loops", "20", "-o", "-"],
+        vec!["--help"],
+    ] {
+        let _ = std::fs::remove_file(&out);
+        let mut child = run_with(&args, Stdio::piped(), Stdio::piped());
+        // The reader goes away before pgo writes anything.
+        drop(child.stdout.take());
+        let done = child.wait_with_output().expect("wait");
+        let err = String::from_utf8_lossy(&done.stderr).into_owned();
+        no_panic(&err, done.status.code(), &format!("{args:?}"));
+        assert_eq!(done.status.code(), Some(141), "{args:?}: {err}");
+        assert!(!err.contains("error"), "{args:?}: not quiet: {err}");
+        if args.contains(&"--json") && args[0] == "optimize" {
+            // The report came last: the graph was written before it.
+            assert!(out.is_file(), "{args:?}");
+        }
+    }
+}
+
+#[test]
+#[cfg(target_os = "linux")]
+fn a_full_stdout_is_an_error_naming_stdout_and_a_full_stderr_is_ignored() {
+    use std::process::Stdio;
+    let full = || std::fs::OpenOptions::new().write(true).open("/dev/full");
+    if full().is_err() {
+        eprintln!("skipped: no /dev/full");
+        return;
+    }
+    let dir = temp_dir("faults-dev-full");
+    let out = dir.join("out.g2o");
+    let o = out.to_str().expect("utf-8");
+    let graph = sample("grid2d.g2o");
+    // stdout full: exit status 1 and a message; the output file is complete.
+    for args in [
+        vec!["optimize", graph.as_str(), "--json", "-o", o],
+        vec!["gate", graph.as_str()],
+        vec!["optimize", graph.as_str(), "-o", "-"],
+    ] {
+        let child = run_with(&args, Stdio::from(full().expect("full")), Stdio::piped());
+        let done = child.wait_with_output().expect("wait");
+        let err = String::from_utf8_lossy(&done.stderr).into_owned();
+        no_panic(&err, done.status.code(), &format!("{args:?}"));
+        assert_eq!(done.status.code(), Some(1), "{args:?}: {err}");
+        assert!(
+            err.contains("stdout: No space left on device"),
+            "{args:?}: {err}"
+        );
+    }
+    assert!(out.is_file());
+    // stderr full (the summary, -v's iterations): ignored, the run succeeds.
+    let _ = std::fs::remove_file(&out);
+    let child = run_with(
+        &["optimize", graph.as_str(), "-v", "-o", o],
+        Stdio::null(),
+        Stdio::from(full().expect("full")),
+    );
+    let done = child.wait_with_output().expect("wait");
+    assert_eq!(done.status.code(), Some(0));
+    assert!(out.is_file());
+    // A failing run with stderr full still fails with its status.
+    let child = run_with(
+        &["optimize", "/nonexistent.g2o"],
+        Stdio::null(),
+        Stdio::from(full().expect("full")),
+    );
+    assert_eq!(
+        child.wait_with_output().expect("wait").status.code(),
+        Some(2)
+    );
+}
+
+#[test]
+#[cfg(unix)]
+fn closed_stdout_and_stderr_do_not_panic_or_catch_other_files() {
+    let dir = temp_dir("faults-closed");
+    let out = dir.join("out.g2o");
+    let graph = sample("grid2d.g2o");
+    let script = format!(
+        "exec \"$0\" optimize '{}' --json -v -o '{}' >&- 2>&-",
+        graph,
+        out.display()
+    );
+    let done = std::process::Command::new("sh")
+        .args(["-c", &script, env!("CARGO_BIN_EXE_pgo")])
+        .output()
+        .expect("sh");
+    assert_eq!(done.status.code(), Some(0), "{done:?}");
+    // The output is a graph, not messages that found their way into it.
+    let text = std::fs::read_to_string(&out).expect("written");
+    assert!(
+        text.lines().all(|l| l.starts_with("VERTEX_SE2")
+            || l.starts_with("EDGE_SE2")
+            || l.starts_with("FIX"))
+    );
+}
+
+#[test]
+#[cfg(unix)]
+fn a_full_disk_names_the_output_and_leaves_the_old_file() {
+    // The file size limit (ulimit -f, with SIGXFSZ ignored) makes writes past
+    // 4 KiB fail as a full disk does, without needing root.
+    let dir = temp_dir("faults-full-disk");
+    let out = dir.join("out.g2o");
+    std::fs::write(&out, "old\n").expect("old");
+    let graph = sample("grid2d.g2o");
+    let script = format!(
+        "trap '' XFSZ; ulimit -f 8; exec \"$0\" optimize '{}' -q -o '{}'",
+        graph,
+        out.display()
+    );
+    let done = std::process::Command::new("sh")
+        .args(["-c", &script, env!("CARGO_BIN_EXE_pgo")])
+        .output()
+        .expect("sh");
+    let err = String::from_utf8_lossy(&done.stderr).into_owned();
+    no_panic(&err, done.status.code(), "ulimit");
+    assert_eq!(done.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!("{}: cannot write: ", out.display())),
+        "{err}"
+    );
+    assert!(err.contains("the file is left as it was"), "{err}");
+    assert_eq!(std::fs::read_to_string(&out).expect("old"), "old\n");
+    let names: Vec<_> = std::fs::read_dir(&dir).expect("dir").collect();
+    assert_eq!(names.len(), 1, "a temporary was left");
+    // A real full file system where we may make one (root, tmpfs).
+    full_tmpfs(&graph);
+}
+
+/// The same on a 64 KiB tmpfs, where root may mount one; skipped otherwise.
+#[cfg(unix)]
+fn full_tmpfs(graph: &str) {
+    let dir = temp_dir("faults-tmpfs");
+    let mounted = std::process::Command::new("mount")
+        .args([
+            "-t",
+            "tmpfs",
+            "-o",
+            "size=64k",
+            "tmpfs",
+            dir.to_str().expect("utf-8"),
+        ])
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        eprintln!("note: no tmpfs (needs root): the ENOSPC case is skipped");
+        return;
+    }
+    let out = dir.join("out.g2o");
+    std::fs::write(&out, "old\n").expect("old");
+    let done = pgo(&["optimize", graph, "-q", "-o", out.to_str().expect("utf-8")]);
+    let err = stderr(&done);
+    let left = std::fs::read_to_string(&out);
+    let names = std::fs::read_dir(&dir).map(|d| d.count()).unwrap_or(0);
+    let _ = std::process::Command::new("umount").arg(&dir).status();
+    assert_eq!(done.status.code(), Some(1), "{err}");
+    assert!(err.contains("No space left on device"), "{err}");
+    assert_eq!(left.expect("old"), "old\n");
+    assert_eq!(names, 1, "a temporary was left");
 }

@@ -161,14 +161,42 @@ fn crlf_tabs_and_a_missing_final_newline_read_like_the_plain_file() {
         ("no-final-newline.g2o", plain.trim_end().to_owned()),
         ("bom.g2o", format!("\u{feff}{plain}")),
     ];
+    // Token by token, the outputs are the same; each keeps its layout.
+    let tokens = |text: &str| -> Vec<Vec<String>> {
+        text.trim_start_matches('\u{feff}')
+            .lines()
+            .map(|l| l.split_whitespace().map(str::to_owned).collect())
+            .collect()
+    };
     for (name, text) in variants {
-        let (report, out) = accepted(&dir, &file(&dir, name, text), &[]);
+        let (report, out) = accepted(&dir, &file(&dir, name, &text), &[]);
         assert_eq!(report["edges"], 3, "{name}");
         assert_eq!(
             report["optimizer"]["final_chi2"], reference["optimizer"]["final_chi2"],
             "{name}"
         );
-        assert_eq!(out, reference_out, "{name}: different output");
+        assert_eq!(
+            tokens(&out),
+            tokens(&reference_out),
+            "{name}: different output"
+        );
+        assert_eq!(
+            out.matches("\r\n").count(),
+            text.matches("\r\n").count(),
+            "{name}: line ends"
+        );
+        assert_eq!(out.ends_with('\n'), text.ends_with('\n'), "{name}");
+        assert_eq!(
+            out.starts_with('\u{feff}'),
+            text.starts_with('\u{feff}'),
+            "{name}"
+        );
+        // Lines without a vertex are the input's own.
+        for (a, b) in out.lines().zip(text.lines()) {
+            if !a.contains("VERTEX") {
+                assert_eq!(a, b, "{name}");
+            }
+        }
     }
 }
 
@@ -324,8 +352,9 @@ fn ids_up_to_u64_max_work_and_negative_or_larger_ids_are_rejected() {
     );
     let (report, out) = accepted(&dir, &file(&dir, "max.g2o", text), &[]);
     assert_eq!(report["poses"], 2);
+    // The gauge vertex did not move: its line is kept as written.
     assert!(
-        out.starts_with(&format!("VERTEX_SE2 {max} 0.0 0.0 0.0\n")),
+        out.starts_with(&format!("VERTEX_SE2 {max} 0 0 0\n")),
         "{out}"
     );
     assert!(out.contains(&format!("EDGE_SE2 {max} 0 ")), "{out}");
@@ -386,15 +415,24 @@ fn a_vertex_defined_twice_names_both_lines() {
 fn edges_to_vertices_without_a_line_get_composed_poses() {
     let dir = temp_dir("hostile-unknown");
     // Vertex 9 has no line: its pose is composed along the spanning tree and
-    // written first, as a vertex line.
+    // written as a vertex line after the last vertex line.
     let text = format!("{V3}{E3}EDGE_SE2 2 9 1 0 0 1 0 0 1 0 1\n");
     let (report, out) = accepted(&dir, &file(&dir, "unknown.g2o", text), &[]);
     assert_eq!(report["poses"], 4);
     assert_eq!(report["initialization"]["vertices_without_line"], 1);
-    let first = out.lines().next().expect("a line");
+    let lines: Vec<&str> = out.lines().collect();
+    assert!(
+        lines[..3].iter().all(|l| l.starts_with("VERTEX_SE2 ")),
+        "{out}"
+    );
+    assert!(
+        lines[4..].iter().all(|l| l.starts_with("EDGE_SE2 ")),
+        "{out}"
+    );
+    let first = lines[3];
     let numbers: Vec<f64> = first
         .strip_prefix("VERTEX_SE2 9 ")
-        .expect("vertex 9 first")
+        .expect("vertex 9 after the vertex lines")
         .split(' ')
         .map(|t| t.parse().expect("number"))
         .collect();
@@ -780,4 +818,454 @@ fn fuzz_regression_mixture_component_count_overflow() {
         Some(2),
         "EDGE_SE2_MIXTURE needs 4 + 13·n tokens (+1 with an inlier count), found 4",
     );
+}
+
+/// A graph with everything pgo does not model, as users' files have it: a
+/// byte-order mark, comments, blank lines, CRLF line ends, tabs, a
+/// parameter block, landmark vertices and edges, an unknown tag, FIX, no
+/// final newline; vertex 3 has no line.
+const ZOO: &str = "\u{feff}# landmarks, parameters and comments\r\n\
+PARAMS_SE2OFFSET 0 0 0 0\r\n\
+\r\n\
+VERTEX_SE2 0 0 0 0\r\n\
+VERTEX_SE2 1 1.1 0.1 0.05\r\n\
+VERTEX_XY 100 2.0 1.0\r\n\
+VERTEX_SE2\t2  2.2 -0.1 0.1\r\n\
+EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\r\n\
+EDGE_SE2 1 2 1.0 0.0 0.0 1 0 0 1 0 1\r\n\
+EDGE_SE2_XY 1 100 1 1 10 0 10\r\n\
+EDGE_SE2 2 3 1 0 0 1 0 0 1 0 1\r\n\
+ROBOTLASER1 0 -1.5 0.01 0.1 8 0.1 0 3 1.0 1.1 1.2 0 0 0 0 0 0 0 0 0 0 0 0 host 0.5 lg 0.5\r\n\
+# the end, without a newline\r\n\
+FIX 0";
+
+/// `line` up to the end of its second token (a vertex line's id).
+fn up_to_id(line: &str) -> &str {
+    let mut tokens = 0;
+    let mut inside = false;
+    for (i, c) in line.char_indices() {
+        if c.is_whitespace() {
+            if inside {
+                tokens += 1;
+                if tokens == 2 {
+                    return &line[..i];
+                }
+            }
+            inside = false;
+        } else {
+            inside = true;
+        }
+    }
+    line
+}
+
+/// Checks that `out` is `ZOO` with new pose values in its vertex lines (and
+/// vertex 3 added after the last one): every other byte as it was.
+fn assert_zoo_kept(out: &str) {
+    let lines_in: Vec<&str> = ZOO.split_inclusive('\n').collect();
+    let lines_out: Vec<&str> = out.split_inclusive('\n').collect();
+    assert_eq!(lines_out.len(), lines_in.len() + 1, "{out}");
+    let added = lines_in
+        .iter()
+        .rposition(|l| l.starts_with("VERTEX_SE2"))
+        .expect("vertex lines")
+        + 1;
+    let mut poses = Vec::new();
+    for (k, line) in lines_out.iter().enumerate() {
+        let original = match k {
+            k if k < added => lines_in[k],
+            k if k == added => "VERTEX_SE2 3 ?\r\n",
+            k => lines_in[k - 1],
+        };
+        let tag = original
+            .trim_start_matches('\u{feff}')
+            .split_whitespace()
+            .next();
+        if tag != Some("VERTEX_SE2") {
+            assert_eq!(*line, original, "line {}", k + 1);
+            continue;
+        }
+        // Only the pose values changed: tag, spacing, id and CRLF kept.
+        assert!(line.ends_with("\r\n"), "{line:?}");
+        let prefix = up_to_id(original);
+        assert!(line.starts_with(prefix), "{line:?} from {original:?}");
+        let tokens: Vec<&str> = line.split_whitespace().collect();
+        assert_eq!(tokens.len(), 5, "{line:?}");
+        let numbers: Vec<f64> = tokens[2..]
+            .iter()
+            .map(|t| t.parse().expect("number"))
+            .collect();
+        poses.push((tokens[1].to_owned(), numbers));
+    }
+    // And they are the optimum: a straight line along x.
+    assert_eq!(poses.len(), 4);
+    for (id, p) in poses {
+        let x: f64 = id.parse().expect("id");
+        assert!(
+            (p[0] - x).abs() < 1e-6 && p[1].abs() < 1e-6 && p[2].abs() < 1e-6,
+            "vertex {id}: {p:?}"
+        );
+    }
+}
+
+#[test]
+fn in_place_keeps_every_line_it_does_not_change_byte_for_byte() {
+    let dir = temp_dir("hostile-in-place-zoo");
+    let path = file(&dir, "zoo.g2o", ZOO);
+    let out = pgo(&["optimize", &path, "--in-place", "-q"]);
+    assert_no_panic(&out, "in-place");
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let in_place = std::fs::read_to_string(&path).expect("rewritten");
+    assert_zoo_kept(&in_place);
+    // -o does the same.
+    let path = file(&dir, "zoo2.g2o", ZOO);
+    let (report, written) = accepted(&dir, &path, &[]);
+    assert_eq!(written, in_place);
+    assert_eq!(std::fs::read_to_string(&path).expect("input"), ZOO);
+    let warnings = report["warnings"].to_string();
+    for tag in [
+        "VERTEX_XY",
+        "EDGE_SE2_XY",
+        "PARAMS_SE2OFFSET",
+        "ROBOTLASER1",
+    ] {
+        assert!(warnings.contains(tag), "{tag}: {warnings}");
+    }
+    // A run that moves nothing writes the file back as it was, plus the
+    // line of the vertex it composed.
+    let path = file(&dir, "still.g2o", ZOO);
+    let (_, same) = accepted(&dir, &path, &["--init", "file", "--max-iters", "0"]);
+    let lines: Vec<&str> = same.split_inclusive('\n').collect();
+    let added = lines
+        .iter()
+        .position(|l| l.starts_with("VERTEX_SE2 3 "))
+        .expect("vertex 3 added");
+    assert_eq!(added, 7, "{same}");
+    let without: String = lines
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| *k != added)
+        .map(|(_, l)| *l)
+        .collect();
+    assert_eq!(without, ZOO);
+}
+
+/// Runs `pgo ARGS` and kills it if it has not finished within `seconds`
+/// (a run that waits on a FIFO forever fails the test instead of hanging it).
+fn pgo_within(args: &[&str], seconds: u64) -> Output {
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_pgo"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start pgo");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(seconds);
+    while child.try_wait().expect("poll").is_none() {
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("pgo {args:?} did not finish within {seconds} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.wait_with_output().expect("output")
+}
+
+/// Makes a FIFO; `None` (and a note) where `mkfifo` is missing.
+#[cfg(unix)]
+fn fifo(dir: &Path, name: &str) -> Option<PathBuf> {
+    let p = dir.join(name);
+    let made = std::process::Command::new("mkfifo").arg(&p).status();
+    if made.is_ok_and(|s| s.success()) {
+        Some(p)
+    } else {
+        eprintln!("skipped: mkfifo unavailable");
+        None
+    }
+}
+
+fn is_root() -> bool {
+    std::process::Command::new("id")
+        .arg("-u")
+        .output()
+        .is_ok_and(|o| o.stdout.starts_with(b"0\n"))
+}
+
+#[test]
+#[cfg(unix)]
+fn devices_fifos_sockets_and_directories_are_refused_as_outputs_before_reading() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = temp_dir("hostile-device-outputs");
+    let input = file(&dir, "graph.g2o", format!("{V3}{E3}"));
+    let mut targets: Vec<(PathBuf, &str)> = vec![(dir.join("subdir"), "is a directory")];
+    std::fs::create_dir(dir.join("subdir")).expect("mkdir");
+    if let Some(f) = fifo(&dir, "fifo") {
+        targets.push((f, "is a FIFO (named pipe)"));
+    }
+    let socket = dir.join("socket");
+    let _listener = std::os::unix::net::UnixListener::bind(&socket).expect("bind");
+    targets.push((socket, "is a socket"));
+    if is_root() {
+        // Copies of /dev/null and /dev/full (never the real ones: a
+        // regression would replace the machine's device nodes).
+        for (name, minor) in [("null", "3"), ("full", "7")] {
+            let node = dir.join(name);
+            let made = std::process::Command::new("mknod")
+                .args([node.to_str().expect("utf-8"), "c", "1", minor])
+                .status();
+            if made.is_ok_and(|s| s.success()) {
+                targets.push((node, "is a character device"));
+            }
+        }
+    } else {
+        eprintln!("note: the device cases need root (mknod)");
+    }
+    for (target, problem) in &targets {
+        let t = target.to_str().expect("utf-8");
+        let link = dir.join(format!(
+            "link-to-{}",
+            target.file_name().expect("name").to_string_lossy()
+        ));
+        std::os::unix::fs::symlink(target, &link).expect("symlink");
+        let l = link.to_str().expect("utf-8");
+        let before = std::fs::symlink_metadata(target).expect("node").file_type();
+        for args in [
+            vec!["optimize", &input, "-o", t],
+            vec!["optimize", &input, "-o", l],
+            vec!["simulate", "--poses", "10", "--loops", "2", "-o", t],
+            vec![
+                "simulate", "--poses", "10", "--loops", "2", "-o", &input, "--labels", t,
+            ],
+            vec!["corrupt", &input, "--wrong", "1", "-o", t],
+        ] {
+            let out = pgo_within(&args, 60);
+            assert_no_panic(&out, t);
+            let err = stderr(&out);
+            assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+            assert!(err.contains(problem), "{args:?}: {err}");
+            assert!(
+                err.contains(&format!("{}: is ", args[args.len() - 1])),
+                "{err}"
+            );
+            assert!(err.contains("pgo writes only regular files"), "{err}");
+        }
+        let after = std::fs::symlink_metadata(target).expect("node").file_type();
+        assert_eq!(
+            (
+                before.is_dir(),
+                before.is_fifo(),
+                before.is_socket(),
+                before.is_char_device()
+            ),
+            (
+                after.is_dir(),
+                after.is_fifo(),
+                after.is_socket(),
+                after.is_char_device()
+            ),
+            "{t} was replaced"
+        );
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .expect("link")
+                .file_type()
+                .is_symlink()
+        );
+    }
+    assert_eq!(
+        std::fs::read_to_string(&input).expect("input"),
+        format!("{V3}{E3}")
+    );
+    // --in-place on a FIFO: refused before opening it (no writer ever comes,
+    // so opening it would wait forever).
+    if let Some(f) = fifo(&dir, "in-fifo") {
+        let f = f.to_str().expect("utf-8");
+        let out = pgo_within(&["optimize", f, "--in-place"], 60);
+        assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+        assert!(stderr(&out).contains("is a FIFO"), "{}", stderr(&out));
+    }
+}
+
+#[test]
+#[cfg(unix)]
+fn outputs_through_links_replace_the_linked_file_and_dangling_links_are_refused() {
+    let dir = temp_dir("hostile-link-outputs");
+    let input = file(
+        &dir,
+        "graph.g2o",
+        format!("{V3}{E3}EDGE_SE2 0 2 2.1 0 0 1 0 0 1 0 1\n"),
+    );
+    std::fs::create_dir(dir.join("real")).expect("mkdir");
+    let real = dir.join("real/out.g2o");
+    std::fs::write(&real, "old").expect("old");
+    let link = dir.join("out-link.g2o");
+    std::os::unix::fs::symlink("real/out.g2o", &link).expect("symlink");
+    let out = pgo(&[
+        "optimize",
+        &input,
+        "-o",
+        link.to_str().expect("utf-8"),
+        "-q",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .expect("link")
+            .file_type()
+            .is_symlink()
+    );
+    let written = std::fs::read_to_string(&real).expect("real");
+    assert!(written.starts_with("VERTEX_SE2 0 0 0 0\n"), "{written}");
+    // --in-place through a link: the file it leads to is rewritten.
+    let in_link = dir.join("in-link.g2o");
+    std::os::unix::fs::symlink("graph.g2o", &in_link).expect("symlink");
+    let out = pgo(&[
+        "optimize",
+        in_link.to_str().expect("utf-8"),
+        "--in-place",
+        "-q",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(
+        std::fs::symlink_metadata(&in_link)
+            .expect("link")
+            .file_type()
+            .is_symlink()
+    );
+    assert_eq!(std::fs::read_to_string(&input).expect("input"), written);
+    // A dangling link: refused, nothing created where it points.
+    let dangling = dir.join("dangling.g2o");
+    std::os::unix::fs::symlink("nowhere/new.g2o", &dangling).expect("symlink");
+    let out = pgo(&["optimize", &input, "-o", dangling.to_str().expect("utf-8")]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out)
+            .contains("dangling.g2o: is a symbolic link to nowhere/new.g2o, which does not exist"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(!dir.join("nowhere").exists());
+}
+
+#[test]
+#[cfg(unix)]
+fn in_place_keeps_the_owner_and_mode_of_the_file() {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    let dir = temp_dir("hostile-owner");
+    let input = file(
+        &dir,
+        "graph.g2o",
+        format!("{V3}{E3}EDGE_SE2 0 2 2.1 0 0 1 0 0 1 0 1\n"),
+    );
+    std::fs::set_permissions(&input, std::fs::Permissions::from_mode(0o640)).expect("chmod");
+    let root = is_root();
+    if root {
+        std::os::unix::fs::chown(&input, Some(4321), Some(4322)).expect("chown");
+    } else {
+        eprintln!("note: the owner case needs root");
+    }
+    let out = pgo(&["optimize", &input, "--in-place", "-q"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let meta = std::fs::metadata(&input).expect("input");
+    assert_eq!(meta.mode() & 0o7777, 0o640);
+    if root {
+        assert_eq!((meta.uid(), meta.gid()), (4321, 4322));
+    }
+}
+
+#[test]
+fn output_names_up_to_255_bytes_work() {
+    let dir = temp_dir("hostile-long-name");
+    let input = file(&dir, "graph.g2o", format!("{V3}{E3}"));
+    for len in [241, 250, 255] {
+        let name = format!("{}.g2o", "n".repeat(len - 4));
+        let out_path = dir.join(&name);
+        let out = pgo(&[
+            "optimize",
+            &input,
+            "-o",
+            out_path.to_str().expect("utf-8"),
+            "-q",
+        ]);
+        assert_eq!(out.status.code(), Some(0), "{len}: {}", stderr(&out));
+        assert!(out_path.is_file(), "{len}");
+        // Again, over the existing file.
+        let out = pgo(&[
+            "optimize",
+            &input,
+            "-o",
+            out_path.to_str().expect("utf-8"),
+            "-q",
+        ]);
+        assert_eq!(out.status.code(), Some(0), "{len}: {}", stderr(&out));
+    }
+    let names: Vec<String> = std::fs::read_dir(&dir)
+        .expect("dir")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names.len(), 4, "temporaries left: {names:?}");
+}
+
+#[test]
+#[cfg(unix)]
+fn labels_or_truth_that_are_the_output_are_refused_before_writing() {
+    let dir = temp_dir("hostile-same-outputs");
+    let out_path = dir.join("out.g2o");
+    let o = out_path.to_str().expect("utf-8");
+    std::fs::write(&out_path, "old").expect("old");
+    let link = dir.join("link.csv");
+    std::os::unix::fs::symlink(&out_path, &link).expect("symlink");
+    let l = link.to_str().expect("utf-8");
+    let dotted = dir.join("sub/../out.g2o");
+    std::fs::create_dir(dir.join("sub")).expect("mkdir");
+    let d = dotted.to_str().expect("utf-8");
+    let new = dir.join("new.g2o");
+    let n = new.to_str().expect("utf-8");
+    let sim = ["simulate", "--poses", "10", "--loops", "2"];
+    let input = file(&dir, "in.g2o", format!("{V3}{E3}"));
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            [&sim[..], &["-o", o, "--labels", o]].concat(),
+            "--labels is the same file as -o",
+        ),
+        (
+            [&sim[..], &["-o", o, "--labels", l]].concat(),
+            "--labels is the same file as -o",
+        ),
+        (
+            [&sim[..], &["-o", o, "--truth", d]].concat(),
+            "--truth is the same file as -o",
+        ),
+        (
+            [&sim[..], &["-o", n, "--labels", n]].concat(),
+            "--labels is the same file as -o",
+        ),
+        (
+            [&sim[..], &["-o", "-", "--labels", "-"]].concat(),
+            "-o and --labels both write to stdout",
+        ),
+        (
+            vec!["corrupt", &input, "-o", o, "--labels", l],
+            "--labels is the same file as -o",
+        ),
+        (
+            vec!["corrupt", &input, "-o", n, "--labels", &input],
+            "the output is the input file",
+        ),
+    ];
+    for (args, problem) in cases {
+        let out = pgo(&args);
+        assert_no_panic(&out, problem);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {}", stderr(&out));
+        assert!(stderr(&out).contains(problem), "{args:?}: {}", stderr(&out));
+        assert_eq!(
+            std::fs::read_to_string(&out_path).expect("old"),
+            "old",
+            "{args:?}"
+        );
+        assert!(!new.exists(), "{args:?} wrote {n}");
+        assert!(out.stdout.is_empty(), "{args:?}");
+    }
 }
