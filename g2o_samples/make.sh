@@ -16,8 +16,9 @@ pgo simulate --world grid2d --poses 500 --loops 150 --seed 3 -o g2o_samples/grid
 # The degenerate case: 8 true loops among 200 wrong candidates whose counts look alike.
 pgo simulate --world grid2d --poses 400 --loops 8 --wrong 200 --wrong-mode local --inliers \
     --true-inliers 40 --wrong-inliers 30 --seed 4 -o g2o_samples/degenerate.g2o --labels g2o_samples/degenerate_labels.csv
-# Perceptual aliasing: 60 wrong candidates in groups of 5 consecutive pairs i–j, each measuring the
-# true pose of j+s from i (one offset s per group, |s| in 5..40 steps), with the usual noise; a
+# Perceptual aliasing: 60 wrong candidates in groups of 5 consecutive pairs i–j starting at a true
+# loop (a revisited place), each measuring the true pose of j+s from i (one offset s per group,
+# |s| in 5..40 steps), with the usual noise; a
 # share of 0.3 of them has counts drawn from the true-loop model, as aliases that pass verification.
 pgo simulate --world grid2d --poses 800 --loops 200 --wrong 60 --wrong-mode aliased --group-size 5 \
     --true-like-counts 0.3 --inliers --seed 5 \

@@ -1,5 +1,8 @@
 //! pgo: pose-graph SLAM back end with unsupervised loop-closure gating.
 
+// The robust and I/O modules document how they work inside; their links to
+// private items are for readers of the source.
+#![allow(rustdoc::private_intra_doc_links)]
 // Index loops over small fixed-size blocks read like the maths they implement.
 #![allow(clippy::needless_range_loop)]
 // No panics on bad input: errors are values. Tests may unwrap.

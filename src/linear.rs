@@ -23,14 +23,18 @@
 //! Covariances: [`BlockSystem::propagate`] gives `A·H⁻¹·Aᵀ` for any two
 //! blocks by a sparse solve; [`BlockSystem::selected_inverse`] gives every
 //! block of `H⁻¹` on the factor's pattern at once, for the blocks that an
-//! edge of `H` ties ([`BlockSystem::propagate_selected`]).
+//! edge of `H` ties ([`BlockSystem::propagate_selected`]);
+//! [`BlockSystem::propagate_group`] gives it for the rows of several edges
+//! at once.
 
+mod group;
 mod supernodal;
 
 use crate::geometry::NormalBlocks;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::SymbolicSparseColMatRef;
 use faer::sparse::linalg::amd;
+pub use group::EdgeJacobian;
 use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
 use supernodal::Symbolic;

@@ -7,7 +7,7 @@ use pgo::gate::{DegeneratePolicy, GateMode};
 use pgo::io::console;
 use pgo::io::output::{CheckError, OutputError, check_files};
 use pgo::pipeline::{self, CandidateRule, OptimizeConfig};
-use pgo::robust::RobustMethod;
+use pgo::robust::{self, RobustMethod};
 use pgo::solve::init::Initialization;
 use pgo::solve::{IterationRecord, Method};
 use pgo::stats::DofConvention;
@@ -33,7 +33,8 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Optimise a pose graph read from a g2o file.
+    /// Optimise a pose graph read from a g2o file (exit status 3 when the
+    /// result fails its χ² test; the outputs are still written).
     Optimize(OptimizeArgs),
     /// Learn the geometric-verification threshold T_GV from inlier counts
     /// alone and print it (exit status 1 when the counts are degenerate).
@@ -321,50 +322,6 @@ struct OptimizeArgs {
     /// 4.100); huber and cauchy √χ²_D(0.95) (2.796 / 3.548); dcs 1 (Φ = 1).
     #[arg(long, value_name = "C")]
     robust_c: Option<f64>,
-    /// EM: do not rescue the candidates the gate dropped. By default each is
-    /// held out of the weighting and accepted if its residual at the map made
-    /// from the kept candidates is that of an inlier (r²/s² ≤ c², or below
-    /// the learned width narrowed by its count's odds), or its innovation is
-    /// (see --no-innovation); a wrong loop never shapes the map it is judged
-    /// by.
-    #[arg(long)]
-    no_rescue: bool,
-    /// EM: decide on plain residuals only. By default the candidates the
-    /// decided map was solved without (dropped by the gate, rejected by EM)
-    /// are judged again by their innovation ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e (the
-    /// map's uncertainty between the two poses added to the edge's):
-    /// accepted when the prior odds (a dropped candidate's count posterior,
-    /// a kept one's ½) times the likelihood ratio of ln(ν²/s²) — consistent
-    /// loops (the residual mixture) against the density of the dropped
-    /// candidates left out (a kernel estimate, each weighted by 1 − p) —
-    /// are ≥ 1.
-    #[arg(long)]
-    no_innovation: bool,
-    /// EM: report in the JSON each loop candidate's innovation ν²/s²
-    /// against the final map without it (loops[].innovation): for a loop
-    /// the map was solved with, its deleted residual eᵀ(Ω⁻¹ − J·H⁻¹·Jᵀ)⁻¹e,
-    /// large where the other loops contradict it; for one left out, its
-    /// innovation. Off by default: it takes a selected inversion of the
-    /// normal matrix (about one more factorisation, and its memory).
-    #[arg(long)]
-    innovations: bool,
-    /// EM: decide at c instead of at the width learned from the residuals.
-    /// By default, once the decisions at c settle, two normals are fitted to
-    /// ln(r²/s²) of the candidates (consistent and inconsistent loops, with
-    /// the gate's EM) and the candidates are decided again at the larger of
-    /// the consistent component's 1 − 10⁻⁶ quantile and the crossing of the
-    /// weighted densities, never below c (JSON: robust.decision_c,
-    /// robust.residual_mixture).
-    #[arg(long)]
-    no_learn_width: bool,
-    /// EM: keep deciding at the file's scale (s² = χ²/dof ≤ 1) even when a
-    /// decided map does not fit the information. By default such a map
-    /// (χ² > 1.4·χ²_dof(1 − 10⁻⁶)), which wrong loops bent, makes EM search the
-    /// scale: decisions at trial scales 1.4× apart until a decided map fits
-    /// its own; undone when a trial would keep fewer than half the loops
-    /// (JSON: robust.scale_search, robust.scale_trials).
-    #[arg(long)]
-    no_scale_search: bool,
     /// Which edges are loop candidates: those with an inlier count, or also
     /// every edge between non-consecutive ids.
     #[arg(long, value_enum, default_value_t = CandidatesArg::Counted)]
@@ -387,6 +344,10 @@ struct OptimizeArgs {
     /// Print every iteration on stderr.
     #[arg(short, long)]
     verbose: bool,
+    /// Switch off layers of EM for an ablation: `no-LAYER,…` with LAYER
+    /// one of annealing, decisions, clusters, aliasing, populations, search.
+    #[arg(long, value_name = "no-LAYER,…", hide = true, value_parser = robust::Layers::parse)]
+    expert: Option<robust::Layers>,
 }
 
 #[derive(Copy, Clone, Debug, ValueEnum)]
@@ -739,6 +700,10 @@ fn read_counts(path: Option<&std::path::Path>) -> Result<Vec<u64>, String> {
     }
 }
 
+/// The exit status of `pgo optimize` when the result fails its χ² test
+/// (the outputs are still written).
+const CHI2_FAILED_STATUS: u8 = 3;
+
 fn optimize(args: OptimizeArgs) -> ExitCode {
     if args.threads > 0 {
         let _ = rayon::ThreadPoolBuilder::new()
@@ -786,11 +751,7 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
         RobustArg::Gnc => RobustMethod::Gnc,
     };
     config.robust_c = args.robust_c;
-    config.rescue = !args.no_rescue;
-    config.innovation = !args.no_innovation;
-    config.loop_innovations = args.innovations;
-    config.learn_width = !args.no_learn_width;
-    config.scale_search = !args.no_scale_search;
+    config.layers = args.expert.unwrap_or_default();
     config.plot = args.plot.clone();
     config.candidates = match args.candidates {
         CandidatesArg::Counted => CandidateRule::Counted,
@@ -838,6 +799,12 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
                         return ExitCode::from(1);
                     }
                 }
+            }
+            if report.chi2_test.as_ref().is_some_and(|t| !t.passed) {
+                say!(
+                    "pgo: the χ² test FAILED: the map does not fit its measurements (exit status {CHI2_FAILED_STATUS})"
+                );
+                return ExitCode::from(CHI2_FAILED_STATUS);
             }
             ExitCode::SUCCESS
         }

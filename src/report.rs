@@ -5,7 +5,7 @@ use crate::gate::{DegeneratePolicy, GateDecision, GateMode, LogNormalMixture, Se
 use crate::graph::VertexId;
 use crate::io::g2o::G2oFile;
 use crate::linear::BlockSystem;
-use crate::robust::{InnovationJudgement, RobustMethod, ScaleSearchOutcome};
+use crate::robust::{LoopModel, Reason, RobustMethod, Search};
 use crate::solve::init::Initialization;
 use crate::solve::{Method, StopReason, Summary};
 use crate::stats::Chi2Test;
@@ -152,44 +152,58 @@ impl GateReport {
 pub struct RobustReport {
     /// The method (`none` when there were no candidates to weigh).
     pub method: RobustMethod,
-    /// Kernel width on the whitened-residual-norm scale.
+    /// Kernel width on the whitened-residual-norm scale (EM: the end of its
+    /// annealing).
     pub c: f64,
-    /// Reweighting rounds (E-steps).
+    /// EM: E-steps of the annealing; the kernels: reweighting rounds.
     pub rounds: usize,
-    /// Candidates accepted at the end (weight ≥ ½).
-    pub active_loops: usize,
-    /// Candidates not accepted (dropped by the gate or weight < ½).
+    /// EM: accepted sets solved while deciding by innovation.
+    pub decisions: usize,
+    /// EM: clusters of candidates judged together.
+    pub clusters: usize,
+    /// Candidates accepted at the end (the final map was solved with them).
+    pub accepted_loops: usize,
+    /// Candidates not accepted.
     pub rejected_loops: usize,
-    /// EM: candidates removed for good.
-    pub removed_loops: usize,
-    /// EM: candidates switched off at the end (may have come back later).
-    pub switched_off_loops: usize,
-    /// EM: the a-posteriori variance factor `s²` of the decided map (≤ 1)
-    /// by which the candidates' residuals were divided for the decisions,
-    /// so that under-confident (square-root) information does not let wrong
-    /// loops through; `null` for the other methods.
-    pub variance_factor: Option<f64>,
-    /// EM: candidates the gate dropped that were accepted at the map of the
-    /// kept ones (`--rescue`).
+    /// Candidates the gate dropped that were accepted.
     pub rescued_loops: usize,
-    /// EM: candidates accepted by their innovation (the map's uncertainty
-    /// added): dropped by the gate (also counted in `rescued_loops`) or
-    /// rejected by EM's decisions; `--no-innovation` turns it off.
-    pub innovation_accepted_loops: usize,
-    /// EM: whether a decided map failed to fit the file's information and
-    /// the noise scale was searched (`not_needed`, `found`, `undone`,
-    /// `searching`; see [`crate::robust::Reweighter::update_fit`]); `null`
-    /// for the other methods.
-    pub scale_search: Option<ScaleSearchOutcome>,
-    /// EM: trial scales taken by that search.
-    pub scale_trials: usize,
-    /// EM: the kernel width of the last hard decision (`c`, or wider when
-    /// learned from the residuals); `null` for the other methods.
-    pub decision_c: Option<f64>,
-    /// EM: the two normals fitted to `ln(r²/s²)` of the weighed candidates
-    /// at the map the decision width was learned at (means, spreads,
-    /// weights, degeneracy), when there were enough residuals to fit.
-    pub residual_mixture: Option<crate::gate::TwoNormals>,
+    /// EM: the loop model at the last evaluation (the spreads of the log
+    /// innovations of true and wrong loops, the aliasing rate, the share of
+    /// true loops among candidates without a count).
+    pub model: Option<LoopModel>,
+    /// EM: what the search on a failed χ² test did (removed clusters, and
+    /// the suspects when it still fails).
+    pub search: Option<Search>,
+}
+
+impl RobustReport {
+    /// One clause for humans: what was accepted and how.
+    pub fn summary(&self) -> String {
+        let mut notes = Vec::new();
+        if self.rescued_loops > 0 {
+            notes.push(format!("{} below the gate", self.rescued_loops));
+        }
+        if let Some(search) = &self.search {
+            let removed: usize = search.removed.iter().map(|r| r.loops.len()).sum();
+            if removed > 0 {
+                notes.push(format!(
+                    "{removed} taken out by the χ² search in {} clusters",
+                    search.removed.len()
+                ));
+            }
+        }
+        let notes = if notes.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", notes.join("; "))
+        };
+        format!(
+            "robust {}: accepted {}{notes}, rejected {}",
+            self.method.name(),
+            self.accepted_loops,
+            self.rejected_loops
+        )
+    }
 }
 
 /// One loop candidate's fate.
@@ -203,28 +217,20 @@ pub struct LoopReport {
     pub inliers: Option<u64>,
     /// Whether it passed the gate.
     pub kept: bool,
-    /// Its final weight in the optimisation, in [0, 1].
+    /// Whether the final map was solved with it.
+    pub accepted: bool,
+    /// Its weight in the final solve, in [0, 1] (≥ ½ exactly when
+    /// accepted).
     pub weight: f64,
-    /// Its prior inlier probability for EM: the count's posterior
-    /// `P(true loop | count)` from the gate's mixture, capped at ½ (0 for a
-    /// zero count), for a candidate the soft gate passes or the hard gate
-    /// dropped (with a threshold learned or given); ½ for the others.
-    pub prior: f64,
-    /// EM: `ν²/s²`, its squared innovation against the final map without
-    /// it, over the noise scale of the decisions: for a loop the map was
-    /// solved with, its deleted residual (Baarda's; large for a loop the
-    /// others contradict); for one it was solved without, its innovation
-    /// ([`crate::solve::Optimizer::leave_one_out_chi2`]). Only with
-    /// `--innovations`; `null` otherwise, for the other methods and for a
-    /// loop nothing else checks (a bridge).
+    /// EM: its prior probability of being a true loop (from its count).
+    pub prior: Option<f64>,
+    /// EM: its posterior probability of being a true loop.
+    pub posterior: Option<f64>,
+    /// EM: its squared innovation `ν²` against the map without it and its
+    /// cluster (`null` when nothing else checks it).
     pub innovation: Option<f64>,
-    /// EM: how the acceptance by innovation judged it, if it did (a
-    /// candidate the decided map was solved without): its `innovation`
-    /// (`ν²/s²` at that map) and `ln_odds`, `ln` of its posterior odds
-    /// there — prior odds times the likelihood ratio of `ln(ν²/s²)`,
-    /// consistent loops against the candidates the gate dropped; accepted
-    /// iff ≥ 0.
-    pub judgement: Option<InnovationJudgement>,
+    /// Why it ended where it did.
+    pub reason: Reason,
 }
 
 /// How the initial guess was made.
@@ -387,48 +393,7 @@ impl Report {
         if self.loop_candidates > 0 {
             verdict.push(self.gate.summary());
             if self.robust.method != RobustMethod::None {
-                let mut notes = Vec::new();
-                if self.robust.rescued_loops > 0 {
-                    notes.push(format!(
-                        "{} rescued below the gate",
-                        self.robust.rescued_loops
-                    ));
-                }
-                if self.robust.innovation_accepted_loops > 0 {
-                    notes.push(format!(
-                        "{} by their innovation",
-                        self.robust.innovation_accepted_loops
-                    ));
-                }
-                if self.robust.scale_trials > 0 {
-                    let outcome = match self.robust.scale_search {
-                        Some(ScaleSearchOutcome::Found) => "found",
-                        Some(ScaleSearchOutcome::Searching) => "out of budget",
-                        _ => "undone",
-                    };
-                    notes.push(format!(
-                        "noise scale searched over {} trials, {outcome}",
-                        self.robust.scale_trials
-                    ));
-                }
-                let rescued = if notes.is_empty() {
-                    String::new()
-                } else {
-                    format!(" ({})", notes.join("; "))
-                };
-                // EM's decision width, when learned wider than c.
-                let width = match self.robust.decision_c {
-                    Some(c_d) if c_d > self.robust.c => {
-                        format!(" at learned width {c_d:.3} (c {:.3})", self.robust.c)
-                    }
-                    _ => String::new(),
-                };
-                verdict.push(format!(
-                    "robust {}{width}: accepted {}{rescued}, rejected {}",
-                    self.robust.method.name(),
-                    self.robust.active_loops,
-                    self.robust.rejected_loops
-                ));
+                verdict.push(self.robust.summary());
             }
         }
         if let Some(t) = &self.chi2_test {

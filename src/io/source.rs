@@ -10,7 +10,7 @@
 //!   into an unnamed temporary file (in `$TMPDIR`, removed by the system on
 //!   exit), which takes disk space, not memory. If that copy fails (no
 //!   space), reading goes on and only the rewrite refuses.
-//! * Both readings are fingerprinted ([`Fingerprint`]): the rewrite refuses
+//! * Both readings are fingerprinted (`Fingerprint`): the rewrite refuses
 //!   if the text it reads again is not the text that was parsed.
 
 use std::fs::File;

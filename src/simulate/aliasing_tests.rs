@@ -167,7 +167,7 @@ fn aliased_groups_share_an_offset_within_the_range() {
     };
     let mut rng = StdRng::seed_from_u64(11);
     let consecutive = |i: usize, j: usize| i.abs_diff(j) == 1;
-    let groups = wrong_groups(&plan, 500, consecutive, |_, _| true, &mut rng).unwrap();
+    let groups = wrong_groups(&plan, 500, &[], consecutive, |_, _| true, &mut rng).unwrap();
     assert_eq!(groups.len(), 21);
     let (mut positive, mut negative) = (0, 0);
     for g in &groups {
@@ -188,7 +188,7 @@ fn aliased_groups_share_an_offset_within_the_range() {
     // leave no room.
     let far = |j: usize, t: usize| j.abs_diff(t) > 40;
     assert!(matches!(
-        wrong_groups(&plan, 500, consecutive, far, &mut rng),
+        wrong_groups(&plan, 500, &[], consecutive, far, &mut rng),
         Err(SimulationError::NoRoomForOutliers { .. })
     ));
 }

@@ -37,8 +37,10 @@ pub(super) fn simulate_on<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Size
         .map(|k| noisy_edge(truth, (k - 1, k), options, None, rng))
         .collect();
     let guess = dead_reckoning(&edges);
-    edges.extend(true_loops(options, &trajectory, rng));
-    edges.extend(wrong_loops(options, &trajectory, rng)?);
+    let loops = true_loops(options, &trajectory, rng);
+    let revisits: Vec<(usize, usize)> = loops.iter().map(|e| (e.from, e.to)).collect();
+    edges.extend(loops);
+    edges.extend(wrong_loops(options, &trajectory, &revisits, rng)?);
 
     // Order as the public datasets do: by the later vertex, odometry first.
     edges.sort_by_key(|e| (e.from.max(e.to), !e.odometry));
@@ -100,6 +102,7 @@ fn true_loops<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
 fn wrong_loops<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
     options: &SimulationOptions,
     trajectory: &Trajectory<P>,
+    revisits: &[(usize, usize)],
     rng: &mut R,
 ) -> Result<Vec<PlannedEdge<P>>, SimulationError> {
     let truth = &trajectory.poses;
@@ -116,7 +119,7 @@ fn wrong_loops<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
     let radius = trajectory.loop_radius;
     let distinct = |j: usize, t: usize| (truth[j].position() - truth[t].position()).norm() > radius;
     let consecutive = |i: usize, j: usize| i.abs_diff(j) == 1;
-    let groups = wrong_groups(&plan, truth.len(), consecutive, distinct, rng)?;
+    let groups = wrong_groups(&plan, truth.len(), revisits, consecutive, distinct, rng)?;
     let mut edges = Vec::with_capacity(options.outliers);
     for group in groups {
         let measurements: Vec<P> = match &group.alias {

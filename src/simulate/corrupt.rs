@@ -28,13 +28,15 @@ pub(super) fn plan(options: &CorruptionOptions) -> WrongLoopPlan {
 }
 
 /// Places the wrong loops between vertices that are neither consecutive in
-/// index nor in id. An aliased vertex must be farther from the vertex it
+/// index nor in id (aliased groups at one of the `revisits`, the vertex
+/// pairs of the graph's true loops). An aliased vertex must be farther from the vertex it
 /// stands in for than the median length of the sequential edges (one
 /// typical step, on the graph's poses): nearer, it would be the same place.
 pub(super) fn place<P: Pose<D>, const D: usize, R: Rng + ?Sized>(
     graph: &PoseGraph<P, D>,
     plan: &WrongLoopPlan,
     sequential: &[bool],
+    revisits: &[(usize, usize)],
     rng: &mut R,
 ) -> Result<Vec<WrongGroup>, SimulationError> {
     let ids = graph.ids();
@@ -47,7 +49,7 @@ pub(super) fn place<P: Pose<D>, const D: usize, R: Rng + ?Sized>(
     let step = steps.get(steps.len() / 2).copied().unwrap_or(0.0);
     let consecutive = |i: usize, j: usize| ids[i].abs_diff(ids[j]) == 1;
     let distinct = |j: usize, t: usize| (position(j) - position(t)).norm() > step;
-    wrong_groups(plan, ids.len(), consecutive, distinct, rng)
+    wrong_groups(plan, ids.len(), revisits, consecutive, distinct, rng)
 }
 
 /// The measurements and information of the wrong loops: per group, the

@@ -382,7 +382,6 @@ pub fn corrupt<P: ErrorCoordinates<D>, const D: usize>(
 
     // Plan everything that can fail before touching the graph.
     let plan = corrupt::plan(options);
-    let groups = corrupt::place(graph, &plan, &sequential, rng)?;
     let loops: Vec<usize> = (0..sequential.len()).filter(|&k| !sequential[k]).collect();
     if options.known_wrong_last > loops.len() {
         return Err(SimulationError::TooManyKnownWrong {
@@ -390,6 +389,11 @@ pub fn corrupt<P: ErrorCoordinates<D>, const D: usize>(
             available: loops.len(),
         });
     }
+    let revisits: Vec<(usize, usize)> = loops[..loops.len() - options.known_wrong_last]
+        .iter()
+        .map(|&k| (graph.edges[k].from, graph.edges[k].to))
+        .collect();
+    let groups = corrupt::place(graph, &plan, &sequential, &revisits, rng)?;
     let mut wrong = vec![false; graph.edges.len()];
     for &k in &loops[loops.len() - options.known_wrong_last..] {
         wrong[k] = true;

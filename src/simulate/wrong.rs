@@ -45,12 +45,15 @@ pub enum OutlierPolicy {
     /// Groups of consecutive pairs `(i+k, j+k)` that all carry the same wrong
     /// relative transform: mutually consistent wrong loops, the hard case.
     Grouped,
-    /// Perceptual aliasing: groups of consecutive pairs `(i+k, j+k)`, `i`
-    /// and `j` drawn as for [`Self::Grouped`], whose measurements are the
+    /// Perceptual aliasing: where a place was revisited — `(i, j)` a true
+    /// loop of the graph, drawn at random (any pair when it has none) —
+    /// groups of consecutive pairs `(i+k, j+k)` whose measurements are the
     /// relative poses `Xᵢ₊ₖ⁻¹·Xⱼ₊ₖ₊ₛ` of the reference poses (plus the
-    /// usual measurement noise): correct for a place `s` steps away from
-    /// `j + k`, one offset `s` per group (see [`AliasOffsets`]). Groups of
-    /// one are scattered aliases; longer groups are repeated structures.
+    /// usual measurement noise): verification matched the repeated
+    /// structure (a corridor, a parking row) a few poses off, so the pose
+    /// is correct for a place `s` steps away from `j + k`, one offset `s`
+    /// per group (see [`AliasOffsets`]). Groups of one are scattered
+    /// aliases; longer groups are repeated structures.
     Aliased,
 }
 
@@ -133,7 +136,9 @@ pub(super) fn aliased_vertex(j: usize, s: isize, vertices: usize) -> Option<usiz
 }
 
 /// The groups of wrong loops of the plan (groups of one unless the policy
-/// is [`OutlierPolicy::Grouped`] or [`OutlierPolicy::Aliased`]).
+/// is [`OutlierPolicy::Grouped`] or [`OutlierPolicy::Aliased`]); aliased
+/// groups start at one of the `revisits` (vertex pairs of true loops) when
+/// there are any.
 /// `consecutive(i, j)` says whether a pair is already joined by odometry
 /// and must be avoided; `distinct(j, t)` whether vertex `t` is another
 /// place than vertex `j`, which every aliased target `j + s` must be (and
@@ -141,6 +146,7 @@ pub(super) fn aliased_vertex(j: usize, s: isize, vertices: usize) -> Option<usiz
 pub(super) fn wrong_groups<R: Rng + ?Sized>(
     plan: &WrongLoopPlan,
     vertices: usize,
+    revisits: &[(usize, usize)],
     consecutive: impl Fn(usize, usize) -> bool,
     distinct: impl Fn(usize, usize) -> bool,
     rng: &mut R,
@@ -162,7 +168,8 @@ pub(super) fn wrong_groups<R: Rng + ?Sized>(
     }
     let fits = |i: usize, j: usize, alias: Option<isize>, k: usize| {
         let (a, b) = (i + k, j + k);
-        a.abs_diff(b) >= 2
+        b < vertices
+            && a.abs_diff(b) >= 2
             && !consecutive(a, b)
             && alias.is_none_or(|s| {
                 aliased_vertex(b, s, vertices).is_some_and(|t| t != a && distinct(b, t))
@@ -173,7 +180,7 @@ pub(super) fn wrong_groups<R: Rng + ?Sized>(
     while left > 0 {
         let len = group.min(left);
         let (i, j, alias) = (0..MAX_PAIR_ATTEMPTS)
-            .map(|_| draw_group(plan, vertices, len, rng))
+            .map(|_| draw_group(plan, vertices, revisits, len, rng))
             .find(|&(i, j, alias)| (0..len).all(|k| fits(i, j, alias, k)))
             .ok_or_else(no_room)?;
         let pairs: Vec<(usize, usize)> = (0..len).map(|k| (i + k, j + k)).collect();
@@ -194,6 +201,7 @@ pub(super) fn wrong_groups<R: Rng + ?Sized>(
 fn draw_group<R: Rng + ?Sized>(
     plan: &WrongLoopPlan,
     vertices: usize,
+    revisits: &[(usize, usize)],
     len: usize,
     rng: &mut R,
 ) -> (usize, usize, Option<isize>) {
@@ -210,11 +218,15 @@ fn draw_group<R: Rng + ?Sized>(
         }
         OutlierPolicy::Aliased => {
             let s = plan.alias_offsets.sample(rng);
-            (
-                rng.random_range(0..=vertices - len),
-                rng.random_range(0..=vertices - len),
-                Some(s),
-            )
+            let (i, j) = if revisits.is_empty() {
+                (
+                    rng.random_range(0..=vertices - len),
+                    rng.random_range(0..=vertices - len),
+                )
+            } else {
+                revisits[rng.random_range(0..revisits.len())]
+            };
+            (i, j, Some(s))
         }
     };
     (i.min(j), i.max(j), alias)

@@ -7,6 +7,9 @@
 //! sets them). The gauge vertices are held fixed.
 
 pub mod init;
+mod session;
+
+pub(crate) use session::{Budget, Session};
 
 use crate::geometry::{NormalBlocks, Pose};
 use crate::graph::{PoseGraph, VertexId};
@@ -813,6 +816,18 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 .map(|(p, lambda)| p * p / lambda)
                 .sum(),
         )
+    }
+
+    /// Factorises the undamped normal matrix of the edges of non-zero
+    /// `weights` at the graph's poses, for covariances from
+    /// [`Optimizer::system_mut`]; returns each vertex's block (`None` for a
+    /// vertex held fixed).
+    pub(crate) fn factor_at(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        weights: &[f64],
+    ) -> Result<Vec<Option<usize>>, SolveError> {
+        self.factor_undamped(graph, weights)
     }
 
     /// Factorises the undamped normal matrix of the edges of non-zero

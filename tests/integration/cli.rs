@@ -409,3 +409,35 @@ fn a_fifo_input_is_read_once_and_rewritten_from_a_copy() {
     );
     assert!(text.contains("VERTEX_XY 7 1 1\r\n"), "{text}");
 }
+
+#[test]
+fn a_failed_chi2_test_exits_3_with_one_line_and_the_output_written() {
+    let dir = temp_dir("chi2-status");
+    let out = dir.join("out.g2o");
+    // Every candidate in at full weight: the wrong ones make the test fail.
+    let input = sample("degenerate.g2o");
+    let o = pgo(&[
+        "optimize",
+        &input,
+        "--robust",
+        "none",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    let failed: Vec<_> = stderr(&o)
+        .lines()
+        .filter(|l| l.starts_with("pgo: the χ² test FAILED"))
+        .map(str::to_owned)
+        .collect();
+    assert_eq!(failed.len(), 1, "{}", stderr(&o));
+    assert!(
+        std::fs::read_to_string(&out)
+            .unwrap()
+            .contains("VERTEX_SE2")
+    );
+    // The robust default rejects the wrong candidates: the test passes, 0.
+    let o = pgo(&["optimize", &input, "-q", "-o", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stderr(&o).is_empty());
+}

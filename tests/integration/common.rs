@@ -57,3 +57,13 @@ pub fn sample(name: &str) -> String {
         .to_string_lossy()
         .into_owned()
 }
+
+/// The exit status `pgo optimize` gives for its JSON report: 3 when the χ²
+/// test failed, 0 otherwise.
+pub fn verdict_status(report: &serde_json::Value) -> i32 {
+    if report["chi2_test"]["passed"] == serde_json::Value::Bool(false) {
+        3
+    } else {
+        0
+    }
+}

@@ -6,7 +6,7 @@
 //! away (exit 141, quietly), a full or closed stdout or stderr, a full disk
 //! (the old output kept, the error naming it): never a panic.
 
-use crate::common::{pgo, sample, stderr, temp_dir, write};
+use crate::common::{pgo, sample, stderr, temp_dir, verdict_status, write};
 use nalgebra::Matrix3;
 use pgo::geometry::{Pose, Se2};
 use pgo::graph::PoseGraph;
@@ -26,8 +26,14 @@ fn run_json(input: &str, out: &Path, args: &[&str]) -> serde_json::Value {
     ];
     all.extend_from_slice(args);
     let o = pgo(&all);
-    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
-    serde_json::from_slice(&o.stdout).expect("JSON report")
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON report");
+    assert_eq!(
+        o.status.code(),
+        Some(verdict_status(&report)),
+        "{}",
+        stderr(&o)
+    );
+    report
 }
 
 /// χ² of the poses written to `out` (read back as the file's own guess).
@@ -42,8 +48,13 @@ fn written_chi2(out: &Path) -> f64 {
         "--json",
         "-q",
     ]);
-    assert_eq!(back.status.code(), Some(0), "{}", stderr(&back));
     let r: serde_json::Value = serde_json::from_slice(&back.stdout).expect("JSON");
+    assert_eq!(
+        back.status.code(),
+        Some(verdict_status(&r)),
+        "{}",
+        stderr(&back)
+    );
     r["input_chi2"].as_f64().expect("finite χ²")
 }
 
@@ -109,7 +120,8 @@ fn time_limit_stops_the_optimisation_and_writes_the_best_so_far() {
     let r = run_json(input, &out, &["--time-limit", &limit.to_string()]);
     let o = &r["optimizer"];
     assert_eq!(o["stop_reason"], "time_limit", "{o}");
-    assert!(o["iterations"].as_u64().expect("n") >= 1);
+    // (EM's annealing counts against the limit too: it may pass before the
+    // first iteration.)
     assert!(o["time_s"].as_f64().expect("t") < limit + 30.0);
     assert!(
         o["final_objective"].as_f64().expect("f") <= o["initial_objective"].as_f64().expect("f")

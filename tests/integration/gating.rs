@@ -4,7 +4,7 @@
 //! wrong ones; degenerate counts are reported before optimisation; and the
 //! χ² test fails when wrong loops are let in on purpose.
 
-use crate::common::{pgo, stderr, temp_dir};
+use crate::common::{pgo, stderr, temp_dir, verdict_status};
 use pgo::gate::{DegeneratePolicy, GateMode, MixtureOptions, gate};
 use pgo::graph::PoseGraph;
 use pgo::simulate::{
@@ -106,8 +106,14 @@ fn report(args: &[&str]) -> serde_json::Value {
     let mut all = vec!["optimize", "--json", "-q"];
     all.extend_from_slice(args);
     let out = pgo(&all);
-    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    serde_json::from_slice(&out.stdout).unwrap()
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(verdict_status(&report)),
+        "{}",
+        stderr(&out)
+    );
+    report
 }
 
 #[test]

@@ -158,7 +158,12 @@ fn a_killed_run_leaves_the_old_output_or_the_complete_new_one() {
     // Finally a run to the end: OUT is the new graph, the leftovers of the
     // killed runs are gone, and the result reads back.
     let done = start(&input, &out).wait_with_output().expect("run");
-    assert!(done.status.success());
+    // 0, or 3 when the map fails its χ² test: the output is written either way.
+    assert!(
+        matches!(done.status.code(), Some(0) | Some(3)),
+        "{:?}",
+        done.status
+    );
     assert!(check_old_or_complete(&out, edges, "completed run"));
     assert!(temporaries(&dir).is_empty(), "{:?}", temporaries(&dir));
     // A write into the same directory while a run is writing its temporary
@@ -179,7 +184,11 @@ fn a_killed_run_leaves_the_old_output_or_the_complete_new_one() {
                 "-o",
                 dir.join("other.g2o").to_str().expect("utf-8"),
             ]);
-            assert!(other.status.success(), "{}", stderr(&other));
+            assert!(
+                matches!(other.status.code(), Some(0) | Some(3)),
+                "{}",
+                stderr(&other)
+            );
             overlapped = true;
             break;
         }
@@ -187,7 +196,7 @@ fn a_killed_run_leaves_the_old_output_or_the_complete_new_one() {
     }
     let done = writing.wait_with_output().expect("run");
     assert!(
-        done.status.success(),
+        matches!(done.status.code(), Some(0) | Some(3)),
         "the run whose temporary was kept failed"
     );
     assert!(check_old_or_complete(&out, edges, "overlapped run"));

@@ -1,6 +1,6 @@
 //! Output files: the one place that opens them. Every file pgo writes (the
 //! optimised graph, `simulate`'s and `corrupt`'s graphs and label CSVs, the
-//! plots) goes through [`write`], by these rules.
+//! plots) goes through [`write()`], by these rules.
 //!
 //! * **Atomic replacement.** The content goes to a new temporary file in the
 //!   target's directory, created exclusively (`O_EXCL`) under a short random
@@ -361,7 +361,7 @@ fn same_inode(_: &fs::Metadata, _: &fs::Metadata) -> bool {
     false
 }
 
-/// Where [`write`]'s closure writes: the temporary file of a regular
+/// Where [`write()`]'s closure writes: the temporary file of a regular
 /// target, or stdout; buffered.
 pub struct Sink<'a>(SinkInner<'a>);
 

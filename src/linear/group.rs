@@ -1,0 +1,210 @@
+//! `A·H⁻¹·Aᵀ` for the Jacobian rows of a group of edges at once: the
+//! covariance, under the current factorisation, that a group of loop
+//! candidates' errors inherit from the map.
+
+use super::{BlockSystem, SelectedInverse};
+use nalgebra::{DMatrix, SMatrix};
+
+/// The Jacobian of one edge's error: its blocks (variable block index, or
+/// `None` for a vertex held fixed) and their `D×D` derivatives.
+pub type EdgeJacobian<const D: usize> = [(Option<usize>, SMatrix<f64, D, D>); 2];
+
+impl<const D: usize> BlockSystem<D> {
+    /// The Gram matrix `A·H⁻¹·Aᵀ` of the stacked Jacobians `A` of `edges`
+    /// (`D·m × D·m` for `m` edges, edge `e`'s rows at `D·e..D·e + D`), from
+    /// one sparse forward solve `L⁻¹·Pᵀ·aᵀ` per row `a` of `A` over the
+    /// supernodes the group reaches: `A·H⁻¹·Aᵀ = YᵀY`. With one edge it is
+    /// [`BlockSystem::propagate`].
+    ///
+    /// # Panics
+    /// If no factorisation succeeded before, or a block index is out of
+    /// range.
+    pub fn propagate_group(&mut self, edges: &[EdgeJacobian<D>]) -> DMatrix<f64> {
+        let m = edges.len();
+        let mut gram = DMatrix::zeros(D * m, D * m);
+        let positions: Vec<usize> = edges
+            .iter()
+            .flat_map(|e| e.iter().filter_map(|(b, _)| b.map(|b| self.position[b])))
+            .collect();
+        if positions.is_empty() || self.n_blocks == 0 {
+            return gram;
+        }
+        assert!(
+            !self.factor.is_empty(),
+            "BlockSystem::propagate_group needs a factorisation first"
+        );
+        let n = self.n_blocks * D;
+        if self.cov_rhs.len() < n {
+            self.cov_rhs.resize(n, 0.0);
+        }
+        self.symbolic
+            .reach(&positions, &mut self.cov_mark, &mut self.cov_reach);
+        // The scalar columns the solves reach, packed: Y holds only those.
+        let ranges: Vec<std::ops::Range<usize>> = self
+            .cov_reach
+            .iter()
+            .map(|&s| {
+                let cols = self.symbolic.supernode_range(s as usize).0;
+                D * cols.start..D * cols.end
+            })
+            .collect();
+        let packed: usize = ranges.iter().map(|r| r.len()).sum();
+        let mut y = vec![0.0; packed * D * m];
+        for (e, edge) in edges.iter().enumerate() {
+            for a in 0..D {
+                let rhs = &mut self.cov_rhs[..n];
+                for (b, block) in edge {
+                    if let Some(b) = b {
+                        let p = self.position[*b];
+                        for r in 0..D {
+                            rhs[p * D + r] += block[(a, r)];
+                        }
+                    }
+                }
+                self.symbolic.forward_sparse(
+                    &self.factor,
+                    rhs,
+                    &self.cov_reach,
+                    &mut self.solve_work,
+                );
+                let column = &mut y[(D * e + a) * packed..(D * e + a + 1) * packed];
+                let mut at = 0;
+                for range in &ranges {
+                    column[at..at + range.len()].copy_from_slice(&rhs[range.clone()]);
+                    rhs[range.clone()].fill(0.0);
+                    at += range.len();
+                }
+            }
+        }
+        for r in 0..D * m {
+            let yr = &y[r * packed..(r + 1) * packed];
+            for c in 0..=r {
+                let yc = &y[c * packed..(c + 1) * packed];
+                let d: f64 = yr.iter().zip(yc).map(|(x, z)| x * z).sum();
+                gram[(r, c)] = d;
+                gram[(c, r)] = d;
+            }
+        }
+        gram
+    }
+}
+
+impl<const D: usize> BlockSystem<D> {
+    /// [`BlockSystem::propagate_group`] from the selected inverse `z` of the
+    /// current factorisation, without a solve: `None` when some pair of the
+    /// edges' blocks is not on the factor's pattern.
+    pub fn propagate_group_selected(
+        &self,
+        z: &SelectedInverse,
+        edges: &[EdgeJacobian<D>],
+    ) -> Option<DMatrix<f64>> {
+        let m = edges.len();
+        let mut gram = DMatrix::zeros(D * m, D * m);
+        for (e, ea) in edges.iter().enumerate() {
+            for (f, fa) in edges.iter().enumerate().take(e + 1) {
+                let mut block = SMatrix::<f64, D, D>::zeros();
+                for (p, a) in ea
+                    .iter()
+                    .filter_map(|(b, a)| Some((self.position[(*b)?], a)))
+                {
+                    for (q, b) in fa
+                        .iter()
+                        .filter_map(|(b, a)| Some((self.position[(*b)?], a)))
+                    {
+                        block += a * self.symbolic.inverse_block(&z.values, p, q)? * b.transpose();
+                    }
+                }
+                gram.view_mut((D * e, D * f), (D, D)).copy_from(&block);
+                gram.view_mut((D * f, D * e), (D, D))
+                    .copy_from(&block.transpose());
+            }
+        }
+        Some(gram)
+    }
+
+    /// An upper bound (in the positive semi-definite order) of one edge's
+    /// `A·H⁻¹·Aᵀ` from the diagonal blocks of the selected inverse `z`:
+    /// `2·(Aᵢ·(H⁻¹)ᵢᵢ·Aᵢᵀ + Aⱼ·(H⁻¹)ⱼⱼ·Aⱼᵀ)`, since
+    /// `[[P, Q], [Qᵀ, R]] ≼ 2·diag(P, R)` for any positive semi-definite
+    /// matrix.
+    pub fn propagate_bound(
+        &self,
+        z: &SelectedInverse,
+        edge: &EdgeJacobian<D>,
+    ) -> SMatrix<f64, D, D> {
+        let mut out = SMatrix::<f64, D, D>::zeros();
+        for (b, a) in edge {
+            if let Some(b) = b {
+                let p = self.position[*b];
+                if let Some(h) = self.symbolic.inverse_block(&z.values, p, p) {
+                    out += a * h * a.transpose();
+                }
+            }
+        }
+        out * 2.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix1, Vector1};
+
+    /// A chain x₀ – x₁ – x₂ of 1-D blocks with unit information, x₀ also
+    /// tied to the origin: H = [[2, −1, 0], [−1, 2, −1], [0, −1, 1]].
+    fn chain() -> BlockSystem<1> {
+        let pairs = [(Some(0), None), (Some(0), Some(1)), (Some(1), Some(2))];
+        let mut sys = BlockSystem::<1>::new(3, &pairs, 1).unwrap();
+        sys.clear();
+        let one = Matrix1::new(1.0);
+        let z = Vector1::zeros();
+        sys.add_edge(0, &one, &Matrix1::zeros(), &Matrix1::zeros(), &z, &z);
+        sys.add_edge(1, &one, &Matrix1::new(-1.0), &one, &z, &z);
+        sys.add_edge(2, &one, &Matrix1::new(-1.0), &one, &z, &z);
+        sys.factorize(0.0).unwrap();
+        sys
+    }
+
+    #[test]
+    fn group_gram_is_the_dense_a_hinv_at() {
+        let mut sys = chain();
+        let h = nalgebra::Matrix3::new(2.0, -1.0, 0.0, -1.0, 2.0, -1.0, 0.0, -1.0, 1.0);
+        let hinv = h.try_inverse().unwrap();
+        let one = Matrix1::new(1.0);
+        let minus = Matrix1::new(-1.0);
+        // Rows: x₂ − x₀, x₁ (x₀'s block fixed), x₂ − x₁.
+        let edges = [
+            [(Some(0), minus), (Some(2), one)],
+            [(None, one), (Some(1), one)],
+            [(Some(1), minus), (Some(2), one)],
+        ];
+        let a = nalgebra::Matrix3::new(-1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, -1.0, 1.0);
+        let expected = a * hinv * a.transpose();
+        let gram = sys.propagate_group(&edges);
+        for r in 0..3 {
+            for c in 0..3 {
+                assert!((gram[(r, c)] - expected[(r, c)]).abs() < 1e-12, "{r},{c}");
+            }
+        }
+        // One edge: the same as propagate.
+        let single = sys.propagate_group(&edges[..1]);
+        let p = sys.propagate(Some(0), &minus, Some(2), &one);
+        assert!((single[(0, 0)] - p[(0, 0)]).abs() < 1e-12);
+        // The scratch is left zeroed: a second call gives the same.
+        assert_eq!(sys.propagate_group(&edges), gram);
+        // From the selected inverse: the same where the blocks are on the
+        // pattern (a chain: x₀–x₂ is not).
+        let z = sys.selected_inverse();
+        assert!(sys.propagate_group_selected(&z, &edges).is_none());
+        let near = sys.propagate_group_selected(&z, &edges[1..]).unwrap();
+        for r in 0..2 {
+            for c in 0..2 {
+                assert!((near[(r, c)] - expected[(r + 1, c + 1)]).abs() < 1e-12);
+            }
+        }
+        // The bound is above the Gram of each edge.
+        for (k, e) in edges.iter().enumerate() {
+            assert!(sys.propagate_bound(&z, e)[(0, 0)] >= expected[(k, k)] - 1e-12);
+        }
+    }
+}

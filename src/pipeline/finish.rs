@@ -1,0 +1,210 @@
+//! The steps around the robust solve: the initial guess, the χ² test, the
+//! report and the pictures.
+
+use super::{OptimizeConfig, PipelineError};
+use crate::graph::PoseGraph;
+use crate::io::g2o::G2oPose;
+use crate::report::{InitializationReport, LoopReport, OptimizerReport, Report, RobustReport};
+use crate::robust::{Candidate, Outcome, RobustMethod};
+use crate::solve::init::{ChordalInit, Initialization, initialize as init_poses};
+use crate::solve::{Optimizer, Summary};
+use crate::stats::{Chi2Test, StatsError};
+use std::path::Path;
+use std::time::Instant;
+
+/// Reports the file's own guess, then makes the configured initial guess
+/// from the edges of non-zero `weights`, and checks that every edge of
+/// weight 1 has a finite cost there.
+pub fn initialize<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
+    graph: &mut PoseGraph<P, D>,
+    missing: &[usize],
+    config: &OptimizeConfig,
+    weights: &[f64],
+    report: &mut Report,
+    start: Instant,
+) -> Result<(), PipelineError> {
+    let solve_error = |source| PipelineError::Solve {
+        path: config.input.clone(),
+        source,
+    };
+    // The file's own guess first (vertices without a line by spanning
+    // tree), so that its χ² can be reported whatever the initialisation.
+    init_poses(graph, missing, Initialization::File, Some(weights)).map_err(solve_error)?;
+    report.input_chi2 = graph.chi2();
+    if !report.input_chi2.is_finite() {
+        report.warnings.push(format!(
+            "the file's own guess has a non-finite χ² ({}; null in JSON)",
+            report.input_chi2
+        ));
+    }
+    if config.initialization != Initialization::File {
+        init_poses(graph, missing, config.initialization, Some(weights)).map_err(solve_error)?;
+    }
+    // An edge whose cost overflows at the start makes the objective
+    // meaningless: name it rather than report a bare non-finite objective.
+    if let Some(k) = (0..graph.edges.len())
+        .find(|&k| weights[k] != 0.0 && !graph.edge_chi2(&graph.edges[k]).is_finite())
+    {
+        let e = &graph.edges[k];
+        return Err(PipelineError::NonFiniteEdge {
+            path: config.input.clone(),
+            edge: k + 1,
+            from: graph.id(e.from),
+            to: graph.id(e.to),
+            initialization: config.initialization,
+        });
+    }
+    report.initialization = InitializationReport {
+        method: config.initialization,
+        chi2: graph.chi2(),
+        time_s: start.elapsed().as_secs_f64(),
+        vertices_without_line: missing.len(),
+    };
+    Ok(())
+}
+
+/// The χ² test over the edges the map was solved with (weight ≥ ½), each at
+/// its plain cost (paper §II-C).
+pub fn chi2_test<P: G2oPose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    weights: &[f64],
+    config: &OptimizeConfig,
+) -> Result<Chi2Test, StatsError> {
+    let used: Vec<usize> = (0..graph.edges.len())
+        .filter(|&k| weights[k] >= 0.5)
+        .collect();
+    let d2: f64 = used.iter().map(|&k| graph.edge_chi2(&graph.edges[k])).sum();
+    let free = graph.num_vertices() - graph.gauge().len();
+    let dof_residual = (used.len() * D) as i64 - (free * D) as i64;
+    Chi2Test::new(
+        d2,
+        used.len() as u64,
+        dof_residual,
+        config.dof,
+        config.alpha,
+    )
+}
+
+/// Fills the optimiser's, the robust back end's and every loop's part of
+/// the report.
+#[allow(clippy::too_many_arguments)]
+pub fn report<P: G2oPose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    optimizer: &Optimizer<P, D>,
+    summary: Option<Summary>,
+    initial_chi2: f64,
+    candidates: &[Candidate],
+    outcome: &Outcome,
+    method: RobustMethod,
+    c: f64,
+    report: &mut Report,
+) {
+    if let Some(summary) = &summary {
+        report.optimizer = OptimizerReport::new(
+            summary,
+            initial_chi2,
+            graph.chi2(),
+            optimizer.system(),
+            optimizer.max_nnz_factor(),
+        );
+    }
+    let accepted = outcome.accepted.iter().filter(|&&a| a).count();
+    report.robust = RobustReport {
+        method,
+        c,
+        rounds: outcome.rounds,
+        decisions: outcome.decisions,
+        clusters: outcome.clusters,
+        accepted_loops: accepted,
+        rejected_loops: candidates.len() - accepted,
+        rescued_loops: candidates
+            .iter()
+            .zip(&outcome.accepted)
+            .filter(|(c, a)| **a && !c.kept)
+            .count(),
+        model: outcome.model.clone(),
+        search: outcome.search.clone(),
+    };
+    report.loops = candidates
+        .iter()
+        .enumerate()
+        .map(|(k, cand)| {
+            let e = &graph.edges[cand.edge];
+            LoopReport {
+                from: graph.id(e.from),
+                to: graph.id(e.to),
+                inliers: e.candidate.and_then(|c| c.inliers),
+                kept: cand.kept,
+                accepted: outcome.accepted[k],
+                weight: outcome.weights[k],
+                prior: outcome
+                    .model
+                    .as_ref()
+                    .map(|m| m.prior(cand.count_posterior)),
+                posterior: outcome.posteriors[k],
+                innovation: outcome.innovations[k],
+                reason: outcome.reasons[k],
+            }
+        })
+        .collect();
+}
+
+/// Writes `counts.svg` (when there are counts) and `trajectory.svg` into
+/// `dir`, and lists them in the report.
+pub fn plot<P: G2oPose<D>, const D: usize>(
+    dir: &Path,
+    graph: &PoseGraph<P, D>,
+    before: &[[f64; 2]],
+    weights: &[f64],
+    config: &OptimizeConfig,
+    report: &mut Report,
+) -> Result<(), PipelineError> {
+    use crate::plot::{LoopLine, plot_counts, plot_trajectory, top_view};
+    std::fs::create_dir_all(dir).map_err(|source| PipelineError::Write {
+        path: dir.to_owned(),
+        source,
+    })?;
+    let counts: Vec<u64> = graph
+        .edges
+        .iter()
+        .filter_map(|e| e.candidate.and_then(|c| c.inliers))
+        .collect();
+    if let (false, Some(fit)) = (counts.is_empty(), &report.gate.fit) {
+        let path = dir.join("counts.svg");
+        plot_counts(&path, &counts, fit)?;
+        report.plots.push(path.display().to_string());
+    }
+    let ids = graph.ids();
+    let odometry: Vec<(usize, usize)> = graph
+        .edges
+        .iter()
+        .filter(|e| e.candidate.is_none() && ids[e.from].abs_diff(ids[e.to]) == 1)
+        .map(|e| (e.from, e.to))
+        .collect();
+    let loops: Vec<LoopLine> = graph
+        .edges
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| e.candidate.is_some() || ids[e.from].abs_diff(ids[e.to]) != 1)
+        .map(|(k, e)| LoopLine {
+            from: e.from,
+            to: e.to,
+            weight: weights[k],
+        })
+        .collect();
+    let title = config
+        .input
+        .file_name()
+        .map_or_else(|| "pose graph".into(), |n| n.to_string_lossy().into_owned());
+    let path = dir.join("trajectory.svg");
+    plot_trajectory(
+        &path,
+        before,
+        &top_view(&graph.poses),
+        &odometry,
+        &loops,
+        &title,
+    )?;
+    report.plots.push(path.display().to_string());
+    Ok(())
+}

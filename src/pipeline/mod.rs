@@ -1,0 +1,313 @@
+//! The whole job of `pgo optimize`, as a library call, in the order the data
+//! flows: read → gate → initialise → optimise (robustly) → test → report →
+//! write. The CLI is a thin layer over [`run`].
+
+mod candidates;
+mod finish;
+
+use crate::gate::{DegeneratePolicy, GateMode, MixtureOptions};
+use crate::graph::{AnyPoseGraph, PoseGraph};
+use crate::io::g2o::{self, G2oFile, G2oPose, ReadError, ReadOptions};
+use crate::io::inliers::InlierCsvError;
+use crate::report::Report;
+use crate::robust::{self, RobustMethod};
+use crate::solve::init::{ChordalInit, Initialization};
+use crate::solve::{Budget, IterationRecord, Optimizer, Session, SolveError, SolverOptions};
+use crate::stats::DofConvention;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Everything `pgo optimize` can be told.
+#[derive(Clone, Debug)]
+pub struct OptimizeConfig {
+    /// The g2o file to read.
+    pub input: PathBuf,
+    /// Where to write the optimised graph, if anywhere.
+    pub output: Option<PathBuf>,
+    /// Inlier counts kept apart from the g2o file.
+    pub inliers: Option<PathBuf>,
+    /// Project non-positive-definite information matrices instead of failing.
+    pub fix_information: bool,
+    /// The initial guess.
+    pub initialization: Initialization,
+    /// Solver options.
+    pub solver: SolverOptions,
+    /// How loop candidates are gated by their inlier counts.
+    pub gate: GateMode,
+    /// What the learned gate does when the counts are degenerate.
+    pub degenerate: DegeneratePolicy,
+    /// Options of the mixture fit.
+    pub mixture: MixtureOptions,
+    /// Significance level of the χ² test.
+    pub alpha: f64,
+    /// Degrees of freedom of the χ² test.
+    pub dof: DofConvention,
+    /// Which edges are loop candidates.
+    pub candidates: CandidateRule,
+    /// The robust method for loop candidates and its kernel width (`None`:
+    /// the default width for the edge dimension).
+    pub robust: RobustMethod,
+    /// Kernel width override.
+    pub robust_c: Option<f64>,
+    /// EM's layers (all on but for an ablation).
+    pub layers: robust::Layers,
+    /// Most solver iterations in all, robust rounds included (`None`: each
+    /// solve bounded by `solver.max_iterations`, the rounds by their own
+    /// limits).
+    pub iteration_budget: Option<usize>,
+    /// Write SVG pictures (inlier-count histogram with the fitted mixture;
+    /// trajectory before and after) into this directory.
+    pub plot: Option<PathBuf>,
+}
+
+/// Which edges are loop-closure candidates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CandidateRule {
+    /// Edges with an inlier count (in the file or the `--inliers` CSV).
+    #[default]
+    Counted,
+    /// Also every edge between non-consecutive ids (|i − j| ≠ 1), with or
+    /// without a count: robust weighting applies to them, gating only to
+    /// those with a count.
+    NonSequential,
+}
+
+impl OptimizeConfig {
+    /// Defaults for everything but the input.
+    pub fn new(input: impl Into<PathBuf>) -> Self {
+        Self {
+            input: input.into(),
+            output: None,
+            inliers: None,
+            fix_information: false,
+            initialization: Initialization::default(),
+            solver: SolverOptions::default(),
+            gate: GateMode::default(),
+            degenerate: DegeneratePolicy::default(),
+            mixture: MixtureOptions::default(),
+            alpha: 0.05,
+            dof: DofConvention::default(),
+            candidates: CandidateRule::default(),
+            robust: RobustMethod::default(),
+            robust_c: None,
+            layers: robust::Layers::default(),
+            iteration_budget: None,
+            plot: None,
+        }
+    }
+}
+
+/// Why `pgo optimize` failed.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// The g2o file is unreadable or malformed.
+    #[error(transparent)]
+    Read(#[from] ReadError),
+    /// The inlier CSV is unreadable or malformed.
+    #[error(transparent)]
+    Inliers(#[from] InlierCsvError),
+    /// The problem cannot be solved as posed.
+    #[error("{path}: {source}")]
+    Solve {
+        /// The input file.
+        path: PathBuf,
+        /// The cause.
+        source: SolveError,
+    },
+    /// The output could not be written.
+    #[error("{path}: cannot write: {source}")]
+    Write {
+        /// The output file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// A picture could not be drawn or written.
+    #[error(transparent)]
+    Plot(#[from] crate::plot::PlotError),
+    /// An edge's cost is not finite at the initial guess (its measurement,
+    /// information or poses are too large for floating point).
+    #[error(
+        "{path}: edge {edge} (vertex {from} → {to}) has a non-finite χ² at the {} initial \
+         guess (--init): its measurement, information or poses are too large",
+        initialization_name(*.initialization)
+    )]
+    NonFiniteEdge {
+        /// The input file.
+        path: PathBuf,
+        /// 1-based index of the edge among the file's edges.
+        edge: usize,
+        /// Its first vertex id.
+        from: crate::graph::VertexId,
+        /// Its second vertex id.
+        to: crate::graph::VertexId,
+        /// The initial guess.
+        initialization: Initialization,
+    },
+    /// The optimiser produced non-finite poses (nothing was written).
+    #[error("{path}: the optimiser produced non-finite poses; nothing was written")]
+    NonFiniteResult {
+        /// The input file.
+        path: PathBuf,
+    },
+}
+
+/// `file`, `odometry` or `chordal`, as on the command line.
+fn initialization_name(i: Initialization) -> &'static str {
+    match i {
+        Initialization::File => "file",
+        Initialization::Odometry => "odometry",
+        Initialization::Chordal => "chordal",
+    }
+}
+
+impl PipelineError {
+    /// The process exit status: 2 for bad input, 1 for other failures.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            Self::Read(ReadError::Io { .. }) | Self::Inliers(InlierCsvError::Io { .. }) => 2,
+            Self::Read(_) | Self::Inliers(_) | Self::NonFiniteEdge { .. } => 2,
+            Self::Solve {
+                source: SolveError::Unconstrained { .. } | SolveError::NotPositiveDefinite { .. },
+                ..
+            } => 2,
+            Self::Solve {
+                source: SolveError::NonFiniteStart,
+                ..
+            } => 2,
+            Self::Solve { .. }
+            | Self::Write { .. }
+            | Self::NonFiniteResult { .. }
+            | Self::Plot(_) => 1,
+        }
+    }
+}
+
+/// Runs `pgo optimize`: returns the report (and writes the output file if
+/// asked). `observer` sees every iteration.
+pub fn run(
+    config: &OptimizeConfig,
+    observer: &mut dyn FnMut(&IterationRecord),
+) -> Result<Report, PipelineError> {
+    let mut file = g2o::read(
+        &config.input,
+        ReadOptions {
+            fix_information: config.fix_information,
+        },
+    )?;
+    let mut report = Report::new(&config.input, &file);
+    match &mut file.graph {
+        AnyPoseGraph::Planar(g) => optimize_graph(g, &file.missing, config, &mut report, observer)?,
+        AnyPoseGraph::Spatial(g) => {
+            optimize_graph(g, &file.missing, config, &mut report, observer)?
+        }
+    }
+    if let Some(out) = &config.output {
+        write_output(&file, out)?;
+        report.output = Some(out.display().to_string());
+    }
+    Ok(report)
+}
+
+/// The job on a graph in memory: gate → initial guess → robust solve → χ²
+/// test → report. `missing` lists the vertices the file did not define.
+pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
+    graph: &mut PoseGraph<P, D>,
+    missing: &[usize],
+    config: &OptimizeConfig,
+    report: &mut Report,
+    observer: &mut dyn FnMut(&IterationRecord),
+) -> Result<(), PipelineError> {
+    let solve_error = |source| PipelineError::Solve {
+        path: config.input.clone(),
+        source,
+    };
+    // Which edges are loop candidates, and what the gate makes of them.
+    candidates::apply_inlier_csv(graph, config, report)?;
+    candidates::mark(graph, config.candidates);
+    let candidates = candidates::gate(graph, config, report);
+    let method = if candidates.iter().any(|c| c.kept) {
+        config.robust
+    } else {
+        RobustMethod::None
+    };
+
+    // The initial guess, from the trusted edges (and the candidates that
+    // alone join parts of the map), before any candidate is weighed.
+    let mut weights = candidates::initial_weights(graph, &candidates, method == RobustMethod::None);
+    let mut optimizer =
+        Optimizer::new(graph, Some(&weights), config.solver.clone()).map_err(solve_error)?;
+    let start = Instant::now();
+    finish::initialize(graph, missing, config, &weights, report, start)?;
+    let before = config
+        .plot
+        .as_ref()
+        .map(|_| crate::plot::top_view(&graph.poses));
+    let initial_chi2 = graph.chi2();
+
+    // The robust solve, within the iteration and time budget.
+    let budget = Budget {
+        iterations: config.iteration_budget.unwrap_or(usize::MAX),
+        deadline: config.solver.time_limit.map(|t| Instant::now() + t),
+    };
+    let c = config
+        .robust_c
+        .unwrap_or_else(|| robust::default_c(method, D));
+    let test = |g: &PoseGraph<P, D>, w: &[f64]| finish::chi2_test(g, w, config).ok();
+    let mut session = Session::new(
+        &mut optimizer,
+        graph,
+        config.solver.clone(),
+        budget,
+        observer,
+    );
+    let chordal = config.initialization == Initialization::Chordal;
+    let outcome = robust::solve(
+        &mut session,
+        chordal,
+        &mut weights,
+        &candidates,
+        method,
+        c,
+        &config.layers,
+        &test,
+    )
+    .map_err(solve_error)?;
+    let summary = session.finish(outcome.cut_short);
+    if graph.poses.iter().any(|p| !p.is_finite()) {
+        return Err(PipelineError::NonFiniteResult {
+            path: config.input.clone(),
+        });
+    }
+
+    // The χ² test of the map returned, and the report.
+    match finish::chi2_test(graph, &weights, config) {
+        Ok(t) => report.chi2_test = Some(t),
+        Err(e) => report.warnings.push(format!("no χ² test: {e}")),
+    }
+    finish::report(
+        graph,
+        &optimizer,
+        summary,
+        initial_chi2,
+        &candidates,
+        &outcome,
+        method,
+        c,
+        report,
+    );
+    if let (Some(dir), Some(before)) = (&config.plot, before) {
+        finish::plot(dir, graph, &before, &weights, config, report)?;
+    }
+    Ok(())
+}
+
+fn write_output(file: &G2oFile, out: &Path) -> Result<(), PipelineError> {
+    crate::io::write_atomically(out, |w| Ok(file.rewrite(w)?)).map_err(|source| {
+        PipelineError::Write {
+            path: out.to_owned(),
+            source,
+        }
+    })
+}

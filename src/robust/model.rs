@@ -1,0 +1,684 @@
+//! The model of a loop candidate's two pieces of evidence, its inlier count
+//! and its innovation, and the posterior probability that it is a true loop.
+//!
+//! A candidate `k` is a true loop or a wrong one (`z_k`). Given `z_k` its
+//! two observations are independent:
+//!
+//! * **the count** `n_k` (when the front end gave one): a true loop's count
+//!   follows the gate's true-loop component, a wrong loop's either the
+//!   wrong-loop component (verification saw through it) or — at a rate
+//!   `a`, the rate at which verification is fooled (perceptual aliasing) —
+//!   the true-loop component. So the prior is `π_k = (1 − a)·p_k`, `p_k`
+//!   the gate's posterior of the true-loop component. Without counts every
+//!   candidate has the same prior, the share `ρ` of true loops.
+//! * **the innovation** `ν_k²`: the candidate's squared Mahalanobis error
+//!   against the map made without it (and without the candidates of its
+//!   cluster). For true loops `y = ln ν²` is normal, `N(μ_in, σ_in²)`
+//!   (Gaussian noise at an unknown scale gives `ln(s²·χ²_D)`; real loops
+//!   scatter more, so the spread is learned, never below that of
+//!   `ln χ²_D`). Wrong loops come in populations — perceptual aliasing a
+//!   few poses off, random matches across the map — so their `y` follows a
+//!   mixture of `K` normals, `K` from 0 to [`MAX_WRONG_POPULATIONS`] chosen
+//!   by BIC (with `K = 0`, a wrong loop is equally likely anywhere in the
+//!   span of the data).
+//!
+//! `a`, `ρ` and the distributions are estimated together by EM from every
+//! candidate's `(p_k, ν_k²)`; the posterior
+//! `P(true | n_k, ν_k) = π_k·f_in / (π_k·f_in + (1 − π_k)·f_out)` decides.
+//! For the decisions the likelihood ratio is made non-increasing in `y`
+//! (its running minimum from `μ_in` up): a smaller innovation is never
+//! evidence against a loop, and one beyond a region of wrong loops is no
+//! evidence for it.
+
+use super::Layers;
+use crate::stats::mixture::NormalComponent;
+use serde::Serialize;
+
+/// One normal population of `y = ln ν²`: its share (among wrong loops; 1
+/// for the true loops), mean and spread.
+pub type Population = NormalComponent;
+
+/// `ln N(y | μ, σ)` of a population, without its weight.
+fn ln_density(p: &Population, y: f64) -> f64 {
+    p.log_weighted_density(y) - p.weight.ln()
+}
+
+/// The fitted evidence model.
+#[derive(Clone, PartialEq, Serialize)]
+pub struct LoopModel {
+    /// The true loops' `ln ν²`.
+    pub inlier: Population,
+    /// The wrong loops' populations (empty: no population stands out; a
+    /// wrong loop is then equally likely anywhere in `span`).
+    pub outliers: Vec<Population>,
+    /// The span of the candidates' `ln ν²`.
+    pub span: f64,
+    /// The rate at which a wrong loop's count looks like a true loop's.
+    pub aliasing_rate: f64,
+    /// The share of true loops among candidates without a count.
+    pub inlier_share: f64,
+    /// The log-likelihood of the fit.
+    pub ln_likelihood: f64,
+    /// Where the non-increasing likelihood ratio is tabulated: its values
+    /// every [`GRID_STEP`] from `inlier.mean`.
+    #[serde(skip)]
+    envelope: Vec<f64>,
+}
+
+impl std::fmt::Debug for LoopModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LoopModel")
+            .field("inlier", &self.inlier)
+            .field("outliers", &self.outliers)
+            .field("span", &self.span)
+            .field("aliasing_rate", &self.aliasing_rate)
+            .field("inlier_share", &self.inlier_share)
+            .field("ln_likelihood", &self.ln_likelihood)
+            .finish()
+    }
+}
+
+/// One candidate as the model sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Evidence {
+    /// The gate's posterior of the true-loop count component, `None` without
+    /// a count.
+    pub count_posterior: Option<f64>,
+    /// `ν²`, its squared innovation (positive and finite).
+    pub innovation: f64,
+}
+
+/// Most populations of wrong loops: aliasing a few poses off, local
+/// mismatches, random matches across the map.
+pub const MAX_WRONG_POPULATIONS: usize = 3;
+/// The smallest group of candidates EM starts from as the true loops: a
+/// mean and a spread need a few points.
+const MIN_START: usize = 4;
+/// EM iterations at most; the fit stops earlier when the log-likelihood
+/// improves by less than [`TOLERANCE`].
+const MAX_ITERATIONS: usize = 500;
+/// Convergence of the log-likelihood, relative: far below the BIC's
+/// resolution (`ln n` per parameter).
+const TOLERANCE: f64 = 1e-8;
+/// The resolution (in `ln ν²`) of the non-increasing likelihood ratio:
+/// finer than any population's spread ([`ln_chi2_sigma`] ≥ 0.5 up to
+/// 12-dimensional edges).
+const GRID_STEP: f64 = 0.01;
+
+/// The standard deviation of `ln X` for `X ~ χ²_dof`, `√ψ₁(dof/2)` (ψ₁ the
+/// trigamma function): the spread of the log innovation of loops whose
+/// noise is exactly Gaussian; no population of loops is tighter.
+///
+/// ```
+/// // ψ₁(3/2) = π²/2 − 4.
+/// let s = pgo::robust::ln_chi2_sigma(3);
+/// assert!((s * s - (std::f64::consts::PI.powi(2) / 2.0 - 4.0)).abs() < 1e-10);
+/// ```
+pub fn ln_chi2_sigma(dof: usize) -> f64 {
+    trigamma(dof.max(1) as f64 / 2.0).sqrt()
+}
+
+/// The mean of `ln X` for `X ~ χ²_dof`, `ψ(dof/2) + ln 2` (ψ the digamma
+/// function): where the log innovations of true loops lie when the file's
+/// information is right.
+pub fn ln_chi2_mean(dof: usize) -> f64 {
+    digamma(dof.max(1) as f64 / 2.0) + std::f64::consts::LN_2
+}
+
+/// ψ(x) for x > 0: the recurrence ψ(x) = ψ(x + 1) − 1/x up to x ≥ 8, then
+/// the asymptotic series (error below 1e-12 there).
+fn digamma(mut x: f64) -> f64 {
+    let mut acc = 0.0;
+    while x < 8.0 {
+        acc -= 1.0 / x;
+        x += 1.0;
+    }
+    let x2 = 1.0 / (x * x);
+    acc + x.ln()
+        - 0.5 / x
+        - x2 * (1.0 / 12.0
+            - x2 * (1.0 / 120.0 - x2 * (1.0 / 252.0 - x2 * (1.0 / 240.0 - x2 / 132.0))))
+}
+
+/// Where the true loops' log innovations are centred.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scale {
+    /// Estimated with the rest of the model: the file's information may be
+    /// off by any factor.
+    Learned,
+    /// At [`ln_chi2_mean`]: the file's information is taken as right, as
+    /// the χ² test takes it.
+    File,
+}
+
+/// ψ₁(x) for x > 0: the recurrence ψ₁(x) = ψ₁(x + 1) + 1/x² up to x ≥ 8,
+/// then the asymptotic series (error below 1e-12 there).
+fn trigamma(mut x: f64) -> f64 {
+    let mut acc = 0.0;
+    while x < 8.0 {
+        acc += 1.0 / (x * x);
+        x += 1.0;
+    }
+    let x2 = 1.0 / (x * x);
+    acc + 1.0 / x
+        + x2 / 2.0
+        + (1.0 / x) * x2 * (1.0 / 6.0 - x2 * (1.0 / 30.0 - x2 * (1.0 / 42.0 - x2 / 30.0)))
+}
+
+/// `ln Σ exp(x)`.
+fn ln_sum_exp(x: impl Iterator<Item = f64> + Clone) -> f64 {
+    let m = x.clone().fold(f64::NEG_INFINITY, f64::max);
+    if m == f64::NEG_INFINITY {
+        return m;
+    }
+    m + x.map(|v| (v - m).exp()).sum::<f64>().ln()
+}
+
+/// Weighted mean and standard deviation (floored) of `(weight, value)`
+/// pairs, and the total weight.
+fn moments(points: impl Iterator<Item = (f64, f64)>, floor: f64) -> (f64, f64, f64) {
+    let (mut n, mut s1, mut s2) = (0.0, 0.0, 0.0);
+    for (w, y) in points {
+        n += w;
+        s1 += w * y;
+        s2 += w * y * y;
+    }
+    if n <= 0.0 {
+        return (0.0, 0.0, floor);
+    }
+    let mean = s1 / n;
+    (n, mean, (s2 / n - mean * mean).max(0.0).sqrt().max(floor))
+}
+
+/// [`moments`] about a given mean.
+fn pinned_moments(
+    points: impl Iterator<Item = (f64, f64)>,
+    mean: f64,
+    floor: f64,
+) -> (f64, f64, f64) {
+    let (n, s2) = points.fold((0.0, 0.0), |(n, s2), (w, y)| {
+        (n + w, s2 + w * (y - mean) * (y - mean))
+    });
+    let sigma = if n > 0.0 { (s2 / n).sqrt() } else { 0.0 };
+    (n, mean, sigma.max(floor))
+}
+
+impl LoopModel {
+    /// Fits the model by EM to candidates of innovation dimension
+    /// `dimension`, for each number of wrong populations from 0 to
+    /// [`MAX_WRONG_POPULATIONS`], and keeps the fit of the lowest BIC.
+    /// `start` marks the candidates taken as true loops for the first
+    /// M-step (e.g. those the map was solved with).
+    pub fn fit(
+        evidence: &[Evidence],
+        start: &[bool],
+        dimension: usize,
+        scale: Scale,
+        layers: &Layers,
+    ) -> Self {
+        let floor = ln_chi2_sigma(dimension);
+        let pinned = (scale == Scale::File).then(|| ln_chi2_mean(dimension));
+        let most = if layers.populations {
+            MAX_WRONG_POPULATIONS
+        } else {
+            1
+        };
+        let y: Vec<f64> = evidence.iter().map(|e| e.innovation.ln()).collect();
+        let n = y.len().max(1) as f64;
+        let mut best: Option<(f64, Self)> = None;
+        // Every number of populations (a second tight population can pay for
+        // itself where a first one spread over both does not), each from
+        // every start: EM finds a local optimum, and a small consistent
+        // group among many wrong loops is found only from near it.
+        for start in starts(&y, start) {
+            for k in 0..=most {
+                let Some(model) =
+                    Self::fit_k(evidence, &y, &start, k, (floor, pinned), layers.aliasing)
+                else {
+                    break;
+                };
+                // Free parameters: the true loops' mean and spread, each
+                // wrong population's mean and spread, their k − 1 shares,
+                // and the two rates.
+                let parameters = 2 + 3 * k + 1;
+                let bic = parameters as f64 * n.ln() - 2.0 * model.ln_likelihood;
+                if best.as_ref().is_none_or(|(b, _)| bic < *b) {
+                    best = Some((bic, model));
+                }
+            }
+        }
+        let mut model = best
+            .map(|(_, m)| m)
+            .unwrap_or_else(|| Self::empty(&y, floor));
+        model.tabulate(&y);
+        model
+    }
+
+    /// A model of nothing: every candidate a true loop.
+    fn empty(y: &[f64], floor: f64) -> Self {
+        let (_, mean, sigma) = moments(y.iter().map(|&y| (1.0, y)), floor);
+        Self {
+            inlier: Population {
+                weight: 1.0,
+                mean,
+                sigma,
+            },
+            outliers: Vec::new(),
+            span: span(y, floor),
+            aliasing_rate: 0.5,
+            inlier_share: 0.5,
+            ln_likelihood: 0.0,
+            envelope: Vec::new(),
+        }
+    }
+
+    /// EM with `k` wrong populations, started from the candidates `start`
+    /// marks as true loops and the others split by rank into `k` groups (or,
+    /// with fewer than `k` others, the upper quarter of all split so);
+    /// `None` when there are fewer than `k` candidates to start from.
+    fn fit_k(
+        evidence: &[Evidence],
+        y: &[f64],
+        start: &[bool],
+        k: usize,
+        (floor, pinned): (f64, Option<f64>),
+        aliasing: bool,
+    ) -> Option<Self> {
+        let mut order: Vec<usize> = (0..y.len()).collect();
+        order.sort_by(|&a, &b| y[a].total_cmp(&y[b]));
+        let mut rest: Vec<usize> = order.iter().copied().filter(|&i| !start[i]).collect();
+        if rest.len() < k {
+            rest = order[order.len() - order.len() / 4..].to_vec();
+        }
+        if rest.len() < k {
+            return None;
+        }
+        // Responsibilities: column 0 the true loops, 1..=k the wrong
+        // populations.
+        let mut r = vec![vec![0.0; k + 1]; y.len()];
+        for ri in r.iter_mut() {
+            ri[0] = 1.0;
+        }
+        for (rank, &i) in rest.iter().enumerate() {
+            if k > 0 {
+                r[i][0] = 0.0;
+                r[i][1 + rank * k / rest.len()] = 1.0;
+            }
+        }
+        let mut model = Self::empty(y, floor);
+        let mut last = f64::NEG_INFINITY;
+        for _ in 0..MAX_ITERATIONS {
+            model = Self::m_step(evidence, y, &r, k, (floor, pinned), model.span);
+            if let Some(j) = model.lower_population() {
+                // The true loops are the most consistent population: the
+                // labels of a mixture are otherwise interchangeable.
+                for ri in r.iter_mut() {
+                    ri.swap(0, j + 1);
+                }
+                model = Self::m_step(evidence, y, &r, k, (floor, pinned), model.span);
+            }
+            if !aliasing {
+                model.aliasing_rate = 0.0;
+            }
+            let ll = model.e_step(evidence, y, &mut r);
+            model.ln_likelihood = ll;
+            if (ll - last).abs() < TOLERANCE * ll.abs().max(1.0) {
+                break;
+            }
+            last = ll;
+        }
+        Some(model)
+    }
+
+    /// The wrong population of lowest mean, if it is below the true loops'.
+    fn lower_population(&self) -> Option<usize> {
+        let (j, o) = self
+            .outliers
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.mean.total_cmp(&b.1.mean))?;
+        (o.mean < self.inlier.mean).then_some(j)
+    }
+
+    /// The parameters that maximise the expected log-likelihood under the
+    /// responsibilities `r`.
+    fn m_step(
+        evidence: &[Evidence],
+        y: &[f64],
+        r: &[Vec<f64>],
+        k: usize,
+        (floor, pinned): (f64, Option<f64>),
+        span: f64,
+    ) -> Self {
+        let column = |j: usize| r.iter().map(move |ri| ri[j]).zip(y.iter().copied());
+        let (_, mean, sigma) = match pinned {
+            Some(mean) => pinned_moments(column(0), mean, floor),
+            None => moments(column(0), floor),
+        };
+        let inlier = Population {
+            weight: 1.0,
+            mean,
+            sigma,
+        };
+        let wrong_total: f64 = r.iter().map(|ri| 1.0 - ri[0]).sum();
+        let outliers = (1..=k)
+            .map(|j| {
+                let (n, mean, sigma) = moments(column(j), floor);
+                Population {
+                    weight: if wrong_total > 0.0 {
+                        n / wrong_total
+                    } else {
+                        1.0 / k as f64
+                    },
+                    mean,
+                    sigma,
+                }
+            })
+            .collect();
+        let (fooled, counted, wrong, uncounted) =
+            evidence
+                .iter()
+                .zip(r)
+                .fold((0.0, 0.0, 0.0, 0.0), |(f, c, w, u), (e, ri)| {
+                    match e.count_posterior {
+                        Some(p) => (f + p * (1.0 - ri[0]), c + p, w, u),
+                        None => (f, c, w + 1.0 - ri[0], u + 1.0),
+                    }
+                });
+        Self {
+            inlier,
+            outliers,
+            span,
+            // The expected share of wrong loops among the candidates whose
+            // count looks like a true loop's, and of true loops among those
+            // without a count, each with a uniform (Beta(1, 1)) prior so
+            // that neither is ever 0 or 1.
+            aliasing_rate: (fooled + 1.0) / (counted + 2.0),
+            inlier_share: (uncounted - wrong + 1.0) / (uncounted + 2.0),
+            ln_likelihood: 0.0,
+            envelope: Vec::new(),
+        }
+    }
+
+    /// The responsibilities under this model, and the log-likelihood.
+    fn e_step(&self, evidence: &[Evidence], y: &[f64], r: &mut [Vec<f64>]) -> f64 {
+        // Per population: ln(weight) − ln σ − ln √(2π), and 1/(2σ²).
+        let constants = |p: &Population| {
+            (
+                p.weight.ln() - p.sigma.ln() - 0.5 * (2.0 * std::f64::consts::PI).ln(),
+                0.5 / (p.sigma * p.sigma),
+                p.mean,
+            )
+        };
+        let inlier = constants(&self.inlier);
+        let outliers: Vec<(f64, f64, f64)> = self.outliers.iter().map(constants).collect();
+        let mut terms = [0.0; MAX_WRONG_POPULATIONS + 1];
+        let mut ll = 0.0;
+        for ((e, &yi), ri) in evidence.iter().zip(y).zip(r.iter_mut()) {
+            let p = self.prior(e.count_posterior);
+            let (ln_in, ln_out) = (p.ln(), (1.0 - p).ln());
+            let term = |(c, h, m): (f64, f64, f64)| c - (yi - m) * (yi - m) * h;
+            terms[0] = ln_in + term(inlier);
+            let n = if outliers.is_empty() {
+                terms[1] = ln_out - self.span.ln();
+                2
+            } else {
+                for (t, &o) in terms[1..].iter_mut().zip(&outliers) {
+                    *t = ln_out + term(o);
+                }
+                1 + outliers.len()
+            };
+            let max = terms[..n].iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let mut sum = 0.0;
+            for t in &mut terms[..n] {
+                *t = (*t - max).exp();
+                sum += *t;
+            }
+            ll += max + sum.ln();
+            for (j, t) in terms[..n].iter().enumerate().take(ri.len()) {
+                ri[j] = t / sum;
+            }
+        }
+        ll
+    }
+
+    /// `ln` of the wrong loops' density of `y`.
+    fn ln_outlier_density(&self, y: f64) -> f64 {
+        if self.outliers.is_empty() {
+            return -self.span.ln();
+        }
+        ln_sum_exp(self.outliers.iter().map(|o| o.log_weighted_density(y)))
+    }
+
+    /// `ln f_in(y) − ln f_out(y)`.
+    fn raw_ratio(&self, y: f64) -> f64 {
+        ln_density(&self.inlier, y) - self.ln_outlier_density(y)
+    }
+
+    /// Tabulates the running minimum of the likelihood ratio from the true
+    /// loops' mean up to the largest `y`.
+    fn tabulate(&mut self, y: &[f64]) {
+        let top = y.iter().copied().fold(self.inlier.mean, f64::max);
+        let steps = ((top - self.inlier.mean) / GRID_STEP).ceil() as usize + 1;
+        let mut low = f64::INFINITY;
+        self.envelope = (0..=steps)
+            .map(|i| {
+                low = low.min(self.raw_ratio(self.inlier.mean + i as f64 * GRID_STEP));
+                low
+            })
+            .collect();
+    }
+
+    /// The prior probability of a true loop before its innovation is seen.
+    pub fn prior(&self, count_posterior: Option<f64>) -> f64 {
+        match count_posterior {
+            Some(p) => {
+                ((1.0 - self.aliasing_rate) * p).clamp(f64::MIN_POSITIVE, 1.0 - f64::EPSILON)
+            }
+            None => self.inlier_share,
+        }
+    }
+
+    /// `ln f_in(y) − ln f_out(y)`, made non-increasing: its running
+    /// minimum from the true loops' mean up (the value there below it).
+    pub fn ln_likelihood_ratio(&self, y: f64) -> f64 {
+        let at = ((y - self.inlier.mean) / GRID_STEP).max(0.0);
+        let i = at.floor() as usize;
+        match self.envelope.get(i) {
+            Some(&v) if i + 1 < self.envelope.len() => v,
+            // Beyond the table: the raw ratio there, and no more than the
+            // table's last value.
+            Some(&v) => v.min(self.raw_ratio(y)),
+            None => self
+                .envelope
+                .last()
+                .map_or(self.raw_ratio(y), |&v| v.min(self.raw_ratio(y))),
+        }
+    }
+
+    /// `ln` of the posterior odds of a true loop.
+    pub fn ln_odds(&self, e: &Evidence) -> f64 {
+        let p = self.prior(e.count_posterior);
+        if e.count_posterior == Some(0.0) {
+            return f64::NEG_INFINITY;
+        }
+        (p / (1.0 - p)).ln() + self.ln_likelihood_ratio(e.innovation.ln())
+    }
+
+    /// The posterior probability of a true loop.
+    pub fn posterior(&self, e: &Evidence) -> f64 {
+        let l = self.ln_odds(e);
+        if l >= 0.0 {
+            1.0 / (1.0 + (-l).exp())
+        } else {
+            let x = l.exp();
+            x / (1.0 + x)
+        }
+    }
+}
+
+/// The starts of EM: the candidates marked (unless none is), then the
+/// lowest quarter of `y`, the lowest sixteenth, … while at least
+/// [`MIN_START`] candidates.
+fn starts(y: &[f64], marked: &[bool]) -> Vec<Vec<bool>> {
+    let mut order: Vec<usize> = (0..y.len()).collect();
+    order.sort_by(|&a, &b| y[a].total_cmp(&y[b]));
+    let mut out = Vec::new();
+    if marked.contains(&true) {
+        out.push(marked.to_vec());
+    }
+    let mut m = y.len() / 4;
+    while m >= MIN_START || out.is_empty() {
+        let mut lowest = vec![false; y.len()];
+        for &i in &order[..m.min(y.len())] {
+            lowest[i] = true;
+        }
+        out.push(lowest);
+        if m < MIN_START {
+            break;
+        }
+        m /= 4;
+    }
+    out
+}
+
+/// The width over which one wrong loop is spread when no population of
+/// them stands out: the span of the data, at least one population's
+/// spread.
+fn span(y: &[f64], floor: f64) -> f64 {
+    let (lo, hi) = y
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &y| {
+            (l.min(y), h.max(y))
+        });
+    if hi > lo { (hi - lo).max(floor) } else { floor }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use statrs::distribution::{ChiSquared, ContinuousCDF};
+    use std::f64::consts::PI;
+
+    fn ev(p: Option<f64>, nu2: f64) -> Evidence {
+        Evidence {
+            count_posterior: p,
+            innovation: nu2,
+        }
+    }
+
+    /// `n` innovations of Gaussian true loops at scale `s2`: `s2·χ²₃` at
+    /// evenly spaced quantiles.
+    fn gaussian_loops(n: usize, s2: f64, p: Option<f64>) -> Vec<Evidence> {
+        let chi2 = ChiSquared::new(3.0).unwrap();
+        (0..n)
+            .map(|k| ev(p, s2 * chi2.inverse_cdf((k as f64 + 0.5) / n as f64)))
+            .collect()
+    }
+
+    #[test]
+    fn digamma_matches_closed_forms() {
+        // ψ(1) = −γ, ψ(3/2) = 2 − γ − 2 ln 2.
+        let gamma = 0.577_215_664_901_532_9;
+        assert!((digamma(1.0) + gamma).abs() < 1e-11);
+        assert!((digamma(1.5) - (2.0 - gamma - 2.0 * std::f64::consts::LN_2)).abs() < 1e-11);
+    }
+
+    #[test]
+    fn trigamma_matches_closed_forms() {
+        assert!((trigamma(1.0) - PI * PI / 6.0).abs() < 1e-11);
+        assert!((trigamma(3.0) - (PI * PI / 6.0 - 1.25)).abs() < 1e-11);
+        assert!((trigamma(0.5) - PI * PI / 2.0).abs() < 1e-10);
+    }
+
+    /// 400 Gaussian true loops at scale 0.5, 40 wrong ones far out
+    /// (ν² ~ e¹²) with low counts, and 20 aliased: counts like true loops,
+    /// innovations 60 (χ²₃ at 0.5 exceeds 30 once in 10⁶).
+    fn population() -> (Vec<Evidence>, Vec<bool>) {
+        let mut e = gaussian_loops(400, 0.5, Some(0.999));
+        let mut truth = vec![true; 400];
+        for k in 0..40 {
+            e.push(ev(Some(0.01), (12.0 + (k % 7) as f64 * 0.5).exp()));
+            truth.push(false);
+        }
+        for k in 0..20 {
+            e.push(ev(Some(0.999), 60.0 + k as f64));
+            truth.push(false);
+        }
+        (e, truth)
+    }
+
+    #[test]
+    fn em_learns_the_aliasing_rate_and_rejects_the_aliased_loops() {
+        let (e, truth) = population();
+        // Start from every candidate accepted: EM must find the split.
+        let m = LoopModel::fit(
+            &e,
+            &vec![true; e.len()],
+            3,
+            Scale::Learned,
+            &Layers::default(),
+        );
+        // 20 of the 420 true-like counts are wrong.
+        assert!((m.aliasing_rate - 21.0 / 421.8).abs() < 0.01, "{m:?}");
+        for (x, t) in e.iter().zip(&truth) {
+            assert_eq!(m.posterior(x) >= 0.5, *t, "{x:?} {m:?}");
+        }
+    }
+
+    #[test]
+    fn a_heavy_tail_is_learned_and_kept() {
+        // True loops whose noise scales spread over two decades (their
+        // information is off by loop-dependent factors, as in files made
+        // by several front ends): one broad population, all kept; a far
+        // wrong population stays out.
+        let chi2 = ChiSquared::new(3.0).unwrap();
+        let mut e: Vec<Evidence> = (0..400)
+            .map(|k| {
+                let q = chi2.inverse_cdf((k as f64 + 0.5) / 400.0);
+                let scale = (((k * 37) % 400) as f64 / 400.0 * 100f64.ln()).exp();
+                ev(Some(0.99), q * scale)
+            })
+            .collect();
+        e.extend((0..30).map(|k| ev(Some(0.01), 1e7 * (1.0 + k as f64))));
+        let m = LoopModel::fit(
+            &e,
+            &vec![true; e.len()],
+            3,
+            Scale::Learned,
+            &Layers::default(),
+        );
+        assert!(e[..400].iter().all(|x| m.posterior(x) >= 0.5), "{m:?}");
+        assert!(e[400..].iter().all(|x| m.posterior(x) < 0.5), "{m:?}");
+        assert!(m.inlier.sigma > 1.5, "{m:?}");
+    }
+
+    #[test]
+    fn a_smaller_innovation_is_never_evidence_against_a_loop() {
+        let (e, _) = population();
+        let m = LoopModel::fit(
+            &e,
+            &vec![true; e.len()],
+            3,
+            Scale::Learned,
+            &Layers::default(),
+        );
+        let mut last = f64::INFINITY;
+        for k in -400..600 {
+            let l = m.ln_likelihood_ratio(k as f64 * 0.05);
+            assert!(l <= last + 1e-12);
+            last = l;
+        }
+        assert!(m.posterior(&ev(Some(0.999), 1e-12)) > 0.99);
+    }
+
+    #[test]
+    fn without_wrong_loops_every_consistent_candidate_is_kept() {
+        let e = gaussian_loops(100, 2.0, None);
+        let m = LoopModel::fit(&e, &[true; 100], 3, Scale::Learned, &Layers::default());
+        assert!(m.outliers.is_empty(), "{m:?}");
+        assert!(e.iter().all(|x| m.posterior(x) >= 0.5));
+        // A candidate far beyond them is not.
+        assert!(m.posterior(&ev(None, 1e4)) < 0.5);
+    }
+}

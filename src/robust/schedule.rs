@@ -1,0 +1,330 @@
+//! The schedule of EM: when to reweight, when to solve, when to decide.
+//!
+//! 1. **Annealing** ([`anneal`]): from the map of the trusted edges, the
+//!    candidates that passed the gate are weighted by the IROS 2013 E-step,
+//!    `w = c_t² / (c_t² + r²)`, with a kernel width `c_t` that starts at the
+//!    median residual and narrows by [`ANNEAL_STEP`] per E-step to `c` (as
+//!    GNC's μ schedule does), each E-step followed by *one* linearised step
+//!    of the map from where it is. It ends when the width reached `c` and
+//!    the set of candidates of weight ≥ ½ held for [`STABLE_STEPS`] steps: a
+//!    map close to the consensus of the loops, found at the cost of a few
+//!    steps instead of a solve per E-step.
+//! 2. **Decisions by innovation** ([`decide`]): the candidates of weight ≥ ½
+//!    are accepted and the map is solved with them (at full weight, the
+//!    others left out); every candidate — accepted, rejected, or dropped by
+//!    the gate — is judged by its innovation against that map without its
+//!    cluster ([`super::innovation`]), under the loop model fitted to all of
+//!    them ([`super::model`]); the accepted set is replaced by those whose
+//!    posterior is ≥ ½, and the map solved again, until the set repeats. The
+//!    map returned is the least-squares map of the accepted loops.
+
+use super::clusters::clusters;
+use super::innovation::{Evaluation, Innovations};
+use super::model::{Evidence, LoopModel, Scale};
+use super::{Candidate, Layers};
+use crate::geometry::Pose;
+use crate::solve::init::ChordalInit;
+use crate::solve::{Session, SolveError};
+
+/// The kernel width's square is divided by this every E-step until it
+/// reaches `c²` (GTSAM's GNC grows μ by the same factor).
+pub const ANNEAL_STEP: f64 = 1.4;
+
+/// E-steps in a row with the same set of candidates of weight ≥ ½, at the
+/// final width, after which the annealing ends.
+pub const STABLE_STEPS: usize = 2;
+
+/// Most E-steps of the annealing: from a width of 10⁶ times `c` (a wrong
+/// loop across the map at the start) down to `c` takes
+/// `log(10¹²)/log(1.4) ≈ 82` steps; the rest is left for the weights to
+/// settle.
+pub const MAX_ANNEAL_STEPS: usize = 120;
+
+/// Most decisions (solves of an accepted set): each one that changes the
+/// set takes out the loops the previous map did not support; a set that
+/// has not settled after this many is cycling.
+pub const MAX_DECISIONS: usize = 10;
+
+/// The IROS 2013 weight of a candidate of whitened squared residual `r2` at
+/// kernel width `c`: `c²/(c² + r²)`.
+fn em_weight(r2: f64, c: f64) -> f64 {
+    let c2 = c * c;
+    c2 / (c2 + r2)
+}
+
+/// The annealing (step 1 of the module doc): leaves the weights of the
+/// candidates that passed the gate in `weights` (one per edge; the others
+/// stay 0) and the map in the session's graph. Returns the E-steps taken
+/// and whether the budget cut it short.
+pub fn anneal<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    candidates: &[Candidate],
+    c: f64,
+) -> Result<(usize, bool), SolveError> {
+    let kept: Vec<usize> = candidates
+        .iter()
+        .filter(|c| c.kept)
+        .map(|c| c.edge)
+        .collect();
+    if kept.is_empty() {
+        return Ok((0, false));
+    }
+    let mut width2: Option<f64> = None;
+    let mut last: Vec<bool> = Vec::new();
+    let mut stable = 0;
+    for step in 0..MAX_ANNEAL_STEPS {
+        let graph = &*session.graph;
+        let r2: Vec<f64> = kept
+            .iter()
+            .map(|&k| graph.edge_chi2(&graph.edges[k]))
+            .collect();
+        let factor = match width2 {
+            None => median(&r2) / (c * c),
+            Some(f) => f / ANNEAL_STEP,
+        }
+        .max(1.0);
+        width2 = Some(factor);
+        let width = c * factor.sqrt();
+        for (&k, &r) in kept.iter().zip(&r2) {
+            weights[k] = em_weight(r, width);
+        }
+        let set: Vec<bool> = kept.iter().map(|&k| weights[k] >= 0.5).collect();
+        stable = if set == last { stable + 1 } else { 0 };
+        last = set;
+        if factor == 1.0 && stable >= STABLE_STEPS {
+            return Ok((step + 1, false));
+        }
+        session.run(weights, 1)?;
+        if session.exhausted() {
+            return Ok((step + 1, true));
+        }
+    }
+    Ok((MAX_ANNEAL_STEPS, false))
+}
+
+/// The annealing on the chordal relaxation: each E-step is followed by a
+/// chordal solve (rotations, then translations; two linear solves) with the
+/// candidates at their weights, from scratch — a convex stand-in for the
+/// map that is cheap to solve and that no earlier map biases. Returns the
+/// E-steps taken, and whether the session's budget cut them short.
+pub fn anneal_chordal<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    candidates: &[Candidate],
+    c: f64,
+) -> Result<(usize, bool), SolveError> {
+    let kept: Vec<usize> = candidates
+        .iter()
+        .filter(|c| c.kept)
+        .map(|c| c.edge)
+        .collect();
+    if kept.is_empty() {
+        return Ok((0, false));
+    }
+    let mut width2: Option<f64> = None;
+    let mut last: Vec<bool> = Vec::new();
+    let mut stable = 0;
+    for step in 0..MAX_ANNEAL_STEPS {
+        if session.exhausted() {
+            return Ok((step, true));
+        }
+        let graph = &mut *session.graph;
+        P::chordal(graph, Some(weights))?;
+        let r2: Vec<f64> = kept
+            .iter()
+            .map(|&k| graph.edge_chi2(&graph.edges[k]))
+            .collect();
+        let factor = match width2 {
+            None => median(&r2) / (c * c),
+            Some(f) => f / ANNEAL_STEP,
+        }
+        .max(1.0);
+        width2 = Some(factor);
+        let width = c * factor.sqrt();
+        for (&k, &r) in kept.iter().zip(&r2) {
+            weights[k] = em_weight(r, width);
+        }
+        let set: Vec<bool> = kept.iter().map(|&k| weights[k] >= 0.5).collect();
+        stable = if set == last { stable + 1 } else { 0 };
+        last = set;
+        if factor == 1.0 && stable >= STABLE_STEPS {
+            return Ok((step + 1, false));
+        }
+    }
+    Ok((MAX_ANNEAL_STEPS, false))
+}
+
+/// What the decisions found.
+#[derive(Clone, Debug)]
+pub struct Decided {
+    /// Whether the map was solved with each candidate.
+    pub accepted: Vec<bool>,
+    /// The loop model at the last evaluation.
+    pub model: Option<LoopModel>,
+    /// The innovations at the last evaluation.
+    pub innovations: Innovations,
+    /// The cluster of each candidate.
+    pub clusters: Vec<Vec<usize>>,
+    /// Accepted sets solved.
+    pub decisions: usize,
+    /// Whether the budget cut them short.
+    pub cut_short: bool,
+}
+
+impl Decided {
+    /// The evidence the model weighed for candidate `k`.
+    pub fn evidence(&self, candidates: &[Candidate], k: usize) -> Option<Evidence> {
+        evidence(candidates, &self.innovations, k)
+    }
+}
+
+fn evidence(candidates: &[Candidate], innov: &Innovations, k: usize) -> Option<Evidence> {
+    innov.nu2.get(k).copied().flatten().map(|v| Evidence {
+        count_posterior: candidates[k].count_posterior,
+        innovation: v,
+    })
+}
+
+/// The decisions by innovation (step 2 of the module doc), starting from
+/// the candidates of weight ≥ ½ in `weights`; leaves the final weights (1
+/// accepted, 0 not) in `weights` and the least-squares map of the accepted
+/// set in the session's graph.
+pub fn decide<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    candidates: &[Candidate],
+    scale: Scale,
+    layers: &Layers,
+) -> Result<Decided, SolveError> {
+    let graph = &*session.graph;
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    let ends: Vec<(u64, u64)> = edges
+        .iter()
+        .map(|&k| {
+            let e = &graph.edges[k];
+            (graph.id(e.from), graph.id(e.to))
+        })
+        .collect();
+    let mut out = Decided {
+        accepted: edges.iter().map(|&k| weights[k] >= 0.5).collect(),
+        model: None,
+        innovations: Innovations::default(),
+        clusters: if layers.clusters {
+            clusters(&ends)
+        } else {
+            (0..ends.len()).map(|k| vec![k]).collect()
+        },
+        decisions: 0,
+        cut_short: false,
+    };
+    let mut seen: Vec<Vec<bool>> = Vec::new();
+    while out.decisions < MAX_DECISIONS {
+        for (&k, &a) in edges.iter().zip(&out.accepted) {
+            weights[k] = if a { 1.0 } else { 0.0 };
+        }
+        session.converge(weights)?;
+        out.decisions += 1;
+        if session.exhausted() {
+            out.cut_short = true;
+            break;
+        }
+        let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?;
+        let mut innov = eval.innovations(&edges, &out.accepted, &out.clusters);
+        let (model, next) = judge_exactly(
+            candidates,
+            &edges,
+            &mut eval,
+            &mut innov,
+            &out.accepted,
+            scale,
+            layers,
+        );
+        out.innovations = innov;
+        out.model = Some(model);
+        if !layers.decisions {
+            // The innovations are reported; the annealed set stands.
+            break;
+        }
+        seen.push(std::mem::replace(&mut out.accepted, next));
+        if seen.contains(&out.accepted) {
+            // Settled, or cycling: keep the set the map was solved with.
+            out.accepted = seen.pop().unwrap_or_default();
+            break;
+        }
+    }
+    Ok(out)
+}
+
+/// [`judge`], with the candidates whose innovation is only a lower bound
+/// made exact where the bound would accept them (a larger innovation can
+/// only lower the posterior), and the model fitted again, until none is
+/// left that could be accepted.
+fn judge_exactly<P: Pose<D>, const D: usize>(
+    candidates: &[Candidate],
+    edges: &[usize],
+    eval: &mut Evaluation<'_, P, D>,
+    innov: &mut Innovations,
+    accepted: &[bool],
+    scale: Scale,
+    layers: &Layers,
+) -> (LoopModel, Vec<bool>) {
+    loop {
+        let (model, next) = judge(candidates, innov, accepted, (D, scale), layers);
+        let open: Vec<usize> = (0..candidates.len())
+            .filter(|&k| next[k] && !innov.exact[k])
+            .collect();
+        if open.is_empty() {
+            return (model, next);
+        }
+        for k in open {
+            eval.refine(edges, k, innov);
+        }
+    }
+}
+
+/// Fits the loop model to every candidate's evidence and returns it with
+/// the set it accepts (posterior ≥ ½; for a candidate that nothing else
+/// checks, prior ≥ ½).
+fn judge(
+    candidates: &[Candidate],
+    innov: &Innovations,
+    accepted: &[bool],
+    (dimension, scale): (usize, Scale),
+    layers: &Layers,
+) -> (LoopModel, Vec<bool>) {
+    let all: Vec<Option<Evidence>> = (0..candidates.len())
+        .map(|k| evidence(candidates, innov, k))
+        .collect();
+    // Exact zeros (a loop the map fits perfectly) have no logarithm: they
+    // are consistent whatever the model, and say nothing about its spread.
+    let (fitted, start): (Vec<Evidence>, Vec<bool>) = all
+        .iter()
+        .zip(accepted)
+        .filter_map(|(e, &a)| {
+            e.filter(|e| e.innovation > 0.0 && e.innovation.is_finite())
+                .map(|e| (e, a))
+        })
+        .unzip();
+    let model = LoopModel::fit(&fitted, &start, dimension, scale, layers);
+    let next = all
+        .iter()
+        .zip(candidates)
+        .map(|(e, c)| match e {
+            Some(e) => model.posterior(e) >= 0.5,
+            None => model.prior(c.count_posterior) >= 0.5,
+        })
+        .collect();
+    (model, next)
+}
+
+/// The median of a slice (0 when empty).
+fn median(x: &[f64]) -> f64 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    let mut v = x.to_vec();
+    let mid = v.len() / 2;
+    let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    *m
+}

@@ -1,0 +1,187 @@
+//! Acting on a failed χ² test. The decisions leave the map of the loops
+//! the model judged consistent; when that map still fails the χ² test of
+//! the file's information, either the noise of the file is larger than its
+//! information says (every loop a little off, none more than the others)
+//! or some accepted loops are wrong in a way their innovations did not
+//! show. For a cluster of accepted loops, removing it lowers `D²` by its
+//! joint statistic `e_Aᵀ·S⁻¹·e_A` ([`super::innovation`]); a cluster
+//! *explains* the failure when the map without it would pass. The search
+//! removes the cluster that explains the failure with the largest drop,
+//! solves again, and repeats while the test fails and a cluster explains
+//! it; what is left is reported as the suspects.
+//!
+//! When no cluster explains it, the decisions may have started from a map
+//! the wrong loops had already bent (most candidates wrong, their counts
+//! no help): every innovation is then measured against a wrong map.
+//! [`restart`] decides once more from the map of the trusted edges alone,
+//! which no candidate shaped — with the scale learned, then with the true
+//! loops' innovations centred where the file's information puts them
+//! ([`super::Scale::File`], as the χ² test takes it: when wrong loops are
+//! the majority, a learned scale fits them instead) — and keeps whichever
+//! end fits better: the one that passes the test, or with all failing the
+//! one of smallest `D² / critical value`.
+
+use super::Candidate;
+use super::innovation::Evaluation;
+use super::schedule::Decided;
+use crate::geometry::Pose;
+use crate::graph::PoseGraph;
+use crate::solve::{Session, SolveError};
+use crate::stats::Chi2Test;
+use serde::Serialize;
+
+/// Most clusters removed: each removal is a solve and an evaluation, and a
+/// failure that needs more is not explained by a few wrong loops.
+pub const MAX_REMOVALS: usize = 8;
+
+/// Suspects reported when the test still fails.
+pub const SUSPECTS: usize = 10;
+
+/// A cluster of accepted loops and what removing it would do.
+#[derive(Clone, Debug, Serialize)]
+pub struct Suspect {
+    /// The candidates of the cluster the map was solved with (indices
+    /// among the loop candidates).
+    pub loops: Vec<usize>,
+    /// By how much `D²` drops without them.
+    pub d2_drop: f64,
+    /// Whether the map without them passes the test.
+    pub explains: bool,
+}
+
+/// What the search did.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Search {
+    /// Whether the decisions were made again from the trusted edges' map,
+    /// and that end was kept.
+    pub restarted: bool,
+    /// The clusters removed, in order.
+    pub removed: Vec<Suspect>,
+    /// The accepted clusters with the largest drops at the end, when the
+    /// test still fails.
+    pub suspects: Vec<Suspect>,
+}
+
+/// The test of the map in the session's graph with `weights`.
+pub type Test<'t, P, const D: usize> = dyn Fn(&PoseGraph<P, D>, &[f64]) -> Option<Chi2Test> + 't;
+
+/// The search of the module doc, from the decisions `decided`; updates
+/// them (and `weights`, and the map) for every cluster it removes.
+pub fn explain<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    candidates: &[Candidate],
+    decided: &mut Decided,
+    test: &Test<'_, P, D>,
+) -> Result<Search, SolveError> {
+    let mut search = Search::default();
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    loop {
+        let Some(t) = test(session.graph, weights) else {
+            return Ok(search);
+        };
+        if t.passed {
+            return Ok(search);
+        }
+        let ranked = rank(decided, &t, D);
+        let found = ranked.iter().find(|s| s.explains).cloned();
+        let Some(cluster) = found.filter(|_| search.removed.len() < MAX_REMOVALS) else {
+            search.suspects = ranked.into_iter().take(SUSPECTS).collect();
+            return Ok(search);
+        };
+        for &k in &cluster.loops {
+            decided.accepted[k] = false;
+            weights[edges[k]] = 0.0;
+        }
+        search.removed.push(cluster);
+        session.converge(weights)?;
+        if session.exhausted() {
+            return Ok(search);
+        }
+        decided.innovations = Evaluation::new(session.optimizer, session.graph, weights)?
+            .innovations(&edges, &decided.accepted, &decided.clusters);
+    }
+}
+
+/// The accepted clusters by the drop of `D²` without them, largest first,
+/// each marked with whether the test `t` would pass without it.
+fn rank(decided: &Decided, t: &Chi2Test, dimension: usize) -> Vec<Suspect> {
+    let mut out: Vec<Suspect> = decided
+        .clusters
+        .iter()
+        .zip(&decided.innovations.joint)
+        .filter_map(|(members, joint)| {
+            let loops: Vec<usize> = members
+                .iter()
+                .copied()
+                .filter(|&k| decided.accepted[k])
+                .collect();
+            let drop = (*joint)?;
+            (!loops.is_empty()).then(|| Suspect {
+                explains: passes_without(t, drop, loops.len(), dimension),
+                loops,
+                d2_drop: drop,
+            })
+        })
+        .collect();
+    out.sort_by(|a, b| b.d2_drop.total_cmp(&a.d2_drop));
+    out
+}
+
+/// Whether the test `t` would pass without `loops` accepted loops (edges of
+/// dimension `dimension`) whose removal lowers `D²` by `drop`.
+fn passes_without(t: &Chi2Test, drop: f64, loops: usize, dimension: usize) -> bool {
+    let d2 = (t.d2 - drop).max(0.0);
+    Chi2Test::new(
+        d2,
+        t.dof_constraints.saturating_sub(loops as u64),
+        t.dof_residual - (loops * dimension) as i64,
+        t.dof_convention,
+        t.alpha,
+    )
+    .is_ok_and(|t| t.passed)
+}
+
+/// Whether the test of the session's map with `weights` failed.
+pub fn fails<P: Pose<D>, const D: usize>(
+    session: &Session<'_, P, D>,
+    weights: &[f64],
+    test: &Test<'_, P, D>,
+) -> bool {
+    test(session.graph, weights).is_some_and(|t| !t.passed)
+}
+
+/// How badly a map fails: `D²` over the critical value (≤ 1 passes).
+fn excess<P: Pose<D>, const D: usize>(
+    session: &Session<'_, P, D>,
+    weights: &[f64],
+    test: &Test<'_, P, D>,
+) -> f64 {
+    test(session.graph, weights).map_or(f64::INFINITY, |t| t.d2 / t.critical)
+}
+
+/// The restart of the module doc: `decide` run again from no candidate
+/// accepted; keeps the better end (the map, `weights` and the decisions),
+/// and says whether it is the new one.
+pub fn restart<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    candidates: &[Candidate],
+    decided: &mut Decided,
+    test: &Test<'_, P, D>,
+    decide: impl FnOnce(&mut Session<'_, P, D>, &mut [f64]) -> Result<Decided, SolveError>,
+) -> Result<bool, SolveError> {
+    let before = excess(session, weights, test);
+    let saved = (session.graph.poses.clone(), weights.to_vec());
+    for c in candidates {
+        weights[c.edge] = 0.0;
+    }
+    let again = decide(session, weights)?;
+    if !again.cut_short && excess(session, weights, test) < before {
+        *decided = again;
+        return Ok(true);
+    }
+    session.graph.poses = saved.0;
+    weights.copy_from_slice(&saved.1);
+    Ok(false)
+}

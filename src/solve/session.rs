@@ -1,0 +1,127 @@
+//! A sequence of solver runs on one graph under one budget: the robust back
+//! end solves many times (a step per reweighting, a solve per decision),
+//! and `--max-iters` / `--time-limit` bound all of them together.
+
+use super::{IterationRecord, Observer, Optimizer, SolveError, SolverOptions, StopReason, Summary};
+use crate::geometry::Pose;
+use crate::graph::PoseGraph;
+use std::time::Instant;
+
+/// Iterations and time left for all the runs of a session.
+#[derive(Clone, Copy, Debug)]
+pub struct Budget {
+    /// Most iterations in all.
+    pub iterations: usize,
+    /// When to stop.
+    pub deadline: Option<Instant>,
+}
+
+impl Budget {
+    /// No limit.
+    pub fn unlimited() -> Self {
+        Self {
+            iterations: usize::MAX,
+            deadline: None,
+        }
+    }
+}
+
+/// The optimiser, the graph it works on, what is left of the budget, and
+/// the summary of every run so far.
+pub struct Session<'a, P: Pose<D>, const D: usize> {
+    /// The optimiser (its sparsity pattern follows the weights).
+    pub optimizer: &'a mut Optimizer<P, D>,
+    /// The graph; its poses are the current map.
+    pub graph: &'a mut PoseGraph<P, D>,
+    /// Options of a run to convergence.
+    pub options: SolverOptions,
+    budget: Budget,
+    observer: &'a mut dyn FnMut(&IterationRecord),
+    summary: Option<Summary>,
+}
+
+impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
+    /// A session of runs with `options` within `budget`.
+    pub fn new(
+        optimizer: &'a mut Optimizer<P, D>,
+        graph: &'a mut PoseGraph<P, D>,
+        options: SolverOptions,
+        budget: Budget,
+        observer: &'a mut dyn FnMut(&IterationRecord),
+    ) -> Self {
+        Self {
+            optimizer,
+            graph,
+            options,
+            budget,
+            observer,
+            summary: None,
+        }
+    }
+
+    /// Iterations run so far.
+    pub fn iterations(&self) -> usize {
+        self.summary.as_ref().map_or(0, |s| s.iterations)
+    }
+
+    /// Whether the budget is spent.
+    pub fn exhausted(&self) -> bool {
+        self.iterations() >= self.budget.iterations
+            || self.budget.deadline.is_some_and(|d| Instant::now() >= d)
+    }
+
+    /// Minimises `Σ wₖ eₖᵀΩₖeₖ` from the current map for at most
+    /// `max_iterations` (and what is left of the budget).
+    pub fn run(&mut self, weights: &[f64], max_iterations: usize) -> Result<(), SolveError> {
+        let left = self.budget.iterations.saturating_sub(self.iterations());
+        *self.optimizer.options_mut() = SolverOptions {
+            max_iterations: max_iterations.min(left),
+            time_limit: self
+                .budget
+                .deadline
+                .map(|d| d.saturating_duration_since(Instant::now())),
+            ..self.options.clone()
+        };
+        let observer = &mut *self.observer;
+        let mut observe = |r: &IterationRecord| observer(r);
+        let run =
+            self.optimizer
+                .run(self.graph, Some(weights), &mut observe as &mut dyn Observer)?;
+        self.summary = Some(match self.summary.take() {
+            None => run,
+            Some(mut total) => {
+                total.iterations += run.iterations;
+                total.factorizations += run.factorizations;
+                total.time += run.time;
+                total.history.extend(run.history);
+                total.timing.add(&run.timing);
+                total.final_objective = run.final_objective;
+                total.stop_reason = run.stop_reason;
+                total
+            }
+        });
+        Ok(())
+    }
+
+    /// Runs to convergence (at most the options' iteration limit).
+    pub fn converge(&mut self, weights: &[f64]) -> Result<(), SolveError> {
+        self.run(weights, self.options.max_iterations)
+    }
+
+    /// The summary of every run, `None` before the first. `cut_short`: the
+    /// caller stopped before it was done because the budget ran out, which
+    /// the stop reason then says even if the last run converged.
+    pub fn finish(self, cut_short: bool) -> Option<Summary> {
+        let limit = self.budget.iterations;
+        self.summary.map(|mut s| {
+            if cut_short {
+                s.stop_reason = if s.iterations >= limit {
+                    StopReason::MaxIterations
+                } else {
+                    StopReason::TimeLimit
+                };
+            }
+            s
+        })
+    }
+}
