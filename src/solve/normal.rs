@@ -1,0 +1,195 @@
+//! The normal equations shared by both methods: linearisation of every edge
+//! into `H` and `b` ([`Optimizer::linearize`]), the objective at trial
+//! poses, and one (damped) step from the factorisation.
+
+use super::{Optimizer, SolveError, Stopwatch, Timing};
+use crate::geometry::{NormalBlocks, Pose};
+use crate::graph::PoseGraph;
+use crate::linear::LinearError;
+use nalgebra::SMatrix;
+use rayon::prelude::*;
+
+/// Edges linearised per parallel batch (512 × ~1 kB of terms in 3D: the
+/// buffer is memory held for the whole run, and larger batches were not
+/// faster).
+const LINEARIZE_CHUNK: usize = 1 << 9;
+
+/// One edge's contribution to the normal equations (`active`: its weight
+/// is not 0).
+#[derive(Clone, Copy, Default)]
+pub(super) struct EdgeTerms<const D: usize> {
+    active: bool,
+    blocks: NormalBlocks<D>,
+}
+
+impl<const D: usize> EdgeTerms<D> {
+    /// `JᵀwΩJ`, `JᵀwΩe` and `w·eᵀΩe` of one edge at prepared poses.
+    fn new<P: Pose<D>>(
+        xi: &P::Prepared,
+        xj: &P::Prepared,
+        z: &P::Prepared,
+        information: &SMatrix<f64, D, D>,
+        w: f64,
+    ) -> Self {
+        let blocks = if w == 1.0 {
+            P::normal_blocks_prepared(xi, xj, z, information)
+        } else {
+            P::normal_blocks_prepared(xi, xj, z, &(information * w))
+        };
+        Self {
+            active: true,
+            blocks,
+        }
+    }
+}
+
+/// How a factorisation and solve for one trial step went.
+pub(super) enum Solved {
+    /// The step is in `Optimizer::step`; its largest absolute component.
+    Step(f64),
+    /// The damped normal matrix is not positive definite at this variable
+    /// block.
+    NotPositiveDefinite(usize),
+}
+
+impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
+    /// Builds `H` and `b` at the graph's poses and returns the objective
+    /// (public for benchmarks; [`Optimizer::run`] does this itself). Edges
+    /// left out of the pattern ([`Optimizer::new`]) count in the objective
+    /// but not in `H`.
+    pub fn linearize(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
+        self.system.clear();
+        let min_len = self.min_len();
+        prepare(&graph.poses, &mut self.prepared, min_len);
+        let mut objective = 0.0;
+        // Edges are linearised in parallel, a chunk at a time, into a buffer
+        // reused across iterations, then added into H in parallel by
+        // destination ([`BlockSystem::add_edges`]).
+        let terms = &mut self.terms;
+        let (prepared, measurements) = (&self.prepared, &self.measurements);
+        for (c, chunk) in graph.edges.chunks(LINEARIZE_CHUNK).enumerate() {
+            let base = c * LINEARIZE_CHUNK;
+            terms.resize(chunk.len(), EdgeTerms::default());
+            terms
+                .par_iter_mut()
+                .zip(chunk.par_iter())
+                .enumerate()
+                .with_min_len(min_len)
+                .for_each(|(i, (t, e))| {
+                    let k = base + i;
+                    let w = weights.map_or(1.0, |w| w[k]);
+                    *t = if w == 0.0 {
+                        EdgeTerms::default()
+                    } else {
+                        let (xi, xj) = (&prepared[e.from], &prepared[e.to]);
+                        EdgeTerms::new::<P>(xi, xj, &measurements[k], &e.information, w)
+                    };
+                });
+            objective += terms.iter().map(|t| t.blocks.chi2).sum::<f64>();
+            self.system
+                .add_edges(base, terms, |t| t.active.then_some(&t.blocks));
+        }
+        objective
+    }
+
+    /// The weighted objective at `poses`.
+    pub(super) fn objective(
+        &mut self,
+        poses: &[P],
+        graph: &PoseGraph<P, D>,
+        weights: Option<&[f64]>,
+    ) -> f64 {
+        let min_len = self.min_len();
+        prepare(poses, &mut self.prepared, min_len);
+        let (prepared, measurements) = (&self.prepared, &self.measurements);
+        graph
+            .edges
+            .par_iter()
+            .enumerate()
+            .with_min_len(min_len)
+            .map(|(k, e)| {
+                let w = weights.map_or(1.0, |w| w[k]);
+                if w == 0.0 {
+                    return 0.0;
+                }
+                let r = P::error_prepared(&prepared[e.from], &prepared[e.to], &measurements[k]);
+                w * r.dot(&(e.information * r))
+            })
+            .sum()
+    }
+
+    /// Factorises `H + λ·diag H` and solves for the step into `self.step`;
+    /// times both into `timing`.
+    pub(super) fn solve_damped(
+        &mut self,
+        lambda: f64,
+        timing: &mut Timing,
+        watch: &mut Stopwatch,
+    ) -> Result<Solved, SolveError> {
+        let factorized = self.system.factorize(lambda);
+        self.factor_time = watch.since_lap();
+        watch.lap(&mut timing.factorize_s);
+        match factorized {
+            Ok(()) => {}
+            Err(LinearError::NotPositiveDefinite { block }) => {
+                return Ok(Solved::NotPositiveDefinite(block));
+            }
+            Err(e) => return Err(e.into()),
+        }
+        self.system.solve(&mut self.step);
+        watch.lap(&mut timing.solve_s);
+        Ok(Solved::Step(
+            self.step.iter().fold(0.0f64, |m, s| m.max(s.abs())),
+        ))
+    }
+
+    /// The objective at `poses ⊞ step` (left in `self.trial`).
+    pub(super) fn evaluate_step(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        weights: Option<&[f64]>,
+        timing: &mut Timing,
+        watch: &mut Stopwatch,
+    ) -> f64 {
+        self.apply_step(graph);
+        let trial = std::mem::take(&mut self.trial);
+        let new_objective = self.objective(&trial, graph, weights);
+        self.trial = trial;
+        watch.lap(&mut timing.evaluate_s);
+        new_objective
+    }
+
+    /// `trial = poses ⊞ step`.
+    fn apply_step(&mut self, graph: &PoseGraph<P, D>) {
+        self.trial.clone_from(&graph.poses);
+        for (block, &v) in self.vertex_of.iter().enumerate() {
+            let delta = nalgebra::SVector::<f64, D>::from_column_slice(
+                &self.step[block * D..block * D + D],
+            );
+            self.trial[v] = graph.poses[v].retract(&delta);
+        }
+    }
+
+    /// The smallest piece of a parallel loop: everything in one piece
+    /// (the calling thread) unless [`super::SolverOptions::threads`] asks
+    /// for more.
+    fn min_len(&self) -> usize {
+        if self.options.threads >= 2 {
+            256
+        } else {
+            usize::MAX
+        }
+    }
+}
+
+/// `out[k] = poses[k].prepare()`, in pieces of at least `min_len`.
+fn prepare<P: Pose<D>, const D: usize>(poses: &[P], out: &mut Vec<P::Prepared>, min_len: usize) {
+    if out.len() != poses.len() {
+        *out = poses.iter().map(|p| p.prepare()).collect();
+    } else {
+        out.par_iter_mut()
+            .zip(poses.par_iter())
+            .with_min_len(min_len.max(4096))
+            .for_each(|(o, p)| *o = p.prepare());
+    }
+}
