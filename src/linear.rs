@@ -25,7 +25,10 @@
 //! block of `H⁻¹` on the factor's pattern at once, for the blocks that an
 //! edge of `H` ties ([`BlockSystem::propagate_selected`]).
 
+mod parallel;
 mod supernodal;
+
+pub use parallel::Parallelism;
 
 use crate::geometry::NormalBlocks;
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -48,6 +51,9 @@ pub enum LinearError {
     /// The factorisation could not allocate its memory, or failed otherwise.
     #[error("sparse Cholesky failed: {0}")]
     Factorization(String),
+    /// The threads of a parallel solver could not be started.
+    #[error("cannot start the solver's threads: {0}")]
+    ThreadPool(String),
 }
 
 /// No block (a fixed vertex, or no off-diagonal block).
@@ -77,10 +83,10 @@ pub struct SelectedInverse {
 ///
 /// ```
 /// use nalgebra::{Matrix1, Vector1};
-/// use pgo::linear::BlockSystem;
+/// use pgo::linear::{BlockSystem, Parallelism};
 /// // Two scalar variables tied by one edge, plus a prior on the first:
 /// // H = [[2, −1], [−1, 1]], b = [0, −1], so δ = −H⁻¹b = [1, 2].
-/// let mut sys = BlockSystem::<1>::new(2, &[(Some(0), Some(1)), (Some(0), None)], 0).unwrap();
+/// let mut sys = BlockSystem::<1>::new(2, &[(Some(0), Some(1)), (Some(0), None)], Parallelism::sequential()).unwrap();
 /// sys.clear();
 /// let one = Matrix1::new(1.0);
 /// sys.add_edge(0, &one, &Matrix1::new(-1.0), &one, &Vector1::new(0.0), &Vector1::new(-1.0));
@@ -124,28 +130,30 @@ pub struct BlockSystem<const D: usize> {
     /// system built early, e.g. to check the graph before the initial guess,
     /// costs little memory until it is used).
     factor: Vec<f64>,
-    threads: usize,
+    /// Where assembly and factorisation run.
+    parallelism: Parallelism,
 }
 
 impl<const D: usize> BlockSystem<D> {
     /// Builds the pattern for `n_blocks` variable blocks and the given edges,
     /// each as the variable blocks `(i, j)` it joins (`None` for a fixed
-    /// vertex). `threads`: 1 factorises sequentially, anything else in
-    /// parallel in rayon's current pool.
+    /// vertex). Assembly ([`Self::add_edges`]) and factorisation run as
+    /// `parallelism` says; the results are the same bits for a given number
+    /// of threads.
     pub fn new(
         n_blocks: usize,
         edges: &[(Option<usize>, Option<usize>)],
-        threads: usize,
+        parallelism: Parallelism,
     ) -> Result<Self, LinearError> {
         let position = fill_reducing_order(n_blocks, edges)?;
-        Self::with_positions(n_blocks, edges, threads, position)
+        Self::with_positions(n_blocks, edges, parallelism, position)
     }
 
     /// Like [`Self::new`] with a given elimination position of each block.
     pub fn with_positions(
         n_blocks: usize,
         edges: &[(Option<usize>, Option<usize>)],
-        threads: usize,
+        parallelism: Parallelism,
         position: Vec<usize>,
     ) -> Result<Self, LinearError> {
         if n_blocks >= NONE as usize {
@@ -231,8 +239,13 @@ impl<const D: usize> BlockSystem<D> {
             lambda: 0.0,
             symbolic,
             factor: Vec::new(),
-            threads,
+            parallelism,
         })
+    }
+
+    /// Where assembly and factorisation run from now on.
+    pub fn set_parallelism(&mut self, parallelism: Parallelism) {
+        self.parallelism = parallelism;
     }
 
     /// Number of variable blocks.
@@ -347,11 +360,7 @@ impl<const D: usize> BlockSystem<D> {
         items: &[T],
         blocks: impl Fn(&T) -> Option<&NormalBlocks<D>> + Sync,
     ) {
-        let threads = if self.threads == 1 {
-            1
-        } else {
-            rayon::current_num_threads()
-        };
+        let threads = self.parallelism.threads();
         if threads <= 1 || items.len() < 512 {
             for (k, item) in items.iter().enumerate() {
                 if let Some(c) = blocks(item) {
@@ -365,7 +374,8 @@ impl<const D: usize> BlockSystem<D> {
         let off = SharedSlice(self.off.as_mut_ptr());
         let gradient = SharedSlice(self.gradient.as_mut_ptr());
         let edges = &self.edges[first..first + items.len()];
-        (0..threads).into_par_iter().for_each(|t| {
+        let blocks = &blocks;
+        let add_owned = |t: usize| {
             let owned = (n * t / threads) as u32..(n * (t + 1) / threads) as u32;
             for (slot, item) in edges.iter().zip(items) {
                 let mine_i = owned.contains(&slot.i);
@@ -394,7 +404,9 @@ impl<const D: usize> BlockSystem<D> {
                     }
                 }
             }
-        });
+        };
+        self.parallelism
+            .install(|| (0..threads).into_par_iter().for_each(add_owned));
     }
 
     /// Sets `b` to zero, keeping `H` (and its factorisation): for solving
@@ -473,7 +485,7 @@ impl<const D: usize> BlockSystem<D> {
                 }
             }
         };
-        match sym.factorize(&mut self.factor, &load, self.threads) {
+        match sym.factorize(&mut self.factor, &load, &self.parallelism) {
             Ok(()) => Ok(()),
             Err(p) => {
                 let block = self.position.iter().position(|&q| q == p).unwrap_or(p);
@@ -520,10 +532,10 @@ impl<const D: usize> BlockSystem<D> {
     ///
     /// ```
     /// use nalgebra::{Matrix1, Vector1};
-    /// use pgo::linear::BlockSystem;
+    /// use pgo::linear::{BlockSystem, Parallelism};
     /// // H = [[2, −1], [−1, 1]], so H⁻¹ = [[1, 1], [1, 2]]; for the edge
     /// // error e = x₁ − x₀, A = [−1, 1] and A·H⁻¹·Aᵀ = 1 − 2 + 2 = 1.
-    /// let mut sys = BlockSystem::<1>::new(2, &[(Some(0), Some(1)), (Some(0), None)], 0).unwrap();
+    /// let mut sys = BlockSystem::<1>::new(2, &[(Some(0), Some(1)), (Some(0), None)], Parallelism::sequential()).unwrap();
     /// sys.clear();
     /// let one = Matrix1::new(1.0);
     /// sys.add_edge(0, &one, &Matrix1::new(-1.0), &one, &Vector1::zeros(), &Vector1::zeros());
@@ -803,7 +815,7 @@ mod tests {
         }
         pairs.push((Some(3), None)); // an edge to a fixed vertex
         pairs.push((Some(0), None));
-        let mut sys = BlockSystem::<2>::new(n, &pairs, 1).unwrap();
+        let mut sys = BlockSystem::<2>::new(n, &pairs, Parallelism::sequential()).unwrap();
         sys.clear();
         let mut h = DMatrix::zeros(2 * n, 2 * n);
         let mut b = DVector::zeros(2 * n);
@@ -1009,7 +1021,7 @@ mod tests {
     fn singular_systems_name_the_failing_block() {
         // Block 2 has no edge at all: its diagonal is zero.
         let pairs = [(Some(0), Some(1)), (Some(0), None)];
-        let mut sys = BlockSystem::<1>::new(3, &pairs, 1).unwrap();
+        let mut sys = BlockSystem::<1>::new(3, &pairs, Parallelism::sequential()).unwrap();
         sys.clear();
         let one = nalgebra::Matrix1::new(1.0);
         let z = nalgebra::Vector1::new(0.0);

@@ -674,11 +674,6 @@ fn read_counts(path: Option<&std::path::Path>) -> Result<Vec<u64>, String> {
 }
 
 fn optimize(args: OptimizeArgs) -> ExitCode {
-    if args.threads > 0 {
-        let _ = rayon::ThreadPoolBuilder::new()
-            .num_threads(args.threads)
-            .build_global();
-    }
     if let Some(out) = &args.output {
         if let Err(message) = refuse_to_overwrite_input(&args.input, out) {
             eprintln!("error: {message}");

@@ -19,7 +19,7 @@
 //!   tree and the work of each subtree) is computed once; a factorisation
 //!   allocates nothing but its thread's workspace on first use.
 
-use super::LinearError;
+use super::{LinearError, Parallelism};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{
     LltError, LltRegularization, cholesky_in_place, cholesky_in_place_scratch,
@@ -416,17 +416,17 @@ impl<const D: usize> Symbolic<D> {
     }
 
     /// Factorises in place: `load(s, panel)` must write the values of the
-    /// matrix into supernode `s`'s (zeroed) panel. `threads == 1` runs
-    /// sequentially, anything else in rayon's current pool. Returns the
-    /// first block column (in elimination order) whose pivot is not
-    /// positive.
+    /// matrix into supernode `s`'s (zeroed) panel. Runs in the calling
+    /// thread, or with a pool on its threads ([`Parallelism`]); the values
+    /// are the same bits for a given number of threads. Returns the first
+    /// block column (in elimination order) whose pivot is not positive.
     pub(super) fn factorize(
         &self,
         values: &mut [f64],
         load: &(dyn Fn(usize, &mut [f64]) + Sync),
-        threads: usize,
+        parallelism: &Parallelism,
     ) -> Result<(), usize> {
-        self.factorize_with_grain(values, load, threads, None)
+        self.factorize_with_grain(values, load, parallelism, None)
     }
 
     /// [`Self::factorize`] with the size of the sequential tasks (default:
@@ -435,14 +435,15 @@ impl<const D: usize> Symbolic<D> {
         &self,
         values: &mut [f64],
         load: &(dyn Fn(usize, &mut [f64]) + Sync),
-        threads: usize,
+        parallelism: &Parallelism,
         grain: Option<f64>,
     ) -> Result<(), usize> {
         assert_eq!(values.len(), self.len_values());
         let ns = self.supernodes();
         let failed = AtomicUsize::new(usize::MAX);
         let shared = Shared(values.as_mut_ptr());
-        if threads == 1 || rayon::current_num_threads() == 1 || ns < 2 {
+        let threads = parallelism.threads();
+        if threads == 1 || ns < 2 {
             for s in 0..ns {
                 // SAFETY: one thread, each supernode once, in elimination order.
                 unsafe { self.factor_node(s, Par::Seq, &shared, load, &failed) };
@@ -452,12 +453,15 @@ impl<const D: usize> Symbolic<D> {
             }
         } else {
             // Subtrees below this much work run sequentially in one task.
-            let grain = grain.unwrap_or_else(|| {
-                (self.flops / (16 * rayon::current_num_threads()) as f64).max(2e5)
+            let grain =
+                grain.unwrap_or_else(|| (self.flops / (16 * threads) as f64).max(2e5));
+            let par = Par::rayon(threads);
+            let (shared, failed) = (&shared, &failed);
+            parallelism.install(|| {
+                self.roots.par_iter().for_each(|&r| {
+                    self.factor_subtree(r as usize, grain, par, shared, load, failed)
+                })
             });
-            self.roots
-                .par_iter()
-                .for_each(|&r| self.factor_subtree(r as usize, grain, &shared, load, &failed));
         }
         match failed.into_inner() {
             usize::MAX => Ok(()),
@@ -474,6 +478,7 @@ impl<const D: usize> Symbolic<D> {
         &self,
         s: usize,
         grain: f64,
+        par: Par,
         shared: &Shared,
         load: &(dyn Fn(usize, &mut [f64]) + Sync),
         failed: &AtomicUsize,
@@ -496,14 +501,13 @@ impl<const D: usize> Symbolic<D> {
                 for &c in kids {
                     if c != heavy {
                         scope.spawn(move |_| {
-                            self.factor_subtree(c as usize, grain, shared, load, failed)
+                            self.factor_subtree(c as usize, grain, par, shared, load, failed)
                         });
                     }
                 }
                 t = heavy as usize;
             }
         });
-        let par = Par::rayon(rayon::current_num_threads());
         for &t in path.iter().rev() {
             // SAFETY: all of `t`'s descendants are done (the scope has
             // ended); nobody else writes `t`.
@@ -1061,6 +1065,7 @@ mod tests {
         threads: usize,
         grain: Option<f64>,
     ) -> Vec<f64> {
+        let parallelism = Parallelism::new(threads).unwrap();
         const D: usize = 2;
         let mut values = vec![0.0; sym.len_values()];
         let load = |s: usize, panel: &mut [f64]| {
@@ -1076,7 +1081,7 @@ mod tests {
                 }
             }
         };
-        sym.factorize_with_grain(&mut values, &load, threads, grain)
+        sym.factorize_with_grain(&mut values, &load, &parallelism, grain)
             .unwrap();
         values
     }
@@ -1165,10 +1170,11 @@ mod tests {
     fn empty_and_single_block_systems() {
         let empty = Symbolic::<3>::new(&[]).unwrap();
         assert_eq!((empty.supernodes(), empty.len_values()), (0, 0));
-        empty.factorize(&mut [], &|_, _| {}, 1).unwrap();
+        let seq = Parallelism::sequential();
+        empty.factorize(&mut [], &|_, _| {}, &seq).unwrap();
         let one = Symbolic::<1>::new(&[Vec::new()]).unwrap();
         let mut values = vec![0.0; one.len_values()];
-        one.factorize(&mut values, &|_, panel: &mut [f64]| panel[0] = 4.0, 1)
+        one.factorize(&mut values, &|_, panel: &mut [f64]| panel[0] = 4.0, &seq)
             .unwrap();
         let mut x = vec![8.0];
         one.solve(&values, &mut x, &mut Vec::new());

@@ -151,6 +151,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 edges: graph.edges.len(),
             });
         }
+        self.match_threads()?;
         self.update_pattern(graph, Some(weights))?;
         self.linearize(graph, Some(weights));
         match self.system.factorize(0.0) {

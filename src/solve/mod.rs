@@ -22,7 +22,7 @@ mod tests;
 
 use crate::geometry::Pose;
 use crate::graph::{PoseGraph, VertexId};
-use crate::linear::{BlockSystem, LinearError};
+use crate::linear::{BlockSystem, LinearError, Parallelism};
 use lm::Damping;
 use normal::EdgeTerms;
 use serde::Serialize;
@@ -69,13 +69,12 @@ pub struct SolverOptions {
     /// LM damping `λ` (relative to the diagonal of `H`) after the first
     /// rejected step; until then λ = 0.
     pub initial_lambda: f64,
-    /// Threads: 0 (automatic) and 1 run everything in the calling thread;
-    /// N ≥ 2 linearises, assembles and factorises (independent subtrees and
-    /// the large dense blocks) in rayon's current pool, whose size the
-    /// caller sets (pgo's `--threads N`). Automatic is sequential because on
-    /// the 2-core machine these figures come from, shared with other work, a
-    /// second thread cost more than it gave at every size measured (see the
-    /// README's Speed section).
+    /// Threads of the parallel work (linearisation, the objective at trial
+    /// points, assembly and numeric factorisation): 0 and 1 run all of it in
+    /// the calling thread and start no thread; N ≥ 2 runs it on a private
+    /// pool of exactly N threads that the optimiser starts and owns (rayon's
+    /// global pool is neither used nor configured). The same input, options
+    /// and number of threads give the same bits.
     pub threads: usize,
 }
 
@@ -330,6 +329,9 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     measurements: Vec<P::Prepared>,
     /// The poses being evaluated, prepared.
     prepared: Vec<P::Prepared>,
+    /// Where the parallel work runs ([`SolverOptions::threads`]); shared
+    /// with `system`.
+    parallelism: Parallelism,
 }
 
 impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
@@ -362,8 +364,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let in_pattern: Vec<bool> = (0..graph.edges.len())
             .map(|k| weights.is_none_or(|w| w[k] != 0.0))
             .collect();
+        let parallelism = Parallelism::new(options.threads)?;
         let start = Instant::now();
-        let system = Self::pattern(graph, &variable, &in_pattern, vertex_of.len(), &options)?;
+        let system = Self::pattern(graph, &variable, &in_pattern, vertex_of.len(), &parallelism)?;
         Ok(Self {
             max_nnz_factor: system.nnz_factor(),
             system,
@@ -382,7 +385,18 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 .map(|e| e.measurement.prepare())
                 .collect(),
             prepared: graph.poses.iter().map(|p| p.prepare()).collect(),
+            parallelism,
         })
+    }
+
+    /// Starts or stops the private pool if [`SolverOptions::threads`] was
+    /// changed ([`Self::options_mut`]) since it was set up.
+    fn match_threads(&mut self) -> Result<(), SolveError> {
+        if self.options.threads.max(1) != self.parallelism.threads() {
+            self.parallelism = Parallelism::new(self.options.threads)?;
+            self.system.set_parallelism(self.parallelism.clone());
+        }
+        Ok(())
     }
 
     /// The options, e.g. to change the iteration limit between runs.
@@ -416,6 +430,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         observer: &mut dyn Observer,
     ) -> Result<Summary, SolveError> {
         self.check_edge_count(graph, weights)?;
+        self.match_threads()?;
         self.update_pattern(graph, weights)?;
         let mut watch = Stopwatch::start();
         let mut summary = Summary::new(self.options.method);

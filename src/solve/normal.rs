@@ -58,6 +58,12 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// left out of the pattern ([`Optimizer::new`]) count in the objective
     /// but not in `H`.
     pub fn linearize(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
+        let parallelism = self.parallelism.clone();
+        parallelism.install(|| self.assemble(graph, weights))
+    }
+
+    /// [`Self::linearize`] where the parallel work belongs.
+    fn assemble(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
         self.system.clear();
         let min_len = self.min_len();
         prepare(&graph.poses, &mut self.prepared, min_len);
@@ -99,6 +105,12 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         graph: &PoseGraph<P, D>,
         weights: Option<&[f64]>,
     ) -> f64 {
+        let parallelism = self.parallelism.clone();
+        parallelism.install(|| self.sum_chi2(poses, graph, weights))
+    }
+
+    /// [`Self::objective`] where the parallel work belongs.
+    fn sum_chi2(&mut self, poses: &[P], graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
         let min_len = self.min_len();
         prepare(poses, &mut self.prepared, min_len);
         let (prepared, measurements) = (&self.prepared, &self.measurements);
@@ -174,7 +186,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// (the calling thread) unless [`super::SolverOptions::threads`] asks
     /// for more.
     fn min_len(&self) -> usize {
-        if self.options.threads >= 2 {
+        if self.parallelism.is_parallel() {
             256
         } else {
             usize::MAX

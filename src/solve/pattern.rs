@@ -2,10 +2,10 @@
 //! edges are in `H`, built once and rebuilt when the weights change which
 //! edges count.
 
-use super::{Optimizer, SolveError, SolverOptions};
+use super::{Optimizer, SolveError};
 use crate::geometry::Pose;
 use crate::graph::PoseGraph;
-use crate::linear::BlockSystem;
+use crate::linear::{BlockSystem, Parallelism};
 use std::time::Instant;
 
 impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
@@ -15,7 +15,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         variable: &[Option<usize>],
         in_pattern: &[bool],
         n_blocks: usize,
-        options: &SolverOptions,
+        parallelism: &Parallelism,
     ) -> Result<BlockSystem<D>, SolveError> {
         let pairs: Vec<(Option<usize>, Option<usize>)> = graph
             .edges
@@ -29,8 +29,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 }
             })
             .collect();
-        let threads = if options.threads >= 2 { 0 } else { 1 };
-        Ok(BlockSystem::new(n_blocks, &pairs, threads)?)
+        Ok(BlockSystem::new(n_blocks, &pairs, parallelism.clone())?)
     }
 
     /// Rebuilds the pattern for the edges of non-zero weight when an edge
@@ -76,7 +75,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             &variable,
             &self.in_pattern,
             self.vertex_of.len(),
-            &self.options,
+            &self.parallelism,
         )?;
         self.build_time = start.elapsed();
         self.max_nnz_factor = self.max_nnz_factor.max(self.system.nnz_factor());

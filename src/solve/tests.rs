@@ -377,3 +377,25 @@ fn non_finite_start_is_an_error_not_a_nan_result() {
         SolveError::NonFiniteStart
     );
 }
+
+#[test]
+fn threads_start_a_private_pool_of_that_size_only_from_two() {
+    let mut g = square(0.3, 6);
+    for (threads, expected) in [(0, 1), (1, 1), (2, 2), (3, 3)] {
+        let options = SolverOptions {
+            threads,
+            ..Default::default()
+        };
+        let opt = Optimizer::new(&g, None, options).unwrap();
+        assert_eq!(opt.parallelism.threads(), expected, "threads {threads}");
+        assert_eq!(opt.parallelism.is_parallel(), threads >= 2);
+    }
+    // Changing the option between runs starts or stops the pool.
+    let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+    opt.options_mut().threads = 2;
+    opt.run(&mut g, None, &mut |_: &IterationRecord| {}).unwrap();
+    assert_eq!(opt.parallelism.threads(), 2);
+    opt.options_mut().threads = 0;
+    opt.run(&mut g, None, &mut |_: &IterationRecord| {}).unwrap();
+    assert!(!opt.parallelism.is_parallel());
+}
