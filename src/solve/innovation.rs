@@ -154,6 +154,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         self.match_threads()?;
         self.update_pattern(graph, Some(weights))?;
         self.linearize(graph, Some(weights));
+        self.factorized = true;
         match self.system.factorize(0.0) {
             Ok(()) => {}
             Err(LinearError::NotPositiveDefinite { block }) => {

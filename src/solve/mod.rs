@@ -206,11 +206,6 @@ impl Stopwatch {
         self.last = now;
     }
 
-    /// Time since the last lap.
-    fn since_lap(&self) -> Duration {
-        self.last.elapsed()
-    }
-
     /// Time since the start.
     fn elapsed(&self) -> Duration {
         self.start.elapsed()
@@ -314,10 +309,9 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     /// Whether each edge is in the sparsity pattern (edges of weight 0 at
     /// construction are not; see [`Self::update_pattern`]).
     in_pattern: Vec<bool>,
-    /// Time to build the pattern (ordering, symbolic factorisation) and of
-    /// the last numeric factorisation.
-    build_time: Duration,
-    factor_time: Duration,
+    /// Whether the optimiser has factorised since it was made (see
+    /// [`Self::update_pattern`]).
+    factorized: bool,
     /// Values of the largest factor among the patterns built so far.
     max_nnz_factor: usize,
     options: SolverOptions,
@@ -325,6 +319,8 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     best: Vec<P>,
     step: Vec<f64>,
     terms: Vec<EdgeTerms<D>>,
+    /// Each edge's weighted χ² at the last trial point.
+    edge_chi2: Vec<f64>,
     /// Each edge's measurement, prepared once ([`Pose::prepare`]).
     measurements: Vec<P::Prepared>,
     /// The poses being evaluated, prepared.
@@ -365,20 +361,19 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             .map(|k| weights.is_none_or(|w| w[k] != 0.0))
             .collect();
         let parallelism = Parallelism::new(options.threads)?;
-        let start = Instant::now();
         let system = Self::pattern(graph, &variable, &in_pattern, vertex_of.len(), &parallelism)?;
         Ok(Self {
             max_nnz_factor: system.nnz_factor(),
+            factorized: false,
             system,
             in_pattern,
-            build_time: start.elapsed(),
-            factor_time: Duration::ZERO,
             step: vec![0.0; vertex_of.len() * D],
             vertex_of,
             trial: graph.poses.clone(),
             best: graph.poses.clone(),
             options,
             terms: Vec::new(),
+            edge_chi2: Vec::new(),
             measurements: graph
                 .edges
                 .iter()

@@ -114,20 +114,26 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let min_len = self.min_len();
         prepare(poses, &mut self.prepared, min_len);
         let (prepared, measurements) = (&self.prepared, &self.measurements);
-        graph
-            .edges
-            .par_iter()
+        self.edge_chi2.resize(graph.edges.len(), 0.0);
+        self.edge_chi2
+            .par_iter_mut()
+            .zip(graph.edges.par_iter())
             .enumerate()
             .with_min_len(min_len)
-            .map(|(k, e)| {
+            .for_each(|(k, (chi2, e))| {
                 let w = weights.map_or(1.0, |w| w[k]);
-                if w == 0.0 {
-                    return 0.0;
-                }
-                let r = P::error_prepared(&prepared[e.from], &prepared[e.to], &measurements[k]);
-                w * r.dot(&(e.information * r))
-            })
-            .sum()
+                *chi2 = if w == 0.0 {
+                    0.0
+                } else {
+                    let r = P::error_prepared(&prepared[e.from], &prepared[e.to], &measurements[k]);
+                    w * r.dot(&(e.information * r))
+                };
+            });
+        // Summed in edge order, not as the parallel loop was split (that
+        // split follows the work stealing, and a floating-point sum depends
+        // on its order): the same bits in every run and with any number of
+        // threads.
+        self.edge_chi2.iter().sum()
     }
 
     /// Factorises `H + λ·diag H` and solves for the step into `self.step`;
@@ -139,7 +145,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         watch: &mut Stopwatch,
     ) -> Result<Solved, SolveError> {
         let factorized = self.system.factorize(lambda);
-        self.factor_time = watch.since_lap();
+        self.factorized = true;
         watch.lap(&mut timing.factorize_s);
         match factorized {
             Ok(()) => {}

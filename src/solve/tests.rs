@@ -393,9 +393,70 @@ fn threads_start_a_private_pool_of_that_size_only_from_two() {
     // Changing the option between runs starts or stops the pool.
     let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
     opt.options_mut().threads = 2;
-    opt.run(&mut g, None, &mut |_: &IterationRecord| {}).unwrap();
+    opt.run(&mut g, None, &mut |_: &IterationRecord| {})
+        .unwrap();
     assert_eq!(opt.parallelism.threads(), 2);
     opt.options_mut().threads = 0;
-    opt.run(&mut g, None, &mut |_: &IterationRecord| {}).unwrap();
+    opt.run(&mut g, None, &mut |_: &IterationRecord| {})
+        .unwrap();
     assert!(!opt.parallelism.is_parallel());
+}
+
+/// A simulated grid of 4000 poses with 40 wrong loops, and weights that
+/// switch half of them off and halve the others (as a robust round would).
+fn simulated_grid() -> (PoseGraph<Se2, 3>, Vec<f64>) {
+    let options = crate::simulate::SimulationOptions {
+        poses: 4000,
+        loops: 400,
+        outliers: 40,
+        seed: 11,
+        ..Default::default()
+    };
+    let sim = crate::simulate::simulate_planar(&options).unwrap();
+    let weights = (sim.wrong.iter().enumerate())
+        .map(|(k, &wrong)| match (wrong, k % 2) {
+            (false, _) => 1.0,
+            (true, 0) => 0.0,
+            (true, _) => 0.5,
+        })
+        .collect();
+    (sim.noisy, weights)
+}
+
+/// The poses and the bits of every objective of two runs with `threads`:
+/// unit weights, then [`simulated_grid`]'s.
+fn two_rounds(threads: usize) -> (Vec<Se2>, Vec<u64>) {
+    let (mut g, weights) = simulated_grid();
+    let options = SolverOptions {
+        threads,
+        ..Default::default()
+    };
+    let mut opt = Optimizer::new(&g, None, options).unwrap();
+    let mut bits = Vec::new();
+    for w in [None, Some(weights.as_slice())] {
+        let s = opt.run(&mut g, w, &mut |_: &IterationRecord| {}).unwrap();
+        assert!(s.iterations > 1, "{s:?}");
+        bits.extend(s.history.iter().map(|r| r.objective.to_bits()));
+        bits.push(s.final_objective.to_bits());
+    }
+    (g.poses, bits)
+}
+
+#[test]
+fn same_input_options_and_threads_give_the_same_bits() {
+    // Large enough that a parallel sum split by work stealing would differ
+    // between runs (it did in one run of two before the objective was
+    // summed in edge order).
+    for threads in [1, 2] {
+        let (poses, objectives) = two_rounds(threads);
+        let (poses_again, objectives_again) = two_rounds(threads);
+        let differ =
+            |a: &[u64], b: &[u64]| (0..a.len().max(b.len())).find(|&k| a.get(k) != b.get(k));
+        assert_eq!(
+            differ(&objectives, &objectives_again),
+            None,
+            "threads {threads}: the first objective that differs"
+        );
+        assert!(poses == poses_again, "threads {threads}: the poses differ");
+    }
 }
