@@ -453,8 +453,7 @@ impl<const D: usize> Symbolic<D> {
             }
         } else {
             // Subtrees below this much work run sequentially in one task.
-            let grain =
-                grain.unwrap_or_else(|| (self.flops / (16 * threads) as f64).max(2e5));
+            let grain = grain.unwrap_or_else(|| (self.flops / (16 * threads) as f64).max(2e5));
             let par = Par::rayon(threads);
             let (shared, failed) = (&shared, &failed);
             parallelism.install(|| {

@@ -2,7 +2,7 @@
 //! (as long as it is finite); the best poses seen are kept by the run.
 
 use super::normal::Solved;
-use super::{Optimizer, SolveError, Step, StepOutcome, Stopwatch, Summary};
+use super::{Optimizer, Progress, SolveError, Step, StepOutcome};
 use crate::geometry::Pose;
 use crate::graph::PoseGraph;
 
@@ -13,11 +13,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         &mut self,
         graph: &PoseGraph<P, D>,
         weights: Option<&[f64]>,
-        summary: &mut Summary,
-        watch: &mut Stopwatch,
+        progress: &mut Progress,
     ) -> Result<StepOutcome, SolveError> {
-        summary.factorizations += 1;
-        let step_max = match self.solve_damped(0.0, &mut summary.timing, watch)? {
+        let step_max = match self.solve_damped(0.0, progress)? {
             Solved::Step(step_max) => step_max,
             Solved::NotPositiveDefinite(block) => {
                 return Err(self.not_positive_definite(graph, block));
@@ -29,7 +27,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         if step_max < self.options.step_tolerance {
             return Ok(StepOutcome::Negligible);
         }
-        let objective = self.evaluate_step(graph, weights, &mut summary.timing, watch);
+        let objective = self.evaluate_step(graph, weights, progress);
         if !objective.is_finite() {
             return Ok(StepOutcome::Failed);
         }

@@ -2,7 +2,7 @@
 //! gain ratio to accept a step, and Nielsen's update of the damping.
 
 use super::normal::Solved;
-use super::{Optimizer, SolveError, Step, StepOutcome, Stopwatch, Summary};
+use super::{Observer, Optimizer, Progress, SolveError, Step, StepOutcome};
 use crate::geometry::Pose;
 use crate::graph::PoseGraph;
 
@@ -70,23 +70,26 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// `objective`: trials of growing damping until one lowers the
     /// objective with a positive gain ratio. The very first trial of a run
     /// is undamped, so that a singular system (an undetermined vertex) is
-    /// reported rather than hidden by the damping.
+    /// reported rather than hidden by the damping. The observer is asked
+    /// before each trial after a rejected one whether to stop.
     pub(super) fn levenberg_marquardt_step(
         &mut self,
         graph: &PoseGraph<P, D>,
         weights: Option<&[f64]>,
         objective: f64,
         damping: &mut Damping,
-        summary: &mut Summary,
-        watch: &mut Stopwatch,
+        progress: &mut Progress,
+        observer: &mut dyn Observer,
     ) -> Result<StepOutcome, SolveError> {
         let initial = self.options.initial_lambda;
         let mut rejected = 0;
         loop {
-            let structural_check = summary.factorizations == 0;
+            if rejected > 0 && observer.should_stop() {
+                return Ok(StepOutcome::Cancelled);
+            }
+            let structural_check = progress.summary.factorizations == 0;
             let lambda = damping.lambda;
-            summary.factorizations += 1;
-            let step_max = match self.solve_damped(lambda, &mut summary.timing, watch)? {
+            let step_max = match self.solve_damped(lambda, progress)? {
                 Solved::NotPositiveDefinite(block) => {
                     if structural_check || lambda > MAX_LAMBDA {
                         return Err(self.not_positive_definite(graph, block));
@@ -108,7 +111,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             if step_max < self.options.step_tolerance {
                 return Ok(StepOutcome::Negligible);
             }
-            let new_objective = self.evaluate_step(graph, weights, &mut summary.timing, watch);
+            let new_objective = self.evaluate_step(graph, weights, progress);
             let predicted = self.system.predicted_decrease(&self.step);
             let rho = (objective - new_objective) / predicted;
             if new_objective.is_finite() && new_objective <= objective && rho > 0.0 {

@@ -17,6 +17,7 @@ mod innovation;
 mod lm;
 mod normal;
 mod pattern;
+mod progress;
 #[cfg(test)]
 mod tests;
 
@@ -25,6 +26,7 @@ use crate::graph::{PoseGraph, VertexId};
 use crate::linear::{BlockSystem, LinearError, Parallelism};
 use lm::Damping;
 use normal::EdgeTerms;
+pub use progress::{Cancel, Cancellable, Observer};
 use serde::Serialize;
 use std::time::{Duration, Instant};
 
@@ -110,6 +112,8 @@ pub enum StopReason {
     TimeLimit,
     /// There was nothing to optimise (no free vertex).
     NothingToOptimize,
+    /// The observer asked to stop ([`Observer::should_stop`]).
+    Cancelled,
 }
 
 impl StopReason {
@@ -129,12 +133,17 @@ pub struct IterationRecord {
     pub iteration: usize,
     /// Objective after the iteration.
     pub objective: f64,
-    /// LM damping used for the accepted step (0 for GN).
+    /// LM's damping after the iteration: the damping of the accepted step
+    /// as Nielsen's rule updated it for the next one (0 for GN, and while
+    /// LM has not damped).
     pub lambda: f64,
     /// Rejected LM trials before the accepted step.
     pub rejected: usize,
     /// Largest absolute component of the step.
     pub step_max: f64,
+    /// Wall time from the start of the run to the end of the iteration.
+    #[serde(rename = "elapsed_s", serialize_with = "serialize_seconds")]
+    pub elapsed: Duration,
 }
 
 /// What an optimisation did.
@@ -212,6 +221,27 @@ impl Stopwatch {
     }
 }
 
+/// What a run has done so far: the summary it will return, and its clock.
+struct Progress {
+    summary: Summary,
+    watch: Stopwatch,
+}
+
+impl Progress {
+    /// The summary of a run that stopped for `reason` at `objective`.
+    fn finish(mut self, reason: StopReason, objective: f64) -> Summary {
+        self.summary.final_objective = objective;
+        self.summary.stop_reason = reason;
+        self.summary.time = self.watch.elapsed();
+        self.summary
+    }
+
+    /// Adds the time since the last lap to the slot `part` picks.
+    fn lap(&mut self, part: impl FnOnce(&mut Timing) -> &mut f64) {
+        self.watch.lap(part(&mut self.summary.timing));
+    }
+}
+
 impl Summary {
     /// A run of `method` that has not started.
     fn new(method: Method) -> Self {
@@ -284,18 +314,6 @@ fn list_ids(ids: &[VertexId]) -> String {
         format!("{} …", shown.join(", "))
     } else {
         shown.join(", ")
-    }
-}
-
-/// Receives progress from the optimiser.
-pub trait Observer {
-    /// Called after every outer iteration.
-    fn iteration(&mut self, record: &IterationRecord);
-}
-
-impl<F: FnMut(&IterationRecord)> Observer for F {
-    fn iteration(&mut self, record: &IterationRecord) {
-        self(record)
     }
 }
 
@@ -427,47 +445,45 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         self.check_edge_count(graph, weights)?;
         self.match_threads()?;
         self.update_pattern(graph, weights)?;
-        let mut watch = Stopwatch::start();
-        let mut summary = Summary::new(self.options.method);
+        let mut progress = Progress {
+            summary: Summary::new(self.options.method),
+            watch: Stopwatch::start(),
+        };
         let mut objective = self.linearize(graph, weights);
-        watch.lap(&mut summary.timing.linearize_s);
-        summary.initial_objective = objective;
-        summary.final_objective = objective;
+        progress.lap(|t| &mut t.linearize_s);
+        progress.summary.initial_objective = objective;
+        progress.summary.final_objective = objective;
         if !objective.is_finite() {
             return Err(SolveError::NonFiniteStart);
         }
         if self.vertex_of.is_empty() {
-            summary.stop_reason = StopReason::NothingToOptimize;
-            summary.time = watch.elapsed();
-            return Ok(summary);
+            return Ok(progress.finish(StopReason::NothingToOptimize, objective));
         }
         self.best.clone_from(&graph.poses);
         let mut best_objective = objective;
         // Every run starts undamped (see `Damping`).
         let mut damping = Damping::undamped();
         let stop = loop {
-            if let Some(reason) = self.limit_reached(objective, &summary, &watch) {
+            if let Some(reason) = self.stop_before_step(objective, &progress, observer) {
                 break reason;
             }
             let outcome = match self.options.method {
-                Method::GaussNewton => {
-                    self.gauss_newton_step(graph, weights, &mut summary, &mut watch)?
-                }
+                Method::GaussNewton => self.gauss_newton_step(graph, weights, &mut progress)?,
                 Method::LevenbergMarquardt => self.levenberg_marquardt_step(
                     graph,
                     weights,
                     objective,
                     &mut damping,
-                    &mut summary,
-                    &mut watch,
+                    &mut progress,
+                    observer,
                 )?,
             };
             let step = match outcome {
                 StepOutcome::Taken(step) => step,
                 StepOutcome::Negligible => break StopReason::SmallStep,
                 StepOutcome::Failed => break StopReason::NoDecrease,
+                StepOutcome::Cancelled => break StopReason::Cancelled,
             };
-            summary.iterations += 1;
             std::mem::swap(&mut graph.poses, &mut self.trial);
             let decrease = (objective - step.objective) / objective;
             objective = step.objective;
@@ -475,23 +491,22 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 best_objective = objective;
                 self.best.clone_from(&graph.poses);
             }
-            let record = step.record(summary.iterations);
+            let summary = &mut progress.summary;
+            summary.iterations += 1;
+            let record = step.record(summary.iterations, progress.watch.elapsed());
             summary.history.push(record);
             observer.iteration(&record);
             if decrease.abs() < self.options.relative_tolerance {
                 break StopReason::RelativeDecrease;
             }
             self.linearize(graph, weights);
-            watch.lap(&mut summary.timing.linearize_s);
+            progress.lap(|t| &mut t.linearize_s);
         };
         if objective > best_objective {
             graph.poses.clone_from(&self.best);
             objective = best_objective;
         }
-        summary.final_objective = objective;
-        summary.stop_reason = stop;
-        summary.time = watch.elapsed();
-        Ok(summary)
+        Ok(progress.finish(stop, objective))
     }
 
     /// Fails unless `weights` (if any) and the pattern have one entry per
@@ -518,22 +533,22 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// The reason to stop before the next step, if any: the objective is
-    /// zero, or the iteration or time limit is reached.
-    fn limit_reached(
+    /// zero, the iteration limit is reached, the observer asks to stop, or
+    /// the time limit is reached.
+    fn stop_before_step(
         &self,
         objective: f64,
-        summary: &Summary,
-        watch: &Stopwatch,
+        progress: &Progress,
+        observer: &mut dyn Observer,
     ) -> Option<StopReason> {
-        if objective == 0.0 && summary.iterations > 0 {
+        let iterations = progress.summary.iterations;
+        if objective == 0.0 && iterations > 0 {
             Some(StopReason::ZeroError)
-        } else if summary.iterations >= self.options.max_iterations {
+        } else if iterations >= self.options.max_iterations {
             Some(StopReason::MaxIterations)
-        } else if self
-            .options
-            .time_limit
-            .is_some_and(|t| watch.elapsed() >= t)
-        {
+        } else if observer.should_stop() {
+            Some(StopReason::Cancelled)
+        } else if (self.options.time_limit).is_some_and(|t| progress.watch.elapsed() >= t) {
             Some(StopReason::TimeLimit)
         } else {
             None
@@ -557,6 +572,8 @@ enum StepOutcome {
     Negligible,
     /// No step with a finite (for LM: lower) objective.
     Failed,
+    /// The observer asked to stop between two LM trials.
+    Cancelled,
 }
 
 /// A step to be taken.
@@ -572,14 +589,16 @@ struct Step {
 }
 
 impl Step {
-    /// The record of iteration `iteration`, this step.
-    fn record(&self, iteration: usize) -> IterationRecord {
+    /// The record of iteration `iteration`, this step, ended `elapsed`
+    /// after the run started.
+    fn record(&self, iteration: usize, elapsed: Duration) -> IterationRecord {
         IterationRecord {
             iteration,
             objective: self.objective,
             lambda: self.lambda,
             rejected: self.rejected,
             step_max: self.step_max,
+            elapsed,
         }
     }
 }

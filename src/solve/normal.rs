@@ -2,7 +2,7 @@
 //! into `H` and `b` ([`Optimizer::linearize`]), the objective at trial
 //! poses, and one (damped) step from the factorisation.
 
-use super::{Optimizer, SolveError, Stopwatch, Timing};
+use super::{Optimizer, Progress, SolveError};
 use crate::geometry::{NormalBlocks, Pose};
 use crate::graph::PoseGraph;
 use crate::linear::LinearError;
@@ -137,16 +137,16 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// Factorises `H + λ·diag H` and solves for the step into `self.step`;
-    /// times both into `timing`.
+    /// counts the factorisation and times both into `progress`.
     pub(super) fn solve_damped(
         &mut self,
         lambda: f64,
-        timing: &mut Timing,
-        watch: &mut Stopwatch,
+        progress: &mut Progress,
     ) -> Result<Solved, SolveError> {
+        progress.summary.factorizations += 1;
         let factorized = self.system.factorize(lambda);
         self.factorized = true;
-        watch.lap(&mut timing.factorize_s);
+        progress.lap(|t| &mut t.factorize_s);
         match factorized {
             Ok(()) => {}
             Err(LinearError::NotPositiveDefinite { block }) => {
@@ -155,7 +155,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             Err(e) => return Err(e.into()),
         }
         self.system.solve(&mut self.step);
-        watch.lap(&mut timing.solve_s);
+        progress.lap(|t| &mut t.solve_s);
         Ok(Solved::Step(
             self.step.iter().fold(0.0f64, |m, s| m.max(s.abs())),
         ))
@@ -166,14 +166,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         &mut self,
         graph: &PoseGraph<P, D>,
         weights: Option<&[f64]>,
-        timing: &mut Timing,
-        watch: &mut Stopwatch,
+        progress: &mut Progress,
     ) -> f64 {
         self.apply_step(graph);
         let trial = std::mem::take(&mut self.trial);
         let new_objective = self.objective(&trial, graph, weights);
         self.trial = trial;
-        watch.lap(&mut timing.evaluate_s);
+        progress.lap(|t| &mut t.evaluate_s);
         new_objective
     }
 

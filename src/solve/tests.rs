@@ -460,3 +460,139 @@ fn same_input_options_and_threads_give_the_same_bits() {
         assert!(poses == poses_again, "threads {threads}: the poses differ");
     }
 }
+
+/// A simulated grid of `poses` poses from its dead-reckoning guess, which LM
+/// takes many iterations to solve.
+fn dead_reckoned_grid(poses: usize) -> PoseGraph<Se2, 3> {
+    let options = crate::simulate::SimulationOptions {
+        poses,
+        seed: 3,
+        ..Default::default()
+    };
+    crate::simulate::simulate_planar(&options).unwrap().noisy
+}
+
+/// Stops the run at the first question after `after` iterations; keeps the
+/// records.
+struct StopAfter {
+    after: usize,
+    records: Vec<IterationRecord>,
+}
+
+impl Observer for StopAfter {
+    fn iteration(&mut self, record: &IterationRecord) {
+        self.records.push(*record);
+    }
+
+    fn should_stop(&mut self) -> bool {
+        self.records.len() >= self.after
+    }
+}
+
+#[test]
+fn an_observer_stops_the_run_after_k_iterations_with_the_best_poses() {
+    let start = dead_reckoned_grid(300);
+    let k = 3;
+    // The same run limited to k iterations: where the cancelled one must be.
+    let mut limited = start.clone();
+    let options = SolverOptions {
+        max_iterations: k,
+        ..Default::default()
+    };
+    let expected = optimize(&mut limited, &options).unwrap();
+    assert_eq!(expected.stop_reason, StopReason::MaxIterations);
+    let mut g = start.clone();
+    let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+    let mut observer = StopAfter {
+        after: k,
+        records: Vec::new(),
+    };
+    let s = opt.run(&mut g, None, &mut observer).unwrap();
+    assert_eq!((s.iterations, s.stop_reason), (k, StopReason::Cancelled));
+    assert!(!s.converged());
+    assert!(g.poses == limited.poses);
+    assert_eq!(s.final_objective, expected.final_objective);
+    assert!(s.final_objective < s.initial_objective);
+    // Each record has the time since the start, growing, within the run's.
+    let times: Vec<Duration> = observer.records.iter().map(|r| r.elapsed).collect();
+    assert!(times.windows(2).all(|w| w[0] <= w[1]), "{times:?}");
+    assert!(times.last().is_some_and(|&t| t <= s.time));
+}
+
+#[test]
+fn a_token_cancelled_before_the_run_stops_it_at_once() {
+    let start = dead_reckoned_grid(300);
+    let mut g = start.clone();
+    let cancel = Cancel::new();
+    let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+    let mut seen = 0;
+    let mut progress = |_: &IterationRecord| seen += 1;
+    // Not cancelled: the run goes on (and reports) ...
+    let mut observer = Cancellable::new(cancel.clone(), &mut progress);
+    let s = opt.run(&mut g, None, &mut observer).unwrap();
+    assert!(s.converged() && s.iterations > 3, "{s:?}");
+    let reported = s.iterations;
+    // ... cancelled from another thread: the next run does nothing.
+    let handle = cancel.clone();
+    std::thread::spawn(move || handle.cancel()).join().unwrap();
+    assert!(cancel.is_cancelled());
+    g.poses.clone_from(&start.poses);
+    let s = opt.run(&mut g, None, &mut observer).unwrap();
+    assert_eq!((s.iterations, s.stop_reason), (0, StopReason::Cancelled));
+    assert_eq!(s.final_objective, s.initial_objective);
+    assert!(g.poses == start.poses);
+    // The token alone is an observer too.
+    let s = opt.run(&mut g, None, &mut cancel.clone()).unwrap();
+    assert_eq!((s.iterations, s.stop_reason), (0, StopReason::Cancelled));
+    drop(observer);
+    assert_eq!(seen, reported);
+}
+
+/// Stops the run at the first question asked between two LM trials (the
+/// second question without an iteration between).
+#[derive(Default)]
+struct StopBetweenTrials {
+    records: Vec<IterationRecord>,
+    asked_since_record: usize,
+}
+
+impl Observer for StopBetweenTrials {
+    fn iteration(&mut self, record: &IterationRecord) {
+        self.records.push(*record);
+        self.asked_since_record = 0;
+    }
+
+    fn should_stop(&mut self) -> bool {
+        self.asked_since_record += 1;
+        self.asked_since_record > 1
+    }
+}
+
+#[test]
+fn an_observer_stops_the_run_between_lm_trials() {
+    // A start where LM rejects a trial after at least one iteration.
+    let found = (0..500).find_map(|seed| {
+        let g = square(2.5, seed);
+        let mut records = Vec::new();
+        optimize_observed(&mut g.clone(), &mut |r: &IterationRecord| records.push(*r));
+        let k = records.iter().skip(1).position(|r| r.rejected > 0)?;
+        Some((g, records, k + 1))
+    });
+    let (mut g, full, k) = found.expect("no start with a rejected trial");
+    let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+    let mut observer = StopBetweenTrials::default();
+    let s = opt.run(&mut g, None, &mut observer).unwrap();
+    // Stopped in iteration k + 1, after its first rejected trial: the poses
+    // and objective of iteration k, one factorisation more than those.
+    assert_eq!((s.iterations, s.stop_reason), (k, StopReason::Cancelled));
+    let trials: usize = full[..k].iter().map(|r| r.rejected + 1).sum();
+    assert_eq!(s.factorizations, trials + 1);
+    assert_eq!(s.final_objective, full[k - 1].objective);
+    assert!((g.chi2() - s.final_objective).abs() <= 1e-12 * s.final_objective.max(1.0));
+}
+
+/// [`optimize`] with an observer.
+fn optimize_observed(g: &mut PoseGraph<Se2, 3>, observer: &mut dyn Observer) -> Summary {
+    let mut opt = Optimizer::new(g, None, SolverOptions::default()).unwrap();
+    opt.run(g, None, observer).unwrap()
+}
