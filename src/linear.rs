@@ -59,6 +59,13 @@ pub enum LinearError {
 /// No block (a fixed vertex, or no off-diagonal block).
 const NONE: u32 = u32::MAX;
 
+/// Marquardt's damping scales each diagonal entry of `H`, floored at this
+/// fraction of the largest one so that a zero entry (a direction no edge
+/// constrains at these poses) is damped too. Far below the spread of a
+/// pose graph's diagonal (the information of its edges, a few decades), it
+/// acts only where an entry is zero to rounding.
+const DIAGONAL_FLOOR: f64 = 1e-9;
+
 /// The blocks one edge adds to: the elimination positions of its two
 /// vertices and its off-diagonal slot.
 #[derive(Clone, Copy, Debug)]
@@ -437,7 +444,8 @@ impl<const D: usize> BlockSystem<D> {
     }
 
     /// Factorises `H + λ·diag(H)` (Marquardt's scaling; diagonal entries are
-    /// floored at `1e-9·max diag` so that a zero entry still gets damped).
+    /// floored at [`DIAGONAL_FLOOR`]` · max diag` so that a zero entry still
+    /// gets damped).
     /// `λ = 0` factorises `H` itself (Gauss–Newton).
     pub fn factorize(&mut self, lambda: f64) -> Result<(), LinearError> {
         self.lambda = lambda;
@@ -452,7 +460,7 @@ impl<const D: usize> BlockSystem<D> {
                 max_diag = max_diag.max(d);
             }
         }
-        let floor = 1e-9 * max_diag;
+        let floor = DIAGONAL_FLOOR * max_diag;
         if self.factor.is_empty() {
             let len = self.symbolic.len_values();
             self.factor
@@ -667,8 +675,35 @@ impl<const D: usize> BlockSystem<D> {
     /// (as returned by [`Self::solve`]): `−2δᵀb − δᵀHδ`, which for the damped
     /// solution equals `−δᵀb + λ·δᵀ diag(H) δ`.
     pub fn predicted_decrease(&self, step: &[f64]) -> f64 {
+        let (dot_b, dot_d) = self.model_terms(step);
+        -dot_b + self.lambda * dot_d
+    }
+
+    /// The share of the damping in the quadratic model along `step` (as
+    /// returned by [`Self::solve`]): `λ·δᵀDδ / (−δᵀb)`, `D` the (floored)
+    /// diagonal of `H`. For the damped solution `−δᵀb = δᵀHδ + λ·δᵀDδ`, so
+    /// the share is 0 without damping, ½ where the damping adds as much
+    /// curvature along the step as `H` has — the step is half as long as
+    /// the undamped model's minimiser along the same direction — and tends
+    /// to 1 as the damping takes over. 1 for a damped step that does not
+    /// descend (`−δᵀb ≤ 0`).
+    pub fn damping_share(&self, step: &[f64]) -> f64 {
+        if self.lambda == 0.0 {
+            return 0.0;
+        }
+        let (dot_b, dot_d) = self.model_terms(step);
+        if -dot_b > 0.0 {
+            (self.lambda * dot_d / -dot_b).min(1.0)
+        } else {
+            1.0
+        }
+    }
+
+    /// `δᵀb` and `δᵀDδ` for `step` by variable block (`D` the diagonal of
+    /// `H`, floored as the damping floors it).
+    fn model_terms(&self, step: &[f64]) -> (f64, f64) {
         let max_diag = self.undamped_diagonal.iter().fold(0.0f64, |m, &d| m.max(d));
-        let floor = 1e-9 * max_diag;
+        let floor = DIAGONAL_FLOOR * max_diag;
         let mut dot_b = 0.0;
         let mut dot_d = 0.0;
         for (block, &p) in self.position.iter().enumerate() {
@@ -678,7 +713,7 @@ impl<const D: usize> BlockSystem<D> {
                 dot_d += s * s * self.undamped_diagonal[p * D + a].max(floor);
             }
         }
-        -dot_b + self.lambda * dot_d
+        (dot_b, dot_d)
     }
 
     /// The largest absolute entry of `b`, for the gradient stopping test.
@@ -1010,11 +1045,28 @@ mod tests {
         let damped = &h + DMatrix::from_diagonal(&h.diagonal()) * lambda;
         let expected = damped.cholesky().unwrap().solve(&(-&b));
         assert!((DVector::from_vec(step.clone()) - &expected).norm() < 1e-9 * expected.norm());
-        // Refactorising without damping gives the undamped solution again.
+        // The damping's share of the model along the step: λ·δᵀDδ / (−δᵀb),
+        // strictly between 0 and 1, growing with λ.
+        let curvature = |d: &DVector<f64>| {
+            d.dot(&DVector::from_iterator(
+                24,
+                (0..24).map(|i| h[(i, i)] * d[i]),
+            ))
+        };
+        let share = lambda * curvature(&expected) / -expected.dot(&b);
+        assert!(share > 0.0 && share < 1.0, "{share}");
+        assert!((sys.damping_share(&step) - share).abs() < 1e-9, "{share}");
+        sys.factorize(50.0).unwrap();
+        let mut heavy = vec![0.0; 24];
+        sys.solve(&mut heavy);
+        assert!(sys.damping_share(&heavy) > 0.9);
+        // Refactorising without damping gives the undamped solution again,
+        // whose share is 0.
         sys.factorize(0.0).unwrap();
         sys.solve(&mut step);
         let plain = h.cholesky().unwrap().solve(&(-&b));
-        assert!((DVector::from_vec(step) - plain).norm() < 1e-9);
+        assert!((DVector::from_vec(step.clone()) - plain).norm() < 1e-9);
+        assert_eq!(sys.damping_share(&step), 0.0);
     }
 
     #[test]

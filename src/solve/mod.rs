@@ -98,9 +98,11 @@ impl Default for SolverOptions {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum StopReason {
-    /// The objective's relative decrease fell below the tolerance.
+    /// The objective's relative decrease fell below the tolerance after a
+    /// step the Gauss–Newton model is trusted at (at most lightly damped,
+    /// its decrease foreseen by the model).
     RelativeDecrease,
-    /// The step became negligible.
+    /// The step became negligible, at most lightly damped.
     SmallStep,
     /// The objective is zero.
     ZeroError,
@@ -114,6 +116,11 @@ pub enum StopReason {
     NothingToOptimize,
     /// The observer asked to stop ([`Observer::should_stop`]).
     Cancelled,
+    /// The objective stopped decreasing (the relative decrease or the step
+    /// fell below its tolerance) where the Gauss–Newton model is not
+    /// trusted: under heavy damping, or after a step that gave far less
+    /// than the model foresaw. Not a minimum; the best poses are kept.
+    Stalled,
 }
 
 impl StopReason {
@@ -480,12 +487,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             };
             let step = match outcome {
                 StepOutcome::Taken(step) => step,
-                StepOutcome::Negligible => break StopReason::SmallStep,
+                StepOutcome::Negligible if self.lightly_damped() => break StopReason::SmallStep,
+                StepOutcome::Negligible => break StopReason::Stalled,
                 StepOutcome::Failed => break StopReason::NoDecrease,
                 StepOutcome::Cancelled => break StopReason::Cancelled,
             };
             std::mem::swap(&mut graph.poses, &mut self.trial);
-            let decrease = (objective - step.objective) / objective;
+            let previous = objective;
             objective = step.objective;
             if objective < best_objective {
                 best_objective = objective;
@@ -496,8 +504,12 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             let record = step.record(summary.iterations, progress.watch.elapsed());
             summary.history.push(record);
             observer.iteration(&record);
-            if decrease.abs() < self.options.relative_tolerance {
-                break StopReason::RelativeDecrease;
+            if ((previous - objective) / previous).abs() < self.options.relative_tolerance {
+                break if self.model_trusted(previous, objective) {
+                    StopReason::RelativeDecrease
+                } else {
+                    StopReason::Stalled
+                };
             }
             self.linearize(graph, weights);
             progress.lap(|t| &mut t.linearize_s);

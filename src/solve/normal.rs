@@ -43,6 +43,18 @@ impl<const D: usize> EdgeTerms<D> {
     }
 }
 
+/// The largest damping share ([`crate::linear::BlockSystem::damping_share`]) of a step
+/// after which the Gauss–Newton model is trusted: the step is then at least
+/// half as long as the model's own minimiser along its direction, so that
+/// (along that direction) the model's whole decrease is at most 4/3 of the
+/// step's (a fraction `α` of the way gives `2α − α²` of it).
+const TRUSTED_DAMPING_SHARE: f64 = 0.5;
+
+/// The smallest gain ratio (actual over predicted decrease) at which the
+/// model foresaw a step's decrease: the usual trust-region threshold of
+/// adequate agreement (Nocedal & Wright, Numerical Optimization, Alg. 4.1).
+const TRUSTED_GAIN_RATIO: f64 = 0.25;
+
 /// How a factorisation and solve for one trial step went.
 pub(super) enum Solved {
     /// The step is in `Optimizer::step`; its largest absolute component.
@@ -174,6 +186,24 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         self.trial = trial;
         progress.lap(|t| &mut t.evaluate_s);
         new_objective
+    }
+
+    /// Whether the last step (in `self.step`, from the last factorisation)
+    /// was at most lightly damped ([`TRUSTED_DAMPING_SHARE`]).
+    pub(super) fn lightly_damped(&self) -> bool {
+        self.system.damping_share(&self.step) <= TRUSTED_DAMPING_SHARE
+    }
+
+    /// Whether the Gauss–Newton model is trusted after the last step took
+    /// the objective from `objective` to `new_objective`: the step was at
+    /// most lightly damped, and the model foresaw its decrease (gain ratio
+    /// at least [`TRUSTED_GAIN_RATIO`]) or foresaw no decrease worth having
+    /// (a predicted relative decrease below the relative tolerance).
+    pub(super) fn model_trusted(&self, objective: f64, new_objective: f64) -> bool {
+        let predicted = self.system.predicted_decrease(&self.step);
+        self.lightly_damped()
+            && (objective - new_objective >= TRUSTED_GAIN_RATIO * predicted
+                || predicted <= self.options.relative_tolerance * objective)
     }
 
     /// `trial = poses ⊞ step`.

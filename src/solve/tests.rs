@@ -596,3 +596,90 @@ fn optimize_observed(g: &mut PoseGraph<Se2, 3>, observer: &mut dyn Observer) -> 
     let mut opt = Optimizer::new(g, None, SolverOptions::default()).unwrap();
     opt.run(g, None, observer).unwrap()
 }
+
+/// [`dead_reckoned_grid`] of 300 poses with every pose but the gauge moved
+/// up to `reach` metres and given a random heading.
+fn far_start(seed: u64, reach: f64) -> PoseGraph<Se2, 3> {
+    let mut g = dead_reckoned_grid(300);
+    let mut rng = StdRng::seed_from_u64(seed);
+    for p in g.poses.iter_mut().skip(1) {
+        *p = Se2::new(
+            rng.random_range(-reach..reach),
+            rng.random_range(-reach..reach),
+            rng.random_range(-PI..PI),
+        );
+    }
+    g
+}
+
+/// The decrease of χ² that the undamped Gauss–Newton model foresees from
+/// the graph's poses, relative to χ² there.
+fn newton_decrement(g: &PoseGraph<Se2, 3>) -> f64 {
+    let mut opt = Optimizer::new(g, None, SolverOptions::default()).unwrap();
+    let chi2 = opt.linearize(g, None);
+    opt.system_mut().factorize(0.0).unwrap();
+    let mut step = vec![0.0; 3 * opt.system().num_blocks()];
+    opt.system_mut().solve(&mut step);
+    opt.system().predicted_decrease(&step) / chi2
+}
+
+#[test]
+fn a_far_start_converges_only_where_the_model_is_trusted() {
+    // Far starts end in local minima of the wrapped angles (converged, the
+    // model foreseeing nothing more), or not converged.
+    let mut converged = 0;
+    for seed in 0..4 {
+        for method in [Method::LevenbergMarquardt, Method::GaussNewton] {
+            let mut g = far_start(seed, 1e3);
+            let options = SolverOptions {
+                method,
+                ..Default::default()
+            };
+            let Ok(s) = optimize(&mut g, &options) else {
+                continue;
+            };
+            if s.converged() {
+                converged += 1;
+                let decrement = newton_decrement(&g);
+                assert!(
+                    decrement < 1e-6,
+                    "{method:?} seed {seed}: {decrement:e} {s:?}"
+                );
+            }
+        }
+    }
+    assert!(converged > 0);
+    // Damped hard after the first rejected step, LM crawls: the objective
+    // barely decreases (less than the relative tolerance) while the model
+    // still foresees a large decrease. That is no convergence.
+    let mut g = far_start(0, 1e3);
+    let options = SolverOptions {
+        initial_lambda: 1e12,
+        ..Default::default()
+    };
+    let s = optimize(&mut g, &options).unwrap();
+    assert_eq!(s.stop_reason, StopReason::Stalled, "{s:?}");
+    assert!(!s.converged() && s.iterations >= 1);
+    assert!(s.final_objective < s.initial_objective);
+    assert!(s.history.iter().all(|r| r.lambda > 1e6), "{s:?}");
+    let decrement = newton_decrement(&g);
+    assert!(decrement > 1e-3, "{decrement:e}");
+    // So is a step below the step tolerance because the damping made it so.
+    let mut g = far_start(0, 1e3);
+    let options = SolverOptions {
+        initial_lambda: 1e12,
+        step_tolerance: 1e-3,
+        ..Default::default()
+    };
+    let s = optimize(&mut g, &options).unwrap();
+    assert_eq!((s.iterations, s.stop_reason), (0, StopReason::Stalled));
+    // An undamped step below it is convergence.
+    let (mut g, _) = open_loop();
+    optimize(&mut g, &SolverOptions::default()).unwrap();
+    let options = SolverOptions {
+        step_tolerance: 1e-3,
+        ..Default::default()
+    };
+    let s = optimize(&mut g, &options).unwrap();
+    assert_eq!((s.iterations, s.stop_reason), (0, StopReason::SmallStep));
+}
