@@ -168,21 +168,7 @@ impl<const D: usize> BlockSystem<D> {
                 "{n_blocks} variable blocks are too many"
             )));
         }
-        // Neighbours of each block that come later in the elimination order,
-        // by elimination position.
-        let mut later: Vec<Vec<usize>> = vec![Vec::new(); n_blocks];
-        for &(i, j) in edges {
-            if let (Some(i), Some(j)) = (i, j) {
-                if i != j {
-                    let (pi, pj) = (position[i], position[j]);
-                    later[pi.min(pj)].push(pi.max(pj));
-                }
-            }
-        }
-        for l in &mut later {
-            l.sort_unstable();
-            l.dedup();
-        }
+        let later = later_neighbours(n_blocks, edges, &position);
         let mut off_ptr = Vec::with_capacity(n_blocks + 1);
         off_ptr.push(0usize);
         for l in &later {
@@ -196,26 +182,8 @@ impl<const D: usize> BlockSystem<D> {
         }
         let slots = edges
             .iter()
-            .map(|&(i, j)| {
-                let pos = |b: Option<usize>| b.map_or(NONE, |b| position[b] as u32);
-                let (pi, pj) = (pos(i), pos(j));
-                let mut slot = EdgeSlot {
-                    i: pi,
-                    j: pj,
-                    off: NONE,
-                    i_is_row: false,
-                };
-                if pi != NONE && pj != NONE && pi != pj {
-                    let (col, row) = (pi.min(pj) as usize, pi.max(pj) as usize);
-                    // Cannot fail: `row` was recorded as a later neighbour of `col`.
-                    let rank = later[col].binary_search(&row).unwrap_or(0);
-                    slot.off = (off_ptr[col] + rank) as u32;
-                    slot.i_is_row = pi > pj;
-                }
-                slot
-            })
+            .map(|&(i, j)| edge_slot(i, j, &position, &later, &off_ptr))
             .collect();
-
         let symbolic = Symbolic::<D>::new(&later)?;
         let diag_dest = (0..n_blocks)
             .map(|p| symbolic.block_offset(p, p).0)
@@ -720,6 +688,57 @@ impl<const D: usize> BlockSystem<D> {
     pub fn gradient_max_norm(&self) -> f64 {
         self.gradient.iter().fold(0.0, |m, g| m.max(g.abs()))
     }
+}
+
+/// The neighbours of each block that come later in the elimination order,
+/// by elimination position, increasing.
+fn later_neighbours(
+    n_blocks: usize,
+    edges: &[(Option<usize>, Option<usize>)],
+    position: &[usize],
+) -> Vec<Vec<usize>> {
+    let mut later: Vec<Vec<usize>> = vec![Vec::new(); n_blocks];
+    for &(i, j) in edges {
+        if let (Some(i), Some(j)) = (i, j) {
+            if i != j {
+                let (pi, pj) = (position[i], position[j]);
+                later[pi.min(pj)].push(pi.max(pj));
+            }
+        }
+    }
+    for l in &mut later {
+        l.sort_unstable();
+        l.dedup();
+    }
+    later
+}
+
+/// The slots of an edge between variable blocks `i` and `j` (`None`: a
+/// fixed vertex), given the later neighbours of each position and where
+/// each position's off-diagonal blocks start.
+fn edge_slot(
+    i: Option<usize>,
+    j: Option<usize>,
+    position: &[usize],
+    later: &[Vec<usize>],
+    off_ptr: &[usize],
+) -> EdgeSlot {
+    let pos = |b: Option<usize>| b.map_or(NONE, |b| position[b] as u32);
+    let (pi, pj) = (pos(i), pos(j));
+    let mut slot = EdgeSlot {
+        i: pi,
+        j: pj,
+        off: NONE,
+        i_is_row: false,
+    };
+    if pi != NONE && pj != NONE && pi != pj {
+        let (col, row) = (pi.min(pj) as usize, pi.max(pj) as usize);
+        // Cannot fail: `row` was recorded as a later neighbour of `col`.
+        let rank = later[col].binary_search(&row).unwrap_or(0);
+        slot.off = (off_ptr[col] + rank) as u32;
+        slot.i_is_row = pi > pj;
+    }
+    slot
 }
 
 /// Adds the lower triangle of `h` to a column-major `D×D` block.
