@@ -77,8 +77,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// [`Self::linearize`] where the parallel work belongs.
     fn assemble(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
         self.system.clear();
-        let min_len = self.min_len();
-        prepare(&graph.poses, &mut self.prepared, min_len);
+        let parallel = self.parallelism.is_parallel();
+        prepare(&graph.poses, &mut self.prepared, parallel);
         let mut objective = 0.0;
         // Edges are linearised in parallel, a chunk at a time, into a buffer
         // reused across iterations, then added into H in parallel by
@@ -88,21 +88,16 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         for (c, chunk) in graph.edges.chunks(LINEARIZE_CHUNK).enumerate() {
             let base = c * LINEARIZE_CHUNK;
             terms.resize(chunk.len(), EdgeTerms::default());
-            terms
-                .par_iter_mut()
-                .zip(chunk.par_iter())
-                .enumerate()
-                .with_min_len(min_len)
-                .for_each(|(i, (t, e))| {
-                    let k = base + i;
-                    let w = weights.map_or(1.0, |w| w[k]);
-                    *t = if w == 0.0 {
-                        EdgeTerms::default()
-                    } else {
-                        let (xi, xj) = (&prepared[e.from], &prepared[e.to]);
-                        EdgeTerms::new::<P>(xi, xj, &measurements[k], &e.information, w)
-                    };
-                });
+            zip_each(parallel, EDGES_PER_TASK, terms, chunk, |i, t, e| {
+                let k = base + i;
+                let w = weights.map_or(1.0, |w| w[k]);
+                *t = if w == 0.0 {
+                    EdgeTerms::default()
+                } else {
+                    let (xi, xj) = (&prepared[e.from], &prepared[e.to]);
+                    EdgeTerms::new::<P>(xi, xj, &measurements[k], &e.information, w)
+                };
+            });
             objective += terms.iter().map(|t| t.blocks.chi2).sum::<f64>();
             self.system
                 .add_edges(base, terms, |t| t.active.then_some(&t.blocks));
@@ -123,16 +118,16 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
 
     /// [`Self::objective`] where the parallel work belongs.
     fn sum_chi2(&mut self, poses: &[P], graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
-        let min_len = self.min_len();
-        prepare(poses, &mut self.prepared, min_len);
+        let parallel = self.parallelism.is_parallel();
+        prepare(poses, &mut self.prepared, parallel);
         let (prepared, measurements) = (&self.prepared, &self.measurements);
         self.edge_chi2.resize(graph.edges.len(), 0.0);
-        self.edge_chi2
-            .par_iter_mut()
-            .zip(graph.edges.par_iter())
-            .enumerate()
-            .with_min_len(min_len)
-            .for_each(|(k, (chi2, e))| {
+        zip_each(
+            parallel,
+            EDGES_PER_TASK,
+            &mut self.edge_chi2,
+            &graph.edges,
+            |k, chi2, e| {
                 let w = weights.map_or(1.0, |w| w[k]);
                 *chi2 = if w == 0.0 {
                     0.0
@@ -140,7 +135,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                     let r = P::error_prepared(&prepared[e.from], &prepared[e.to], &measurements[k]);
                     w * r.dot(&(e.information * r))
                 };
-            });
+            },
+        );
         // Summed in edge order, not as the parallel loop was split (that
         // split follows the work stealing, and a floating-point sum depends
         // on its order): the same bits in every run and with any number of
@@ -216,27 +212,48 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             self.trial[v] = graph.poses[v].retract(&delta);
         }
     }
-
-    /// The smallest piece of a parallel loop: everything in one piece
-    /// (the calling thread) unless [`super::SolverOptions::threads`] asks
-    /// for more.
-    fn min_len(&self) -> usize {
-        if self.parallelism.is_parallel() {
-            256
-        } else {
-            usize::MAX
-        }
-    }
 }
 
-/// `out[k] = poses[k].prepare()`, in pieces of at least `min_len`.
-fn prepare<P: Pose<D>, const D: usize>(poses: &[P], out: &mut Vec<P::Prepared>, min_len: usize) {
+/// `out[k] = poses[k].prepare()`, in parallel if `parallel`.
+fn prepare<P: Pose<D>, const D: usize>(poses: &[P], out: &mut Vec<P::Prepared>, parallel: bool) {
     if out.len() != poses.len() {
         *out = poses.iter().map(|p| p.prepare()).collect();
     } else {
+        zip_each(parallel, POSES_PER_TASK, out, poses, |_, o, p| {
+            *o = p.prepare()
+        });
+    }
+}
+
+/// The least edges (linearisations or χ² terms) a parallel task gets: a
+/// few tens of microseconds of work, well above the cost of handing it to
+/// another thread.
+const EDGES_PER_TASK: usize = 256;
+
+/// The least poses a parallel task prepares (a sine and cosine, or a
+/// rotation matrix, each: a sixteenth of an edge's linearisation).
+const POSES_PER_TASK: usize = 16 * EDGES_PER_TASK;
+
+/// `f(k, &mut out[k], &input[k])` for every `k`: in parallel tasks of at
+/// least `per_task` items if `parallel` (in the current pool), else a plain
+/// loop in the calling thread that does not touch rayon (which would start
+/// its global pool).
+fn zip_each<A: Send, B: Sync>(
+    parallel: bool,
+    per_task: usize,
+    out: &mut [A],
+    input: &[B],
+    f: impl Fn(usize, &mut A, &B) + Sync + Send,
+) {
+    if parallel {
         out.par_iter_mut()
-            .zip(poses.par_iter())
-            .with_min_len(min_len.max(4096))
-            .for_each(|(o, p)| *o = p.prepare());
+            .zip(input.par_iter())
+            .enumerate()
+            .with_min_len(per_task)
+            .for_each(|(k, (a, b))| f(k, a, b));
+    } else {
+        for (k, (a, b)) in out.iter_mut().zip(input).enumerate() {
+            f(k, a, b);
+        }
     }
 }
