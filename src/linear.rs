@@ -28,7 +28,10 @@
 //! at once.
 
 mod group;
+mod parallel;
 mod supernodal;
+
+pub use parallel::Parallelism;
 
 use crate::geometry::NormalBlocks;
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -52,10 +55,20 @@ pub enum LinearError {
     /// The factorisation could not allocate its memory, or failed otherwise.
     #[error("sparse Cholesky failed: {0}")]
     Factorization(String),
+    /// The threads of a parallel solver could not be started.
+    #[error("cannot start the solver's threads: {0}")]
+    ThreadPool(String),
 }
 
 /// No block (a fixed vertex, or no off-diagonal block).
 const NONE: u32 = u32::MAX;
+
+/// Marquardt's damping scales each diagonal entry of `H`, floored at this
+/// fraction of the largest one so that a zero entry (a direction no edge
+/// constrains at these poses) is damped too. Far below the spread of a
+/// pose graph's diagonal (the information of its edges, a few decades), it
+/// acts only where an entry is zero to rounding.
+const DIAGONAL_FLOOR: f64 = 1e-9;
 
 /// The blocks one edge adds to: the elimination positions of its two
 /// vertices and its off-diagonal slot.
@@ -81,10 +94,10 @@ pub struct SelectedInverse {
 ///
 /// ```
 /// use nalgebra::{Matrix1, Vector1};
-/// use pgo::linear::BlockSystem;
+/// use pgo::linear::{BlockSystem, Parallelism};
 /// // Two scalar variables tied by one edge, plus a prior on the first:
 /// // H = [[2, −1], [−1, 1]], b = [0, −1], so δ = −H⁻¹b = [1, 2].
-/// let mut sys = BlockSystem::<1>::new(2, &[(Some(0), Some(1)), (Some(0), None)], 0).unwrap();
+/// let mut sys = BlockSystem::<1>::new(2, &[(Some(0), Some(1)), (Some(0), None)], Parallelism::sequential()).unwrap();
 /// sys.clear();
 /// let one = Matrix1::new(1.0);
 /// sys.add_edge(0, &one, &Matrix1::new(-1.0), &one, &Vector1::new(0.0), &Vector1::new(-1.0));
@@ -128,28 +141,30 @@ pub struct BlockSystem<const D: usize> {
     /// system built early, e.g. to check the graph before the initial guess,
     /// costs little memory until it is used).
     factor: Vec<f64>,
-    threads: usize,
+    /// Where assembly and factorisation run.
+    parallelism: Parallelism,
 }
 
 impl<const D: usize> BlockSystem<D> {
     /// Builds the pattern for `n_blocks` variable blocks and the given edges,
     /// each as the variable blocks `(i, j)` it joins (`None` for a fixed
-    /// vertex). `threads`: 1 factorises sequentially, anything else in
-    /// parallel in rayon's current pool.
+    /// vertex). Assembly ([`Self::add_edges`]) and factorisation run as
+    /// `parallelism` says; the results are the same bits for a given number
+    /// of threads.
     pub fn new(
         n_blocks: usize,
         edges: &[(Option<usize>, Option<usize>)],
-        threads: usize,
+        parallelism: Parallelism,
     ) -> Result<Self, LinearError> {
         let position = fill_reducing_order(n_blocks, edges)?;
-        Self::with_positions(n_blocks, edges, threads, position)
+        Self::with_positions(n_blocks, edges, parallelism, position)
     }
 
     /// Like [`Self::new`] with a given elimination position of each block.
     pub fn with_positions(
         n_blocks: usize,
         edges: &[(Option<usize>, Option<usize>)],
-        threads: usize,
+        parallelism: Parallelism,
         position: Vec<usize>,
     ) -> Result<Self, LinearError> {
         if n_blocks >= NONE as usize {
@@ -157,21 +172,7 @@ impl<const D: usize> BlockSystem<D> {
                 "{n_blocks} variable blocks are too many"
             )));
         }
-        // Neighbours of each block that come later in the elimination order,
-        // by elimination position.
-        let mut later: Vec<Vec<usize>> = vec![Vec::new(); n_blocks];
-        for &(i, j) in edges {
-            if let (Some(i), Some(j)) = (i, j) {
-                if i != j {
-                    let (pi, pj) = (position[i], position[j]);
-                    later[pi.min(pj)].push(pi.max(pj));
-                }
-            }
-        }
-        for l in &mut later {
-            l.sort_unstable();
-            l.dedup();
-        }
+        let later = later_neighbours(n_blocks, edges, &position);
         let mut off_ptr = Vec::with_capacity(n_blocks + 1);
         off_ptr.push(0usize);
         for l in &later {
@@ -185,26 +186,8 @@ impl<const D: usize> BlockSystem<D> {
         }
         let slots = edges
             .iter()
-            .map(|&(i, j)| {
-                let pos = |b: Option<usize>| b.map_or(NONE, |b| position[b] as u32);
-                let (pi, pj) = (pos(i), pos(j));
-                let mut slot = EdgeSlot {
-                    i: pi,
-                    j: pj,
-                    off: NONE,
-                    i_is_row: false,
-                };
-                if pi != NONE && pj != NONE && pi != pj {
-                    let (col, row) = (pi.min(pj) as usize, pi.max(pj) as usize);
-                    // Cannot fail: `row` was recorded as a later neighbour of `col`.
-                    let rank = later[col].binary_search(&row).unwrap_or(0);
-                    slot.off = (off_ptr[col] + rank) as u32;
-                    slot.i_is_row = pi > pj;
-                }
-                slot
-            })
+            .map(|&(i, j)| edge_slot(i, j, &position, &later, &off_ptr))
             .collect();
-
         let symbolic = Symbolic::<D>::new(&later)?;
         let diag_dest = (0..n_blocks)
             .map(|p| symbolic.block_offset(p, p).0)
@@ -235,8 +218,13 @@ impl<const D: usize> BlockSystem<D> {
             lambda: 0.0,
             symbolic,
             factor: Vec::new(),
-            threads,
+            parallelism,
         })
+    }
+
+    /// Where assembly and factorisation run from now on.
+    pub fn set_parallelism(&mut self, parallelism: Parallelism) {
+        self.parallelism = parallelism;
     }
 
     /// Number of variable blocks.
@@ -351,11 +339,7 @@ impl<const D: usize> BlockSystem<D> {
         items: &[T],
         blocks: impl Fn(&T) -> Option<&NormalBlocks<D>> + Sync,
     ) {
-        let threads = if self.threads == 1 {
-            1
-        } else {
-            rayon::current_num_threads()
-        };
+        let threads = self.parallelism.threads();
         if threads <= 1 || items.len() < 512 {
             for (k, item) in items.iter().enumerate() {
                 if let Some(c) = blocks(item) {
@@ -369,7 +353,8 @@ impl<const D: usize> BlockSystem<D> {
         let off = SharedSlice(self.off.as_mut_ptr());
         let gradient = SharedSlice(self.gradient.as_mut_ptr());
         let edges = &self.edges[first..first + items.len()];
-        (0..threads).into_par_iter().for_each(|t| {
+        let blocks = &blocks;
+        let add_owned = |t: usize| {
             let owned = (n * t / threads) as u32..(n * (t + 1) / threads) as u32;
             for (slot, item) in edges.iter().zip(items) {
                 let mine_i = owned.contains(&slot.i);
@@ -398,7 +383,9 @@ impl<const D: usize> BlockSystem<D> {
                     }
                 }
             }
-        });
+        };
+        self.parallelism
+            .install(|| (0..threads).into_par_iter().for_each(add_owned));
     }
 
     /// Sets `b` to zero, keeping `H` (and its factorisation): for solving
@@ -429,7 +416,8 @@ impl<const D: usize> BlockSystem<D> {
     }
 
     /// Factorises `H + λ·diag(H)` (Marquardt's scaling; diagonal entries are
-    /// floored at `1e-9·max diag` so that a zero entry still gets damped).
+    /// floored at [`DIAGONAL_FLOOR`]` · max diag` so that a zero entry still
+    /// gets damped).
     /// `λ = 0` factorises `H` itself (Gauss–Newton).
     pub fn factorize(&mut self, lambda: f64) -> Result<(), LinearError> {
         self.lambda = lambda;
@@ -444,7 +432,7 @@ impl<const D: usize> BlockSystem<D> {
                 max_diag = max_diag.max(d);
             }
         }
-        let floor = 1e-9 * max_diag;
+        let floor = DIAGONAL_FLOOR * max_diag;
         if self.factor.is_empty() {
             let len = self.symbolic.len_values();
             self.factor
@@ -477,7 +465,7 @@ impl<const D: usize> BlockSystem<D> {
                 }
             }
         };
-        match sym.factorize(&mut self.factor, &load, self.threads) {
+        match sym.factorize(&mut self.factor, &load, &self.parallelism) {
             Ok(()) => Ok(()),
             Err(p) => {
                 let block = self.position.iter().position(|&q| q == p).unwrap_or(p);
@@ -524,10 +512,10 @@ impl<const D: usize> BlockSystem<D> {
     ///
     /// ```
     /// use nalgebra::{Matrix1, Vector1};
-    /// use pgo::linear::BlockSystem;
+    /// use pgo::linear::{BlockSystem, Parallelism};
     /// // H = [[2, −1], [−1, 1]], so H⁻¹ = [[1, 1], [1, 2]]; for the edge
     /// // error e = x₁ − x₀, A = [−1, 1] and A·H⁻¹·Aᵀ = 1 − 2 + 2 = 1.
-    /// let mut sys = BlockSystem::<1>::new(2, &[(Some(0), Some(1)), (Some(0), None)], 0).unwrap();
+    /// let mut sys = BlockSystem::<1>::new(2, &[(Some(0), Some(1)), (Some(0), None)], Parallelism::sequential()).unwrap();
     /// sys.clear();
     /// let one = Matrix1::new(1.0);
     /// sys.add_edge(0, &one, &Matrix1::new(-1.0), &one, &Vector1::zeros(), &Vector1::zeros());
@@ -659,8 +647,35 @@ impl<const D: usize> BlockSystem<D> {
     /// (as returned by [`Self::solve`]): `−2δᵀb − δᵀHδ`, which for the damped
     /// solution equals `−δᵀb + λ·δᵀ diag(H) δ`.
     pub fn predicted_decrease(&self, step: &[f64]) -> f64 {
+        let (dot_b, dot_d) = self.model_terms(step);
+        -dot_b + self.lambda * dot_d
+    }
+
+    /// The share of the damping in the quadratic model along `step` (as
+    /// returned by [`Self::solve`]): `λ·δᵀDδ / (−δᵀb)`, `D` the (floored)
+    /// diagonal of `H`. For the damped solution `−δᵀb = δᵀHδ + λ·δᵀDδ`, so
+    /// the share is 0 without damping, ½ where the damping adds as much
+    /// curvature along the step as `H` has — the step is half as long as
+    /// the undamped model's minimiser along the same direction — and tends
+    /// to 1 as the damping takes over. 1 for a damped step that does not
+    /// descend (`−δᵀb ≤ 0`).
+    pub fn damping_share(&self, step: &[f64]) -> f64 {
+        if self.lambda == 0.0 {
+            return 0.0;
+        }
+        let (dot_b, dot_d) = self.model_terms(step);
+        if -dot_b > 0.0 {
+            (self.lambda * dot_d / -dot_b).min(1.0)
+        } else {
+            1.0
+        }
+    }
+
+    /// `δᵀb` and `δᵀDδ` for `step` by variable block (`D` the diagonal of
+    /// `H`, floored as the damping floors it).
+    fn model_terms(&self, step: &[f64]) -> (f64, f64) {
         let max_diag = self.undamped_diagonal.iter().fold(0.0f64, |m, &d| m.max(d));
-        let floor = 1e-9 * max_diag;
+        let floor = DIAGONAL_FLOOR * max_diag;
         let mut dot_b = 0.0;
         let mut dot_d = 0.0;
         for (block, &p) in self.position.iter().enumerate() {
@@ -670,13 +685,64 @@ impl<const D: usize> BlockSystem<D> {
                 dot_d += s * s * self.undamped_diagonal[p * D + a].max(floor);
             }
         }
-        -dot_b + self.lambda * dot_d
+        (dot_b, dot_d)
     }
 
     /// The largest absolute entry of `b`, for the gradient stopping test.
     pub fn gradient_max_norm(&self) -> f64 {
         self.gradient.iter().fold(0.0, |m, g| m.max(g.abs()))
     }
+}
+
+/// The neighbours of each block that come later in the elimination order,
+/// by elimination position, increasing.
+fn later_neighbours(
+    n_blocks: usize,
+    edges: &[(Option<usize>, Option<usize>)],
+    position: &[usize],
+) -> Vec<Vec<usize>> {
+    let mut later: Vec<Vec<usize>> = vec![Vec::new(); n_blocks];
+    for &(i, j) in edges {
+        if let (Some(i), Some(j)) = (i, j) {
+            if i != j {
+                let (pi, pj) = (position[i], position[j]);
+                later[pi.min(pj)].push(pi.max(pj));
+            }
+        }
+    }
+    for l in &mut later {
+        l.sort_unstable();
+        l.dedup();
+    }
+    later
+}
+
+/// The slots of an edge between variable blocks `i` and `j` (`None`: a
+/// fixed vertex), given the later neighbours of each position and where
+/// each position's off-diagonal blocks start.
+fn edge_slot(
+    i: Option<usize>,
+    j: Option<usize>,
+    position: &[usize],
+    later: &[Vec<usize>],
+    off_ptr: &[usize],
+) -> EdgeSlot {
+    let pos = |b: Option<usize>| b.map_or(NONE, |b| position[b] as u32);
+    let (pi, pj) = (pos(i), pos(j));
+    let mut slot = EdgeSlot {
+        i: pi,
+        j: pj,
+        off: NONE,
+        i_is_row: false,
+    };
+    if pi != NONE && pj != NONE && pi != pj {
+        let (col, row) = (pi.min(pj) as usize, pi.max(pj) as usize);
+        // Cannot fail: `row` was recorded as a later neighbour of `col`.
+        let rank = later[col].binary_search(&row).unwrap_or(0);
+        slot.off = (off_ptr[col] + rank) as u32;
+        slot.i_is_row = pi > pj;
+    }
+    slot
 }
 
 /// Adds the lower triangle of `h` to a column-major `D×D` block.
@@ -807,7 +873,7 @@ mod tests {
         }
         pairs.push((Some(3), None)); // an edge to a fixed vertex
         pairs.push((Some(0), None));
-        let mut sys = BlockSystem::<2>::new(n, &pairs, 1).unwrap();
+        let mut sys = BlockSystem::<2>::new(n, &pairs, Parallelism::sequential()).unwrap();
         sys.clear();
         let mut h = DMatrix::zeros(2 * n, 2 * n);
         let mut b = DVector::zeros(2 * n);
@@ -1002,18 +1068,35 @@ mod tests {
         let damped = &h + DMatrix::from_diagonal(&h.diagonal()) * lambda;
         let expected = damped.cholesky().unwrap().solve(&(-&b));
         assert!((DVector::from_vec(step.clone()) - &expected).norm() < 1e-9 * expected.norm());
-        // Refactorising without damping gives the undamped solution again.
+        // The damping's share of the model along the step: λ·δᵀDδ / (−δᵀb),
+        // strictly between 0 and 1, growing with λ.
+        let curvature = |d: &DVector<f64>| {
+            d.dot(&DVector::from_iterator(
+                24,
+                (0..24).map(|i| h[(i, i)] * d[i]),
+            ))
+        };
+        let share = lambda * curvature(&expected) / -expected.dot(&b);
+        assert!(share > 0.0 && share < 1.0, "{share}");
+        assert!((sys.damping_share(&step) - share).abs() < 1e-9, "{share}");
+        sys.factorize(50.0).unwrap();
+        let mut heavy = vec![0.0; 24];
+        sys.solve(&mut heavy);
+        assert!(sys.damping_share(&heavy) > 0.9);
+        // Refactorising without damping gives the undamped solution again,
+        // whose share is 0.
         sys.factorize(0.0).unwrap();
         sys.solve(&mut step);
         let plain = h.cholesky().unwrap().solve(&(-&b));
-        assert!((DVector::from_vec(step) - plain).norm() < 1e-9);
+        assert!((DVector::from_vec(step.clone()) - plain).norm() < 1e-9);
+        assert_eq!(sys.damping_share(&step), 0.0);
     }
 
     #[test]
     fn singular_systems_name_the_failing_block() {
         // Block 2 has no edge at all: its diagonal is zero.
         let pairs = [(Some(0), Some(1)), (Some(0), None)];
-        let mut sys = BlockSystem::<1>::new(3, &pairs, 1).unwrap();
+        let mut sys = BlockSystem::<1>::new(3, &pairs, Parallelism::sequential()).unwrap();
         sys.clear();
         let one = nalgebra::Matrix1::new(1.0);
         let z = nalgebra::Vector1::new(0.0);

@@ -705,11 +705,6 @@ fn read_counts(path: Option<&std::path::Path>) -> Result<Vec<u64>, String> {
 const CHI2_FAILED_STATUS: u8 = 3;
 
 fn optimize(args: OptimizeArgs) -> ExitCode {
-    if args.threads > 0 {
-        let _ = rayon::ThreadPoolBuilder::new()
-            .num_threads(args.threads)
-            .build_global();
-    }
     if let Err(message) = check_optimize_files(&args) {
         say!("error: {message}");
         return ExitCode::from(2);

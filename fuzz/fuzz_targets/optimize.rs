@@ -51,7 +51,7 @@ fuzz_target!(|data: &[u8]| {
     if flags & 4 != 0 {
         config.initialization = pgo::solve::init::Initialization::File;
     }
-    match run(&config, &mut |_| {}) {
+    match run(&config, &mut |_: &pgo::solve::IterationRecord| {}) {
         Ok(report) => {
             serde_json::to_string(&report).expect("the report serialises");
             let back = read(

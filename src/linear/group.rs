@@ -154,7 +154,8 @@ mod tests {
     /// tied to the origin: H = [[2, −1, 0], [−1, 2, −1], [0, −1, 1]].
     fn chain() -> BlockSystem<1> {
         let pairs = [(Some(0), None), (Some(0), Some(1)), (Some(1), Some(2))];
-        let mut sys = BlockSystem::<1>::new(3, &pairs, 1).unwrap();
+        let mut sys =
+            BlockSystem::<1>::new(3, &pairs, crate::linear::Parallelism::sequential()).unwrap();
         sys.clear();
         let one = Matrix1::new(1.0);
         let z = Vector1::zeros();

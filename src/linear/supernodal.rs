@@ -19,7 +19,7 @@
 //!   tree and the work of each subtree) is computed once; a factorisation
 //!   allocates nothing but its thread's workspace on first use.
 
-use super::LinearError;
+use super::{LinearError, Parallelism};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{
     LltError, LltRegularization, cholesky_in_place, cholesky_in_place_scratch,
@@ -209,25 +209,53 @@ impl<const D: usize> Symbolic<D> {
         update_scratch: usize,
     ) -> Self {
         let ns = begin.len() - 1;
-        let n = begin[ns];
-        let mut supernode_of = vec![0u32; n];
+        let mut supernode_of = vec![0u32; begin[ns]];
         for s in 0..ns {
             supernode_of[begin[s]..begin[s + 1]].fill(s as u32);
         }
-        let panel = |s: usize| Panel {
-            b0: begin[s],
-            w: begin[s + 1] - begin[s],
-            p: row_ptr[s + 1] - row_ptr[s],
+        let mut symbolic = Self {
+            begin,
+            row_ptr,
+            rows,
+            val_ptr: Vec::new(),
+            supernode_of,
+            update_ptr: Vec::new(),
+            updates: Vec::new(),
+            child_ptr: Vec::new(),
+            parent: Vec::new(),
+            children: Vec::new(),
+            roots: Vec::new(),
+            subtree_flops: Vec::new(),
+            flops: 0.0,
+            max_update: 0,
+            max_below: 0,
+            update_scratch,
         };
+        symbolic.val_ptr = symbolic.panel_offsets();
+        (symbolic.update_ptr, symbolic.updates) = symbolic.group_updates();
+        symbolic.build_tree();
+        symbolic.estimate_work();
+        symbolic
+    }
+
+    /// Where each supernode's panel starts in the values (and the end).
+    fn panel_offsets(&self) -> Vec<usize> {
+        let ns = self.supernodes();
         let mut val_ptr = Vec::with_capacity(ns + 1);
         val_ptr.push(0usize);
         for s in 0..ns {
-            let g = panel(s);
+            let g = self.panel(s);
             val_ptr.push(val_ptr[s] + g.ld::<D>() * g.cols::<D>());
         }
+        val_ptr
+    }
 
-        // Updates: the rows of descendant d, grouped by the supernode they
-        // fall in (consecutive, since rows increase and supernodes are runs).
+    /// The updates each supernode receives (`update_ptr`, `updates`): the
+    /// rows of each descendant, grouped by the supernode they fall in
+    /// (consecutive, since rows increase and supernodes are runs).
+    fn group_updates(&self) -> (Vec<usize>, Vec<Update>) {
+        let ns = self.supernodes();
+        let (rows, row_ptr, supernode_of) = (&self.rows, &self.row_ptr, &self.supernode_of);
         let mut counts = vec![0usize; ns + 1];
         let mut groups = Vec::new();
         for d in 0..ns {
@@ -267,9 +295,15 @@ impl<const D: usize> Symbolic<D> {
             updates[counts[t as usize]] = u;
             counts[t as usize] += 1;
         }
+        (update_ptr, updates)
+    }
 
-        // The elimination tree of the supernodes (the parent holds the first
-        // row below the diagonal block; parents come after their children).
+    /// The elimination tree of the supernodes (`parent`, `child_ptr`,
+    /// `children`, `roots`): the parent holds the first row below the
+    /// diagonal block; parents come after their children.
+    fn build_tree(&mut self) {
+        let ns = self.supernodes();
+        let (rows, row_ptr, supernode_of) = (&self.rows, &self.row_ptr, &self.supernode_of);
         let parent: Vec<u32> = (0..ns)
             .map(|s| {
                 if row_ptr[s + 1] > row_ptr[s] {
@@ -299,51 +333,42 @@ impl<const D: usize> Symbolic<D> {
                 next[p as usize] += 1;
             }
         }
+        (self.parent, self.child_ptr, self.children, self.roots) =
+            (parent, child_ptr, children, roots);
+    }
 
-        // Work: each update product, each diagonal factorisation and solve.
+    /// The work of a factorisation (`flops`, `subtree_flops`) and the
+    /// workspace sizes (`max_update`, `max_below`): each update product,
+    /// each diagonal factorisation and solve.
+    fn estimate_work(&mut self) {
+        let ns = self.supernodes();
         let mut node_flops = vec![0.0f64; ns];
         let mut max_update = 0usize;
         let mut max_below = 0usize;
         for t in 0..ns {
-            let g = panel(t);
+            let g = self.panel(t);
             let (wc, below) = (g.cols::<D>() as f64, (D * g.p) as f64);
             node_flops[t] += wc * wc * wc / 3.0 + below * wc * wc;
             max_below = max_below.max(D * g.p);
-            for u in &updates[update_ptr[t]..update_ptr[t + 1]] {
-                let gd = panel(u.from as usize);
+            for u in &self.updates[self.update_ptr[t]..self.update_ptr[t + 1]] {
+                let gd = self.panel(u.from as usize);
                 let m = D * (gd.p - u.start as usize);
                 let nn = D * u.count as usize;
-                max_update =
-                    max_update.max(m * D * chunk_blocks::<D>(update_scratch, m, u.count as usize));
+                let chunk = chunk_blocks::<D>(self.update_scratch, m, u.count as usize);
+                max_update = max_update.max(m * D * chunk);
                 // The top n×n of the product is triangular.
                 node_flops[t] += ((nn * (nn + 1) + 2 * (m - nn) * nn) * gd.cols::<D>()) as f64;
             }
         }
-        let flops = node_flops.iter().sum();
+        self.flops = node_flops.iter().sum();
         let mut subtree_flops = node_flops;
         for s in 0..ns {
-            if parent[s] != u32::MAX {
-                subtree_flops[parent[s] as usize] += subtree_flops[s];
+            if self.parent[s] != u32::MAX {
+                subtree_flops[self.parent[s] as usize] += subtree_flops[s];
             }
         }
-        Self {
-            begin,
-            row_ptr,
-            rows,
-            val_ptr,
-            supernode_of,
-            update_ptr,
-            updates,
-            child_ptr,
-            parent,
-            children,
-            roots,
-            subtree_flops,
-            flops,
-            max_update,
-            max_below,
-            update_scratch,
-        }
+        (self.subtree_flops, self.max_update, self.max_below) =
+            (subtree_flops, max_update, max_below);
     }
 
     fn panel(&self, s: usize) -> Panel {
@@ -416,17 +441,17 @@ impl<const D: usize> Symbolic<D> {
     }
 
     /// Factorises in place: `load(s, panel)` must write the values of the
-    /// matrix into supernode `s`'s (zeroed) panel. `threads == 1` runs
-    /// sequentially, anything else in rayon's current pool. Returns the
-    /// first block column (in elimination order) whose pivot is not
-    /// positive.
+    /// matrix into supernode `s`'s (zeroed) panel. Runs in the calling
+    /// thread, or with a pool on its threads ([`Parallelism`]); the values
+    /// are the same bits for a given number of threads. Returns the first
+    /// block column (in elimination order) whose pivot is not positive.
     pub(super) fn factorize(
         &self,
         values: &mut [f64],
         load: &(dyn Fn(usize, &mut [f64]) + Sync),
-        threads: usize,
+        parallelism: &Parallelism,
     ) -> Result<(), usize> {
-        self.factorize_with_grain(values, load, threads, None)
+        self.factorize_with_grain(values, load, parallelism, None)
     }
 
     /// [`Self::factorize`] with the size of the sequential tasks (default:
@@ -435,14 +460,15 @@ impl<const D: usize> Symbolic<D> {
         &self,
         values: &mut [f64],
         load: &(dyn Fn(usize, &mut [f64]) + Sync),
-        threads: usize,
+        parallelism: &Parallelism,
         grain: Option<f64>,
     ) -> Result<(), usize> {
         assert_eq!(values.len(), self.len_values());
         let ns = self.supernodes();
         let failed = AtomicUsize::new(usize::MAX);
         let shared = Shared(values.as_mut_ptr());
-        if threads == 1 || rayon::current_num_threads() == 1 || ns < 2 {
+        let threads = parallelism.threads();
+        if threads == 1 || ns < 2 {
             for s in 0..ns {
                 // SAFETY: one thread, each supernode once, in elimination order.
                 unsafe { self.factor_node(s, Par::Seq, &shared, load, &failed) };
@@ -452,12 +478,14 @@ impl<const D: usize> Symbolic<D> {
             }
         } else {
             // Subtrees below this much work run sequentially in one task.
-            let grain = grain.unwrap_or_else(|| {
-                (self.flops / (16 * rayon::current_num_threads()) as f64).max(2e5)
+            let grain = grain.unwrap_or_else(|| (self.flops / (16 * threads) as f64).max(2e5));
+            let par = Par::rayon(threads);
+            let (shared, failed) = (&shared, &failed);
+            parallelism.install(|| {
+                self.roots.par_iter().for_each(|&r| {
+                    self.factor_subtree(r as usize, grain, par, shared, load, failed)
+                })
             });
-            self.roots
-                .par_iter()
-                .for_each(|&r| self.factor_subtree(r as usize, grain, &shared, load, &failed));
         }
         match failed.into_inner() {
             usize::MAX => Ok(()),
@@ -474,6 +502,7 @@ impl<const D: usize> Symbolic<D> {
         &self,
         s: usize,
         grain: f64,
+        par: Par,
         shared: &Shared,
         load: &(dyn Fn(usize, &mut [f64]) + Sync),
         failed: &AtomicUsize,
@@ -496,14 +525,13 @@ impl<const D: usize> Symbolic<D> {
                 for &c in kids {
                     if c != heavy {
                         scope.spawn(move |_| {
-                            self.factor_subtree(c as usize, grain, shared, load, failed)
+                            self.factor_subtree(c as usize, grain, par, shared, load, failed)
                         });
                     }
                 }
                 t = heavy as usize;
             }
         });
-        let par = Par::rayon(rayon::current_num_threads());
         for &t in path.iter().rev() {
             // SAFETY: all of `t`'s descendants are done (the scope has
             // ended); nobody else writes `t`.
@@ -560,84 +588,8 @@ impl<const D: usize> Symbolic<D> {
                 ws.local[r as usize] = i as u32;
             }
             for u in &self.updates[self.update_ptr[s]..self.update_ptr[s + 1]] {
-                let d = u.from as usize;
-                let gd = self.panel(d);
-                let (wd, ldd) = (gd.cols::<D>(), gd.ld::<D>());
-                let (start, count) = (u.start as usize, u.count as usize);
-                let m = D * (gd.p - start);
-                let d_rows = &self.rows[self.row_ptr[d] + start..self.row_ptr[d + 1]];
-                // SAFETY: `d` is a finished descendant; its panel is only read.
-                let a = unsafe {
-                    MatRef::from_raw_parts(
-                        shared.0.add(self.val_ptr[d] + D * (gd.w + start)) as *const f64,
-                        m,
-                        wd,
-                        1,
-                        ldd as isize,
-                    )
-                };
-                // Where each block row of the product goes in the panel.
-                let local = &mut ws.rows[..gd.p - start];
-                for (l, &r) in local.iter_mut().zip(d_rows) {
-                    let r = r as usize;
-                    *l = if r < g.b0 + g.w {
-                        D * (r - g.b0)
-                    } else {
-                        D * (g.w + ws.local[r] as usize)
-                    };
-                }
-                // The lower part of the m×n product, a few block columns at
-                // a time so that the scratch stays small: columns j0..j1 of
-                // it are rows j0.. of `a` times rows j0..j1 of `a`
-                // transposed, their top block symmetric (its lower half
-                // only: the scatter skips what lies above the diagonal).
-                let chunk = chunk_blocks::<D>(self.update_scratch, m, count);
-                for j0 in (0..count).step_by(chunk) {
-                    let j1 = (j0 + chunk).min(count);
-                    let (r0, nc) = (D * j0, D * (j1 - j0));
-                    let mc = m - r0;
-                    let temp = &mut ws.temp[..mc * nc];
-                    let b = a.subrows(r0, nc);
-                    let par = if (mc * nc * wd) as f64 > PARALLEL_PRODUCT {
-                        par
-                    } else {
-                        Par::Seq
-                    };
-                    let (top, bottom) =
-                        MatMut::from_column_major_slice_mut(temp, mc, nc).split_at_row_mut(nc);
-                    triangular::matmul(
-                        top,
-                        BlockStructure::TriangularLower,
-                        Accum::Replace,
-                        b,
-                        BlockStructure::Rectangular,
-                        b.transpose(),
-                        BlockStructure::Rectangular,
-                        1.0,
-                        par,
-                    );
-                    matmul(
-                        bottom,
-                        Accum::Replace,
-                        a.subrows(r0 + nc, mc - nc),
-                        b.transpose(),
-                        1.0,
-                        par,
-                    );
-                    // Scatter the lower part, block by block.
-                    for jb in j0..j1 {
-                        let col = local[jb];
-                        for (ib, &row) in local.iter().enumerate().skip(jb) {
-                            for a in 0..D {
-                                let dst = &mut panel[(col + a) * ld + row..][..D];
-                                let src = &temp[(D * (jb - j0) + a) * mc + D * (ib - j0)..][..D];
-                                for (x, y) in dst.iter_mut().zip(src) {
-                                    *x -= y;
-                                }
-                            }
-                        }
-                    }
-                }
+                // SAFETY: by the caller's contract.
+                unsafe { self.apply_update(u, g, panel, ws, par, shared) };
             }
         });
         let result = if wc <= SMALL_WIDTH {
@@ -652,6 +604,90 @@ impl<const D: usize> Symbolic<D> {
         };
         if let Err(col) = result {
             failed.fetch_min(g.b0 + col / D, Ordering::Relaxed);
+        }
+    }
+
+    /// Subtracts update `u` (from a descendant `d`) from the panel of the
+    /// supernode of geometry `g`: the lower part of `A·Aᵀ`, `A` the rows of
+    /// `d`'s panel that fall in or below `g`'s columns, formed a few block
+    /// columns at a time so that the scratch stays small, and scattered
+    /// block by block. `ws.local` holds the position of each block row of
+    /// `g`'s pattern.
+    ///
+    /// # Safety
+    /// `d` is factorised, and nobody writes its panel meanwhile.
+    unsafe fn apply_update(
+        &self,
+        u: &Update,
+        g: Panel,
+        panel: &mut [f64],
+        ws: &mut Workspace,
+        par: Par,
+        shared: &Shared,
+    ) {
+        let d = u.from as usize;
+        let gd = self.panel(d);
+        let (wd, ldd) = (gd.cols::<D>(), gd.ld::<D>());
+        let (start, count) = (u.start as usize, u.count as usize);
+        let m = D * (gd.p - start);
+        let d_rows = &self.rows[self.row_ptr[d] + start..self.row_ptr[d + 1]];
+        // SAFETY: `d` is a finished descendant; its panel is only read.
+        let a = unsafe {
+            MatRef::from_raw_parts(
+                shared.0.add(self.val_ptr[d] + D * (gd.w + start)) as *const f64,
+                m,
+                wd,
+                1,
+                ldd as isize,
+            )
+        };
+        // Where each block row of the product goes in the panel.
+        let local = &mut ws.rows[..gd.p - start];
+        for (l, &r) in local.iter_mut().zip(d_rows) {
+            let r = r as usize;
+            *l = if r < g.b0 + g.w {
+                D * (r - g.b0)
+            } else {
+                D * (g.w + ws.local[r] as usize)
+            };
+        }
+        // Columns j0..j1 of the product are rows j0.. of `a` times rows
+        // j0..j1 of `a` transposed, their top block symmetric (its lower
+        // half only: the scatter skips what lies above the diagonal).
+        let chunk = chunk_blocks::<D>(self.update_scratch, m, count);
+        for j0 in (0..count).step_by(chunk) {
+            let j1 = (j0 + chunk).min(count);
+            let (r0, nc) = (D * j0, D * (j1 - j0));
+            let mc = m - r0;
+            let temp = &mut ws.temp[..mc * nc];
+            let b = a.subrows(r0, nc);
+            let par = if (mc * nc * wd) as f64 > PARALLEL_PRODUCT {
+                par
+            } else {
+                Par::Seq
+            };
+            let (top, bottom) =
+                MatMut::from_column_major_slice_mut(temp, mc, nc).split_at_row_mut(nc);
+            triangular::matmul(
+                top,
+                BlockStructure::TriangularLower,
+                Accum::Replace,
+                b,
+                BlockStructure::Rectangular,
+                b.transpose(),
+                BlockStructure::Rectangular,
+                1.0,
+                par,
+            );
+            matmul(
+                bottom,
+                Accum::Replace,
+                a.subrows(r0 + nc, mc - nc),
+                b.transpose(),
+                1.0,
+                par,
+            );
+            scatter_lower::<D>(panel, g.ld::<D>(), local, j0..j1, temp, mc);
         }
     }
 
@@ -911,6 +947,34 @@ impl<const D: usize> Symbolic<D> {
     }
 }
 
+/// Subtracts block columns `cols` of an update product (`temp`, `mc` rows
+/// from block row `cols.start` down, column-major) from a panel of leading
+/// dimension `ld`, the lower part block by block: block row `i` of the
+/// product goes to panel row `local[i]`, block column `j` to panel column
+/// `local[j]`.
+fn scatter_lower<const D: usize>(
+    panel: &mut [f64],
+    ld: usize,
+    local: &[usize],
+    cols: std::ops::Range<usize>,
+    temp: &[f64],
+    mc: usize,
+) {
+    let j0 = cols.start;
+    for jb in cols {
+        let col = local[jb];
+        for (ib, &row) in local.iter().enumerate().skip(jb) {
+            for a in 0..D {
+                let dst = &mut panel[(col + a) * ld + row..][..D];
+                let src = &temp[(D * (jb - j0) + a) * mc + D * (ib - j0)..][..D];
+                for (x, y) in dst.iter_mut().zip(src) {
+                    *x -= y;
+                }
+            }
+        }
+    }
+}
+
 /// `Σ aᵢbᵢ` with eight partial sums (so that it vectorises).
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     let mut acc = [0.0; 8];
@@ -1061,6 +1125,7 @@ mod tests {
         threads: usize,
         grain: Option<f64>,
     ) -> Vec<f64> {
+        let parallelism = Parallelism::new(threads).unwrap();
         const D: usize = 2;
         let mut values = vec![0.0; sym.len_values()];
         let load = |s: usize, panel: &mut [f64]| {
@@ -1076,7 +1141,7 @@ mod tests {
                 }
             }
         };
-        sym.factorize_with_grain(&mut values, &load, threads, grain)
+        sym.factorize_with_grain(&mut values, &load, &parallelism, grain)
             .unwrap();
         values
     }
@@ -1165,10 +1230,11 @@ mod tests {
     fn empty_and_single_block_systems() {
         let empty = Symbolic::<3>::new(&[]).unwrap();
         assert_eq!((empty.supernodes(), empty.len_values()), (0, 0));
-        empty.factorize(&mut [], &|_, _| {}, 1).unwrap();
+        let seq = Parallelism::sequential();
+        empty.factorize(&mut [], &|_, _| {}, &seq).unwrap();
         let one = Symbolic::<1>::new(&[Vec::new()]).unwrap();
         let mut values = vec![0.0; one.len_values()];
-        one.factorize(&mut values, &|_, panel: &mut [f64]| panel[0] = 4.0, 1)
+        one.factorize(&mut values, &|_, panel: &mut [f64]| panel[0] = 4.0, &seq)
             .unwrap();
         let mut x = vec![8.0];
         one.solve(&values, &mut x, &mut Vec::new());

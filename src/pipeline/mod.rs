@@ -12,7 +12,7 @@ use crate::io::inliers::InlierCsvError;
 use crate::report::Report;
 use crate::robust::{self, RobustMethod};
 use crate::solve::init::{ChordalInit, Initialization};
-use crate::solve::{Budget, IterationRecord, Optimizer, Session, SolveError, SolverOptions};
+use crate::solve::{Budget, Observer, Optimizer, Session, SolveError, SolverOptions};
 use crate::stats::DofConvention;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -186,10 +186,7 @@ impl PipelineError {
 
 /// Runs `pgo optimize`: returns the report (and writes the output file if
 /// asked). `observer` sees every iteration.
-pub fn run(
-    config: &OptimizeConfig,
-    observer: &mut dyn FnMut(&IterationRecord),
-) -> Result<Report, PipelineError> {
+pub fn run(config: &OptimizeConfig, observer: &mut dyn Observer) -> Result<Report, PipelineError> {
     let mut file = g2o::read(
         &config.input,
         ReadOptions {
@@ -217,7 +214,7 @@ pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     missing: &[usize],
     config: &OptimizeConfig,
     report: &mut Report,
-    observer: &mut dyn FnMut(&IterationRecord),
+    observer: &mut dyn Observer,
 ) -> Result<(), PipelineError> {
     let solve_error = |source| PipelineError::Solve {
         path: config.input.clone(),

@@ -17,7 +17,7 @@
 use super::SolveError;
 use crate::geometry::{Pose, Se2, Se3};
 use crate::graph::{Edge, PoseGraph};
-use crate::linear::{BlockSystem, LinearError};
+use crate::linear::{BlockSystem, LinearError, Parallelism};
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, UnitQuaternion, Vector2, Vector3};
 use serde::Serialize;
 use std::collections::VecDeque;
@@ -172,7 +172,7 @@ impl<const D: usize> LinearProblem<D> {
             })
             .collect();
         Ok(Self {
-            system: BlockSystem::new(n_free, &pairs, 1)?,
+            system: BlockSystem::new(n_free, &pairs, Parallelism::sequential())?,
             variable,
             n_free,
         })

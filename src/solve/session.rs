@@ -2,7 +2,7 @@
 //! end solves many times (a step per reweighting, a solve per decision),
 //! and `--max-iters` / `--time-limit` bound all of them together.
 
-use super::{IterationRecord, Observer, Optimizer, SolveError, SolverOptions, StopReason, Summary};
+use super::{Observer, Optimizer, SolveError, SolverOptions, StopReason, Summary};
 use crate::geometry::Pose;
 use crate::graph::PoseGraph;
 use std::time::Instant;
@@ -36,8 +36,9 @@ pub struct Session<'a, P: Pose<D>, const D: usize> {
     /// Options of a run to convergence.
     pub options: SolverOptions,
     budget: Budget,
-    observer: &'a mut dyn FnMut(&IterationRecord),
+    observer: &'a mut dyn Observer,
     summary: Option<Summary>,
+    cancelled: bool,
 }
 
 impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
@@ -47,7 +48,7 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
         graph: &'a mut PoseGraph<P, D>,
         options: SolverOptions,
         budget: Budget,
-        observer: &'a mut dyn FnMut(&IterationRecord),
+        observer: &'a mut dyn Observer,
     ) -> Self {
         Self {
             optimizer,
@@ -56,6 +57,7 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
             budget,
             observer,
             summary: None,
+            cancelled: false,
         }
     }
 
@@ -64,9 +66,10 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
         self.summary.as_ref().map_or(0, |s| s.iterations)
     }
 
-    /// Whether the budget is spent.
+    /// Whether the budget is spent (or the observer stopped a run).
     pub fn exhausted(&self) -> bool {
-        self.iterations() >= self.budget.iterations
+        self.cancelled
+            || self.iterations() >= self.budget.iterations
             || self.budget.deadline.is_some_and(|d| Instant::now() >= d)
     }
 
@@ -82,11 +85,10 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
                 .map(|d| d.saturating_duration_since(Instant::now())),
             ..self.options.clone()
         };
-        let observer = &mut *self.observer;
-        let mut observe = |r: &IterationRecord| observer(r);
-        let run =
-            self.optimizer
-                .run(self.graph, Some(weights), &mut observe as &mut dyn Observer)?;
+        let run = self
+            .optimizer
+            .run(self.graph, Some(weights), &mut *self.observer)?;
+        self.cancelled |= run.stop_reason == StopReason::Cancelled;
         self.summary = Some(match self.summary.take() {
             None => run,
             Some(mut total) => {
@@ -113,8 +115,11 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
     /// the stop reason then says even if the last run converged.
     pub fn finish(self, cut_short: bool) -> Option<Summary> {
         let limit = self.budget.iterations;
+        let cancelled = self.cancelled;
         self.summary.map(|mut s| {
-            if cut_short {
+            if cancelled {
+                s.stop_reason = StopReason::Cancelled;
+            } else if cut_short {
                 s.stop_reason = if s.iterations >= limit {
                     StopReason::MaxIterations
                 } else {

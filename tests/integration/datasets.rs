@@ -16,7 +16,10 @@ fn optimise(name: &str, init: Initialization) -> Option<pgo::report::Report> {
     let dir = datasets()?;
     let mut config = OptimizeConfig::new(dir.join(name));
     config.initialization = init;
-    Some(pipeline::run(&config, &mut |_| {}).unwrap_or_else(|e| panic!("{name}: {e}")))
+    Some(
+        pipeline::run(&config, &mut |_: &pgo::solve::IterationRecord| {})
+            .unwrap_or_else(|e| panic!("{name}: {e}")),
+    )
 }
 
 /// The lowest final χ² (g2o's error definition) that g2o or GTSAM reached
@@ -100,7 +103,7 @@ fn q2_indefinite_information_is_reported_and_repaired_on_request() {
     assert_eq!(f.summary.information_fixed, 0);
     let mut config = OptimizeConfig::new(dir.join("cubicle.g2o"));
     config.fix_information = true;
-    let r = pipeline::run(&config, &mut |_| {}).unwrap();
+    let r = pipeline::run(&config, &mut |_: &pgo::solve::IterationRecord| {}).unwrap();
     assert!(
         r.optimizer.converged && r.optimizer.final_chi2 < 2400.0,
         "{:?}",

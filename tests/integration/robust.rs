@@ -83,7 +83,7 @@ fn run(input: &Path, gate: GateMode, robust: RobustMethod, output: Option<&Path>
 }
 
 fn run_config(config: OptimizeConfig) -> Report {
-    pipeline::run(&config, &mut |_| {}).expect("optimise")
+    pipeline::run(&config, &mut |_: &pgo::solve::IterationRecord| {}).expect("optimise")
 }
 
 /// Accepted (weight ≥ ½) true loops, accepted wrong ones, true loops that
@@ -266,7 +266,7 @@ fn degenerate_counts_are_flagged_before_optimisation_or_fail_the_chi2_test() {
         degenerate: DegeneratePolicy::DropAll,
         ..OptimizeConfig::new(&input)
     };
-    let r = pipeline::run(&config, &mut |_| {}).expect("optimise");
+    let r = pipeline::run(&config, &mut |_: &pgo::solve::IterationRecord| {}).expect("optimise");
     assert!(r.gate.degenerate);
     assert!(r.loops.iter().all(|l| l.weight == 0.0));
     // keep-all (the default): whatever EM keeps, a kept wrong loop fails
@@ -277,7 +277,8 @@ fn degenerate_counts_are_flagged_before_optimisation_or_fail_the_chi2_test() {
             robust,
             ..OptimizeConfig::new(&input)
         };
-        let r = pipeline::run(&config, &mut |_| {}).expect("optimise");
+        let r =
+            pipeline::run(&config, &mut |_: &pgo::solve::IterationRecord| {}).expect("optimise");
         let (_, fp, _) = counts(&r, &wrong);
         let passed = r.chi2_test.as_ref().unwrap().passed;
         assert!(

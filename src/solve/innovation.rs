@@ -1,0 +1,185 @@
+//! How well each edge agrees with a solution made without it: the
+//! innovation of an edge left out ([`Optimizer::innovation_chi2`]) and the
+//! deleted residual of an edge in it ([`Optimizer::leave_one_out_chi2`]),
+//! from the factorisation of the undamped normal matrix.
+
+use super::{Optimizer, SolveError};
+use crate::geometry::Pose;
+use crate::graph::PoseGraph;
+use crate::linear::{LinearError, SelectedInverse};
+use nalgebra::SMatrix;
+
+impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
+    /// The squared *innovation* `ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e` of each of
+    /// `edges` at the graph's poses: the Mahalanobis distance of the error of
+    /// an edge the solution was made without, with the solution's own
+    /// uncertainty (`H` the normal matrix of the edges of non-zero `weights`
+    /// at these poses, undamped) added to the edge's. `ν² ≤ eᵀΩe`, and much
+    /// less where the solution is loosely tied between the edge's two poses.
+    /// An edge at a vertex that is held fixed because no edge of non-zero
+    /// weight ties it to the gauge gets its plain `eᵀΩe` (the solution
+    /// knows nothing of that vertex to add).
+    pub fn innovation_chi2(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        weights: &[f64],
+        edges: &[usize],
+    ) -> Result<Vec<f64>, SolveError> {
+        let block = self.factor_undamped(graph, weights)?;
+        let gauge = graph.gauge();
+        Ok(edges
+            .iter()
+            .map(|&k| self.left_out_chi2(graph, &block, &gauge, k))
+            .collect())
+    }
+
+    /// The squared innovation of each of `edges` against the solution
+    /// without it, whether the solution was made without it (weight 0 in
+    /// `weights`: [`Optimizer::innovation_chi2`]) or with it (weight 1):
+    /// then Baarda's deleted residual `eᵀ(Ω⁻¹ − J·H⁻¹·Jᵀ)⁻¹e`, `H` as there.
+    /// `Ω⁻¹ − J·H⁻¹·Jᵀ` is the covariance of the edge's residual at the
+    /// optimum, and the number is, to first order (exactly for a linear
+    /// problem), the innovation the edge would have against the optimum of
+    /// the others — so the two kinds compare like with like. `None` for an
+    /// edge of another weight, or one of the solution that the others do
+    /// not determine in some direction (a bridge: the whitened redundancy
+    /// `I − Ω^½·J·H⁻¹·Jᵀ·Ω^½` has an eigenvalue below `1e-9`).
+    pub fn leave_one_out_chi2(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        weights: &[f64],
+        edges: &[usize],
+    ) -> Result<Vec<Option<f64>>, SolveError> {
+        let block = self.factor_undamped(graph, weights)?;
+        let gauge = graph.gauge();
+        // The edges of the solution read H⁻¹ from its selected inverse (one
+        // pass over the factor), not from a solve each.
+        let inverse = edges
+            .iter()
+            .any(|&k| weights[k] == 1.0)
+            .then(|| self.system.selected_inverse());
+        Ok(edges
+            .iter()
+            .map(|&k| match (weights[k], &inverse) {
+                (0.0, _) => Some(self.left_out_chi2(graph, &block, &gauge, k)),
+                (1.0, Some(z)) => self.deleted_chi2(graph, &block, z, k),
+                _ => None,
+            })
+            .collect())
+    }
+
+    /// [`Optimizer::innovation_chi2`] of edge `k`, at the factor of
+    /// [`Optimizer::factor_undamped`] (`block`) with the graph's `gauge`.
+    fn left_out_chi2(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        block: &[Option<usize>],
+        gauge: &[usize],
+        k: usize,
+    ) -> f64 {
+        let e = &graph.edges[k];
+        let lin = P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
+        let plain = lin.error.dot(&(e.information * lin.error));
+        let known = |v: usize| block[v].is_some() || gauge.contains(&v);
+        if !(known(e.from) && known(e.to)) {
+            return plain;
+        }
+        let spread = self
+            .system
+            .propagate(block[e.from], &lin.jac_i, block[e.to], &lin.jac_j);
+        let innovation = e
+            .information
+            .try_inverse()
+            .map(|sigma| sigma + spread)
+            .and_then(|s| s.cholesky());
+        match innovation {
+            Some(s) => lin.error.dot(&s.solve(&lin.error)).min(plain),
+            None => plain,
+        }
+    }
+
+    /// The deleted residual of edge `k`, one of the solution
+    /// ([`Optimizer::leave_one_out_chi2`]), with `H⁻¹` from its selected
+    /// `inverse`.
+    fn deleted_chi2(
+        &self,
+        graph: &PoseGraph<P, D>,
+        block: &[Option<usize>],
+        inverse: &SelectedInverse,
+        k: usize,
+    ) -> Option<f64> {
+        let e = &graph.edges[k];
+        let lin = P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
+        let spread = self.system.propagate_selected(
+            inverse,
+            block[e.from],
+            &lin.jac_i,
+            block[e.to],
+            &lin.jac_j,
+        )?;
+        // Whitened: Ω = LLᵀ, ẽ = Lᵀe, R = I − Lᵀ·spread·L.
+        let l = e.information.cholesky()?.unpack();
+        let whitened = l.transpose() * lin.error;
+        let redundancy = SMatrix::<f64, D, D>::identity() - l.transpose() * spread * l;
+        // (Dynamic: nalgebra's eigen solver is not generic in D.)
+        let eig =
+            nalgebra::DMatrix::from_column_slice(D, D, redundancy.as_slice()).symmetric_eigen();
+        if eig.eigenvalues.min() < 1e-9 {
+            return None;
+        }
+        let projected = eig.eigenvectors.transpose() * whitened;
+        Some(
+            projected
+                .iter()
+                .zip(eig.eigenvalues.iter())
+                .map(|(p, lambda)| p * p / lambda)
+                .sum(),
+        )
+    }
+
+    /// Factorises the undamped normal matrix of the edges of non-zero
+    /// `weights` at the graph's poses, for covariances from
+    /// [`Optimizer::system_mut`]; returns each vertex's block (`None` for a
+    /// vertex held fixed).
+    pub(crate) fn factor_at(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        weights: &[f64],
+    ) -> Result<Vec<Option<usize>>, SolveError> {
+        self.factor_undamped(graph, weights)
+    }
+
+    /// Factorises the undamped normal matrix of the edges of non-zero
+    /// `weights` at the graph's poses; returns each vertex's block (`None`
+    /// for a vertex held fixed).
+    fn factor_undamped(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        weights: &[f64],
+    ) -> Result<Vec<Option<usize>>, SolveError> {
+        if weights.len() != graph.edges.len() {
+            return Err(SolveError::WeightCount {
+                weights: weights.len(),
+                edges: graph.edges.len(),
+            });
+        }
+        self.match_threads()?;
+        self.update_pattern(graph, Some(weights))?;
+        self.linearize(graph, Some(weights));
+        self.factorized = true;
+        match self.system.factorize(0.0) {
+            Ok(()) => {}
+            Err(LinearError::NotPositiveDefinite { block }) => {
+                return Err(SolveError::NotPositiveDefinite {
+                    vertex: graph.id(self.vertex_of[block]),
+                });
+            }
+            Err(e) => return Err(e.into()),
+        }
+        let mut block = vec![None; graph.num_vertices()];
+        for (b, &v) in self.vertex_of.iter().enumerate() {
+            block[v] = Some(b);
+        }
+        Ok(block)
+    }
+}
