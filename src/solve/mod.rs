@@ -936,7 +936,7 @@ impl<const D: usize> EdgeTerms<D> {
 /// Optimises `graph` in place with unit weights: a convenience over
 /// [`Optimizer`].
 ///
-/// ```
+/// ```ignore
 /// use nalgebra::Matrix3;
 /// use pgo::geometry::{Pose, Se2};
 /// use pgo::graph::PoseGraph;
