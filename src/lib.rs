@@ -32,7 +32,7 @@
 //!
 //! * `cli` (default): the `pgo` binary; implies `json`, `plot` and
 //!   `simulate`.
-//! * `json`: [`report::Report::to_json`].
+//! * `json`: `report::Report::to_json`.
 //! * `plot`: SVG pictures (`pgo optimize --plot`).
 //! * `simulate`: synthetic graphs (`pgo simulate`, `pgo corrupt`).
 //!
@@ -42,6 +42,13 @@
 #![allow(clippy::needless_range_loop)]
 // No panics on bad input: errors are values. Tests may unwrap.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+// Without the `cli` and `simulate` features the inside is private, and the
+// public types of the report keep their links into it (documented with the
+// default features, where they resolve).
+#![cfg_attr(
+    not(any(feature = "cli", feature = "simulate")),
+    allow(rustdoc::private_intra_doc_links)
+)]
 
 pub use nalgebra;
 
@@ -59,49 +66,58 @@ mod solution;
 // (src/main.rs, a crate of its own) still reaches into those it uses until
 // its arguments are derived from [`Options`], and the simulator's graphs are
 // the inside's: with the `cli` or `simulate` feature they are public but
-// hidden from the documentation and carry no stability promise; without
+// hidden from the documentation (so their links into the private ones go
+// nowhere, and are allowed to) and carry no stability promise; without
 // them they are private.
 #[cfg(any(feature = "cli", feature = "simulate"))]
 #[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
 pub mod gate;
 #[cfg(not(any(feature = "cli", feature = "simulate")))]
 #[allow(dead_code, unused_imports)]
 mod gate;
 #[cfg(any(feature = "cli", feature = "simulate"))]
 #[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
 pub mod graph;
 #[cfg(not(any(feature = "cli", feature = "simulate")))]
 #[allow(dead_code, unused_imports)]
 mod graph;
 #[cfg(any(feature = "cli", feature = "simulate"))]
 #[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
 pub mod io;
 #[cfg(not(any(feature = "cli", feature = "simulate")))]
 #[allow(dead_code, unused_imports)]
 mod io;
 #[cfg(any(feature = "cli", feature = "simulate"))]
 #[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
 pub mod pipeline;
 #[cfg(not(any(feature = "cli", feature = "simulate")))]
 #[allow(dead_code, unused_imports)]
 mod pipeline;
 #[cfg(any(feature = "cli", feature = "simulate"))]
 #[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
 pub mod robust;
 #[cfg(not(any(feature = "cli", feature = "simulate")))]
 #[allow(dead_code, unused_imports)]
 mod robust;
 #[cfg(feature = "simulate")]
 #[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
 pub mod simulate;
 #[cfg(any(feature = "cli", feature = "simulate"))]
 #[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
 pub mod solve;
 #[cfg(not(any(feature = "cli", feature = "simulate")))]
 #[allow(dead_code, unused_imports)]
 mod solve;
 #[cfg(any(feature = "cli", feature = "simulate"))]
 #[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
 pub mod stats;
 #[cfg(not(any(feature = "cli", feature = "simulate")))]
 #[allow(dead_code, unused_imports)]
