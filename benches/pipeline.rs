@@ -22,18 +22,22 @@
 //! Cases: the seven datasets and simulated graphs of 10⁴ and 10⁵ poses in
 //! 2D and 3D; 10⁶ poses too with `PGO_BENCH_MILLION=1` (minutes).
 //!
-//! Run: `cargo bench --bench pipeline` (all) or e.g.
-//! `cargo bench --bench pipeline -- factorize`. The linear algebra runs in
+//! The stages are pgo's insides, reached through the hidden
+//! `pgo::internals` hook of the `internals` feature (no stability promise).
+//!
+//! Run: `cargo bench --features internals --bench pipeline` (all) or e.g.
+//! `cargo bench --features internals --bench pipeline -- factorize`. The linear algebra runs in
 //! rayon's pool: `RAYON_NUM_THREADS=1 cargo bench --bench pipeline` for one
 //! thread. `cargo test` does not build or run these.
 
 use divan::Bencher;
-use pgo::geometry::{Se2, Se3};
-use pgo::graph::{AnyPoseGraph, PoseGraph};
-use pgo::io::g2o::{self, G2oPose, ReadOptions};
-use pgo::simulate::{AnySimulation, SimulationOptions, World};
-use pgo::solve::init::{ChordalInit, Initialization, initialize};
-use pgo::solve::{IterationRecord, Optimizer, SolverOptions};
+use pgo::internals::{
+    AnyGraph as AnyPoseGraph, AnySimulation, ChordalInit, G2oPose, Graph as PoseGraph,
+    Initialization, IterationRecord, Optimizer, ReadOptions, SimulationOptions, SolverOptions,
+    World, initialize,
+};
+use pgo::internals::{read, write_graph};
+use pgo::{Se2, Se3};
 use std::path::PathBuf;
 
 fn main() {
@@ -104,14 +108,14 @@ fn load(case: &str) -> Option<(AnyPoseGraph, Vec<usize>)> {
             seed: 7,
             ..SimulationOptions::default()
         };
-        let graph = match pgo::simulate::simulate(&options).expect("simulates") {
+        let graph = match pgo::internals::simulate(&options).expect("simulates") {
             AnySimulation::Planar(s) => AnyPoseGraph::Planar(s.noisy),
             AnySimulation::Spatial(s) => AnyPoseGraph::Spatial(s.noisy),
         };
         return Some((graph, Vec::new()));
     }
     let path = dataset(case)?;
-    let file = g2o::read(&path, read_options(case)).expect("dataset reads");
+    let file = read(&path, read_options(case)).expect("dataset reads");
     Some((file.graph, file.missing))
 }
 
@@ -126,8 +130,8 @@ fn file_of(case: &str) -> Option<PathBuf> {
         let (graph, _) = load(case)?;
         let mut out = std::io::BufWriter::new(std::fs::File::create(&path).expect("temp file"));
         match &graph {
-            AnyPoseGraph::Planar(g) => g2o::write_graph(g, &mut out),
-            AnyPoseGraph::Spatial(g) => g2o::write_graph(g, &mut out),
+            AnyPoseGraph::Planar(g) => write_graph(g, &mut out),
+            AnyPoseGraph::Spatial(g) => write_graph(g, &mut out),
         }
         .expect("writes");
     }
@@ -149,7 +153,7 @@ fn prepared<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
 fn parse(bencher: Bencher, case: &str) {
     let Some(path) = file_of(case) else { return };
     let options = read_options(case);
-    bencher.bench(|| g2o::read(&path, options).expect("reads"));
+    bencher.bench(|| read(&path, options).expect("reads"));
 }
 
 /// Runs `$body` with `$g` (the graph at its chordal guess) and `$opt` bound

@@ -2,12 +2,14 @@
 //! supernodes and flops, and the minimum time of one linearisation, one
 //! numeric factorisation and one solve over `REPS` repetitions.
 //!
-//! `cargo run --release --example probe -- FILE.g2o [REPS] [THREADS]`
+//! `cargo run --release --features internals --example probe -- FILE.g2o
+//! [REPS] [THREADS]` (pgo's insides, through the hidden `pgo::internals`
+//! hook: no stability promise).
 //! (`PROBE_LIN=1`: time only the linearisation, e.g. under `perf`).
-use pgo::graph::{AnyPoseGraph, PoseGraph};
-use pgo::io::g2o::{self, G2oPose, ReadOptions};
-use pgo::solve::init::{ChordalInit, Initialization, initialize};
-use pgo::solve::{Optimizer, SolverOptions};
+use pgo::internals::{
+    AnyGraph as AnyPoseGraph, ChordalInit, G2oPose, Graph as PoseGraph, Initialization, Optimizer,
+    ReadOptions, SolverOptions, initialize, read,
+};
 use std::time::Instant;
 
 fn main() {
@@ -16,7 +18,7 @@ fn main() {
     let reps: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(5);
     let threads: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(1);
     let fix = path.contains("cubicle");
-    let file = g2o::read(
+    let file = read(
         std::path::Path::new(path),
         ReadOptions {
             fix_information: fix,

@@ -496,7 +496,7 @@ impl ThresholdFit {
 /// loop-closure candidate): the paper's Algorithm 1 with the changes listed
 /// in the [module documentation](self).
 ///
-/// ```
+/// ```ignore
 /// use pgo::gate::{learn_threshold, MixtureOptions};
 /// // Many weakly supported candidates (8..=32 inliers) and some strong ones
 /// // (150..=209 inliers).
@@ -559,7 +559,7 @@ pub struct TwoNormals {
 /// robust back end fits the logs of the candidates' residuals
 /// ([`crate::robust`]).
 ///
-/// ```
+/// ```ignore
 /// use pgo::gate::{fit_two_normals, MixtureOptions};
 /// // ln of two well-separated groups.
 /// let mut y: Vec<f64> = (0..200).map(|i| (i % 20) as f64 * 0.1).collect();
@@ -838,7 +838,7 @@ impl Rule {
 /// * [`GateMode::Soft`]: learned as `Auto`, all kept unless degenerate (then
 ///   as `Auto`).
 ///
-/// ```
+/// ```ignore
 /// use pgo::gate::{gate, DegeneratePolicy, GateMode, MixtureOptions};
 /// let mut counts: Vec<Option<u64>> = (0..200).map(|i| Some(8 + (i * 7919) % 25)).collect();
 /// counts.extend((0..40).map(|i| Some(150 + (i * 31) % 60)));

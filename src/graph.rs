@@ -56,7 +56,7 @@ pub enum GraphError {
 
 /// A pose graph over poses `P` with `D` degrees of freedom.
 ///
-/// ```
+/// ```ignore
 /// use pgo::geometry::{Pose, Se2};
 /// use pgo::graph::PoseGraph;
 /// use nalgebra::Matrix3;

@@ -1,4 +1,42 @@
 //! pgo: pose-graph SLAM back end with unsupervised loop-closure gating.
+//!
+//! Build a [`PoseGraph`] call by call (or read one with
+//! [`PoseGraph::read_g2o`]), then [`PoseGraph::optimize`] it: the whole job of
+//! `pgo optimize` — the geometric-verification gate learned from the loop
+//! candidates' inlier counts, the robust weighting of the loops that are
+//! left, and the χ² test of the result — in memory, returning the optimised
+//! poses, a [`LoopDecision`] per loop candidate and the [`report::Report`]
+//! the command line prints as JSON. [`Options`] says everything the job can
+//! be told, by field or by the command line's flag names
+//! ([`Options::set`]). [`AnyPoseGraph`] is the same graph with its
+//! dimension chosen at run time, for bindings.
+//!
+//! ```
+//! use pgo::{Options, PoseGraph2, Se2};
+//! use pgo::nalgebra::Matrix3;
+//!
+//! let mut graph = PoseGraph2::new();
+//! for k in 0..4 {
+//!     graph.add_pose(k, Se2::new(k as f64, 0.0, 0.0))?;
+//! }
+//! for k in 1..4 {
+//!     graph.add_edge(k - 1, k, Se2::new(1.0, 0.0, 0.0), Matrix3::identity())?;
+//! }
+//! graph.add_loop_candidate(0, 3, Se2::new(3.0, 0.0, 0.0), Matrix3::identity(), Some(120))?;
+//! let solution = graph.optimize(&Options::default())?;
+//! assert!(solution.loops()[0].accepted);
+//! # Ok::<(), pgo::Error>(())
+//! ```
+//!
+//! # Features
+//!
+//! * `cli` (default): the `pgo` binary; implies `json`, `plot` and
+//!   `simulate`.
+//! * `json`: `report::Report::to_json`.
+//! * `plot`: SVG pictures (`pgo optimize --plot`).
+//! * `simulate`: synthetic graphs (`pgo simulate`, `pgo corrupt`).
+//!
+//! With `default-features = false` the crate is the solver alone.
 
 // The robust and I/O modules document how they work inside; their links to
 // private items are for readers of the source.
@@ -7,15 +45,116 @@
 #![allow(clippy::needless_range_loop)]
 // No panics on bad input: errors are values. Tests may unwrap.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
-pub mod gate;
+
+pub use nalgebra;
+
 pub mod geometry;
-pub mod graph;
-pub mod io;
-pub mod linear;
-pub mod pipeline;
-pub mod plot;
 pub mod report;
+
+mod error;
+#[cfg(test)]
+mod internal_examples;
+mod options;
+mod pose_graph;
+mod solution;
+
+// The modules below are the library's inside. The `pgo` binary
+// (src/main.rs, a crate of its own) still reaches into those it uses until
+// its arguments are derived from [`Options`], and the simulator's graphs are
+// the inside's: with the `cli` or `simulate` feature they are public but
+// hidden from the documentation (so their links into the private ones go
+// nowhere, and are allowed to) and carry no stability promise; without
+// them they are private.
+#[cfg(any(feature = "cli", feature = "simulate"))]
+#[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
+pub mod gate;
+#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[allow(dead_code, unused_imports)]
+mod gate;
+#[cfg(any(feature = "cli", feature = "simulate"))]
+#[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
+pub mod graph;
+#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[allow(dead_code, unused_imports)]
+mod graph;
+#[cfg(any(feature = "cli", feature = "simulate"))]
+#[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
+pub mod io;
+#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[allow(dead_code, unused_imports)]
+mod io;
+#[cfg(any(feature = "cli", feature = "simulate"))]
+#[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
+pub mod pipeline;
+#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[allow(dead_code, unused_imports)]
+mod pipeline;
+#[cfg(any(feature = "cli", feature = "simulate"))]
+#[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
 pub mod robust;
+#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[allow(dead_code, unused_imports)]
+mod robust;
+#[cfg(feature = "simulate")]
+#[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
 pub mod simulate;
+#[cfg(any(feature = "cli", feature = "simulate"))]
+#[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
 pub mod solve;
+#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[allow(dead_code, unused_imports)]
+mod solve;
+#[cfg(any(feature = "cli", feature = "simulate"))]
+#[doc(hidden)]
+#[allow(rustdoc::private_intra_doc_links)]
 pub mod stats;
+#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[allow(dead_code, unused_imports)]
+mod stats;
+
+#[allow(dead_code, unused_imports)]
+mod linear;
+#[cfg(feature = "plot")]
+#[cfg_attr(not(feature = "cli"), allow(dead_code))]
+mod plot;
+#[cfg(not(feature = "plot"))]
+#[path = "plot_disabled.rs"]
+mod plot;
+
+pub use error::{Error, InformationProblem, PoseProblem};
+pub use gate::{DegeneratePolicy, GateMode};
+pub use geometry::{Pose, Se2, Se3};
+pub use graph::VertexId;
+pub use io::g2o::{LineProblem, ReadError};
+pub use options::{
+    ExpertOptions, GateOptions, MAX_THREADS, MAX_TIME_LIMIT_S, Options, RobustOptions,
+    SolverOptions, TestOptions,
+};
+pub use pipeline::CandidateRule;
+pub use pose_graph::{AnyPoseGraph, GraphPose, PoseGraph, PoseGraph2, PoseGraph3};
+pub use robust::RobustMethod;
+pub use solution::{AnySolution, LoopDecision, Reason, Solution};
+pub use solve::Method as SolverMethod;
+pub use solve::init::Initialization;
+pub use solve::{Cancel, Cancellable, IterationRecord, Observer, StopReason};
+pub use stats::{Chi2Test, DofConvention};
+
+/// Internals for pgo's own stage benchmarks and probes (benches/,
+/// examples/): no stability promise, not part of the API.
+#[cfg(feature = "internals")]
+#[doc(hidden)]
+pub mod internals {
+    pub use crate::graph::{AnyPoseGraph as AnyGraph, PoseGraph as Graph};
+    pub use crate::io::g2o::{G2oPose, ReadOptions, read, write_graph};
+    #[cfg(feature = "simulate")]
+    pub use crate::simulate::{AnySimulation, SimulationOptions, World, simulate};
+    pub use crate::solve::init::{ChordalInit, Initialization, initialize};
+    pub use crate::solve::{IterationRecord, Optimizer, SolverOptions};
+}

@@ -92,7 +92,7 @@ pub struct SelectedInverse {
 /// The normal equations of a pose graph with `D`-dimensional blocks, and
 /// their factorisation.
 ///
-/// ```
+/// ```ignore
 /// use nalgebra::{Matrix1, Vector1};
 /// use pgo::linear::{BlockSystem, Parallelism};
 /// // Two scalar variables tied by one edge, plus a prior on the first:
@@ -510,7 +510,7 @@ impl<const D: usize> BlockSystem<D> {
     /// forward solve visits just the supernodes on their paths to the root
     /// of the elimination tree.
     ///
-    /// ```
+    /// ```ignore
     /// use nalgebra::{Matrix1, Vector1};
     /// use pgo::linear::{BlockSystem, Parallelism};
     /// // H = [[2, −1], [−1, 1]], so H⁻¹ = [[1, 1], [1, 2]]; for the edge

@@ -3,17 +3,13 @@
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
 use clap::{Parser, Subcommand, ValueEnum};
-use pgo::gate::{DegeneratePolicy, GateMode};
 use pgo::io::console;
 use pgo::io::output::{CheckError, OutputError, check_files};
-use pgo::pipeline::{self, CandidateRule, OptimizeConfig};
-use pgo::robust::{self, RobustMethod};
+use pgo::pipeline::{self, OptimizeConfig};
+use pgo::solve::IterationRecord;
 use pgo::solve::init::Initialization;
-use pgo::solve::{IterationRecord, Method};
-use pgo::stats::DofConvention;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Duration;
 
 /// A line on stderr, best effort: printing never panics (see
 /// [`pgo::io::console`]).
@@ -267,30 +263,17 @@ struct GateArgs {
 
 #[derive(clap::Args, Debug)]
 struct OptimizeArgs {
-    /// Input g2o file (VERTEX_SE2/EDGE_SE2 or VERTEX_SE3:QUAT/EDGE_SE3:QUAT).
+    /// Input g2o file (VERTEX_SE2/EDGE_SE2 or VERTEX_SE3:QUAT/EDGE_SE3:QUAT;
+    /// `-` reads stdin).
     input: PathBuf,
-    /// Write the optimised graph here (atomically: temporary file, then rename).
+    /// Write the optimised graph here (atomically: temporary file, then
+    /// rename; `-` writes stdout).
     #[arg(short, long, value_name = "OUT.g2o")]
     output: Option<PathBuf>,
-    /// Write the optimised graph over the input file.
+    /// Write the optimised graph over the input file (every line it does not
+    /// change kept as it was).
     #[arg(long, conflicts_with = "output")]
     in_place: bool,
-    /// Nonlinear least-squares method.
-    #[arg(long, value_enum, default_value_t = SolverArg::Lm)]
-    solver: SolverArg,
-    /// Most LM/GN iterations in all, robust reweighting rounds included.
-    /// Without it, each solve stops after 100 and the robust rounds are
-    /// bounded by their own limits.
-    #[arg(long, value_name = "N")]
-    max_iters: Option<usize>,
-    /// Stop optimising after this many seconds (checked between iterations;
-    /// reading, initialisation and writing not counted) and write the best
-    /// estimate so far.
-    #[arg(long, value_name = "SECONDS")]
-    time_limit: Option<f64>,
-    /// Initial guess.
-    #[arg(long, value_enum, default_value_t = InitArg::Chordal)]
-    init: InitArg,
     /// Inlier counts of loop candidates from a CSV file (from,to,inliers).
     #[arg(long, value_name = "FILE")]
     inliers: Option<PathBuf>,
@@ -298,43 +281,14 @@ struct OptimizeArgs {
     /// nearest positive-definite ones instead of failing.
     #[arg(long)]
     fix_information: bool,
-    /// Loop-candidate gate: `auto` learns T_GV from the inlier counts and drops
-    /// candidates below it; `soft` drops nothing but gives each candidate its
-    /// posterior P(true loop | count) as the robust prior; `off` keeps every
-    /// candidate; a number N keeps candidates with count ≥ N.
-    #[arg(long, value_name = "auto|soft|off|N", default_value = "auto", value_parser = parse_gate)]
-    gate: GateMode,
-    /// What the learned gate does when the counts do not show two components.
-    #[arg(long, value_enum, default_value_t = DegenerateArg::KeepAll)]
-    degenerate: DegenerateArg,
-    /// Significance level of the χ² test of the result.
-    #[arg(long, default_value_t = 0.05, value_parser = parse_alpha)]
-    alpha: f64,
-    /// Degrees of freedom of the χ² test: residual (Σ edge dimensions − free
-    /// pose parameters) or constraints (number of edges, as in the paper).
-    #[arg(long, value_enum, default_value_t = DofArg::Residual)]
-    dof: DofArg,
-    /// Robust weighting of the loop candidates that pass the gate.
-    #[arg(long, value_enum, default_value_t = RobustArg::Em)]
-    robust: RobustArg,
-    /// Kernel width c on the whitened residual norm. Defaults: em
-    /// √χ²_D(1 − 10⁻⁶) (5.54 in 2D, 6.19 in 3D); gnc √χ²_D(0.99) (3.368 /
-    /// 4.100); huber and cauchy √χ²_D(0.95) (2.796 / 3.548); dcs 1 (Φ = 1).
-    #[arg(long, value_name = "C")]
-    robust_c: Option<f64>,
-    /// Which edges are loop candidates: those with an inlier count, or also
-    /// every edge between non-consecutive ids.
-    #[arg(long, value_enum, default_value_t = CandidatesArg::Counted)]
-    candidates: CandidatesArg,
     /// Write SVG pictures into this directory: counts.svg (histogram of the
     /// normalised inlier counts with the fitted mixture and T_GV) and
     /// trajectory.svg (before and after, loops coloured by final weight).
     #[arg(long, value_name = "DIR")]
     plot: Option<PathBuf>,
-    /// Threads: 0 (the default) and 1 optimise in one thread, which was the
-    /// fastest on a 2-core machine shared with other work; N > 1 uses N.
-    #[arg(long, default_value_t = 0)]
-    threads: usize,
+    /// Everything the job itself can be told (the library's `Options`).
+    #[command(flatten)]
+    options: pgo::Options,
     /// Print the JSON report on stdout.
     #[arg(long)]
     json: bool,
@@ -344,90 +298,6 @@ struct OptimizeArgs {
     /// Print every iteration on stderr.
     #[arg(short, long)]
     verbose: bool,
-    /// Switch off layers of EM for an ablation: `no-LAYER,…` with LAYER
-    /// one of annealing, decisions, clusters, aliasing, populations, search.
-    #[arg(long, value_name = "no-LAYER,…", hide = true, value_parser = robust::Layers::parse)]
-    expert: Option<robust::Layers>,
-}
-
-#[derive(Copy, Clone, Debug, ValueEnum)]
-enum SolverArg {
-    /// Levenberg–Marquardt.
-    Lm,
-    /// Gauss–Newton.
-    Gn,
-}
-
-#[derive(Copy, Clone, Debug, ValueEnum)]
-enum RobustArg {
-    /// Plain least squares.
-    None,
-    /// EM-weighted loop edges (Lee et al., IROS 2013).
-    Em,
-    /// Huber kernel.
-    Huber,
-    /// Cauchy kernel.
-    Cauchy,
-    /// Dynamic covariance scaling.
-    Dcs,
-    /// Graduated non-convexity (truncated least squares).
-    Gnc,
-}
-
-#[derive(Copy, Clone, Debug, ValueEnum)]
-enum CandidatesArg {
-    /// Edges with an inlier count.
-    Counted,
-    /// Also every edge with |i − j| ≠ 1.
-    NonSequential,
-}
-
-#[derive(Copy, Clone, Debug, ValueEnum)]
-enum DegenerateArg {
-    /// Keep every candidate: the robust back end decides them by geometry.
-    KeepAll,
-    /// Drop every counted candidate: no wrong loop gets in (the choice with
-    /// --robust none).
-    DropAll,
-    /// Use the crossing anyway when there is one.
-    Threshold,
-}
-
-#[derive(Copy, Clone, Debug, ValueEnum)]
-enum DofArg {
-    /// Σ edge dimensions − free pose parameters (the textbook value).
-    Residual,
-    /// The number of constraints (the paper's K).
-    Constraints,
-}
-
-fn parse_gate(s: &str) -> Result<GateMode, String> {
-    match s {
-        "auto" => Ok(GateMode::Auto),
-        "off" => Ok(GateMode::Off),
-        "soft" => Ok(GateMode::Soft),
-        n => n
-            .parse::<u64>()
-            .map(GateMode::Fixed)
-            .map_err(|_| format!("expected auto, off or a non-negative integer, got '{n}'")),
-    }
-}
-
-fn parse_alpha(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(a) if a > 0.0 && a < 1.0 => Ok(a),
-        _ => Err(format!("expected a number in (0, 1), got '{s}'")),
-    }
-}
-
-#[derive(Copy, Clone, Debug, ValueEnum)]
-enum InitArg {
-    /// The poses in the file (missing ones composed along a spanning tree).
-    File,
-    /// Odometry composed along a spanning tree from the gauge.
-    Odometry,
-    /// Chordal relaxation of rotations, then linear translations.
-    Chordal,
 }
 
 fn main() -> ExitCode {
@@ -704,12 +574,16 @@ fn read_counts(path: Option<&std::path::Path>) -> Result<Vec<u64>, String> {
 /// (the outputs are still written).
 const CHI2_FAILED_STATUS: u8 = 3;
 
+/// The exit status of `pgo optimize` stopped by Ctrl-C (128 + SIGINT, as
+/// shells report it; the outputs are still written).
+const INTERRUPTED_STATUS: u8 = 130;
+
 fn optimize(args: OptimizeArgs) -> ExitCode {
     if let Err(message) = check_optimize_files(&args) {
         say!("error: {message}");
         return ExitCode::from(2);
     }
-    let mut config = OptimizeConfig::new(&args.input);
+    let mut config = OptimizeConfig::from_options(&args.input, &args.options);
     config.output = if args.in_place {
         Some(args.input.clone())
     } else {
@@ -717,55 +591,14 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
     };
     config.inliers = args.inliers.clone();
     config.fix_information = args.fix_information;
-    config.initialization = match args.init {
-        InitArg::File => Initialization::File,
-        InitArg::Odometry => Initialization::Odometry,
-        InitArg::Chordal => Initialization::Chordal,
-    };
-    config.solver.method = match args.solver {
-        SolverArg::Lm => Method::LevenbergMarquardt,
-        SolverArg::Gn => Method::GaussNewton,
-    };
-    if let Some(n) = args.max_iters {
-        config.solver.max_iterations = n;
-    }
-    config.iteration_budget = args.max_iters;
-    config.gate = args.gate;
-    config.degenerate = match args.degenerate {
-        DegenerateArg::KeepAll => DegeneratePolicy::KeepAll,
-        DegenerateArg::DropAll => DegeneratePolicy::DropAll,
-        DegenerateArg::Threshold => DegeneratePolicy::Threshold,
-    };
-    config.alpha = args.alpha;
-    config.robust = match args.robust {
-        RobustArg::None => RobustMethod::None,
-        RobustArg::Em => RobustMethod::Em,
-        RobustArg::Huber => RobustMethod::Huber,
-        RobustArg::Cauchy => RobustMethod::Cauchy,
-        RobustArg::Dcs => RobustMethod::Dcs,
-        RobustArg::Gnc => RobustMethod::Gnc,
-    };
-    config.robust_c = args.robust_c;
-    config.layers = args.expert.unwrap_or_default();
     config.plot = args.plot.clone();
-    config.candidates = match args.candidates {
-        CandidatesArg::Counted => CandidateRule::Counted,
-        CandidatesArg::NonSequential => CandidateRule::NonSequential,
-    };
-    config.dof = match args.dof {
-        DofArg::Residual => DofConvention::Residual,
-        DofArg::Constraints => DofConvention::Constraints,
-    };
-    config.solver.threads = args.threads;
-    if let Some(t) = args.time_limit {
-        if !(t >= 0.0 && t.is_finite()) {
-            say!("error: --time-limit must be a non-negative number of seconds");
-            return ExitCode::from(2);
-        }
-        config.solver.time_limit = Some(Duration::from_secs_f64(t));
-    }
     let verbose = args.verbose && !args.quiet;
-    let mut observer = |r: &IterationRecord| {
+    // Ctrl-C stops the optimisation between iterations; the best map so far
+    // is written and the exit status says it was interrupted.
+    let cancel = pgo::Cancel::new();
+    let on_interrupt = cancel.clone();
+    let _ = ctrlc::set_handler(move || on_interrupt.cancel());
+    let progress = |r: &IterationRecord| {
         if verbose {
             say!(
                 "iteration {:>3}: χ² {:.10e}  λ {:.1e}  rejected {}  |δ|∞ {:.2e}",
@@ -777,6 +610,7 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
             );
         }
     };
+    let mut observer = pgo::Cancellable::new(cancel, progress);
     match pipeline::run(&config, &mut observer) {
         Ok(report) => {
             if !args.quiet {
@@ -794,6 +628,12 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
                         return ExitCode::from(1);
                     }
                 }
+            }
+            if report.optimizer.stop_reason == pgo::StopReason::Cancelled {
+                say!(
+                    "pgo: interrupted: the best map so far was written (exit status {INTERRUPTED_STATUS})"
+                );
+                return ExitCode::from(INTERRUPTED_STATUS);
             }
             if report.chi2_test.as_ref().is_some_and(|t| !t.passed) {
                 say!(

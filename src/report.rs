@@ -1,17 +1,24 @@
 //! The report of a run: what was read, how it was initialised and
 //! optimised, serialised to JSON with `--json` and summarised for humans.
+//! The types its fields hold are re-exported here.
 
-use crate::gate::{DegeneratePolicy, GateDecision, GateMode, LogNormalMixture, Separation};
+use crate::gate::GateDecision;
+use crate::geometry::Pose;
 use crate::graph::VertexId;
-use crate::io::g2o::G2oFile;
+use crate::io::g2o::{G2oFile, ReadSummary};
 use crate::linear::BlockSystem;
-use crate::robust::{LoopModel, Reason, RobustMethod, Search};
-use crate::solve::init::Initialization;
-use crate::solve::{Method, StopReason, Summary};
-use crate::stats::Chi2Test;
+use crate::solve::{Method, Summary};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::Path;
+
+pub use crate::gate::{
+    Degeneracy, DegeneratePolicy, EmStart, GateMode, LogNormalMixture, Separation, TwoNormals,
+};
+pub use crate::robust::{Layers, LoopModel, Reason, RobustMethod, Search, Suspect};
+pub use crate::solve::init::Initialization;
+pub use crate::solve::{StopReason, Timing};
+pub use crate::stats::{Chi2Test, DofConvention};
 
 /// The JSON report of `pgo optimize`.
 #[derive(Clone, Debug, Serialize)]
@@ -78,7 +85,7 @@ pub struct GateReport {
     /// The whole fit, for pictures (not serialised: `mixture` and
     /// `separation` carry its numbers).
     #[serde(skip)]
-    pub fit: Option<crate::gate::ThresholdFit>,
+    pub(crate) fit: Option<crate::gate::ThresholdFit>,
     /// BIC, Ashman's D and the loop component's size.
     pub separation: Option<Separation>,
     /// Candidates kept.
@@ -93,7 +100,7 @@ pub struct GateReport {
 
 impl GateReport {
     /// From the gate's decision and the candidates' counts.
-    pub fn new(decision: &GateDecision, counts: &[Option<u64>]) -> Self {
+    pub(crate) fn new(decision: &GateDecision, counts: &[Option<u64>]) -> Self {
         let max_inliers = counts.iter().flatten().copied().max().unwrap_or(0);
         let fit = decision.fit.as_ref();
         Self {
@@ -290,7 +297,7 @@ pub struct OptimizerReport {
 impl OptimizerReport {
     /// From a solver summary, the unweighted χ² before and after, the
     /// linear system and the largest factor of the run (values).
-    pub fn new<const D: usize>(
+    pub(crate) fn new<const D: usize>(
         summary: &Summary,
         initial_chi2: f64,
         final_chi2: f64,
@@ -341,16 +348,29 @@ impl Default for OptimizerReport {
 
 impl Report {
     /// A report of what was read, before anything ran.
-    pub fn new(input: &Path, file: &G2oFile) -> Self {
+    pub(crate) fn new(input: &Path, file: &G2oFile) -> Self {
+        match &file.graph {
+            crate::graph::AnyPoseGraph::Planar(g) => Self::for_graph(input, g, &file.summary),
+            crate::graph::AnyPoseGraph::Spatial(g) => Self::for_graph(input, g, &file.summary),
+        }
+    }
+
+    /// A report of a graph (read from `input`, with what the reader
+    /// noticed, or built in memory), before anything ran.
+    pub(crate) fn for_graph<P: Pose<D>, const D: usize>(
+        input: &Path,
+        graph: &crate::graph::PoseGraph<P, D>,
+        read: &ReadSummary,
+    ) -> Self {
         Self {
             input: input.display().to_string(),
             output: None,
-            dimension: file.graph.dimension(),
-            poses: file.graph.num_vertices(),
-            edges: file.graph.num_edges(),
-            loop_candidates: file.graph.num_candidates(),
-            skipped_tags: file.summary.skipped_tags.clone(),
-            information_fixed: file.summary.information_fixed,
+            dimension: crate::pose_graph::dimension::<D>(),
+            poses: graph.num_vertices(),
+            edges: graph.edges.len(),
+            loop_candidates: graph.num_candidates(),
+            skipped_tags: read.skipped_tags.clone(),
+            information_fixed: read.information_fixed,
             input_chi2: 0.0,
             initialization: InitializationReport::default(),
             optimizer: OptimizerReport::default(),
@@ -359,8 +379,17 @@ impl Report {
             robust: RobustReport::default(),
             loops: Vec::new(),
             plots: Vec::new(),
-            warnings: file.summary.warnings.clone(),
+            warnings: read.warnings.clone(),
         }
+    }
+
+    /// The report as `pgo optimize --json` prints it (pretty-printed; NaN
+    /// and infinities as `null`). Errors: [`crate::Error::Internal`],
+    /// which plain fields like these do not give.
+    #[cfg(feature = "json")]
+    pub fn to_json(&self) -> Result<String, crate::Error> {
+        serde_json::to_string_pretty(self)
+            .map_err(|e| crate::Error::Internal(format!("cannot serialise the report: {e}")))
     }
 
     /// The human summary, a few lines for stderr.

@@ -9,6 +9,7 @@ use crate::gate::{DegeneratePolicy, GateMode, MixtureOptions};
 use crate::graph::{AnyPoseGraph, PoseGraph};
 use crate::io::g2o::{self, G2oFile, G2oPose, ReadError, ReadOptions};
 use crate::io::inliers::InlierCsvError;
+use crate::options::Options;
 use crate::report::Report;
 use crate::robust::{self, RobustMethod};
 use crate::solve::init::{ChordalInit, Initialization};
@@ -74,25 +75,41 @@ pub enum CandidateRule {
 }
 
 impl OptimizeConfig {
-    /// Defaults for everything but the input.
+    /// Defaults for everything but the input: those of [`Options`].
     pub fn new(input: impl Into<PathBuf>) -> Self {
+        Self::from_options(input, &Options::default())
+    }
+
+    /// The job of [`Options`] on the g2o file `input`: no output, no inlier
+    /// CSV, no pictures, information matrices as read.
+    pub fn from_options(input: impl Into<PathBuf>, options: &Options) -> Self {
+        let defaults = SolverOptions::default();
         Self {
             input: input.into(),
             output: None,
             inliers: None,
             fix_information: false,
-            initialization: Initialization::default(),
-            solver: SolverOptions::default(),
-            gate: GateMode::default(),
-            degenerate: DegeneratePolicy::default(),
+            initialization: options.solver.init,
+            solver: SolverOptions {
+                method: options.solver.method,
+                max_iterations: options
+                    .solver
+                    .max_iterations
+                    .unwrap_or(defaults.max_iterations),
+                time_limit: options.solver.time_limit,
+                threads: options.solver.threads,
+                ..defaults
+            },
+            gate: options.gate.mode,
+            degenerate: options.gate.degenerate,
             mixture: MixtureOptions::default(),
-            alpha: 0.05,
-            dof: DofConvention::default(),
-            candidates: CandidateRule::default(),
-            robust: RobustMethod::default(),
-            robust_c: None,
-            layers: robust::Layers::default(),
-            iteration_budget: None,
+            alpha: options.test.alpha,
+            dof: options.test.dof,
+            candidates: options.gate.candidates,
+            robust: options.robust.method,
+            robust_c: options.robust.c,
+            layers: options.expert.layers,
+            iteration_budget: options.solver.max_iterations,
             plot: None,
         }
     }
@@ -187,6 +204,10 @@ impl PipelineError {
 /// Runs `pgo optimize`: returns the report (and writes the output file if
 /// asked). `observer` sees every iteration.
 pub fn run(config: &OptimizeConfig, observer: &mut dyn Observer) -> Result<Report, PipelineError> {
+    #[cfg(not(feature = "plot"))]
+    if let Some(dir) = &config.plot {
+        return Err(crate::plot::PlotError::Disabled { path: dir.clone() }.into());
+    }
     let mut file = g2o::read(
         &config.input,
         ReadOptions {
@@ -199,6 +220,9 @@ pub fn run(config: &OptimizeConfig, observer: &mut dyn Observer) -> Result<Repor
         AnyPoseGraph::Spatial(g) => {
             optimize_graph(g, &file.missing, config, &mut report, observer)?
         }
+    }
+    for w in &report.warnings {
+        log::warn!("{w}");
     }
     if let Some(out) = &config.output {
         write_output(&file, out)?;

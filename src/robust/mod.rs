@@ -90,6 +90,12 @@ pub fn default_c(method: RobustMethod, dim: usize) -> f64 {
     }
 }
 
+/// The fewest loop candidates EM learns its model from: a mean and a
+/// spread for the true loops and for one wrong population, and the two
+/// rates, need a few candidates each ([`model`]'s smallest start is 4).
+/// With fewer, EM weighs them with its kernel (Cauchy at its width `c`).
+pub const MIN_CANDIDATES: usize = 8;
+
 /// The layers of EM on top of its model, each of which can be switched off
 /// for an ablation (`pgo optimize --expert no-LAYER,…`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -262,13 +268,28 @@ pub fn solve<P: ChordalInit<D>, const D: usize>(
         .filter(|c| c.kept)
         .map(|c| c.edge)
         .collect();
+    // Too few candidates to learn EM's model from: EM's kernel with every
+    // prior ½, the Cauchy kernel at EM's width.
+    let few = method == RobustMethod::Em && n < MIN_CANDIDATES;
     match method {
-        RobustMethod::Em if n > 0 => em(
+        RobustMethod::Em if n >= MIN_CANDIDATES => em(
             session, chordal, weights, candidates, c, layers, test, &mut out,
         )?,
-        RobustMethod::None | RobustMethod::Em => {
+        RobustMethod::None => {
             session.converge(weights)?;
             out.cut_short = session.exhausted();
+        }
+        RobustMethod::Em => {
+            (out.rounds, out.cut_short) =
+                kernels::reweight(session, weights, &kept, RobustMethod::Cauchy, c)?;
+            // As EM does: the final map is solved with the accepted ones.
+            for &k in &kept {
+                weights[k] = if weights[k] >= 0.5 { 1.0 } else { 0.0 };
+            }
+            if !out.cut_short {
+                session.converge(weights)?;
+                out.cut_short = session.exhausted();
+            }
         }
         kernel => {
             (out.rounds, out.cut_short) = kernels::reweight(session, weights, &kept, kernel, c)?;
@@ -277,7 +298,7 @@ pub fn solve<P: ChordalInit<D>, const D: usize>(
     for (k, cand) in candidates.iter().enumerate() {
         out.weights[k] = weights[cand.edge];
         out.accepted[k] = weights[cand.edge] >= 0.5;
-        if method != RobustMethod::Em && cand.kept {
+        if (method != RobustMethod::Em || few) && cand.kept {
             out.reasons[k] = if method == RobustMethod::None {
                 Reason::Trusted
             } else {

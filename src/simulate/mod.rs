@@ -68,7 +68,7 @@
 //! `world` (trajectories and true-loop search), `noise` (error-coordinate
 //! noise and information), `counts` (inlier-count models), `wrong`
 //! (placement of wrong candidates), `assemble` (the simulated graphs),
-//! `corrupt` (the steps of [`corrupt`]), `labels` (the labels CSV),
+//! `corrupt` (the steps of `corrupt`), `labels` (the labels CSV),
 //! `options`.
 //!
 //! # Determinism

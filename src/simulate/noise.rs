@@ -11,7 +11,7 @@ use std::f64::consts::PI;
 /// Poses whose edge error can be inverted: given error coordinates `e`, the
 /// pose `E` with exactly those coordinates, and the Gaussian noise model in
 /// them. Implemented for [`Se2`] and [`Se3`]; the simulator draws all its
-/// measurement noise through it, and [`corrupt`](super::corrupt) the noise
+/// measurement noise through it, and `corrupt` the noise
 /// of aliased candidates.
 pub trait ErrorCoordinates<const D: usize>: Pose<D> {
     /// The information matrix of the noise drawn by [`Self::sample_error`].

@@ -1,5 +1,5 @@
 //! The options of [`simulate`](super::simulate) and
-//! [`corrupt`](super::corrupt), and the ranges they are checked against.
+//! `corrupt`, and the ranges they are checked against.
 //!
 //! Every number written by `pgo simulate` or `pgo corrupt` must read back:
 //! finite, with positive-definite information. The ranges below are derived
@@ -137,7 +137,7 @@ impl SimulationOptions {
     }
 }
 
-/// Options of [`corrupt`](super::corrupt).
+/// Options of `corrupt`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CorruptionOptions {
     /// Number of wrong loop candidates to append, at most [`MAX_POSES`]
@@ -171,7 +171,7 @@ pub struct CorruptionOptions {
     /// 1000 mixture edges are the injected outliers (default 0): they are
     /// labelled wrong and get counts like the appended wrong candidates.
     /// At most the number of non-sequential edges, checked by
-    /// [`corrupt`](super::corrupt).
+    /// `corrupt`.
     pub known_wrong_last: usize,
     /// Share of the wrong candidates (appended and known-wrong) whose
     /// counts are drawn from the true-loop model, in `[0, 1]` (default 0),
@@ -199,7 +199,7 @@ impl Default for CorruptionOptions {
 impl CorruptionOptions {
     /// Checks every option against its range (see the fields), and the
     /// inlier model; `known_wrong_last` and the graph's room for wrong
-    /// loops are checked against the graph by [`corrupt`](super::corrupt).
+    /// loops are checked against the graph by `corrupt`.
     pub fn validate(&self) -> Result<(), SimulationError> {
         within_count("outliers", self.outliers, 0, MAX_POSES)?;
         if self.group_size == 0 {

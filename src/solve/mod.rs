@@ -620,7 +620,7 @@ impl Step {
 /// Optimises `graph` in place with unit weights: a convenience over
 /// [`Optimizer`].
 ///
-/// ```
+/// ```ignore
 /// use nalgebra::Matrix3;
 /// use pgo::geometry::{Pose, Se2};
 /// use pgo::graph::PoseGraph;

@@ -401,285 +401,290 @@ fn threads_start_a_private_pool_of_that_size_only_from_two() {
         .unwrap();
     assert!(!opt.parallelism.is_parallel());
 }
+/// The tests on simulated graphs (the `simulate` feature).
+#[cfg(feature = "simulate")]
+mod simulated {
+    use super::*;
 
-/// A simulated grid of 4000 poses with 40 wrong loops, and weights that
-/// switch half of them off and halve the others (as a robust round would).
-fn simulated_grid() -> (PoseGraph<Se2, 3>, Vec<f64>) {
-    let options = crate::simulate::SimulationOptions {
-        poses: 4000,
-        loops: 400,
-        outliers: 40,
-        seed: 11,
-        ..Default::default()
-    };
-    let sim = crate::simulate::simulate_planar(&options).unwrap();
-    let weights = (sim.wrong.iter().enumerate())
-        .map(|(k, &wrong)| match (wrong, k % 2) {
-            (false, _) => 1.0,
-            (true, 0) => 0.0,
-            (true, _) => 0.5,
-        })
-        .collect();
-    (sim.noisy, weights)
-}
-
-/// The poses and the bits of every objective of two runs with `threads`:
-/// unit weights, then [`simulated_grid`]'s.
-fn two_rounds(threads: usize) -> (Vec<Se2>, Vec<u64>) {
-    let (mut g, weights) = simulated_grid();
-    let options = SolverOptions {
-        threads,
-        ..Default::default()
-    };
-    let mut opt = Optimizer::new(&g, None, options).unwrap();
-    let mut bits = Vec::new();
-    for w in [None, Some(weights.as_slice())] {
-        let s = opt.run(&mut g, w, &mut |_: &IterationRecord| {}).unwrap();
-        assert!(s.iterations > 1, "{s:?}");
-        bits.extend(s.history.iter().map(|r| r.objective.to_bits()));
-        bits.push(s.final_objective.to_bits());
-    }
-    (g.poses, bits)
-}
-
-#[test]
-fn same_input_options_and_threads_give_the_same_bits() {
-    // Large enough that a parallel sum split by work stealing would differ
-    // between runs (it did in one run of two before the objective was
-    // summed in edge order).
-    for threads in [1, 2] {
-        let (poses, objectives) = two_rounds(threads);
-        let (poses_again, objectives_again) = two_rounds(threads);
-        let differ =
-            |a: &[u64], b: &[u64]| (0..a.len().max(b.len())).find(|&k| a.get(k) != b.get(k));
-        assert_eq!(
-            differ(&objectives, &objectives_again),
-            None,
-            "threads {threads}: the first objective that differs"
-        );
-        assert!(poses == poses_again, "threads {threads}: the poses differ");
-    }
-}
-
-/// A simulated grid of `poses` poses from its dead-reckoning guess, which LM
-/// takes many iterations to solve.
-fn dead_reckoned_grid(poses: usize) -> PoseGraph<Se2, 3> {
-    let options = crate::simulate::SimulationOptions {
-        poses,
-        seed: 3,
-        ..Default::default()
-    };
-    crate::simulate::simulate_planar(&options).unwrap().noisy
-}
-
-/// Stops the run at the first question after `after` iterations; keeps the
-/// records.
-struct StopAfter {
-    after: usize,
-    records: Vec<IterationRecord>,
-}
-
-impl Observer for StopAfter {
-    fn iteration(&mut self, record: &IterationRecord) {
-        self.records.push(*record);
+    /// A simulated grid of 4000 poses with 40 wrong loops, and weights that
+    /// switch half of them off and halve the others (as a robust round would).
+    fn simulated_grid() -> (PoseGraph<Se2, 3>, Vec<f64>) {
+        let options = crate::simulate::SimulationOptions {
+            poses: 4000,
+            loops: 400,
+            outliers: 40,
+            seed: 11,
+            ..Default::default()
+        };
+        let sim = crate::simulate::simulate_planar(&options).unwrap();
+        let weights = (sim.wrong.iter().enumerate())
+            .map(|(k, &wrong)| match (wrong, k % 2) {
+                (false, _) => 1.0,
+                (true, 0) => 0.0,
+                (true, _) => 0.5,
+            })
+            .collect();
+        (sim.noisy, weights)
     }
 
-    fn should_stop(&mut self) -> bool {
-        self.records.len() >= self.after
-    }
-}
-
-#[test]
-fn an_observer_stops_the_run_after_k_iterations_with_the_best_poses() {
-    let start = dead_reckoned_grid(300);
-    let k = 3;
-    // The same run limited to k iterations: where the cancelled one must be.
-    let mut limited = start.clone();
-    let options = SolverOptions {
-        max_iterations: k,
-        ..Default::default()
-    };
-    let expected = optimize(&mut limited, &options).unwrap();
-    assert_eq!(expected.stop_reason, StopReason::MaxIterations);
-    let mut g = start.clone();
-    let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
-    let mut observer = StopAfter {
-        after: k,
-        records: Vec::new(),
-    };
-    let s = opt.run(&mut g, None, &mut observer).unwrap();
-    assert_eq!((s.iterations, s.stop_reason), (k, StopReason::Cancelled));
-    assert!(!s.converged());
-    assert!(g.poses == limited.poses);
-    assert_eq!(s.final_objective, expected.final_objective);
-    assert!(s.final_objective < s.initial_objective);
-    // Each record has the time since the start, growing, within the run's.
-    let times: Vec<Duration> = observer.records.iter().map(|r| r.elapsed).collect();
-    assert!(times.windows(2).all(|w| w[0] <= w[1]), "{times:?}");
-    assert!(times.last().is_some_and(|&t| t <= s.time));
-}
-
-#[test]
-fn a_token_cancelled_before_the_run_stops_it_at_once() {
-    let start = dead_reckoned_grid(300);
-    let mut g = start.clone();
-    let cancel = Cancel::new();
-    let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
-    let mut seen = 0;
-    let mut progress = |_: &IterationRecord| seen += 1;
-    // Not cancelled: the run goes on (and reports) ...
-    let mut observer = Cancellable::new(cancel.clone(), &mut progress);
-    let s = opt.run(&mut g, None, &mut observer).unwrap();
-    assert!(s.converged() && s.iterations > 3, "{s:?}");
-    let reported = s.iterations;
-    // ... cancelled from another thread: the next run does nothing.
-    let handle = cancel.clone();
-    std::thread::spawn(move || handle.cancel()).join().unwrap();
-    assert!(cancel.is_cancelled());
-    g.poses.clone_from(&start.poses);
-    let s = opt.run(&mut g, None, &mut observer).unwrap();
-    assert_eq!((s.iterations, s.stop_reason), (0, StopReason::Cancelled));
-    assert_eq!(s.final_objective, s.initial_objective);
-    assert!(g.poses == start.poses);
-    // The token alone is an observer too.
-    let s = opt.run(&mut g, None, &mut cancel.clone()).unwrap();
-    assert_eq!((s.iterations, s.stop_reason), (0, StopReason::Cancelled));
-    drop(observer);
-    assert_eq!(seen, reported);
-}
-
-/// Stops the run at the first question asked between two LM trials (the
-/// second question without an iteration between).
-#[derive(Default)]
-struct StopBetweenTrials {
-    records: Vec<IterationRecord>,
-    asked_since_record: usize,
-}
-
-impl Observer for StopBetweenTrials {
-    fn iteration(&mut self, record: &IterationRecord) {
-        self.records.push(*record);
-        self.asked_since_record = 0;
+    /// The poses and the bits of every objective of two runs with `threads`:
+    /// unit weights, then [`simulated_grid`]'s.
+    fn two_rounds(threads: usize) -> (Vec<Se2>, Vec<u64>) {
+        let (mut g, weights) = simulated_grid();
+        let options = SolverOptions {
+            threads,
+            ..Default::default()
+        };
+        let mut opt = Optimizer::new(&g, None, options).unwrap();
+        let mut bits = Vec::new();
+        for w in [None, Some(weights.as_slice())] {
+            let s = opt.run(&mut g, w, &mut |_: &IterationRecord| {}).unwrap();
+            assert!(s.iterations > 1, "{s:?}");
+            bits.extend(s.history.iter().map(|r| r.objective.to_bits()));
+            bits.push(s.final_objective.to_bits());
+        }
+        (g.poses, bits)
     }
 
-    fn should_stop(&mut self) -> bool {
-        self.asked_since_record += 1;
-        self.asked_since_record > 1
-    }
-}
-
-#[test]
-fn an_observer_stops_the_run_between_lm_trials() {
-    // A start where LM rejects a trial after at least one iteration.
-    let found = (0..500).find_map(|seed| {
-        let g = square(2.5, seed);
-        let mut records = Vec::new();
-        optimize_observed(&mut g.clone(), &mut |r: &IterationRecord| records.push(*r));
-        let k = records.iter().skip(1).position(|r| r.rejected > 0)?;
-        Some((g, records, k + 1))
-    });
-    let (mut g, full, k) = found.expect("no start with a rejected trial");
-    let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
-    let mut observer = StopBetweenTrials::default();
-    let s = opt.run(&mut g, None, &mut observer).unwrap();
-    // Stopped in iteration k + 1, after its first rejected trial: the poses
-    // and objective of iteration k, one factorisation more than those.
-    assert_eq!((s.iterations, s.stop_reason), (k, StopReason::Cancelled));
-    let trials: usize = full[..k].iter().map(|r| r.rejected + 1).sum();
-    assert_eq!(s.factorizations, trials + 1);
-    assert_eq!(s.final_objective, full[k - 1].objective);
-    assert!((g.chi2() - s.final_objective).abs() <= 1e-12 * s.final_objective.max(1.0));
-}
-
-/// [`optimize`] with an observer.
-fn optimize_observed(g: &mut PoseGraph<Se2, 3>, observer: &mut dyn Observer) -> Summary {
-    let mut opt = Optimizer::new(g, None, SolverOptions::default()).unwrap();
-    opt.run(g, None, observer).unwrap()
-}
-
-/// [`dead_reckoned_grid`] of 300 poses with every pose but the gauge moved
-/// up to `reach` metres and given a random heading.
-fn far_start(seed: u64, reach: f64) -> PoseGraph<Se2, 3> {
-    let mut g = dead_reckoned_grid(300);
-    let mut rng = StdRng::seed_from_u64(seed);
-    for p in g.poses.iter_mut().skip(1) {
-        *p = Se2::new(
-            rng.random_range(-reach..reach),
-            rng.random_range(-reach..reach),
-            rng.random_range(-PI..PI),
-        );
-    }
-    g
-}
-
-/// The decrease of χ² that the undamped Gauss–Newton model foresees from
-/// the graph's poses, relative to χ² there.
-fn newton_decrement(g: &PoseGraph<Se2, 3>) -> f64 {
-    let mut opt = Optimizer::new(g, None, SolverOptions::default()).unwrap();
-    let chi2 = opt.linearize(g, None);
-    opt.system_mut().factorize(0.0).unwrap();
-    let mut step = vec![0.0; 3 * opt.system().num_blocks()];
-    opt.system_mut().solve(&mut step);
-    opt.system().predicted_decrease(&step) / chi2
-}
-
-#[test]
-fn a_far_start_converges_only_where_the_model_is_trusted() {
-    // Far starts end in local minima of the wrapped angles (converged, the
-    // model foreseeing nothing more), or not converged.
-    let mut converged = 0;
-    for seed in 0..4 {
-        for method in [Method::LevenbergMarquardt, Method::GaussNewton] {
-            let mut g = far_start(seed, 1e3);
-            let options = SolverOptions {
-                method,
-                ..Default::default()
-            };
-            let Ok(s) = optimize(&mut g, &options) else {
-                continue;
-            };
-            if s.converged() {
-                converged += 1;
-                let decrement = newton_decrement(&g);
-                assert!(
-                    decrement < 1e-6,
-                    "{method:?} seed {seed}: {decrement:e} {s:?}"
-                );
-            }
+    #[test]
+    fn same_input_options_and_threads_give_the_same_bits() {
+        // Large enough that a parallel sum split by work stealing would differ
+        // between runs (it did in one run of two before the objective was
+        // summed in edge order).
+        for threads in [1, 2] {
+            let (poses, objectives) = two_rounds(threads);
+            let (poses_again, objectives_again) = two_rounds(threads);
+            let differ =
+                |a: &[u64], b: &[u64]| (0..a.len().max(b.len())).find(|&k| a.get(k) != b.get(k));
+            assert_eq!(
+                differ(&objectives, &objectives_again),
+                None,
+                "threads {threads}: the first objective that differs"
+            );
+            assert!(poses == poses_again, "threads {threads}: the poses differ");
         }
     }
-    assert!(converged > 0);
-    // Damped hard after the first rejected step, LM crawls: the objective
-    // barely decreases (less than the relative tolerance) while the model
-    // still foresees a large decrease. That is no convergence.
-    let mut g = far_start(0, 1e3);
-    let options = SolverOptions {
-        initial_lambda: 1e12,
-        ..Default::default()
-    };
-    let s = optimize(&mut g, &options).unwrap();
-    assert_eq!(s.stop_reason, StopReason::Stalled, "{s:?}");
-    assert!(!s.converged() && s.iterations >= 1);
-    assert!(s.final_objective < s.initial_objective);
-    assert!(s.history.iter().all(|r| r.lambda > 1e6), "{s:?}");
-    let decrement = newton_decrement(&g);
-    assert!(decrement > 1e-3, "{decrement:e}");
-    // So is a step below the step tolerance because the damping made it so.
-    let mut g = far_start(0, 1e3);
-    let options = SolverOptions {
-        initial_lambda: 1e12,
-        step_tolerance: 1e-3,
-        ..Default::default()
-    };
-    let s = optimize(&mut g, &options).unwrap();
-    assert_eq!((s.iterations, s.stop_reason), (0, StopReason::Stalled));
-    // An undamped step below it is convergence.
-    let (mut g, _) = open_loop();
-    optimize(&mut g, &SolverOptions::default()).unwrap();
-    let options = SolverOptions {
-        step_tolerance: 1e-3,
-        ..Default::default()
-    };
-    let s = optimize(&mut g, &options).unwrap();
-    assert_eq!((s.iterations, s.stop_reason), (0, StopReason::SmallStep));
+
+    /// A simulated grid of `poses` poses from its dead-reckoning guess, which LM
+    /// takes many iterations to solve.
+    fn dead_reckoned_grid(poses: usize) -> PoseGraph<Se2, 3> {
+        let options = crate::simulate::SimulationOptions {
+            poses,
+            seed: 3,
+            ..Default::default()
+        };
+        crate::simulate::simulate_planar(&options).unwrap().noisy
+    }
+
+    /// Stops the run at the first question after `after` iterations; keeps the
+    /// records.
+    struct StopAfter {
+        after: usize,
+        records: Vec<IterationRecord>,
+    }
+
+    impl Observer for StopAfter {
+        fn iteration(&mut self, record: &IterationRecord) {
+            self.records.push(*record);
+        }
+
+        fn should_stop(&mut self) -> bool {
+            self.records.len() >= self.after
+        }
+    }
+
+    #[test]
+    fn an_observer_stops_the_run_after_k_iterations_with_the_best_poses() {
+        let start = dead_reckoned_grid(300);
+        let k = 3;
+        // The same run limited to k iterations: where the cancelled one must be.
+        let mut limited = start.clone();
+        let options = SolverOptions {
+            max_iterations: k,
+            ..Default::default()
+        };
+        let expected = optimize(&mut limited, &options).unwrap();
+        assert_eq!(expected.stop_reason, StopReason::MaxIterations);
+        let mut g = start.clone();
+        let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+        let mut observer = StopAfter {
+            after: k,
+            records: Vec::new(),
+        };
+        let s = opt.run(&mut g, None, &mut observer).unwrap();
+        assert_eq!((s.iterations, s.stop_reason), (k, StopReason::Cancelled));
+        assert!(!s.converged());
+        assert!(g.poses == limited.poses);
+        assert_eq!(s.final_objective, expected.final_objective);
+        assert!(s.final_objective < s.initial_objective);
+        // Each record has the time since the start, growing, within the run's.
+        let times: Vec<Duration> = observer.records.iter().map(|r| r.elapsed).collect();
+        assert!(times.windows(2).all(|w| w[0] <= w[1]), "{times:?}");
+        assert!(times.last().is_some_and(|&t| t <= s.time));
+    }
+
+    #[test]
+    fn a_token_cancelled_before_the_run_stops_it_at_once() {
+        let start = dead_reckoned_grid(300);
+        let mut g = start.clone();
+        let cancel = Cancel::new();
+        let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+        let mut seen = 0;
+        let mut progress = |_: &IterationRecord| seen += 1;
+        // Not cancelled: the run goes on (and reports) ...
+        let mut observer = Cancellable::new(cancel.clone(), &mut progress);
+        let s = opt.run(&mut g, None, &mut observer).unwrap();
+        assert!(s.converged() && s.iterations > 3, "{s:?}");
+        let reported = s.iterations;
+        // ... cancelled from another thread: the next run does nothing.
+        let handle = cancel.clone();
+        std::thread::spawn(move || handle.cancel()).join().unwrap();
+        assert!(cancel.is_cancelled());
+        g.poses.clone_from(&start.poses);
+        let s = opt.run(&mut g, None, &mut observer).unwrap();
+        assert_eq!((s.iterations, s.stop_reason), (0, StopReason::Cancelled));
+        assert_eq!(s.final_objective, s.initial_objective);
+        assert!(g.poses == start.poses);
+        // The token alone is an observer too.
+        let s = opt.run(&mut g, None, &mut cancel.clone()).unwrap();
+        assert_eq!((s.iterations, s.stop_reason), (0, StopReason::Cancelled));
+        drop(observer);
+        assert_eq!(seen, reported);
+    }
+
+    /// Stops the run at the first question asked between two LM trials (the
+    /// second question without an iteration between).
+    #[derive(Default)]
+    struct StopBetweenTrials {
+        records: Vec<IterationRecord>,
+        asked_since_record: usize,
+    }
+
+    impl Observer for StopBetweenTrials {
+        fn iteration(&mut self, record: &IterationRecord) {
+            self.records.push(*record);
+            self.asked_since_record = 0;
+        }
+
+        fn should_stop(&mut self) -> bool {
+            self.asked_since_record += 1;
+            self.asked_since_record > 1
+        }
+    }
+
+    #[test]
+    fn an_observer_stops_the_run_between_lm_trials() {
+        // A start where LM rejects a trial after at least one iteration.
+        let found = (0..500).find_map(|seed| {
+            let g = square(2.5, seed);
+            let mut records = Vec::new();
+            optimize_observed(&mut g.clone(), &mut |r: &IterationRecord| records.push(*r));
+            let k = records.iter().skip(1).position(|r| r.rejected > 0)?;
+            Some((g, records, k + 1))
+        });
+        let (mut g, full, k) = found.expect("no start with a rejected trial");
+        let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+        let mut observer = StopBetweenTrials::default();
+        let s = opt.run(&mut g, None, &mut observer).unwrap();
+        // Stopped in iteration k + 1, after its first rejected trial: the poses
+        // and objective of iteration k, one factorisation more than those.
+        assert_eq!((s.iterations, s.stop_reason), (k, StopReason::Cancelled));
+        let trials: usize = full[..k].iter().map(|r| r.rejected + 1).sum();
+        assert_eq!(s.factorizations, trials + 1);
+        assert_eq!(s.final_objective, full[k - 1].objective);
+        assert!((g.chi2() - s.final_objective).abs() <= 1e-12 * s.final_objective.max(1.0));
+    }
+
+    /// [`optimize`] with an observer.
+    fn optimize_observed(g: &mut PoseGraph<Se2, 3>, observer: &mut dyn Observer) -> Summary {
+        let mut opt = Optimizer::new(g, None, SolverOptions::default()).unwrap();
+        opt.run(g, None, observer).unwrap()
+    }
+
+    /// [`dead_reckoned_grid`] of 300 poses with every pose but the gauge moved
+    /// up to `reach` metres and given a random heading.
+    fn far_start(seed: u64, reach: f64) -> PoseGraph<Se2, 3> {
+        let mut g = dead_reckoned_grid(300);
+        let mut rng = StdRng::seed_from_u64(seed);
+        for p in g.poses.iter_mut().skip(1) {
+            *p = Se2::new(
+                rng.random_range(-reach..reach),
+                rng.random_range(-reach..reach),
+                rng.random_range(-PI..PI),
+            );
+        }
+        g
+    }
+
+    /// The decrease of χ² that the undamped Gauss–Newton model foresees from
+    /// the graph's poses, relative to χ² there.
+    fn newton_decrement(g: &PoseGraph<Se2, 3>) -> f64 {
+        let mut opt = Optimizer::new(g, None, SolverOptions::default()).unwrap();
+        let chi2 = opt.linearize(g, None);
+        opt.system_mut().factorize(0.0).unwrap();
+        let mut step = vec![0.0; 3 * opt.system().num_blocks()];
+        opt.system_mut().solve(&mut step);
+        opt.system().predicted_decrease(&step) / chi2
+    }
+
+    #[test]
+    fn a_far_start_converges_only_where_the_model_is_trusted() {
+        // Far starts end in local minima of the wrapped angles (converged, the
+        // model foreseeing nothing more), or not converged.
+        let mut converged = 0;
+        for seed in 0..4 {
+            for method in [Method::LevenbergMarquardt, Method::GaussNewton] {
+                let mut g = far_start(seed, 1e3);
+                let options = SolverOptions {
+                    method,
+                    ..Default::default()
+                };
+                let Ok(s) = optimize(&mut g, &options) else {
+                    continue;
+                };
+                if s.converged() {
+                    converged += 1;
+                    let decrement = newton_decrement(&g);
+                    assert!(
+                        decrement < 1e-6,
+                        "{method:?} seed {seed}: {decrement:e} {s:?}"
+                    );
+                }
+            }
+        }
+        assert!(converged > 0);
+        // Damped hard after the first rejected step, LM crawls: the objective
+        // barely decreases (less than the relative tolerance) while the model
+        // still foresees a large decrease. That is no convergence.
+        let mut g = far_start(0, 1e3);
+        let options = SolverOptions {
+            initial_lambda: 1e12,
+            ..Default::default()
+        };
+        let s = optimize(&mut g, &options).unwrap();
+        assert_eq!(s.stop_reason, StopReason::Stalled, "{s:?}");
+        assert!(!s.converged() && s.iterations >= 1);
+        assert!(s.final_objective < s.initial_objective);
+        assert!(s.history.iter().all(|r| r.lambda > 1e6), "{s:?}");
+        let decrement = newton_decrement(&g);
+        assert!(decrement > 1e-3, "{decrement:e}");
+        // So is a step below the step tolerance because the damping made it so.
+        let mut g = far_start(0, 1e3);
+        let options = SolverOptions {
+            initial_lambda: 1e12,
+            step_tolerance: 1e-3,
+            ..Default::default()
+        };
+        let s = optimize(&mut g, &options).unwrap();
+        assert_eq!((s.iterations, s.stop_reason), (0, StopReason::Stalled));
+        // An undamped step below it is convergence.
+        let (mut g, _) = open_loop();
+        optimize(&mut g, &SolverOptions::default()).unwrap();
+        let options = SolverOptions {
+            step_tolerance: 1e-3,
+            ..Default::default()
+        };
+        let s = optimize(&mut g, &options).unwrap();
+        assert_eq!((s.iterations, s.stop_reason), (0, StopReason::SmallStep));
+    }
 }

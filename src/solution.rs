@@ -1,0 +1,191 @@
+//! What the job returns: the optimised poses by id, one decision per loop
+//! candidate, the χ² test's verdict, and the report `pgo optimize` prints.
+
+use crate::geometry::Pose;
+use crate::graph::{self, VertexId};
+use crate::pose_graph::sealed::Sealed;
+use crate::report::Report;
+pub use crate::robust::Reason;
+use crate::stats::Chi2Test;
+use std::collections::HashMap;
+
+/// The result of [`crate::PoseGraph::optimize`].
+#[derive(Clone, Debug)]
+pub struct Solution<P> {
+    ids: Vec<VertexId>,
+    poses: Vec<P>,
+    index: HashMap<VertexId, usize>,
+    loops: Vec<LoopDecision>,
+    chi2: f64,
+    report: Report,
+}
+
+/// How the job decided one loop candidate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoopDecision {
+    /// Its index, as [`crate::PoseGraph::add_loop_candidate`] returned it
+    /// (edges and candidates are numbered together; with
+    /// `--candidates non-sequential` a trusted edge between non-consecutive
+    /// ids is a candidate too, under its edge index).
+    pub index: usize,
+    /// Its first vertex id.
+    pub from: VertexId,
+    /// Its second vertex id.
+    pub to: VertexId,
+    /// Its inlier count, if it has one.
+    pub inliers: Option<u64>,
+    /// Whether the gate kept it.
+    pub gated: bool,
+    /// Its final weight in the optimisation, in [0, 1].
+    pub weight: f64,
+    /// Whether it is in the map: weight ≥ ½.
+    pub accepted: bool,
+    /// EM: its posterior probability of being a true loop.
+    pub posterior: Option<f64>,
+    /// EM: its squared innovation `ν²` against the map without it and its
+    /// cluster (`None` when nothing else checks it).
+    pub innovation: Option<f64>,
+    /// Why it ended where it did.
+    pub reason: Reason,
+}
+
+impl<P> Solution<P> {
+    /// The solution in the optimised `graph`, with the job's `report`.
+    pub(crate) fn new<const D: usize>(graph: &graph::PoseGraph<P, D>, report: Report) -> Self
+    where
+        P: Pose<D>,
+    {
+        let candidates = (0..graph.edges.len()).filter(|&k| graph.edges[k].is_candidate());
+        let loops = candidates
+            .zip(&report.loops)
+            .map(|(index, l)| LoopDecision {
+                index,
+                from: l.from,
+                to: l.to,
+                inliers: l.inliers,
+                gated: l.kept,
+                weight: l.weight,
+                accepted: l.accepted,
+                posterior: l.posterior,
+                innovation: l.innovation,
+                reason: l.reason,
+            })
+            .collect();
+        let ids = graph.ids().to_vec();
+        let index = ids.iter().enumerate().map(|(k, &id)| (id, k)).collect();
+        Self {
+            ids,
+            poses: graph.poses.clone(),
+            index,
+            loops,
+            chi2: graph.chi2(),
+            report,
+        }
+    }
+}
+
+impl<P> Solution<P> {
+    /// The optimised pose with this id.
+    pub fn pose(&self, id: VertexId) -> Option<&P> {
+        self.index.get(&id).map(|&k| &self.poses[k])
+    }
+
+    /// Every optimised pose with its id, in the graph's order.
+    pub fn poses(&self) -> impl ExactSizeIterator<Item = (VertexId, &P)> {
+        self.ids.iter().copied().zip(&self.poses)
+    }
+
+    /// One decision per loop candidate, in the order they were added.
+    pub fn loops(&self) -> &[LoopDecision] {
+        &self.loops
+    }
+
+    /// `Σ eᵀΩe` over all edges at the optimised poses (g2o's χ²; dropped
+    /// candidates included).
+    pub fn chi2(&self) -> f64 {
+        self.chi2
+    }
+
+    /// The χ² test of the result, over the edges in the map (weight ≥ ½);
+    /// `None` when it cannot be computed (the report's warnings say why).
+    pub fn chi2_test(&self) -> Option<&Chi2Test> {
+        self.report.chi2_test.as_ref()
+    }
+
+    /// `D²`, the χ² of the edges in the map that the test tests.
+    pub fn d2(&self) -> Option<f64> {
+        self.chi2_test().map(|t| t.d2)
+    }
+
+    /// The test's verdict: whether `D²` is within the critical value.
+    pub fn passed(&self) -> Option<bool> {
+        self.chi2_test().map(|t| t.passed)
+    }
+
+    /// The report `pgo optimize --json` prints.
+    pub fn report(&self) -> &Report {
+        &self.report
+    }
+
+    /// The report, owned.
+    pub fn into_report(self) -> Report {
+        self.report
+    }
+}
+
+/// The result of [`crate::AnyPoseGraph::optimize`].
+#[derive(Clone, Debug)]
+pub enum AnySolution {
+    /// SE(2).
+    Planar(Solution<crate::Se2>),
+    /// SE(3).
+    Spatial(Solution<crate::Se3>),
+}
+
+/// Runs `$body` with `$s` bound to the solution of either dimension.
+macro_rules! either {
+    ($self:expr, |$s:ident| $body:expr) => {
+        match $self {
+            AnySolution::Planar($s) => $body,
+            AnySolution::Spatial($s) => $body,
+        }
+    };
+}
+
+impl AnySolution {
+    /// The g2o numbers of the optimised pose with this id (`x y θ` or
+    /// `x y z qx qy qz qw`).
+    pub fn pose(&self, id: VertexId) -> Option<Vec<f64>> {
+        either!(self, |s| s.pose(id).map(Sealed::numbers))
+    }
+
+    /// See [`Solution::loops`].
+    pub fn loops(&self) -> &[LoopDecision] {
+        either!(self, |s| s.loops())
+    }
+
+    /// See [`Solution::chi2`].
+    pub fn chi2(&self) -> f64 {
+        either!(self, |s| s.chi2())
+    }
+
+    /// See [`Solution::chi2_test`].
+    pub fn chi2_test(&self) -> Option<&Chi2Test> {
+        either!(self, |s| s.chi2_test())
+    }
+
+    /// See [`Solution::d2`].
+    pub fn d2(&self) -> Option<f64> {
+        either!(self, |s| s.d2())
+    }
+
+    /// See [`Solution::passed`].
+    pub fn passed(&self) -> Option<bool> {
+        either!(self, |s| s.passed())
+    }
+
+    /// See [`Solution::report`].
+    pub fn report(&self) -> &Report {
+        either!(self, |s| s.report())
+    }
+}
