@@ -215,3 +215,102 @@ fn io_write_atomically() {
     assert_eq!(std::fs::read_to_string(&path).unwrap(), "hello\n");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// src/io/mod.rs: the example at line 118.
+#[test]
+fn io_write_atomically_with_tempfile() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("out.txt");
+    crate::io::write_atomically(&path, |w| {
+        use std::io::Write;
+        writeln!(w, "hello")
+    })
+    .unwrap();
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), "hello\n");
+}
+
+/// src/io/output/mod.rs: the example at line 401.
+#[test]
+fn io_output_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("out.txt");
+    crate::io::output::write(&path, |w| {
+        use std::io::Write;
+        writeln!(w, "hello")
+    })
+    .unwrap();
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), "hello\n");
+    // A directory is no output.
+    let err = crate::io::output::write(dir.path(), |_| Ok(())).unwrap_err();
+    assert!(
+        err.to_string()
+            .ends_with("is a directory; pgo writes only regular files (use - for stdout)")
+    );
+}
+
+/// src/robust/mod.rs: the example at line 147.
+#[test]
+fn robust_layers_parse() {
+    let l = crate::robust::Layers::parse("no-clusters,no-search").unwrap();
+    assert!(!l.clusters && !l.search && l.decisions);
+    assert!(crate::robust::Layers::parse("no-magic").is_err());
+}
+
+/// src/robust/model.rs: the example at line 112.
+#[test]
+fn robust_ln_chi2_sigma() {
+    // ψ₁(3/2) = π²/2 − 4.
+    let s = crate::robust::ln_chi2_sigma(3);
+    assert!((s * s - (std::f64::consts::PI.powi(2) / 2.0 - 4.0)).abs() < 1e-10);
+}
+
+/// src/stats/mixture.rs: the example at line 106.
+#[test]
+fn stats_normal_mixture_new() {
+    use crate::stats::mixture::{NormalComponent, NormalMixture};
+    let c = |weight, mean, sigma| NormalComponent {
+        weight,
+        mean,
+        sigma,
+    };
+    let m = NormalMixture::new(vec![c(0.5, -2.0, 1.0), c(0.5, 1.0, 1.0)]).unwrap();
+    assert_eq!(m.len(), 2);
+    assert!(NormalMixture::new(vec![c(0.0, 0.0, 1.0)]).is_err());
+}
+
+/// src/stats/mixture.rs: the example at line 294.
+#[test]
+fn stats_mixture_em() {
+    use crate::stats::mixture::{EmOptions, em, quantile_start};
+    let y: Vec<f64> = (0..100)
+        .map(|i| if i < 60 { -2.0 } else { 3.0 } + (i % 7) as f64 * 0.1)
+        .collect();
+    let options = EmOptions {
+        tolerance: 1e-9,
+        max_iterations: 500,
+        variance_floor: 1e-6,
+    };
+    let fit = em(&y, quantile_start(&y, 2, 1e-6).unwrap(), &options, |_| {}).unwrap();
+    let c = fit.mixture.components();
+    assert!((c[0].weight - 0.6).abs() < 1e-6 && (c[1].mean - 3.3).abs() < 0.05);
+}
+
+/// src/stats/separation.rs: the example at line 29.
+#[test]
+fn stats_separation_crossing() {
+    use crate::stats::mixture::NormalComponent;
+    use crate::stats::separation::crossing;
+    let low = NormalComponent {
+        weight: 0.5,
+        mean: -1.0,
+        sigma: 0.5,
+    };
+    let high = NormalComponent {
+        weight: 0.5,
+        mean: 1.0,
+        sigma: 0.5,
+    };
+    // Equal weights and widths: half-way.
+    assert!(crossing(&low, &high).unwrap().abs() < 1e-12);
+    assert_eq!(crossing(&high, &low), None);
+}

@@ -115,7 +115,7 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 /// same kind that does not repeat the path (callers that name the path
 /// themselves use this one).
 ///
-/// ```
+/// ```ignore
 /// let dir = tempfile::tempdir().unwrap();
 /// let path = dir.path().join("out.txt");
 /// pgo::io::write_atomically(&path, |w| {

