@@ -35,3 +35,12 @@ pub extern "C" fn pgo_last_error() -> *const c_char {
 pub extern "C" fn pgo_version() -> *const c_char {
     concat!(env!("CARGO_PKG_VERSION"), "\0").as_ptr().cast()
 }
+
+/// The handles may be read from several threads at once and moved between
+/// threads, as their documentation promises.
+const _: () = {
+    const fn shareable<T: Send + Sync>() {}
+    shareable::<PgoGraph>();
+    shareable::<PgoOptions>();
+    shareable::<PgoResult>();
+};
