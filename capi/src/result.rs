@@ -1,0 +1,337 @@
+//! The optimisation and what it returns: `PgoResult`, with one
+//! `PgoLoopDecision` per loop candidate.
+
+use crate::graph::PgoGraph;
+use crate::options::PgoOptions;
+use crate::status::{Failure, PgoStatus, borrow, out_ptr, status, value};
+use pgo::{AnySolution, LoopDecision, Options, Reason};
+use std::ffi::{CStr, CString, c_char};
+use std::ptr;
+use std::sync::{Mutex, OnceLock};
+
+/// What `pgo_graph_optimize` returns (opaque): the optimised poses by id,
+/// one decision per loop candidate, χ², the χ² test's verdict and the
+/// report `pgo optimize --json` prints.
+///
+/// Owned by the caller, freed by `pgo_result_free`; the strings it hands
+/// out live as long as it. It may be read by several threads at once.
+pub struct PgoResult {
+    solution: AnySolution,
+    report_json: OnceLock<CString>,
+}
+
+/// How the optimisation decided one loop candidate (a plain struct the
+/// caller owns, filled by `pgo_result_loop`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PgoLoopDecision {
+    /// Its index, as `pgo_graph_add_loop_candidate` stored it (edges and
+    /// candidates numbered together).
+    pub index: usize,
+    /// Its first vertex id.
+    pub from: u64,
+    /// Its second vertex id.
+    pub to: u64,
+    /// Its inlier count; -1 if it has none.
+    pub inliers: i64,
+    /// Whether the gate kept it.
+    pub gated: bool,
+    /// Its final weight in the optimisation, in [0, 1].
+    pub weight: f64,
+    /// Whether it is in the map (weight ≥ ½).
+    pub accepted: bool,
+}
+
+impl From<&LoopDecision> for PgoLoopDecision {
+    fn from(d: &LoopDecision) -> Self {
+        Self {
+            index: d.index,
+            from: d.from,
+            to: d.to,
+            inliers: d
+                .inliers
+                .map_or(-1, |n| i64::try_from(n).unwrap_or(i64::MAX)),
+            gated: d.gated,
+            weight: d.weight,
+            accepted: d.accepted,
+        }
+    }
+}
+
+/// Runs the whole job of `pgo optimize` on the graph (which is left as it
+/// is) with `options` (NULL: the defaults): the gate learned from the loop
+/// candidates' inlier counts, the initial guess, the robust optimisation
+/// and the χ² test. Stores the result at `*out` (NULL on failure); free it
+/// with `pgo_result_free`.
+///
+/// Errors: `PGO_ERR_EMPTY_GRAPH`, `PGO_ERR_UNCONSTRAINED`,
+/// `PGO_ERR_NUMERICAL`, `PGO_ERR_INVALID_OPTION`, `PGO_ERR_INTERNAL`,
+/// `PGO_ERR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `graph` is NULL or a live graph nothing changes during the call;
+/// `options` is NULL or live options; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_graph_optimize(
+    graph: *const PgoGraph,
+    options: *const PgoOptions,
+    out: *mut *mut PgoResult,
+) -> PgoStatus {
+    status(|| {
+        let slot = out_ptr(out, "out")?;
+        // SAFETY: writable, by the caller's contract.
+        unsafe { *slot = ptr::null_mut() };
+        // SAFETY: the caller's contract.
+        let graph = unsafe { borrow(graph, "graph")? };
+        // SAFETY: NULL or live, by the caller's contract.
+        let solution = match unsafe { options.as_ref() } {
+            Some(o) => graph.graph.optimize(&o.options)?,
+            None => graph.graph.optimize(&Options::default())?,
+        };
+        let result = Box::new(PgoResult {
+            solution,
+            report_json: OnceLock::new(),
+        });
+        // SAFETY: as above.
+        unsafe { *slot = Box::into_raw(result) };
+        Ok(())
+    })
+}
+
+/// Copies the optimised pose with id `id` into the `len` numbers at `out`
+/// (`x y θ` in 2D, `len` = 3; `x y z qx qy qz qw` in 3D, `len` = 7).
+///
+/// Errors: `PGO_ERR_UNKNOWN_VERTEX`, `PGO_ERR_LENGTH`,
+/// `PGO_ERR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `result` is NULL or a live result; `out` is NULL or points to `len`
+/// writable numbers.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_pose(
+    result: *const PgoResult,
+    id: u64,
+    out: *mut f64,
+    len: usize,
+) -> PgoStatus {
+    status(|| {
+        // SAFETY: the caller's contract.
+        let result = unsafe { borrow(result, "result")? };
+        let slot = out_ptr(out, "out")?;
+        let pose = result.solution.pose(id).ok_or_else(|| {
+            Failure::new(
+                PgoStatus::PgoErrUnknownVertex,
+                format!("unknown vertex id {id}"),
+            )
+        })?;
+        if pose.len() != len {
+            let dimension = if pose.len() == 3 { 2 } else { 3 };
+            return Err(Failure::new(
+                PgoStatus::PgoErrLength,
+                format!(
+                    "pose: expected {} numbers for a {dimension}D graph, got {len}",
+                    pose.len()
+                ),
+            ));
+        }
+        // SAFETY: `len` writable numbers at `slot`, by the caller's contract.
+        unsafe { ptr::copy_nonoverlapping(pose.as_ptr(), slot, len) };
+        Ok(())
+    })
+}
+
+/// Stores the number of loop decisions (one per loop candidate) at `*out`.
+///
+/// Errors: `PGO_ERR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `result` is NULL or a live result; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_num_loops(
+    result: *const PgoResult,
+    out: *mut usize,
+) -> PgoStatus {
+    // SAFETY: the caller's contract.
+    unsafe { get(result, out, |s| s.loops().len()) }
+}
+
+/// Copies the `k`-th loop decision (0 ≤ `k` < `pgo_result_num_loops`, in
+/// the order the candidates were added) into `*out`.
+///
+/// Errors: `PGO_ERR_INVALID_ARGUMENT` (also for `k` out of range).
+///
+/// # Safety
+/// `result` is NULL or a live result; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_loop(
+    result: *const PgoResult,
+    k: usize,
+    out: *mut PgoLoopDecision,
+) -> PgoStatus {
+    status(|| {
+        // SAFETY: the caller's contract.
+        let decision = unsafe { decision(result, k)? };
+        let slot = out_ptr(out, "out")?;
+        // SAFETY: writable, by the caller's contract.
+        unsafe { slot.write(decision.into()) };
+        Ok(())
+    })
+}
+
+/// Which stage decided the `k`-th loop: `"gate"`, `"residual"`,
+/// `"innovation"`, ... (the stage's name in snake case; later versions may
+/// add stages). The string is static: never free it. NULL on failure
+/// (`PGO_ERR_INVALID_ARGUMENT` in `pgo_last_error`: NULL `result`, `k` out
+/// of range).
+///
+/// # Safety
+/// `result` is NULL or a live result.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_loop_reason(
+    result: *const PgoResult,
+    k: usize,
+) -> *const c_char {
+    value(ptr::null(), || {
+        // SAFETY: the caller's contract.
+        let decision = unsafe { decision(result, k)? };
+        Ok(reason_name(&decision.reason).as_ptr())
+    })
+}
+
+/// The `k`-th decision of a result.
+///
+/// # Safety
+/// `result` is NULL or a live result.
+unsafe fn decision<'a>(result: *const PgoResult, k: usize) -> Result<&'a LoopDecision, Failure> {
+    // SAFETY: the caller's contract.
+    let loops = unsafe { borrow(result, "result")? }.solution.loops();
+    loops.get(k).ok_or_else(|| {
+        Failure::invalid(format!(
+            "loop {k} out of range: the result has {} loops",
+            loops.len()
+        ))
+    })
+}
+
+/// The name of a reason, the one place it is derived: its variant's name
+/// (its `Debug` form up to the first field) in snake case, interned.
+pub(crate) fn reason_name(reason: &Reason) -> &'static CStr {
+    static NAMES: Mutex<Vec<&'static CStr>> = Mutex::new(Vec::new());
+    let debug = format!("{reason:?}");
+    let mut name = String::new();
+    for c in debug.chars().take_while(char::is_ascii_alphanumeric) {
+        if c.is_ascii_uppercase() && !name.is_empty() {
+            name.push('_');
+        }
+        name.push(c.to_ascii_lowercase());
+    }
+    let mut names = NAMES
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some(known) = names.iter().find(|n| n.to_bytes() == name.as_bytes()) {
+        return known;
+    }
+    // Alphanumeric: no NUL. One leak per variant, ever.
+    let interned: &'static CStr =
+        Box::leak(CString::new(name).unwrap_or_default().into_boxed_c_str());
+    names.push(interned);
+    interned
+}
+
+/// Stores `Σ eᵀΩe` over all edges at the optimised poses (g2o's χ²,
+/// dropped candidates included) at `*out`.
+///
+/// Errors: `PGO_ERR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `result` is NULL or a live result; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_chi2(result: *const PgoResult, out: *mut f64) -> PgoStatus {
+    // SAFETY: the caller's contract.
+    unsafe { get(result, out, |s| s.chi2()) }
+}
+
+/// Stores `D²`, the χ² of the edges in the map that the χ² test tests, at
+/// `*out`; NaN when there is no test (see `pgo_result_verdict`).
+///
+/// Errors: `PGO_ERR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `result` is NULL or a live result; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_d2(result: *const PgoResult, out: *mut f64) -> PgoStatus {
+    // SAFETY: the caller's contract.
+    unsafe { get(result, out, |s| s.d2().unwrap_or(f64::NAN)) }
+}
+
+/// Stores the χ² test's verdict at `*out`: 1 passed (`D²` within the
+/// critical value), 0 failed, -1 no test (it could not be computed; the
+/// report's warnings say why).
+///
+/// Errors: `PGO_ERR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `result` is NULL or a live result; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_verdict(result: *const PgoResult, out: *mut i32) -> PgoStatus {
+    // SAFETY: the caller's contract.
+    unsafe { get(result, out, |s| s.passed().map_or(-1, i32::from)) }
+}
+
+/// The report `pgo optimize --json` prints, as a NUL-terminated JSON
+/// string owned by the result: valid until `pgo_result_free`, never free
+/// it. Its fields are documented with the command line, not by this API.
+/// NULL on failure (see `pgo_last_error`).
+///
+/// # Safety
+/// `result` is NULL or a live result.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_report_json(result: *const PgoResult) -> *const c_char {
+    value(ptr::null(), || {
+        // SAFETY: the caller's contract.
+        let result = unsafe { borrow(result, "result")? };
+        if let Some(json) = result.report_json.get() {
+            return Ok(json.as_ptr());
+        }
+        let json = result.solution.report().to_json()?;
+        let json = CString::new(json)
+            .map_err(|_| Failure::new(PgoStatus::PgoErrInternal, "the report holds a NUL byte"))?;
+        Ok(result.report_json.get_or_init(|| json).as_ptr())
+    })
+}
+
+/// Frees a result made by `pgo_graph_optimize`, and the strings it handed
+/// out. NULL is allowed and does nothing.
+///
+/// # Safety
+/// `result` is NULL or a result from this API not yet freed, which nothing
+/// uses any more.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_free(result: *mut PgoResult) {
+    if !result.is_null() {
+        value((), || {
+            // SAFETY: made by Box::into_raw and not yet freed, by the contract.
+            drop(unsafe { Box::from_raw(result) });
+            Ok(())
+        });
+    }
+}
+
+/// Stores `read(solution)` at `*out`.
+///
+/// # Safety
+/// `result` is NULL or a live result; `out` is NULL or writable.
+unsafe fn get<T>(
+    result: *const PgoResult,
+    out: *mut T,
+    read: impl FnOnce(&AnySolution) -> T,
+) -> PgoStatus {
+    status(|| {
+        // SAFETY: the caller's contract.
+        let result = unsafe { borrow(result, "result")? };
+        let slot = out_ptr(out, "out")?;
+        // SAFETY: writable, by the caller's contract.
+        unsafe { slot.write(read(&result.solution)) };
+        Ok(())
+    })
+}
