@@ -91,9 +91,6 @@ pub struct Evidence {
 /// Most populations of wrong loops: aliasing a few poses off, local
 /// mismatches, random matches across the map.
 pub const MAX_WRONG_POPULATIONS: usize = 3;
-/// The smallest group of candidates EM starts from as the true loops: a
-/// mean and a spread need a few points.
-const MIN_START: usize = 4;
 /// EM iterations at most; the fit stops earlier when the log-likelihood
 /// improves by less than [`TOLERANCE`].
 const MAX_ITERATIONS: usize = 500;
@@ -226,10 +223,8 @@ impl LoopModel {
         let y: Vec<f64> = evidence.iter().map(|e| e.innovation.ln()).collect();
         let n = y.len().max(1) as f64;
         let mut best: Option<(f64, Self)> = None;
-        // Every number of populations (a second tight population can pay for
-        // itself where a first one spread over both does not), each from
-        // every start: EM finds a local optimum, and a small consistent
-        // group among many wrong loops is found only from near it.
+        // Every number of populations: a second tight population can pay for
+        // itself where a first one spread over both does not.
         for start in starts(&y, start) {
             for k in 0..=most {
                 let Some(model) =
@@ -309,14 +304,6 @@ impl LoopModel {
         let mut last = f64::NEG_INFINITY;
         for _ in 0..MAX_ITERATIONS {
             model = Self::m_step(evidence, y, &r, k, (floor, pinned), model.span);
-            if let Some(j) = model.lower_population() {
-                // The true loops are the most consistent population: the
-                // labels of a mixture are otherwise interchangeable.
-                for ri in r.iter_mut() {
-                    ri.swap(0, j + 1);
-                }
-                model = Self::m_step(evidence, y, &r, k, (floor, pinned), model.span);
-            }
             if !aliasing {
                 model.aliasing_rate = 0.0;
             }
@@ -328,16 +315,6 @@ impl LoopModel {
             last = ll;
         }
         Some(model)
-    }
-
-    /// The wrong population of lowest mean, if it is below the true loops'.
-    fn lower_population(&self) -> Option<usize> {
-        let (j, o) = self
-            .outliers
-            .iter()
-            .enumerate()
-            .min_by(|a, b| a.1.mean.total_cmp(&b.1.mean))?;
-        (o.mean < self.inlier.mean).then_some(j)
     }
 
     /// The parameters that maximise the expected log-likelihood under the
@@ -517,29 +494,19 @@ impl LoopModel {
     }
 }
 
-/// The starts of EM: the candidates marked (unless none is), then the
-/// lowest quarter of `y`, the lowest sixteenth, … while at least
-/// [`MIN_START`] candidates.
+/// The starts of EM: the candidates marked, or with none marked the lower
+/// half of `y` (true loops are the more consistent ones).
 fn starts(y: &[f64], marked: &[bool]) -> Vec<Vec<bool>> {
+    if marked.contains(&true) {
+        return vec![marked.to_vec()];
+    }
     let mut order: Vec<usize> = (0..y.len()).collect();
     order.sort_by(|&a, &b| y[a].total_cmp(&y[b]));
-    let mut out = Vec::new();
-    if marked.contains(&true) {
-        out.push(marked.to_vec());
+    let mut lower = vec![false; y.len()];
+    for &i in &order[..y.len() / 2] {
+        lower[i] = true;
     }
-    let mut m = y.len() / 4;
-    while m >= MIN_START || out.is_empty() {
-        let mut lowest = vec![false; y.len()];
-        for &i in &order[..m.min(y.len())] {
-            lowest[i] = true;
-        }
-        out.push(lowest);
-        if m < MIN_START {
-            break;
-        }
-        m /= 4;
-    }
-    out
+    vec![lower]
 }
 
 /// The width over which one wrong loop is spread when no population of

@@ -73,9 +73,21 @@ pub(super) fn measure<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
             planned.extend((group.pairs.iter()).map(|&(i, j)| (i, j, measurement, information)));
             continue;
         };
+        // Noise needs information that can draw it: where the source's
+        // cannot, another source's (files mix edges of all kinds).
+        let mut information = information;
+        let mut tries = 0;
         for (&(i, j), &target) in group.pairs.iter().zip(&alias.targets) {
-            let e = sample_with_information::<P, D, R>(&information, rng)
-                .ok_or(SimulationError::UnusableInformation { edge: source })?;
+            let e = loop {
+                if let Some(e) = sample_with_information::<P, D, R>(&information, rng) {
+                    break e;
+                }
+                tries += 1;
+                if tries >= sources.len() {
+                    return Err(SimulationError::UnusableInformation { edge: source });
+                }
+                information = graph.edges[sources[rng.random_range(0..sources.len())]].information;
+            };
             let exact = graph.poses[i].inverse().compose(&graph.poses[target]);
             planned.push((i, j, perturb(&exact, &e), information));
         }

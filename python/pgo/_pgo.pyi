@@ -1,0 +1,114 @@
+"""Type stubs of the extension module ``pgo._pgo`` (re-exported by ``pgo``)."""
+
+import os
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+#: A vertex id: an integer in 0 ..= 2**64 - 1.
+VertexId = int
+#: A pose or measurement: (x, y, θ) in 2D, (x, y, z, qx, qy, qz, qw) in 3D.
+Numbers = Union[Sequence[float], npt.ArrayLike]
+#: An information matrix: 3×3 (2D) or 6×6 (3D), nested or an array.
+Matrix = Union[Sequence[Sequence[float]], npt.ArrayLike]
+#: A pose as returned: 3 floats in 2D, 7 in 3D.
+PoseTuple = Tuple[float, ...]
+#: An option value, converted to the text the command line takes.
+OptionValue = Union[bool, int, float, str, None]
+
+class Error(ValueError):
+    """Bad input to pgo or a failed optimisation, with the library's message."""
+
+class PoseGraph:
+    """A pose graph in 2D (SE(2)) or 3D (SE(3)).
+
+    Poses with integer ids, trusted edges (odometry), loop-closure
+    candidates with their inlier counts, and the poses held fixed. Every
+    addition is checked and refused with :class:`Error`.
+    """
+
+    def __init__(self, dim: int, *, repair_information: bool = False) -> None:
+        """An empty graph of poses in ``dim`` (2 or 3) dimensions."""
+    def add_pose(self, id: VertexId, pose: Numbers) -> None:
+        """Adds a pose: (x, y, θ) or (x, y, z, qx, qy, qz, qw)."""
+    def add_edge(self, i: VertexId, j: VertexId, meas: Numbers, info: Matrix) -> int:
+        """Adds a trusted edge from pose i to pose j; returns its edge index."""
+    def add_loop_candidate(
+        self,
+        i: VertexId,
+        j: VertexId,
+        meas: Numbers,
+        info: Matrix,
+        inliers: Optional[int] = None,
+    ) -> int:
+        """Adds a loop-closure candidate with its inlier count; returns its index."""
+    def fix(self, id: VertexId) -> None:
+        """Holds the pose ``id`` fixed (the first pose added is, without any)."""
+    def len(self) -> int:
+        """Number of poses."""
+    def __len__(self) -> int:
+        """Number of poses."""
+    def __contains__(self, id: object) -> bool:
+        """Whether a pose has this id."""
+    @property
+    def dim(self) -> int:
+        """The dimension: 2 or 3."""
+    @property
+    def ids(self) -> List[VertexId]:
+        """The ids of the poses, in the order they were added (or read)."""
+    @property
+    def num_edges(self) -> int:
+        """Number of edges, loop candidates included."""
+    @property
+    def num_loop_candidates(self) -> int:
+        """Number of loop-closure candidates."""
+    def pose(self, id: VertexId) -> Optional[PoseTuple]:
+        """The pose as given; None for a vertex a file named only in edges."""
+    def write_g2o(self, path: Union[str, os.PathLike[str]]) -> None:
+        """Writes the graph as a g2o file, atomically."""
+    def optimize(self, **options: OptionValue) -> Result:
+        """Runs the job of ``pgo optimize``; options are its flags, ``_`` for ``-``."""
+    def __repr__(self) -> str: ...
+
+class Result:
+    """What :meth:`PoseGraph.optimize` returns."""
+
+    @property
+    def poses(self) -> Dict[VertexId, PoseTuple]:
+        """The optimised poses by id, in the graph's order."""
+    def pose(self, id: VertexId) -> PoseTuple:
+        """The optimised pose ``id``."""
+    def poses_array(
+        self,
+    ) -> Tuple[npt.NDArray[np.uint64], npt.NDArray[np.float64]]:
+        """(ids, poses): ids of N poses and an N×3 (2D) or N×7 (3D) array."""
+    @property
+    def loops(self) -> List[Dict[str, Any]]:
+        """One dict per loop candidate: index, from, to, inliers, gated, weight, accepted, reason."""
+    @property
+    def report(self) -> Dict[str, Any]:
+        """The report ``pgo optimize --json`` prints."""
+    @property
+    def chi2(self) -> float:
+        """Σ eᵀΩe over all edges at the optimised poses."""
+    @property
+    def d2(self) -> Optional[float]:
+        """D² of the χ² test; None when there is no test."""
+    @property
+    def passed(self) -> Optional[bool]:
+        """Whether the map passes the χ² test; None when there is no test."""
+    @property
+    def verdict(self) -> Optional[str]:
+        """"passed", "failed", or None when there is no test."""
+    def __repr__(self) -> str: ...
+
+def read_g2o(
+    path: Union[str, os.PathLike[str]], *, repair_information: bool = False
+) -> PoseGraph:
+    """Reads a g2o file of either dimension."""
+
+def option_names() -> List[str]:
+    """The option names :meth:`PoseGraph.optimize` takes (``-`` or ``_``)."""

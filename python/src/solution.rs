@@ -1,0 +1,182 @@
+//! `pgo.Result`: what `PoseGraph.optimize` returns — the optimised poses,
+//! one decision per loop candidate, the χ² test and the report — read from
+//! the library's [`AnySolution`].
+
+use crate::Error;
+use crate::convert::error;
+use numpy::{PyArray1, PyArray2};
+use pgo::{AnySolution, LoopDecision, Reason};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList, PyTuple};
+
+/// `(ids, poses)` as numpy arrays.
+type PosesArrays<'py> = (Bound<'py, PyArray1<u64>>, Bound<'py, PyArray2<f64>>);
+
+/// The result of `PoseGraph.optimize`: the optimised poses by id, one
+/// decision per loop candidate, χ², the χ² test of the map, and the report
+/// `pgo optimize --json` prints.
+#[pyclass(name = "Result", module = "pgo", frozen)]
+pub struct Solution {
+    /// The ids of the poses, in the graph's order.
+    ids: Vec<u64>,
+    /// Numbers per pose: 3 (2D) or 7 (3D).
+    width: usize,
+    solution: AnySolution,
+}
+
+impl Solution {
+    /// The solution of the graph of dimension `dim` whose pose ids are
+    /// `ids`.
+    pub fn new(ids: Vec<u64>, dim: usize, solution: AnySolution) -> Self {
+        let width = if dim == 2 { 3 } else { 7 };
+        Self {
+            ids,
+            width,
+            solution,
+        }
+    }
+
+    /// The optimised pose `id`'s numbers (every id of the graph has one).
+    fn numbers(&self, id: u64) -> PyResult<Vec<f64>> {
+        self.solution
+            .pose(id)
+            .ok_or_else(|| error(pgo::Error::UnknownVertex { id }))
+    }
+}
+
+#[pymethods]
+impl Solution {
+    /// The optimised poses: a dict from id to pose, laid out as
+    /// `PoseGraph.add_pose` takes it, in the graph's order.
+    #[getter]
+    fn poses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let poses = PyDict::new(py);
+        for &id in &self.ids {
+            poses.set_item(id, PyTuple::new(py, self.numbers(id)?)?)?;
+        }
+        Ok(poses)
+    }
+
+    /// The optimised pose `id` as a tuple.
+    fn pose<'py>(&self, py: Python<'py>, id: u64) -> PyResult<Bound<'py, PyTuple>> {
+        PyTuple::new(py, self.numbers(id)?)
+    }
+
+    /// The optimised poses for numpy: `(ids, poses)`, ids a uint64 array
+    /// of N and poses a float64 array N×3 (2D) or N×7 (3D), row k the pose
+    /// of ids[k], in the graph's order.
+    fn poses_array<'py>(&self, py: Python<'py>) -> PyResult<PosesArrays<'py>> {
+        let rows = self
+            .ids
+            .iter()
+            .map(|&id| self.numbers(id))
+            .collect::<PyResult<Vec<_>>>()?;
+        let poses = if rows.is_empty() {
+            PyArray2::zeros(py, [0, self.width], false)
+        } else {
+            PyArray2::from_vec2(py, &rows).map_err(|e| Error::new_err(e.to_string()))?
+        };
+        Ok((PyArray1::from_slice(py, &self.ids), poses))
+    }
+
+    /// One dict per loop candidate, in the order they were added: `index`
+    /// (as `add_loop_candidate` returned it), `from`, `to`, `inliers` (int
+    /// or None), `gated` (the gate kept it), `weight` (its final weight in
+    /// [0, 1]), `accepted` (weight ≥ ½: it is in the map) and `reason`
+    /// (why it ended where it did: "consistent", "inconsistent",
+    /// "unchecked", "explains_chi2", "kernel", "gated" or "trusted").
+    #[getter]
+    fn loops<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let loops = PyList::empty(py);
+        for decision in self.solution.loops() {
+            loops.append(loop_dict(py, decision)?)?;
+        }
+        Ok(loops)
+    }
+
+    /// The report `pgo optimize --json` prints, as a dict (its JSON
+    /// parsed by `json.loads`).
+    #[getter]
+    fn report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let text = self.solution.report().to_json().map_err(error)?;
+        py.import("json")?.call_method1("loads", (text,))
+    }
+
+    /// `Σ eᵀΩe` over all edges at the optimised poses (g2o's χ², the
+    /// candidates left out of the map included).
+    #[getter]
+    fn chi2(&self) -> f64 {
+        self.solution.chi2()
+    }
+
+    /// D², the χ² of the edges in the map that the χ² test tests; `None`
+    /// when the test could not be computed (`report["warnings"]` says why).
+    #[getter]
+    fn d2(&self) -> Option<f64> {
+        self.solution.d2()
+    }
+
+    /// Whether the map passes the χ² test (D² within the critical value
+    /// at significance `alpha`); `None` when there is no test.
+    #[getter]
+    fn passed(&self) -> Option<bool> {
+        self.solution.passed()
+    }
+
+    /// The χ² test's verdict: "passed", "failed", or `None` when the test
+    /// could not be computed.
+    #[getter]
+    fn verdict(&self) -> Option<&'static str> {
+        self.solution
+            .passed()
+            .map(|p| if p { "passed" } else { "failed" })
+    }
+
+    /// `Result(poses=…, loops=…, accepted=…, chi2=…, verdict=…)`.
+    fn __repr__(&self) -> String {
+        let loops = self.solution.loops();
+        let accepted = loops.iter().filter(|d| d.accepted).count();
+        let verdict = self
+            .verdict()
+            .map_or("None".to_owned(), |v| format!("'{v}'"));
+        format!(
+            "Result(poses={}, loops={}, accepted={accepted}, chi2={}, verdict={verdict})",
+            self.ids.len(),
+            loops.len(),
+            self.solution.chi2()
+        )
+    }
+}
+
+/// One loop decision as a dict.
+fn loop_dict<'py>(py: Python<'py>, d: &LoopDecision) -> PyResult<Bound<'py, PyDict>> {
+    let dict = PyDict::new(py);
+    dict.set_item("index", d.index)?;
+    dict.set_item("from", d.from)?;
+    dict.set_item("to", d.to)?;
+    dict.set_item("inliers", d.inliers)?;
+    dict.set_item("gated", d.gated)?;
+    dict.set_item("weight", d.weight)?;
+    dict.set_item("accepted", d.accepted)?;
+    dict.set_item("reason", reason_name(&d.reason))?;
+    Ok(dict)
+}
+
+/// The name of why a loop ended where it did: the variant's name in
+/// snake case (`Consistent` → "consistent", `ExplainsChi2` →
+/// "explains_chi2"), taken
+/// from its `Debug` text so that new variants name themselves.
+pub fn reason_name(reason: &Reason) -> String {
+    let debug = format!("{reason:?}");
+    let mut name = String::new();
+    for c in debug
+        .chars()
+        .take_while(|c| c.is_alphanumeric() || *c == '_')
+    {
+        if c.is_uppercase() && !name.is_empty() {
+            name.push('_');
+        }
+        name.extend(c.to_lowercase());
+    }
+    name
+}

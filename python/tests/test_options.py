@@ -1,0 +1,79 @@
+"""Options pass through to the library by their command-line names."""
+
+import pytest
+
+import pgo
+from conftest import SAMPLES, assert_close, assert_same_result
+
+
+@pytest.fixture(scope="module")
+def grid():
+    return pgo.read_g2o(SAMPLES / "grid2d.g2o")
+
+
+@pytest.fixture(scope="module")
+def default(grid):
+    return grid.optimize()
+
+
+def test_option_names_are_the_flags():
+    names = pgo.option_names()
+    for name in ["gate", "robust", "robust-c", "max-iters", "alpha", "expert"]:
+        assert name in names
+
+
+def test_gate_off_keeps_every_candidate(grid, default):
+    assert not all(d["gated"] for d in default.loops)
+    assert all(d["gated"] for d in grid.optimize(gate="off").loops)
+
+
+def test_gate_threshold_as_an_int(grid):
+    loops = grid.optimize(gate=200).loops
+    assert all(d["gated"] == (d["inliers"] >= 200) for d in loops)
+
+
+def test_robust_none_accepts_what_the_gate_keeps(grid, default):
+    loops = grid.optimize(robust="none").loops
+    assert all(d["accepted"] == d["gated"] and d["weight"] in (0.0, 1.0) for d in loops)
+    assert {d["reason"] for d in loops} == {"trusted", "gated"}
+    assert [d["accepted"] for d in loops] != [d["accepted"] for d in default.loops]
+
+
+def test_reasons_are_snake_case_names(default):
+    reasons = {d["reason"] for d in default.loops}
+    assert len(reasons) > 1
+    assert all(r.isidentifier() and r == r.lower() for r in reasons)
+
+
+def test_expert_layers_switch_off(grid, default):
+    def aliasing_rate(result):
+        return result.report["robust"]["model"]["aliasing_rate"]
+
+    assert aliasing_rate(default) > 0
+    assert aliasing_rate(grid.optimize(expert="no-aliasing")) == 0
+    assert_close(grid.optimize(expert="").loops, default.loops)
+
+
+def test_float_option(grid, default):
+    narrow = grid.optimize(robust_c=1.0)
+    change = [abs(a["weight"] - b["weight"]) for a, b in zip(narrow.loops, default.loops)]
+    assert max(change) > 0.1
+
+
+def test_none_leaves_the_default(grid, default):
+    assert_same_result(grid.optimize(robust_c=None, gate=None), default)
+
+
+def test_kebab_and_snake_names_agree(grid, default):
+    snake = grid.optimize(max_iters=3)
+    kebab = grid.optimize(**{"max-iters": 3})
+    assert_same_result(snake, kebab)
+    moved = max(abs(a - b) for i in default.poses for a, b in zip(snake.poses[i], default.poses[i]))
+    assert moved > 1e-6
+
+
+def test_alpha_changes_the_verdict_not_the_map(grid, default):
+    strict = grid.optimize(alpha=0.9)
+    assert_close((strict.poses, strict.d2), (default.poses, default.d2))
+    assert (default.verdict, strict.verdict) == ("passed", "failed")
+    assert strict.passed is False
