@@ -208,3 +208,62 @@ fn a_killed_run_leaves_the_old_output_or_the_complete_new_one() {
         started.elapsed().as_secs_f64()
     );
 }
+
+#[test]
+fn ctrl_c_writes_the_best_map_so_far_and_exits_130() {
+    let dir = temp_dir("interrupted");
+    let input = dir.join("big.g2o");
+    let sim = pgo(&[
+        "simulate",
+        "--poses",
+        "30000",
+        "--loops",
+        "3000",
+        "--wrong",
+        "300",
+        "--inliers",
+        "-o",
+        input.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(sim.status.code(), Some(0), "{}", stderr(&sim));
+    let out = dir.join("out.g2o");
+    let child = Command::new(env!("CARGO_BIN_EXE_pgo"))
+        .args([
+            "optimize",
+            input.to_str().expect("utf-8"),
+            "--init",
+            "odometry",
+            "-o",
+        ])
+        .arg(&out)
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    std::thread::sleep(Duration::from_millis(1500));
+    let interrupted = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(interrupted.success());
+    let done = child.wait_with_output().expect("wait");
+    let message = String::from_utf8_lossy(&done.stderr);
+    match done.status.code() {
+        Some(130) => assert!(message.contains("interrupted"), "{message}"),
+        // The run ended before the signal came: nothing to interrupt.
+        Some(0) | Some(3) => eprintln!("note: the run finished before Ctrl-C"),
+        other => panic!("exit {other:?}: {message}"),
+    }
+    // Either way the output is a complete graph.
+    let back = pgo(&[
+        "optimize",
+        out.to_str().expect("utf-8"),
+        "--max-iters",
+        "0",
+        "-q",
+    ]);
+    assert!(
+        matches!(back.status.code(), Some(0) | Some(3)),
+        "{}",
+        stderr(&back)
+    );
+}
