@@ -65,8 +65,10 @@ SECTIONS = [
 SCALE = {
     "file": "scale.json",
     "title": "Scaling",
-    "default_cmd": (".venv/bin/python scripts/bench_scale.py --sizes 1e4 1e5 1e6 --work /tmp/scale "
-                    "--out bench/results/scale.json"),
+    "default_cmd": (".venv/bin/python scripts/bench_scale.py --sizes 1e4 1e5 --worlds grid2d sphere3d "
+                    "--work /tmp/scale --out bench/results/scale.json --svg docs/scaling.svg"),
+    # One row per world and size of the command above.
+    "expected_rows": 4,
 }
 
 
@@ -139,7 +141,7 @@ def robust_section(path, spec):
     results = data["results"]
     out += ["Made by (`%s`):" % rel, "", "```sh", robust_command(data.get("args", {}), rel), "```", ""]
     if "total_s" not in data:
-        out += ["**Partial:** the run had not finished when this file was copied; %d cases are in it." %
+        out += ["**Partial:** the run had not finished when this file was copied; cases in it: %d." %
                 len(results), ""]
     tools = []
     for r in results:
@@ -195,6 +197,9 @@ def scale_section(path):
         return out
     results = json.load(open(path))
     out += ["Made by:", "", "```sh", SCALE["default_cmd"], "```", ""]
+    if len(results) < SCALE["expected_rows"]:
+        out += ["**Partial:** %d of the command's %d graphs are in the file; the run had not finished "
+                "when it was copied." % (len(results), SCALE["expected_rows"]), ""]
     out += ["| world | poses | edges | candidates | wall (s) | optimiser (s) | iterations / factorisations "
             "| peak RSS (MB) | largest factor (MB) |", "|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(results, key=lambda r: (r["world"], r["poses"])):
