@@ -1,0 +1,234 @@
+#!/usr/bin/env python3
+"""Writes docs/benchmarks.md from the result files under bench/results/.
+
+usage: python3 scripts/benchmarks_md.py [--results bench/results] [--out docs/benchmarks.md]
+
+Plain Python 3 (json only). Every number in the generated file comes from a
+JSON file under bench/results/; a section whose file is missing says so and
+gives the command that would make it, instead of a table.
+
+Result files
+  robust_1000.json  scripts/bench_robust.py, 1000 wrong candidates per case
+  aliased.json      scripts/bench_robust.py --policies aliased
+  scale.json        scripts/bench_scale.py
+"""
+import argparse
+import json
+import os
+import shlex
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+
+MACHINE = ("a 2-core x86-64 virtual machine (AMD EPYC) shared with other work "
+           "(builds and other benchmarks ran beside these), so times carry noise "
+           "of ±20 % or more and are only indicative.")
+
+# Flags of bench_robust.py whose defaults are already repository-relative
+# (or the machine's) and are left out of the command shown.
+LOCAL_ARGS = {"datasets", "peers", "python", "pgo", "work", "out", "tables_from"}
+
+SECTIONS = [
+    {
+        "file": "robust_1000.json",
+        "title": "Outliers: 1000 wrong loop candidates per case",
+        "intro": (
+            "Each clean dataset is corrupted by `pgo corrupt` with 1000 wrong loop "
+            "candidates of one policy (random: any two poses; local: at most 20 poses "
+            "apart; grouped: groups of 10 mutually consistent wrong loops). Every "
+            "candidate carries an inlier count (log-normal, median 150 for true loops, "
+            "25 for wrong ones). Each case runs with the information matrices as "
+            "published and calibrated (scaled so that the clean optimum has "
+            "χ²/dof = 1). pgo runs with its defaults; the peers (GTSAM, g2o) run their "
+            "robust kernels on every non-odometry edge with their default widths, from "
+            "the file's guess, and cannot read the counts."),
+        "default_cmd": (".venv/bin/python scripts/bench_robust.py --outliers 1000 --timeout 90 "
+                        "--tools pgo \"GTSAM huber\" \"GTSAM cauchy\" \"GTSAM dcs\" \"GTSAM gnc\" "
+                        "\"g2o cauchy\" \"g2o dcs\" --only intel manhattan sphere2500 --no-maxmix "
+                        "--out bench/results/robust_1000.json"),
+    },
+    {
+        "file": "aliased.json",
+        "title": "Perceptual aliasing",
+        "intro": (
+            "Each clean dataset is corrupted by `pgo corrupt --wrong-mode aliased`: 100 "
+            "wrong candidates i–j that measure the pose j+s seen from i (s a few poses), "
+            "in groups of 5 sharing s, half of them with counts drawn like a true loop's "
+            "(aliases pass geometric verification). Information calibrated."),
+        "default_cmd": (".venv/bin/python scripts/bench_robust.py --policies aliased --outliers 100 "
+                        "--no-maxmix --scales calibrated --timeout 300 --tools pgo \"GTSAM gnc\" "
+                        "\"GTSAM cauchy\" --only manhattan intel city10000 sphere2500 parking-garage "
+                        "--out bench/results/aliased.json"),
+    },
+]
+
+SCALE = {
+    "file": "scale.json",
+    "title": "Scaling",
+    "default_cmd": (".venv/bin/python scripts/bench_scale.py --sizes 1e4 1e5 --worlds grid2d sphere3d "
+                    "--work /tmp/scale --out bench/results/scale.json --svg docs/scaling.svg"),
+    # One row per world and size of the command above.
+    "expected_rows": 4,
+}
+
+
+def quote(word):
+    return '"%s"' % word if " " in word else shlex.quote(word)
+
+
+def robust_command(args, out):
+    """The bench_robust.py command that made a result file, from its args."""
+    parts = [".venv/bin/python", "scripts/bench_robust.py"]
+    for key in ("policies", "alias_group_size", "alias_true_like", "outliers", "maxmix",
+                "scales", "tools", "timeout", "pgo_flags", "seed", "only"):
+        if key not in args or key in LOCAL_ARGS:
+            continue
+        value = args[key]
+        flag = "--" + key.replace("_", "-")
+        if key == "maxmix":
+            parts.append("--maxmix" if value else "--no-maxmix")
+        elif key in ("alias_group_size", "alias_true_like") and "aliased" not in args.get("policies", []):
+            continue
+        elif isinstance(value, list):
+            if value:
+                parts.append(flag)
+                parts.extend(quote(str(v)) for v in value)
+        elif value is not None:
+            parts.extend([flag, str(value)])
+    parts.extend(["--out", out])
+    return " ".join(parts)
+
+
+def fmt(x, digits=3):
+    return "–" if x is None else ("%.*f" % (digits, x))
+
+
+def metric(r, what):
+    """One tool's result on one case, one metric."""
+    if r is None:
+        return "not run"
+    if "error" in r:
+        e = r["error"]
+        return "timeout (%s)" % e[len("timeout after "):] if e.startswith("timeout after ") else e
+    if what == "f1":
+        return "%s (%s / %s)" % (fmt(r.get("f1")), fmt(r.get("precision")), fmt(r.get("recall")))
+    if what == "error":
+        if "ate_pct" in r:
+            return "%.3g %%" % r["ate_pct"]
+        return ("%.3g" % r["rms"]) if "rms" in r else "–"
+    text = "%.2f" % r["time"] if "time" in r else "–"
+    if "factorizations" in r:
+        text += " (%d)" % r["factorizations"]
+    return text
+
+
+METRICS = [
+    ("f1", "F1 (precision / recall); a loop is accepted at weight ≥ ½"),
+    ("error", "map error: ATE, the RMSE of the positions after rigid alignment onto the clean "
+              "graph's optimum, as % of the trajectory's extent"),
+    ("time", "time in seconds (pgo: initialisation + optimisation from its report, factorisations "
+             "in parentheses where recorded; peers: their optimize call)"),
+]
+
+
+def robust_section(path, spec):
+    out = ["## " + spec["title"], "", spec["intro"], ""]
+    rel = os.path.relpath(path, ROOT)
+    if not os.path.exists(path):
+        out += ["**Not run yet.** Command:", "", "```sh", spec["default_cmd"], "```", ""]
+        return out
+    data = json.load(open(path))
+    results = data["results"]
+    out += ["Made by (`%s`):" % rel, "", "```sh", robust_command(data.get("args", {}), rel), "```", ""]
+    if "total_s" not in data:
+        out += ["**Partial:** the run had not finished when this file was copied; cases in it: %d." %
+                len(results), ""]
+    tools = []
+    for r in results:
+        for t in r["tools"]:
+            if t not in tools:
+                tools.append(t)
+    header = "| case | information | candidates (wrong) | " + " | ".join(tools) + " |"
+    rule = "|---|---|---|" + "---|" * len(tools)
+    for what, caption in METRICS:
+        out += ["*%s*" % caption, "",
+                header, rule]
+        for r in results:
+            row = [r["case"], r["scale"], "%d (%d)" % (r["candidates"], r["wrong"])]
+            row += [metric(r["tools"].get(t), what) for t in tools]
+            out.append("| " + " | ".join(row) + " |")
+        out.append("")
+    wins = ties_or_wins = compared = unmatched = 0
+    for r in results:
+        pgo = r["tools"].get("pgo", {})
+        peers = [v for t, v in r["tools"].items() if t != "pgo" and "f1" in v]
+        if "f1" in pgo and not peers:
+            unmatched += 1
+        if "f1" in pgo and peers:
+            compared += 1
+            best = max(v["f1"] for v in peers)
+            if pgo["f1"] >= best:
+                ties_or_wins += 1
+            if pgo["f1"] > best:
+                wins += 1
+    out += ["**Summary:** pgo's F1 ≥ every peer's that finished in %d of %d cases (above all of them "
+            "in %d); in %d more cases no peer finished." % (ties_or_wins, compared, wins, unmatched), ""]
+    lines = []
+    for t in tools:
+        f1 = [r["tools"][t]["f1"] for r in results if "f1" in r["tools"].get(t, {})]
+        errors = sum(1 for r in results if "error" in r["tools"].get(t, {}))
+        if f1:
+            lines.append("| %s | %d | %s | %s | %d |" % (t, len(f1), fmt(sum(f1) / len(f1)), fmt(min(f1)),
+                                                       errors))
+        else:
+            lines.append("| %s | 0 | – | – | %d |" % (t, errors))
+    out += ["| tool | cases finished | mean F1 | lowest F1 | errors or timeouts |", "|---|---|---|---|---|"]
+    out += lines + [""]
+    return out
+
+
+def scale_section(path):
+    out = ["## " + SCALE["title"], "",
+           "`pgo simulate` graphs (2D grid world, 3D sphere world) with loop candidates on 10 % of the "
+           "poses (9 % true, 1 % wrong, with inlier counts), each `pgo optimize` with its defaults "
+           "and one thread under `/usr/bin/time -v`.", ""]
+    if not os.path.exists(path):
+        out += ["**Not run yet.** Command:", "", "```sh", SCALE["default_cmd"], "```", ""]
+        return out
+    results = json.load(open(path))
+    out += ["Made by:", "", "```sh", SCALE["default_cmd"], "```", ""]
+    if len(results) < SCALE["expected_rows"]:
+        out += ["**Partial:** %d of the command's %d graphs are in the file; the run had not finished "
+                "when it was copied." % (len(results), SCALE["expected_rows"]), ""]
+    out += ["| world | poses | edges | candidates | wall (s) | optimiser (s) | iterations / factorisations "
+            "| peak RSS (MB) | largest factor (MB) |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in sorted(results, key=lambda r: (r["world"], r["poses"])):
+        out.append("| %s | %d | %d | %d | %.2f | %.2f | %d / %d | %.0f | %.0f |" % (
+            r["world"], r["poses"], r["edges"], r["candidates"], r["wall_s"], r["optimizer_s"],
+            r["iterations"], r["factorizations"], r["rss_mb"], r["factor_mb"]))
+    out.append("")
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--results", default=os.path.join(ROOT, "bench", "results"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "docs", "benchmarks.md"))
+    args = ap.parse_args()
+    out = ["# Benchmarks", "",
+           "Generated by `python3 scripts/benchmarks_md.py` from the JSON files in `bench/results/`; "
+           "do not edit by hand. To refresh a section, run its command (it needs a release build, "
+           "`cargo build --release`, the peers' environment made by `scripts/setup_peers.sh`, and the "
+           "public datasets under `$PGO_DATASETS`), copy the JSON into `bench/results/` under the "
+           "name shown, and run the generator again.", "",
+           "Machine: " + MACHINE, ""]
+    for spec in SECTIONS:
+        out += robust_section(os.path.join(args.results, spec["file"]), spec)
+    out += scale_section(os.path.join(args.results, SCALE["file"]))
+    text = "\n".join(out).rstrip("\n") + "\n"
+    with open(args.out, "w") as f:
+        f.write(text)
+
+
+if __name__ == "__main__":
+    main()
