@@ -54,9 +54,10 @@ def test_expert_layers_switch_off(grid, default):
     assert_close(grid.optimize(expert="").loops, default.loops)
 
 
-def test_float_option(grid, default):
-    narrow = grid.optimize(robust_c=1.0)
-    change = [abs(a["weight"] - b["weight"]) for a, b in zip(narrow.loops, default.loops)]
+def test_float_option(grid):
+    narrow = grid.optimize(robust="cauchy", robust_c=1.0)
+    wide = grid.optimize(robust="cauchy")
+    change = [abs(a["weight"] - b["weight"]) for a, b in zip(narrow.loops, wide.loops)]
     assert max(change) > 0.1
 
 
@@ -72,8 +73,13 @@ def test_kebab_and_snake_names_agree(grid, default):
     assert moved > 1e-6
 
 
-def test_alpha_changes_the_verdict_not_the_map(grid, default):
+def test_alpha_changes_the_verdict_not_the_decisions(grid, default):
+    # A failed test makes the job search for loops that explain it; here
+    # none does, and the decisions (and the map, to the solver's tolerance)
+    # stay.
     strict = grid.optimize(alpha=0.9)
-    assert_close((strict.poses, strict.d2), (default.poses, default.d2))
+    assert [d["accepted"] for d in strict.loops] == [d["accepted"] for d in default.loops]
+    for k, pose in default.poses.items():
+        assert all(abs(a - b) <= 1e-6 * max(1.0, abs(a)) for a, b in zip(strict.poses[k], pose))
     assert (default.verdict, strict.verdict) == ("passed", "failed")
     assert strict.passed is False
