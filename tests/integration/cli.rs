@@ -441,3 +441,36 @@ fn a_failed_chi2_test_exits_3_with_one_line_and_the_output_written() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(stderr(&o).is_empty());
 }
+
+#[test]
+fn the_same_command_writes_the_same_bits() {
+    let dir = temp_dir("determinism");
+    for sample_name in ["grid2d.g2o", "sphere3d.g2o", "aliased.g2o"] {
+        for threads in ["1", "2"] {
+            let outputs: Vec<Vec<u8>> = (0..2)
+                .map(|k| {
+                    let out = dir.join(format!("{sample_name}-{threads}-{k}.g2o"));
+                    let o = pgo(&[
+                        "optimize",
+                        &sample(sample_name),
+                        "--threads",
+                        threads,
+                        "-q",
+                        "-o",
+                        out.to_str().unwrap(),
+                    ]);
+                    assert!(
+                        matches!(o.status.code(), Some(0) | Some(3)),
+                        "{}",
+                        stderr(&o)
+                    );
+                    std::fs::read(&out).unwrap()
+                })
+                .collect();
+            assert!(
+                outputs[0] == outputs[1],
+                "{sample_name} with {threads} threads: two runs differ"
+            );
+        }
+    }
+}
