@@ -87,7 +87,7 @@ class Result:
         """(ids, poses): ids of N poses and an N×3 (2D) or N×7 (3D) array."""
     @property
     def loops(self) -> List[Dict[str, Any]]:
-        """One dict per loop candidate: index, from, to, inliers, gated, weight, accepted, reason."""
+        """One dict per loop candidate: index, from, to, inliers, gated, weight, accepted, posterior, innovation, reason."""
     @property
     def report(self) -> Dict[str, Any]:
         """The report ``pgo optimize --json`` prints."""

@@ -66,4 +66,9 @@ def test_optimize_is_the_command_line(name, flags, pgo_bin, tmp_path):
         assert (mine["from"], mine["to"], mine["inliers"]) == (
             theirs["from"], theirs["to"], theirs["inliers"])
         assert abs(mine["weight"] - theirs["weight"]) <= TOLERANCE
+        assert mine["reason"] == theirs["reason"]
+        for key in ("posterior", "innovation"):
+            a, b = mine[key], theirs[key]
+            assert (a is None) == (b is None), (key, a, b)
+            assert a is None or abs(a - b) <= TOLERANCE * max(1.0, abs(b)), (key, a, b)
     assert_close(without_run_details(result.report), without_run_details(cli_report), "report")
