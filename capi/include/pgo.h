@@ -173,6 +173,16 @@ typedef struct PgoLoopDecision {
    * Whether it is in the map (weight ≥ ½).
    */
   bool accepted;
+  /**
+   * EM's posterior probability that it is a true loop; NaN where the
+   * method gives none.
+   */
+  double posterior;
+  /**
+   * Its squared innovation ν² against the map without it and its
+   * cluster; NaN where there is none.
+   */
+  double innovation;
 } PgoLoopDecision;
 
 #ifdef __cplusplus

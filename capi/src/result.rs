@@ -40,6 +40,12 @@ pub struct PgoLoopDecision {
     pub weight: f64,
     /// Whether it is in the map (weight ≥ ½).
     pub accepted: bool,
+    /// EM's posterior probability that it is a true loop; NaN where the
+    /// method gives none.
+    pub posterior: f64,
+    /// Its squared innovation ν² against the map without it and its
+    /// cluster; NaN where there is none.
+    pub innovation: f64,
 }
 
 impl From<&LoopDecision> for PgoLoopDecision {
@@ -54,6 +60,8 @@ impl From<&LoopDecision> for PgoLoopDecision {
             gated: d.gated,
             weight: d.weight,
             accepted: d.accepted,
+            posterior: d.posterior.unwrap_or(f64::NAN),
+            innovation: d.innovation.unwrap_or(f64::NAN),
         }
     }
 }

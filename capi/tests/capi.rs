@@ -321,6 +321,8 @@ fn vertices_must_exist_once_and_messages_name_them() {
             gated: false,
             weight: 0.0,
             accepted: false,
+            posterior: 0.0,
+            innovation: 0.0,
         };
         ok(pgo_result_loop(r, 0, &mut d));
         assert_eq!((d.index, d.from, d.to, d.inliers), (2, 0, 2, -1));
@@ -550,14 +552,28 @@ fn assert_same(r: *const PgoResult, expected: &AnySolution, ids: &[u64]) {
             gated: false,
             weight: f64::NAN,
             accepted: false,
+            posterior: f64::NAN,
+            innovation: f64::NAN,
         };
         ok(unsafe { pgo_result_loop(r, k, &mut got) });
-        let want_c = PgoLoopDecision::from(want);
+        let mut want_c = PgoLoopDecision::from(want);
         assert!(
             close(got.weight, want_c.weight),
             "loop {k}: {got:?} vs {want_c:?}"
         );
+        // NaN (none) on both sides, or the same number.
+        for (a, b) in [
+            (got.posterior, want_c.posterior),
+            (got.innovation, want_c.innovation),
+        ] {
+            assert!(
+                (a.is_nan() && b.is_nan()) || close(a, b),
+                "loop {k}: {got:?} vs {want_c:?}"
+            );
+        }
         got.weight = want_c.weight;
+        (got.posterior, got.innovation) = (0.0, 0.0);
+        (want_c.posterior, want_c.innovation) = (0.0, 0.0);
         assert_eq!(got, want_c);
         let reason = unsafe { CStr::from_ptr(pgo_result_loop_reason(r, k)) };
         let debug = format!("{:?}", want.reason).to_lowercase();
