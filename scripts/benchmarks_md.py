@@ -207,7 +207,24 @@ def scale_section(path):
             r["world"], r["poses"], r["edges"], r["candidates"], r["wall_s"], r["optimizer_s"],
             r["iterations"], r["factorizations"], r["rss_mb"], r["factor_mb"]))
     out.append("")
+    big = os.path.join(os.path.dirname(path), SCALE_1E6["file"])
+    if os.path.exists(big):
+        out += ["10⁶ poses (2D), made by:", "", "```sh", SCALE_1E6["cmd"], "```", "",
+                "| world | poses | edges | candidates | wall (s) | optimiser (s) | iterations / factorisations "
+                "| peak RSS (MB) | largest factor (MB) |", "|---|---|---|---|---|---|---|---|---|"]
+        for r in json.load(open(big)):
+            out.append("| %s | %d | %d | %d | %.2f | %.2f | %d / %d | %.0f | %.0f |" % (
+                r["world"], r["poses"], r["edges"], r["candidates"], r["wall_s"], r["optimizer_s"],
+                r["iterations"], r["factorizations"], r["rss_mb"], r["factor_mb"]))
+        out.append("")
     return out
+
+
+SCALE_1E6 = {
+    "file": "scale_1e6.json",
+    "cmd": (".venv/bin/python scripts/bench_scale.py --sizes 1e6 --worlds grid2d "
+            "--work /tmp/scale --out bench/results/scale_1e6.json --svg /tmp/scale_1e6.svg"),
+}
 
 
 ABLATION_LAYERS = ["all", "annealing", "decisions", "clusters", "aliasing", "populations", "search"]
