@@ -20,9 +20,11 @@
 
 use super::clusters::clusters;
 use super::innovation::{Evaluation, Innovations};
+use super::kernels::cauchy_weight;
 use super::model::{Evidence, LoopModel, Scale};
 use super::{Candidate, Layers};
 use crate::geometry::Pose;
+use crate::graph::PoseGraph;
 use crate::solve::init::ChordalInit;
 use crate::solve::{Session, SolveError};
 
@@ -45,11 +47,60 @@ pub const MAX_ANNEAL_STEPS: usize = 120;
 /// has not settled after this many is cycling.
 pub const MAX_DECISIONS: usize = 10;
 
-/// The IROS 2013 weight of a candidate of whitened squared residual `r2` at
-/// kernel width `c`: `c²/(c² + r²)`.
-fn em_weight(r2: f64, c: f64) -> f64 {
-    let c2 = c * c;
-    c2 / (c2 + r2)
+/// The state of an annealing: the candidates it weighs (those that passed
+/// the gate), the kernel width's square over `c²`, and for how many E-steps
+/// the set of candidates of weight ≥ ½ has stood.
+struct Annealing {
+    kept: Vec<usize>,
+    c: f64,
+    factor: Option<f64>,
+    last: Vec<bool>,
+    stable: usize,
+}
+
+impl Annealing {
+    fn new(candidates: &[Candidate], c: f64) -> Self {
+        Self {
+            kept: candidates
+                .iter()
+                .filter(|c| c.kept)
+                .map(|c| c.edge)
+                .collect(),
+            c,
+            factor: None,
+            last: Vec::new(),
+            stable: 0,
+        }
+    }
+
+    /// One E-step at the graph's map: the IROS 2013 (Cauchy) weights of the
+    /// kept candidates at the next width — first the one that puts the
+    /// median residual at `c`, then `ANNEAL_STEP` times narrower, never
+    /// below `c`. True once the width is `c` and the accepted set has stood
+    /// for [`STABLE_STEPS`].
+    fn e_step<P: Pose<D>, const D: usize>(
+        &mut self,
+        graph: &PoseGraph<P, D>,
+        weights: &mut [f64],
+    ) -> bool {
+        let r2: Vec<f64> = (self.kept.iter())
+            .map(|&k| graph.edge_chi2(&graph.edges[k]))
+            .collect();
+        let factor = match self.factor {
+            None => median(&r2) / (self.c * self.c),
+            Some(f) => f / ANNEAL_STEP,
+        }
+        .max(1.0);
+        self.factor = Some(factor);
+        let width = self.c * factor.sqrt();
+        for (&k, &r) in self.kept.iter().zip(&r2) {
+            weights[k] = cauchy_weight(r, width);
+        }
+        let set: Vec<bool> = self.kept.iter().map(|&k| weights[k] >= 0.5).collect();
+        self.stable = if set == self.last { self.stable + 1 } else { 0 };
+        self.last = set;
+        factor == 1.0 && self.stable >= STABLE_STEPS
+    }
 }
 
 /// The annealing (step 1 of the module doc): leaves the weights of the
@@ -62,37 +113,12 @@ pub fn anneal<P: Pose<D>, const D: usize>(
     candidates: &[Candidate],
     c: f64,
 ) -> Result<(usize, bool), SolveError> {
-    let kept: Vec<usize> = candidates
-        .iter()
-        .filter(|c| c.kept)
-        .map(|c| c.edge)
-        .collect();
-    if kept.is_empty() {
+    let mut annealing = Annealing::new(candidates, c);
+    if annealing.kept.is_empty() {
         return Ok((0, false));
     }
-    let mut width2: Option<f64> = None;
-    let mut last: Vec<bool> = Vec::new();
-    let mut stable = 0;
     for step in 0..MAX_ANNEAL_STEPS {
-        let graph = &*session.graph;
-        let r2: Vec<f64> = kept
-            .iter()
-            .map(|&k| graph.edge_chi2(&graph.edges[k]))
-            .collect();
-        let factor = match width2 {
-            None => median(&r2) / (c * c),
-            Some(f) => f / ANNEAL_STEP,
-        }
-        .max(1.0);
-        width2 = Some(factor);
-        let width = c * factor.sqrt();
-        for (&k, &r) in kept.iter().zip(&r2) {
-            weights[k] = em_weight(r, width);
-        }
-        let set: Vec<bool> = kept.iter().map(|&k| weights[k] >= 0.5).collect();
-        stable = if set == last { stable + 1 } else { 0 };
-        last = set;
-        if factor == 1.0 && stable >= STABLE_STEPS {
+        if annealing.e_step(session.graph, weights) {
             return Ok((step + 1, false));
         }
         session.run(weights, 1)?;
@@ -114,41 +140,16 @@ pub fn anneal_chordal<P: ChordalInit<D>, const D: usize>(
     candidates: &[Candidate],
     c: f64,
 ) -> Result<(usize, bool), SolveError> {
-    let kept: Vec<usize> = candidates
-        .iter()
-        .filter(|c| c.kept)
-        .map(|c| c.edge)
-        .collect();
-    if kept.is_empty() {
+    let mut annealing = Annealing::new(candidates, c);
+    if annealing.kept.is_empty() {
         return Ok((0, false));
     }
-    let mut width2: Option<f64> = None;
-    let mut last: Vec<bool> = Vec::new();
-    let mut stable = 0;
     for step in 0..MAX_ANNEAL_STEPS {
         if session.exhausted() {
             return Ok((step, true));
         }
-        let graph = &mut *session.graph;
-        P::chordal(graph, Some(weights))?;
-        let r2: Vec<f64> = kept
-            .iter()
-            .map(|&k| graph.edge_chi2(&graph.edges[k]))
-            .collect();
-        let factor = match width2 {
-            None => median(&r2) / (c * c),
-            Some(f) => f / ANNEAL_STEP,
-        }
-        .max(1.0);
-        width2 = Some(factor);
-        let width = c * factor.sqrt();
-        for (&k, &r) in kept.iter().zip(&r2) {
-            weights[k] = em_weight(r, width);
-        }
-        let set: Vec<bool> = kept.iter().map(|&k| weights[k] >= 0.5).collect();
-        stable = if set == last { stable + 1 } else { 0 };
-        last = set;
-        if factor == 1.0 && stable >= STABLE_STEPS {
+        P::chordal(session.graph, Some(weights))?;
+        if annealing.e_step(session.graph, weights) {
             return Ok((step + 1, false));
         }
     }

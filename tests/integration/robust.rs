@@ -130,6 +130,23 @@ fn position_rmse(a: &Path, b: &Path) -> (f64, f64) {
     (mse.sqrt(), (hi - lo).norm())
 }
 
+/// Asserts that the map written to `out` is the clean graph's optimum to
+/// within 0.5 % of the trajectory's size (RMS, same gauge).
+fn assert_clean_map(dir: &Path, c: &Case, out: &Path, name: &str) {
+    let reference = dir.join(format!("{name}_ref.g2o"));
+    run(
+        &c.clean,
+        GateMode::Off,
+        RobustMethod::None,
+        Some(&reference),
+    );
+    let (rmse, size) = position_rmse(out, &reference);
+    assert!(
+        rmse < 0.005 * size,
+        "{name}: the robust map is {rmse} m (RMS) from the clean one, size {size} m"
+    );
+}
+
 #[test]
 fn every_robust_method_down_weights_the_planted_wrong_loops() {
     let dir = temp_dir("robust-methods");
@@ -198,20 +215,7 @@ fn gate_and_em_recover_the_clean_map_for_every_outlier_policy() {
             "{name}: {:?}",
             r.chi2_test
         );
-        // The map is the clean graph's optimum to within 0.5 % of the
-        // trajectory's size (RMS, same gauge).
-        let reference = dir.join(format!("{name}_ref.g2o"));
-        run(
-            &c.clean,
-            GateMode::Off,
-            RobustMethod::None,
-            Some(&reference),
-        );
-        let (rmse, size) = position_rmse(&out, &reference);
-        assert!(
-            rmse < 0.005 * size,
-            "{name}: the robust map is {rmse} m (RMS) from the clean one, size {size} m"
-        );
+        assert_clean_map(&dir, &c, &out, &name);
     }
 }
 
@@ -458,18 +462,7 @@ fn aliasing_at_revisits_is_rejected_and_the_map_is_the_clean_one() {
     assert_eq!(fp, 0, "aliased loops accepted");
     assert!(tp as f64 >= 0.97 * n_true as f64, "{tp} of {n_true}");
     assert!(r.chi2_test.as_ref().expect("χ² test").passed);
-    let reference = dir.join("ref.g2o");
-    run(
-        &c.clean,
-        GateMode::Off,
-        RobustMethod::None,
-        Some(&reference),
-    );
-    let (rmse, size) = position_rmse(&out, &reference);
-    assert!(
-        rmse < 0.005 * size,
-        "{rmse} m from the clean map, size {size}"
-    );
+    assert_clean_map(&dir, &c, &out, "aliased");
 }
 
 #[test]
