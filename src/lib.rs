@@ -139,6 +139,7 @@ pub use options::{
 };
 pub use pipeline::CandidateRule;
 pub use pose_graph::{AnyPoseGraph, GraphPose, PoseGraph, PoseGraph2, PoseGraph3};
+pub use report::{DecisionChange, IncrementalReport, UpdateSolve};
 pub use robust::RobustMethod;
 pub use solution::{AnySolution, LoopDecision, Reason, Solution};
 pub use solve::Method as SolverMethod;

@@ -8,10 +8,10 @@ use crate::geometry::{Pose, Se2, Se3};
 use crate::graph::{self, LoopCandidate, VertexId};
 use crate::io::g2o::{self, ReadOptions, ReadSummary};
 use crate::options::Options;
-use crate::pipeline::{self, OptimizeConfig, PipelineError};
-use crate::report::Report;
+use crate::pipeline::{self, OptimizeConfig, PipelineError, Warm};
+use crate::report::{IncrementalReport, Report, UpdateSolve};
 use crate::solution::{AnySolution, Solution};
-use crate::solve::{IterationRecord, Observer};
+use crate::solve::{IterationRecord, Observer, StopReason};
 use nalgebra::SMatrix;
 use sealed::Sealed;
 use std::io::Write;
@@ -156,6 +156,9 @@ pub struct PoseGraph<P, const D: usize> {
     repair_information: bool,
     /// Information matrices repaired when edges were added.
     repaired: usize,
+    /// What [`PoseGraph::update`] keeps between calls: the options of the
+    /// last one and its solution's state.
+    state: Option<Box<(Options, Warm<P>)>>,
 }
 
 /// A planar pose graph (SE(2), 3 degrees of freedom).
@@ -179,6 +182,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
             source: None,
             repair_information: false,
             repaired: 0,
+            state: None,
         }
     }
 
@@ -212,6 +216,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
             source: Some((path.to_owned(), file.summary)),
             repair_information: fix_information,
             repaired: 0,
+            state: None,
         })
     }
 
@@ -361,7 +366,12 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// Holds a pose fixed (part of the gauge). Without any, the first pose
     /// added is. Errors: [`Error::UnknownVertex`].
     pub fn fix(&mut self, id: VertexId) -> Result<(), Error> {
-        self.graph.fix(id).map_err(|_| Error::UnknownVertex { id })
+        self.graph
+            .fix(id)
+            .map_err(|_| Error::UnknownVertex { id })?;
+        // Another gauge: the last solution is no start for the next.
+        self.state = None;
+        Ok(())
     }
 
     /// Number of poses.
@@ -456,6 +466,106 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         observer: &mut dyn Observer,
     ) -> Result<Solution<P>, Error> {
         options.validate()?;
+        let (mut report, config) = self.start(options)?;
+        let mut graph = self.graph.clone();
+        pipeline::optimize_graph(&mut graph, &self.missing, &config, &mut report, observer)
+            .map_err(from_pipeline)?;
+        for w in &report.warnings {
+            log::warn!("{w}");
+        }
+        Ok(Solution::new(&graph, report))
+    }
+
+    /// The job again after poses, edges or loop candidates were added, for
+    /// a mapping front end that asks for the map every keyframe: the same
+    /// map and decisions as [`PoseGraph::optimize`] of the graph as it now
+    /// is, reached from the last update's. The graph keeps that update's
+    /// poses, decisions and report (its memory: the poses, a byte per edge,
+    /// about 100 bytes per loop candidate); a new pose is composed along
+    /// trusted edges from them. Only as much is solved as the additions
+    /// need: nothing when nothing was added, no factorisation when the new
+    /// poses hang on the map by one trusted edge each (odometry), else
+    /// EM's decisions from the last ones ([`UpdateSolve`]). The report's
+    /// `incremental` part says which, and which earlier decisions changed.
+    ///
+    /// The first update, one with other options than the last, and one
+    /// after [`PoseGraph::fix`] or [`PoseGraph::forget`] run the whole job
+    /// ([`UpdateSolve::Batch`]). A cancelled update keeps the earlier state.
+    /// Errors: those of [`PoseGraph::optimize`].
+    ///
+    /// ```
+    /// use pgo::nalgebra::Matrix3;
+    /// use pgo::{Options, PoseGraph2, Se2, UpdateSolve};
+    ///
+    /// let (step, info) = (Se2::new(1.0, 0.0, 0.0), Matrix3::identity());
+    /// let mut graph = PoseGraph2::new();
+    /// graph.add_pose(0, Se2::new(0.0, 0.0, 0.0))?;
+    /// let options = Options::default();
+    /// for k in 1..5 {
+    ///     graph.add_pose(k, Se2::new(0.0, 0.0, 0.0))?; // composed by update
+    ///     graph.add_edge(k - 1, k, step, info)?;
+    ///     let solution = graph.update(&options)?;
+    ///     let how = solution.incremental().unwrap().solve;
+    ///     assert_eq!(how, if k == 1 { UpdateSolve::Batch } else { UpdateSolve::Extended });
+    ///     assert!((solution.pose(k).unwrap().x - k as f64).abs() < 1e-12);
+    /// }
+    /// # Ok::<(), pgo::Error>(())
+    /// ```
+    pub fn update(&mut self, options: &Options) -> Result<Solution<P>, Error> {
+        self.update_with(options, &mut |_: &IterationRecord| {})
+    }
+
+    /// [`PoseGraph::update`] reporting every solver iteration to
+    /// `observer`, which can stop it (as in [`PoseGraph::optimize_with`]).
+    pub fn update_with(
+        &mut self,
+        options: &Options,
+        observer: &mut dyn Observer,
+    ) -> Result<Solution<P>, Error> {
+        options.validate()?;
+        let (mut report, config) = self.start(options)?;
+        let mut graph = self.graph.clone();
+        let warm = match self.state.as_deref() {
+            Some((last, warm)) if last == options => {
+                pipeline::update_graph(&mut graph, warm, &config, &mut report, observer)
+                    .map_err(from_pipeline)?
+            }
+            last => {
+                pipeline::optimize_graph(&mut graph, &self.missing, &config, &mut report, observer)
+                    .map_err(from_pipeline)?;
+                report.incremental = Some(IncrementalReport {
+                    solve: UpdateSolve::Batch,
+                    reason: if last.is_some() {
+                        "options changed"
+                    } else {
+                        "no earlier solution"
+                    }
+                    .into(),
+                    new_poses: graph.num_vertices(),
+                    new_edges: graph.edges.len(),
+                    new_candidates: graph.num_candidates(),
+                    changed: Vec::new(),
+                });
+                Warm::after(&graph, &report)
+            }
+        };
+        if report.optimizer.stop_reason != StopReason::Cancelled {
+            self.state = Some(Box::new((options.clone(), warm)));
+        }
+        for w in &report.warnings {
+            log::warn!("{w}");
+        }
+        Ok(Solution::new(&graph, report))
+    }
+
+    /// Drops what [`PoseGraph::update`] keeps: the next update runs the
+    /// whole job.
+    pub fn forget(&mut self) {
+        self.state = None;
+    }
+
+    /// The report before the job, and the job's configuration.
+    fn start(&self, options: &Options) -> Result<(Report, OptimizeConfig), Error> {
         if self.is_empty() {
             return Err(Error::EmptyGraph);
         }
@@ -471,14 +581,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
                 self.repaired
             ));
         }
-        let config = OptimizeConfig::from_options(input, options);
-        let mut graph = self.graph.clone();
-        pipeline::optimize_graph(&mut graph, &self.missing, &config, &mut report, observer)
-            .map_err(from_pipeline)?;
-        for w in &report.warnings {
-            log::warn!("{w}");
-        }
-        Ok(Solution::new(&graph, report))
+        Ok((report, OptimizeConfig::from_options(input, options)))
     }
 }
 
@@ -627,6 +730,7 @@ impl AnyPoseGraph {
                 source,
                 repair_information: fix,
                 repaired: 0,
+                state: None,
             }),
             graph::AnyPoseGraph::Spatial(graph) => Self::Spatial(PoseGraph {
                 graph,
@@ -634,6 +738,7 @@ impl AnyPoseGraph {
                 source,
                 repair_information: fix,
                 repaired: 0,
+                state: None,
             }),
         })
     }
@@ -755,6 +860,28 @@ impl AnyPoseGraph {
             Self::Planar(g) => g.optimize(options).map(AnySolution::Planar),
             Self::Spatial(g) => g.optimize(options).map(AnySolution::Spatial),
         }
+    }
+
+    /// See [`PoseGraph::update`].
+    pub fn update(&mut self, options: &Options) -> Result<AnySolution, Error> {
+        self.update_with(options, &mut |_: &IterationRecord| {})
+    }
+
+    /// See [`PoseGraph::update_with`].
+    pub fn update_with(
+        &mut self,
+        options: &Options,
+        observer: &mut dyn Observer,
+    ) -> Result<AnySolution, Error> {
+        match self {
+            Self::Planar(g) => g.update_with(options, observer).map(AnySolution::Planar),
+            Self::Spatial(g) => g.update_with(options, observer).map(AnySolution::Spatial),
+        }
+    }
+
+    /// See [`PoseGraph::forget`].
+    pub fn forget(&mut self) {
+        either!(self, |g| g.forget())
     }
 }
 

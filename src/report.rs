@@ -59,6 +59,65 @@ pub struct Report {
     pub plots: Vec<String>,
     /// Warnings, one line each.
     pub warnings: Vec<String>,
+    /// What an incremental update did ([`crate::PoseGraph::update`]);
+    /// absent from a batch job's report.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub incremental: Option<IncrementalReport>,
+}
+
+/// How an incremental update ([`crate::PoseGraph::update`]) reached its
+/// map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum UpdateSolve {
+    /// The whole job from scratch: the first update, or the first after
+    /// the kept state was invalidated (`reason` says which).
+    Batch,
+    /// Nothing was added since the last update: its solution stands.
+    None,
+    /// Only new poses, each hung on the map by one trusted edge: they are
+    /// composed from it and the rest of the map is unchanged, which is
+    /// exactly the optimum; no factorisation.
+    Extended,
+    /// From the last solution (new poses composed along trusted edges) and
+    /// the last decisions: EM's decisions by innovation and its χ² search
+    /// until the accepted set repeats — no annealing.
+    Warm,
+    /// From the last solution, every candidate weighed again by the robust
+    /// kernel (a kernel method, or fewer candidates than EM's model needs).
+    Full,
+}
+
+/// What an incremental update added and changed.
+#[derive(Clone, Debug, Serialize)]
+pub struct IncrementalReport {
+    /// How the map was reached.
+    pub solve: UpdateSolve,
+    /// Why that way, in a few words.
+    pub reason: String,
+    /// Poses added since the last update.
+    pub new_poses: usize,
+    /// Edges (loop candidates included) added since the last update.
+    pub new_edges: usize,
+    /// Loop candidates among them.
+    pub new_candidates: usize,
+    /// The earlier candidates whose decision this update changed.
+    pub changed: Vec<DecisionChange>,
+}
+
+/// An earlier loop candidate's decision that an update changed.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct DecisionChange {
+    /// Its index, as [`crate::PoseGraph::add_loop_candidate`] returned it.
+    pub index: usize,
+    /// Its first vertex id.
+    pub from: VertexId,
+    /// Its second vertex id.
+    pub to: VertexId,
+    /// Whether it is in the map now (it was not before, or the reverse).
+    pub accepted: bool,
+    /// Why it ends where it does now.
+    pub reason: Reason,
 }
 
 /// What the gate did.
@@ -380,6 +439,7 @@ impl Report {
             loops: Vec::new(),
             plots: Vec::new(),
             warnings: read.warnings.clone(),
+            incremental: None,
         }
     }
 

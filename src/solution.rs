@@ -4,7 +4,7 @@
 use crate::geometry::Pose;
 use crate::graph::{self, VertexId};
 use crate::pose_graph::sealed::Sealed;
-use crate::report::Report;
+use crate::report::{IncrementalReport, Report};
 pub use crate::robust::Reason;
 use crate::stats::Chi2Test;
 use std::collections::HashMap;
@@ -85,6 +85,13 @@ impl<P> Solution<P> {
 }
 
 impl<P> Solution<P> {
+    /// What an incremental update ([`crate::PoseGraph::update`]) did:
+    /// how it reached the map and which earlier decisions it changed
+    /// (`None` for [`crate::PoseGraph::optimize`]).
+    pub fn incremental(&self) -> Option<&IncrementalReport> {
+        self.report.incremental.as_ref()
+    }
+
     /// The optimised pose with this id.
     pub fn pose(&self, id: VertexId) -> Option<&P> {
         self.index.get(&id).map(|&k| &self.poses[k])
@@ -187,5 +194,10 @@ impl AnySolution {
     /// See [`Solution::report`].
     pub fn report(&self) -> &Report {
         either!(self, |s| s.report())
+    }
+
+    /// See [`Solution::incremental`].
+    pub fn incremental(&self) -> Option<&IncrementalReport> {
+        either!(self, |s| s.incremental())
     }
 }

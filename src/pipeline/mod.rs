@@ -4,6 +4,9 @@
 
 mod candidates;
 mod finish;
+mod incremental;
+
+pub(crate) use incremental::{Warm, update_graph};
 
 use crate::gate::{DegeneratePolicy, GateMode, MixtureOptions};
 use crate::graph::{AnyPoseGraph, PoseGraph};
@@ -176,6 +179,7 @@ fn initialization_name(i: Initialization) -> &'static str {
         Initialization::File => "file",
         Initialization::Odometry => "odometry",
         Initialization::Chordal => "chordal",
+        Initialization::Previous => "previous",
     }
 }
 

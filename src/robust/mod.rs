@@ -231,6 +231,25 @@ pub struct Outcome {
     pub cut_short: bool,
 }
 
+impl Outcome {
+    /// Nothing decided yet about `n` candidates.
+    fn new(n: usize) -> Self {
+        Self {
+            accepted: vec![false; n],
+            weights: vec![0.0; n],
+            posteriors: vec![None; n],
+            innovations: vec![None; n],
+            reasons: vec![Reason::Gated; n],
+            model: None,
+            rounds: 0,
+            decisions: 0,
+            clusters: 0,
+            search: None,
+            cut_short: false,
+        }
+    }
+}
+
 /// Solves for the map with the candidates weighed by `method` (kernel
 /// width `c`), leaving the map in the session's graph and the weights in
 /// `weights` (one per edge: the trusted edges stay 1). `test` is the χ²
@@ -250,19 +269,7 @@ pub fn solve<P: ChordalInit<D>, const D: usize>(
     for cand in candidates {
         weights[cand.edge] = if cand.kept { 1.0 } else { 0.0 };
     }
-    let mut out = Outcome {
-        accepted: vec![false; n],
-        weights: vec![0.0; n],
-        posteriors: vec![None; n],
-        innovations: vec![None; n],
-        reasons: vec![Reason::Gated; n],
-        model: None,
-        rounds: 0,
-        decisions: 0,
-        clusters: 0,
-        search: None,
-        cut_short: false,
-    };
+    let mut out = Outcome::new(n);
     let kept: Vec<usize> = candidates
         .iter()
         .filter(|c| c.kept)
@@ -356,6 +363,54 @@ fn em<P: ChordalInit<D>, const D: usize>(
         out.cut_short = true;
         return Ok(());
     }
+    settle(session, weights, candidates, layers, test, out)
+}
+
+/// Re-decides every candidate from an earlier solution: the decisions by
+/// innovation and the χ² search of EM, started from the accepted set in
+/// `weights` (1 accepted, 0 not) and the map in the session's graph —
+/// instead of the annealing, whose work the earlier decisions did. With a
+/// method other than EM, or too few candidates for EM's model, every
+/// candidate is weighed again by [`solve`] from the map as it is.
+/// Returns the outcome and whether it was that full re-weighing.
+#[allow(clippy::too_many_arguments)]
+pub fn resume<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    candidates: &[Candidate],
+    method: RobustMethod,
+    c: f64,
+    layers: &Layers,
+    test: &Test<'_, P, D>,
+) -> Result<(Outcome, bool), SolveError> {
+    if method != RobustMethod::Em || candidates.len() < MIN_CANDIDATES {
+        let out = solve(session, false, weights, candidates, method, c, layers, test)?;
+        return Ok((out, method != RobustMethod::None));
+    }
+    let mut out = Outcome::new(candidates.len());
+    if session.exhausted() {
+        session.run(weights, 0)?;
+        out.cut_short = true;
+    } else {
+        settle(session, weights, candidates, layers, test, &mut out)?;
+    }
+    for (k, cand) in candidates.iter().enumerate() {
+        out.weights[k] = weights[cand.edge];
+        out.accepted[k] = weights[cand.edge] >= 0.5;
+    }
+    Ok((out, false))
+}
+
+/// EM from an accepted set: decisions by innovation until the set repeats,
+/// the χ² search, and each candidate's posterior and reason.
+fn settle<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    candidates: &[Candidate],
+    layers: &Layers,
+    test: &Test<'_, P, D>,
+    out: &mut Outcome,
+) -> Result<(), SolveError> {
     let mut decided = schedule::decide(session, weights, candidates, Scale::Learned, layers)?;
     let mut search = explain(session, weights, candidates, &mut decided, layers, test)?;
     // A failed test no cluster explains: decide again from the trusted

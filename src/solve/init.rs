@@ -33,6 +33,10 @@ pub enum Initialization {
     /// Chordal relaxation of the rotations, then linear translations.
     #[default]
     Chordal,
+    /// The poses as they are: the last solution of an incremental update
+    /// ([`crate::PoseGraph::update`]), new poses composed along a spanning
+    /// tree. Not a command-line choice.
+    Previous,
 }
 
 /// Pose types that have a chordal initialisation.
@@ -73,6 +77,7 @@ pub fn initialize<P: ChordalInit<D>, const D: usize>(
             Ok(())
         }
         Initialization::Chordal => P::chordal(graph, weights),
+        Initialization::Previous => Ok(()),
     }
 }
 

@@ -1,0 +1,294 @@
+//! The job again on a graph that grew since its last solution
+//! ([`crate::PoseGraph::update`]): the last map and decisions are the
+//! start, new poses are composed along trusted edges, and only as much is
+//! solved as the additions need.
+//!
+//! 1. Nothing added: the last solution stands.
+//! 2. Only new poses, each hung on the map by one trusted edge (odometry
+//!    to a new keyframe): composing them gives the optimum exactly, since
+//!    each new edge can be met with zero error and leaves the rest of the
+//!    map's optimality conditions untouched.
+//! 3. Otherwise the gate is learned again from every count (a 1-D EM,
+//!    cheap beside a factorisation, and what a batch job would find), and
+//!    EM decides every candidate by its innovation starting from the last
+//!    accepted set and the last map ([`robust::resume`]): the decisions
+//!    the new evidence does not touch come back as they were after one
+//!    solve and one evaluation; the χ² search acts on a failed test as in
+//!    the batch job.
+
+use super::{OptimizeConfig, PipelineError, candidates, finish};
+use crate::graph::PoseGraph;
+use crate::io::g2o::G2oPose;
+use crate::report::{
+    DecisionChange, IncrementalReport, InitializationReport, OptimizerReport, Report, UpdateSolve,
+};
+use crate::robust::{self, RobustMethod};
+use crate::solve::init::{ChordalInit, Initialization, spanning_tree};
+use crate::solve::{Budget, Observer, Optimizer, Session, SolverOptions};
+use std::time::Instant;
+
+/// An update's solves stop once an iteration lowers the objective by less
+/// than this share of it (a batch job's: 10⁻⁹). From the last map,
+/// Gauss–Newton converges quadratically: the iteration that lowers the
+/// objective by less than 10⁻⁶ of it leaves it within about the square of
+/// that of the optimum, far inside the 10⁻⁶ by which an update may differ
+/// from a batch job; the iteration a 10⁻⁹ tolerance adds (4 instead of 3
+/// factorisations an update on city10000) buys nothing measurable.
+pub const UPDATE_TOLERANCE: f64 = 1e-6;
+
+/// What a graph keeps between updates: the last solution's poses (of its
+/// first `poses.len()` vertices), how many edges it had, whether each
+/// candidate edge was accepted, and the last report (returned again when
+/// nothing was added). Its memory is that of the poses, one byte per edge
+/// and the report (about 100 bytes per loop candidate).
+#[derive(Clone, Debug)]
+pub(crate) struct Warm<P> {
+    poses: Vec<P>,
+    edges: usize,
+    /// Per edge: `Some(accepted)` for a loop candidate, `None` for a
+    /// trusted edge.
+    accepted: Vec<Option<bool>>,
+    report: Report,
+}
+
+impl<P: Clone> Warm<P> {
+    /// The state after a job on `graph` that made `report`.
+    pub(crate) fn after<const D: usize>(graph: &PoseGraph<P, D>, report: &Report) -> Self
+    where
+        P: crate::geometry::Pose<D>,
+    {
+        let mut accepted = vec![None; graph.edges.len()];
+        let candidates = (0..graph.edges.len()).filter(|&k| graph.edges[k].is_candidate());
+        for (k, l) in candidates.zip(&report.loops) {
+            accepted[k] = Some(l.accepted);
+        }
+        Self {
+            poses: graph.poses.clone(),
+            edges: graph.edges.len(),
+            accepted,
+            report: report.clone(),
+        }
+    }
+}
+
+/// Solves `graph` again from the state `warm` of its last solution (see
+/// the module doc), leaving the map in `graph` and filling `report`.
+/// Returns the state to keep.
+pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
+    graph: &mut PoseGraph<P, D>,
+    warm: &Warm<P>,
+    config: &OptimizeConfig,
+    report: &mut Report,
+    observer: &mut dyn Observer,
+) -> Result<Warm<P>, PipelineError> {
+    let start = Instant::now();
+    let added = place(graph, warm);
+    candidates::mark(graph, config.candidates);
+    let new_candidates = (warm.edges..graph.edges.len())
+        .filter(|&k| graph.edges[k].is_candidate())
+        .count();
+    let mut step = IncrementalReport {
+        solve: UpdateSolve::Warm,
+        reason: String::new(),
+        new_poses: graph.num_vertices() - warm.poses.len(),
+        new_edges: graph.edges.len() - warm.edges,
+        new_candidates,
+        changed: Vec::new(),
+    };
+    if step.new_edges == 0 && step.new_poses == 0 {
+        *report = warm.report.clone();
+        step.solve = UpdateSolve::None;
+        step.reason = "nothing added".into();
+        report.incremental = Some(step);
+        return Ok(warm.clone());
+    }
+    if new_candidates == 0 && added.all_by_tree {
+        extended(graph, warm, config, report, start);
+        step.solve = UpdateSolve::Extended;
+        step.reason = "only poses hung on the map by one trusted edge each".into();
+        report.incremental = Some(step);
+        return Ok(Warm::after(graph, report));
+    }
+    let (full, previous) = resolve(graph, warm, config, report, observer, start)?;
+    step.solve = if full {
+        UpdateSolve::Full
+    } else {
+        UpdateSolve::Warm
+    };
+    step.reason = match (full, config.robust) {
+        (false, _) if report.loops.is_empty() => "new edges: solved from the last map".into(),
+        (false, _) => "new edges: EM's decisions from the last ones".into(),
+        (true, RobustMethod::Em) => format!(
+            "fewer than {} candidates: every one weighed again by the kernel",
+            robust::MIN_CANDIDATES
+        ),
+        (true, m) => format!("every candidate weighed again by {}", m.name()),
+    };
+    let candidate_edges = (0..graph.edges.len()).filter(|&k| graph.edges[k].is_candidate());
+    for (k, l) in candidate_edges.zip(&report.loops) {
+        if previous[k].is_some_and(|a| a != l.accepted) {
+            step.changed.push(DecisionChange {
+                index: k,
+                from: l.from,
+                to: l.to,
+                accepted: l.accepted,
+                reason: l.reason,
+            });
+        }
+    }
+    report.incremental = Some(step);
+    Ok(Warm::after(graph, report))
+}
+
+/// How the new poses were placed.
+struct Placed {
+    /// Whether every new edge is trusted and placed a new pose (so that
+    /// the map stays optimal without a solve).
+    all_by_tree: bool,
+}
+
+/// Puts the last solution's poses back and composes every new pose along
+/// trusted edges from them (a pose no trusted edge reaches keeps the
+/// caller's).
+fn place<P: G2oPose<D>, const D: usize>(graph: &mut PoseGraph<P, D>, warm: &Warm<P>) -> Placed {
+    let old = warm.poses.len();
+    graph.poses[..old].clone_from_slice(&warm.poses);
+    let trusted: Vec<f64> = (graph.edges.iter())
+        .map(|e| if e.is_candidate() { 0.0 } else { 1.0 })
+        .collect();
+    let mut known: Vec<bool> = (0..graph.num_vertices()).map(|k| k < old).collect();
+    spanning_tree(graph, &mut known, Some(&trusted));
+    let new_edges = &graph.edges[warm.edges..];
+    Placed {
+        all_by_tree: known.iter().all(|&k| k)
+            && new_edges.len() == graph.num_vertices() - old
+            && new_edges.iter().all(|e| !e.is_candidate()),
+    }
+}
+
+/// The report of an extension: the last decisions, the χ² test at the
+/// composed map (it changes neither D² nor the degrees of freedom).
+fn extended<P: G2oPose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    warm: &Warm<P>,
+    config: &OptimizeConfig,
+    report: &mut Report,
+    start: Instant,
+) {
+    let weights: Vec<f64> = (0..graph.edges.len())
+        .map(|k| match warm.accepted.get(k).copied().flatten() {
+            Some(false) => 0.0,
+            _ => 1.0,
+        })
+        .collect();
+    let chi2 = graph.chi2();
+    report.gate = warm.report.gate.clone();
+    report.robust = warm.report.robust.clone();
+    report.loops = warm.report.loops.clone();
+    report.input_chi2 = chi2;
+    report.initialization = InitializationReport {
+        method: Initialization::Previous,
+        chi2,
+        time_s: start.elapsed().as_secs_f64(),
+        vertices_without_line: 0,
+    };
+    report.optimizer = OptimizerReport {
+        solver: warm.report.optimizer.solver,
+        initial_chi2: chi2,
+        final_chi2: chi2,
+        initial_objective: chi2,
+        final_objective: chi2,
+        converged: true,
+        ..OptimizerReport::default()
+    };
+    match finish::chi2_test(graph, &weights, config) {
+        Ok(t) => report.chi2_test = Some(t),
+        Err(e) => report.warnings.push(format!("no χ² test: {e}")),
+    }
+}
+
+/// The gate, and the robust solve from the last decisions. Returns whether
+/// every candidate was weighed again, and each edge's earlier decision.
+fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
+    graph: &mut PoseGraph<P, D>,
+    warm: &Warm<P>,
+    config: &OptimizeConfig,
+    report: &mut Report,
+    observer: &mut dyn Observer,
+    start: Instant,
+) -> Result<(bool, Vec<Option<bool>>), PipelineError> {
+    let solve_error = |source| PipelineError::Solve {
+        path: config.input.clone(),
+        source,
+    };
+    let candidates = candidates::gate(graph, config, report);
+    let method = if candidates.iter().any(|c| c.kept) {
+        config.robust
+    } else {
+        RobustMethod::None
+    };
+    let mut previous = warm.accepted.clone();
+    previous.resize(graph.edges.len(), None);
+    // The start: the last accepted set, and what joins new parts to it.
+    let mut weights = candidates::initial_weights(graph, &candidates, method == RobustMethod::None);
+    for c in &candidates {
+        if previous[c.edge] == Some(true) {
+            weights[c.edge] = 1.0;
+        }
+    }
+    let solver = SolverOptions {
+        relative_tolerance: UPDATE_TOLERANCE,
+        ..config.solver.clone()
+    };
+    let mut optimizer =
+        Optimizer::new(graph, Some(&weights), solver.clone()).map_err(solve_error)?;
+    let initial_chi2 = graph.chi2();
+    report.input_chi2 = initial_chi2;
+    report.initialization = InitializationReport {
+        method: Initialization::Previous,
+        chi2: initial_chi2,
+        time_s: start.elapsed().as_secs_f64(),
+        vertices_without_line: 0,
+    };
+    let budget = Budget {
+        iterations: config.iteration_budget.unwrap_or(usize::MAX),
+        deadline: config.solver.time_limit.map(|t| Instant::now() + t),
+    };
+    let c = config
+        .robust_c
+        .unwrap_or_else(|| robust::default_c(method, D));
+    let test = |g: &PoseGraph<P, D>, w: &[f64]| finish::chi2_test(g, w, config).ok();
+    let mut session = Session::new(&mut optimizer, graph, solver, budget, observer);
+    let (outcome, full) = robust::resume(
+        &mut session,
+        &mut weights,
+        &candidates,
+        method,
+        c,
+        &config.layers,
+        &test,
+    )
+    .map_err(solve_error)?;
+    let summary = session.finish(outcome.cut_short);
+    if graph.poses.iter().any(|p| !p.is_finite()) {
+        return Err(PipelineError::NonFiniteResult {
+            path: config.input.clone(),
+        });
+    }
+    match finish::chi2_test(graph, &weights, config) {
+        Ok(t) => report.chi2_test = Some(t),
+        Err(e) => report.warnings.push(format!("no χ² test: {e}")),
+    }
+    finish::report(
+        graph,
+        &optimizer,
+        summary,
+        initial_chi2,
+        &candidates,
+        &outcome,
+        method,
+        c,
+        report,
+    );
+    Ok((full, previous))
+}

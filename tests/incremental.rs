@@ -1,0 +1,272 @@
+//! Incremental solving as an online front end uses it: poses, edges and
+//! loop candidates added a few at a time, `update` after each batch of
+//! them. The last update's map and decisions are a batch job's; each
+//! update says how it solved and which earlier decisions it changed.
+//! Runs with any features.
+
+use pgo::nalgebra::{Matrix3, SMatrix};
+use pgo::{
+    Cancel, Options, Pose, PoseGraph, PoseGraph2, Se2, Se3, Solution, StopReason, UpdateSolve,
+};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+fn sample(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("g2o_samples")
+        .join(name)
+}
+
+/// One line of a g2o file as a front end would send it.
+enum Addition<P, const D: usize> {
+    Pose(u64, P),
+    Edge(u64, u64, P, SMatrix<f64, D, D>, Option<u64>),
+}
+
+/// The additions of a g2o file in the order a front end makes them: each
+/// pose, then the edges whose later end it is.
+fn additions<P: Pose<D>, const D: usize>(
+    path: &Path,
+    pose: fn(&[f64]) -> P,
+) -> Vec<Vec<Addition<P, D>>> {
+    let numbers = if D == 3 { 3 } else { 7 };
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut steps: Vec<Vec<Addition<P, D>>> = Vec::new();
+    let mut step_of: HashMap<u64, usize> = HashMap::new();
+    let mut edges = Vec::new();
+    for line in text.lines() {
+        let t: Vec<&str> = line.split_whitespace().collect();
+        let f = |r: &[&str]| -> Vec<f64> { r.iter().map(|x| x.parse().unwrap()).collect() };
+        match t.first() {
+            Some(tag) if tag.starts_with("VERTEX") => {
+                let id = t[1].parse().unwrap();
+                step_of.insert(id, steps.len());
+                steps.push(vec![Addition::Pose(id, pose(&f(&t[2..])))]);
+            }
+            Some(tag) if tag.starts_with("EDGE") => {
+                let (from, to) = (t[1].parse().unwrap(), t[2].parse().unwrap());
+                let info_end = 3 + numbers + D * (D + 1) / 2;
+                let v = f(&t[3 + numbers..info_end]);
+                let mut info = SMatrix::<f64, D, D>::zeros();
+                let mut k = 0;
+                for r in 0..D {
+                    for c in r..D {
+                        (info[(r, c)], info[(c, r)]) = (v[k], v[k]);
+                        k += 1;
+                    }
+                }
+                let count = t.get(info_end).map(|n| n.parse().unwrap());
+                let z = pose(&f(&t[3..3 + numbers]));
+                edges.push(Addition::Edge(from, to, z, info, count));
+            }
+            _ => {}
+        }
+    }
+    for e in edges {
+        if let Addition::Edge(from, to, ..) = &e {
+            let due = step_of[from].max(step_of[to]);
+            steps[due].push(e);
+        }
+    }
+    steps
+}
+
+fn apply<P: pgo::GraphPose<D>, const D: usize>(g: &mut PoseGraph<P, D>, a: Addition<P, D>) {
+    match a {
+        Addition::Pose(id, p) => g.add_pose(id, p).unwrap(),
+        Addition::Edge(i, j, z, info, None) => {
+            g.add_edge(i, j, z, info).unwrap();
+        }
+        Addition::Edge(i, j, z, info, count) => {
+            g.add_loop_candidate(i, j, z, info, count).unwrap();
+        }
+    }
+}
+
+fn accepted<P>(s: &Solution<P>) -> Vec<usize> {
+    (s.loops().iter().filter(|d| d.accepted))
+        .map(|d| d.index)
+        .collect()
+}
+
+/// Replays `file` with an update every `every` poses; checks each update's
+/// account of itself, and the last one against a batch job.
+fn replay<P: pgo::GraphPose<D>, const D: usize>(
+    file: &str,
+    pose: fn(&[f64]) -> P,
+    every: usize,
+) -> Vec<UpdateSolve> {
+    let options = Options::default();
+    let steps = additions::<P, D>(&sample(file), pose);
+    let n = steps.len();
+    let mut g = PoseGraph::<P, D>::new();
+    let (mut kinds, mut last): (Vec<UpdateSolve>, Option<Solution<P>>) = (Vec::new(), None);
+    for (k, step) in steps.into_iter().enumerate() {
+        step.into_iter().for_each(|a| apply(&mut g, a));
+        if (k + 1) % every != 0 && k + 1 != n {
+            continue;
+        }
+        let s = g.update(&options).unwrap();
+        let inc = s.incremental().unwrap().clone();
+        kinds.push(inc.solve);
+        // `changed` lists exactly the earlier candidates whose decision
+        // differs from the last update's.
+        if let Some(prev) = &last {
+            let before: HashMap<usize, bool> =
+                prev.loops().iter().map(|d| (d.index, d.accepted)).collect();
+            let flipped: Vec<usize> = (s.loops().iter())
+                .filter(|d| before.get(&d.index).is_some_and(|&a| a != d.accepted))
+                .map(|d| d.index)
+                .collect();
+            let listed: Vec<usize> = inc.changed.iter().map(|c| c.index).collect();
+            assert_eq!(flipped, listed, "{file}: update at {} poses", k + 1);
+        }
+        last = Some(s);
+    }
+    let last = last.unwrap();
+    let batch = g.optimize(&options).unwrap();
+    assert!(batch.incremental().is_none());
+    let rel = (last.chi2() / batch.chi2() - 1.0).abs();
+    assert!(rel < 1e-6, "{file} every {every}: χ² {rel:e} from batch");
+    assert_eq!(accepted(&last), accepted(&batch), "{file} every {every}");
+    assert_eq!(last.passed(), batch.passed());
+    for ((id, p), (_, q)) in last.poses().zip(batch.poses()) {
+        let d = p.inverse().compose(q).log();
+        assert!(d.amax() < 1e-5, "{file} every {every}: vertex {id} {d:?}");
+    }
+    kinds
+}
+
+fn se2(v: &[f64]) -> Se2 {
+    Se2::new(v[0], v[1], v[2])
+}
+
+fn se3(v: &[f64]) -> Se3 {
+    Se3::from_translation_quaternion([v[0], v[1], v[2]], [v[3], v[4], v[5], v[6]]).unwrap()
+}
+
+#[test]
+fn a_replay_ends_with_the_batch_map_and_decisions() {
+    for every in [7, 60] {
+        let kinds = replay::<Se2, 3>("aliased.g2o", se2, every);
+        assert_eq!(kinds[0], UpdateSolve::Batch);
+        assert!(kinds[1..].iter().all(|k| *k != UpdateSolve::Batch));
+        assert!(kinds.contains(&UpdateSolve::Warm));
+    }
+    let kinds = replay::<Se2, 3>("grid2d.g2o", se2, 25);
+    assert!(kinds.contains(&UpdateSolve::Warm));
+    replay::<Se3, 6>("sphere3d.g2o", se3, 100);
+}
+
+/// A walk along x from the origin, odometry 1 m forward (the other poses
+/// start off the line).
+fn walk(n: u64) -> PoseGraph2 {
+    let mut g = PoseGraph2::new();
+    for k in 0..n {
+        let off = if k == 0 { 0.0 } else { 0.1 };
+        g.add_pose(k, Se2::new(0.3 * k as f64, off, off)).unwrap();
+        if k > 0 {
+            (g.add_edge(k - 1, k, Se2::new(1.0, 0.0, 0.0), Matrix3::identity())).unwrap();
+        }
+    }
+    g
+}
+
+#[test]
+fn odometry_alone_is_composed_without_a_factorisation() {
+    let options = Options::default();
+    let mut g = walk(5);
+    let first = g.update(&options).unwrap();
+    assert_eq!(first.incremental().unwrap().solve, UpdateSolve::Batch);
+    for k in 5..8 {
+        g.add_pose(k, Se2::new(-4.0, 2.0, 1.0)).unwrap();
+        (g.add_edge(k - 1, k, Se2::new(1.0, 0.0, 0.0), Matrix3::identity())).unwrap();
+    }
+    let s = g.update(&options).unwrap();
+    let inc = s.incremental().unwrap();
+    assert_eq!(inc.solve, UpdateSolve::Extended);
+    assert_eq!(
+        (inc.new_poses, inc.new_edges, inc.new_candidates),
+        (3, 3, 0)
+    );
+    assert_eq!(s.report().optimizer.factorizations, 0);
+    for k in 0..8 {
+        let p = s.pose(k).unwrap();
+        assert!(
+            (p.x - k as f64).abs() < 1e-9 && p.y.abs() < 1e-9,
+            "{k}: {p:?}"
+        );
+    }
+    assert!(s.chi2() < 1e-20);
+    // A second edge to a new pose is no tree: solved.
+    g.add_pose(8, Se2::new(0.0, 0.0, 0.0)).unwrap();
+    (g.add_edge(7, 8, Se2::new(1.0, 0.0, 0.0), Matrix3::identity())).unwrap();
+    (g.add_edge(6, 8, Se2::new(2.2, 0.0, 0.0), Matrix3::identity())).unwrap();
+    let s = g.update(&options).unwrap();
+    assert_eq!(s.incremental().unwrap().solve, UpdateSolve::Warm);
+    assert!(s.report().optimizer.factorizations > 0);
+    assert!(s.chi2() > 0.0);
+}
+
+#[test]
+fn nothing_added_returns_the_last_solution() {
+    let options = Options::default();
+    let mut g = walk(6);
+    (g.add_edge(0, 5, Se2::new(5.1, 0.0, 0.0), Matrix3::identity())).unwrap();
+    let a = g.update(&options).unwrap();
+    let b = g.update(&options).unwrap();
+    assert_eq!(b.incremental().unwrap().solve, UpdateSolve::None);
+    assert_eq!(a.chi2().to_bits(), b.chi2().to_bits());
+    for ((_, p), (_, q)) in a.poses().zip(b.poses()) {
+        assert_eq!(p, q);
+    }
+}
+
+#[test]
+fn other_options_a_new_gauge_or_forget_start_again() {
+    let options = Options::default();
+    let mut g = walk(4);
+    g.update(&options).unwrap();
+    g.add_pose(4, Se2::new(4.0, 0.0, 0.0)).unwrap();
+    (g.add_edge(3, 4, Se2::new(1.0, 0.0, 0.0), Matrix3::identity())).unwrap();
+    let mut other = options.clone();
+    other.test.alpha = 0.01;
+    let s = g.update(&other).unwrap();
+    let inc = s.incremental().unwrap();
+    assert_eq!(
+        (inc.solve, inc.reason.as_str()),
+        (UpdateSolve::Batch, "options changed")
+    );
+    assert_eq!(
+        g.update(&other).unwrap().incremental().unwrap().solve,
+        UpdateSolve::None
+    );
+    g.fix(2).unwrap();
+    assert_eq!(
+        g.update(&other).unwrap().incremental().unwrap().solve,
+        UpdateSolve::Batch
+    );
+    g.forget();
+    assert_eq!(
+        g.update(&other).unwrap().incremental().unwrap().solve,
+        UpdateSolve::Batch
+    );
+}
+
+#[test]
+fn a_cancelled_update_keeps_the_earlier_state() {
+    let options = Options::default();
+    let mut g = walk(10);
+    g.update(&options).unwrap();
+    (g.add_edge(0, 9, Se2::new(9.3, 0.2, 0.0), Matrix3::identity())).unwrap();
+    let cancel = Cancel::new();
+    cancel.cancel();
+    let s = g.update_with(&options, &mut cancel.clone()).unwrap();
+    assert_eq!(s.report().optimizer.stop_reason, StopReason::Cancelled);
+    // The next update starts from the state before the cancelled one.
+    let s = g.update(&options).unwrap();
+    let inc = s.incremental().unwrap();
+    assert_eq!((inc.solve, inc.new_edges), (UpdateSolve::Warm, 1));
+    let batch = g.optimize(&options).unwrap();
+    assert!((s.chi2() / batch.chi2() - 1.0).abs() < 1e-6);
+}
