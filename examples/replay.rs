@@ -140,11 +140,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if verbose {
             let o = &solution.report().optimizer;
             println!(
-                "{:>7} poses  {name:<8} {ms:8.2} ms  {} iterations, {} factorisations ({:.2} ms)",
+                "{:>7} poses  {name:<8} {ms:8.2} ms  {} iterations, {} factorisations ({:.2} ms), optimiser {:.2} ms",
                 k + 1,
                 o.iterations,
                 o.factorizations,
-                o.timing.factorize_s * 1e3
+                o.timing.factorize_s * 1e3,
+                o.time_s * 1e3
             );
         }
         last = Some(solution);
