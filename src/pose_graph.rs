@@ -425,15 +425,6 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// [`Error::Undetermined`], [`Error::NonFiniteEdge`],
     /// [`Error::NonFinite`], [`Error::Threads`], [`Error::Internal`].
     pub fn optimize(&self, options: &Options) -> Result<Solution<P>, Error> {
-        let mut trace = |r: &IterationRecord| {
-            log::trace!(
-                "iteration {}: χ² {:e}, λ {:e}, |δ|∞ {:e}",
-                r.iteration,
-                r.objective,
-                r.lambda,
-                r.step_max
-            )
-        };
         self.optimize_with(options, &mut trace)
     }
 
@@ -512,7 +503,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// # Ok::<(), pgo::Error>(())
     /// ```
     pub fn update(&mut self, options: &Options) -> Result<Solution<P>, Error> {
-        self.update_with(options, &mut |_: &IterationRecord| {})
+        self.update_with(options, &mut trace)
     }
 
     /// [`PoseGraph::update`] reporting every solver iteration to
@@ -583,6 +574,18 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         }
         Ok((report, OptimizeConfig::from_options(input, options)))
     }
+}
+
+/// The observer of `optimize` and `update`: every iteration to
+/// `log::trace!`.
+fn trace(r: &IterationRecord) {
+    log::trace!(
+        "iteration {}: χ² {:e}, λ {:e}, |δ|∞ {:e}",
+        r.iteration,
+        r.objective,
+        r.lambda,
+        r.step_max
+    )
 }
 
 /// The dimension (2 or 3) of poses with `D` degrees of freedom.
@@ -862,9 +865,21 @@ impl AnyPoseGraph {
         }
     }
 
+    /// See [`PoseGraph::optimize_with`].
+    pub fn optimize_with(
+        &self,
+        options: &Options,
+        observer: &mut dyn Observer,
+    ) -> Result<AnySolution, Error> {
+        match self {
+            Self::Planar(g) => g.optimize_with(options, observer).map(AnySolution::Planar),
+            Self::Spatial(g) => g.optimize_with(options, observer).map(AnySolution::Spatial),
+        }
+    }
+
     /// See [`PoseGraph::update`].
     pub fn update(&mut self, options: &Options) -> Result<AnySolution, Error> {
-        self.update_with(options, &mut |_: &IterationRecord| {})
+        self.update_with(options, &mut trace)
     }
 
     /// See [`PoseGraph::update_with`].
