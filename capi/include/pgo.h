@@ -106,6 +106,41 @@ typedef enum PgoStatus {
 } PgoStatus;
 
 /**
+ * How a result was reached (`PgoUpdate.solve`).
+ */
+typedef enum PgoUpdateSolve {
+  /**
+   * Not an update: the result of `pgo_graph_optimize`.
+   */
+  PGO_NOT_AN_UPDATE = 0,
+  /**
+   * The whole job from scratch: the first update, the first with
+   * other options, or the first after `pgo_graph_fix` or
+   * `pgo_graph_forget` (`pgo_result_update_reason` says which).
+   */
+  PGO_UPDATE_BATCH,
+  /**
+   * Nothing was added since the last update: its map stands.
+   */
+  PGO_UPDATE_NONE,
+  /**
+   * Only new poses, each hung on the map by one trusted edge: composed
+   * from the map, which is otherwise unchanged; nothing solved.
+   */
+  PGO_UPDATE_EXTENDED,
+  /**
+   * From the last map and decisions: EM's decisions by innovation and
+   * its χ² search, without annealing.
+   */
+  PGO_UPDATE_WARM,
+  /**
+   * From the last map, every candidate weighed again by the robust
+   * kernel (a kernel method, or fewer candidates than EM's model needs).
+   */
+  PGO_UPDATE_FULL,
+} PgoUpdateSolve;
+
+/**
  * A pose graph (opaque): SE(2) or SE(3) poses with ids, trusted edges,
  * loop-closure candidates with their inlier counts, and the poses held
  * fixed. Poses and measurements are their g2o numbers — `x y θ` in 2D,
@@ -114,30 +149,87 @@ typedef enum PgoStatus {
  *
  * Made by `pgo_graph_new` or `pgo_graph_read_g2o`, owned by the caller,
  * freed by `pgo_graph_free`. A graph may be read (optimised, written) by
- * several threads at once, but not changed while anything else uses it.
+ * several threads at once, but not changed (added to, updated, forgotten)
+ * while anything else uses it. It keeps the last `pgo_graph_update`'s
+ * poses and decisions, which the next update starts from.
  */
 typedef struct PgoGraph PgoGraph;
 
 /**
- * The options of `pgo_graph_optimize` (opaque): the gate, the robust
- * back end, the solver and the χ² test, each set by the long flag
- * `pgo optimize` spells it with.
+ * The options of `pgo_graph_optimize` and `pgo_graph_update` (opaque):
+ * the gate, the robust back end, the solver and the χ² test, each set by
+ * the long flag `pgo optimize` spells it with.
  *
  * Made by `pgo_options_new`, owned by the caller, freed by
- * `pgo_options_free`. Passing NULL to `pgo_graph_optimize` means the
- * defaults.
+ * `pgo_options_free`. Passing NULL to `pgo_graph_optimize` or
+ * `pgo_graph_update` means the defaults.
  */
 typedef struct PgoOptions PgoOptions;
 
 /**
- * What `pgo_graph_optimize` returns (opaque): the optimised poses by id,
- * one decision per loop candidate, χ², the χ² test's verdict and the
- * report `pgo optimize --json` prints.
+ * What `pgo_graph_optimize` or `pgo_graph_update` returns (opaque): the
+ * optimised poses by id, one decision per loop candidate, χ², the χ²
+ * test's verdict, the report `pgo optimize --json` prints and, for an
+ * update, what it did (`pgo_result_update`).
  *
  * Owned by the caller, freed by `pgo_result_free`; the strings it hands
  * out live as long as it. It may be read by several threads at once.
  */
 typedef struct PgoResult PgoResult;
+
+/**
+ * What an update did (a plain struct the caller owns, filled by
+ * `pgo_result_update`); all zero (`PGO_NOT_AN_UPDATE`) for the result of
+ * `pgo_graph_optimize`.
+ */
+typedef struct PgoUpdate {
+  /**
+   * How the map was reached.
+   */
+  enum PgoUpdateSolve solve;
+  /**
+   * Poses added since the last update (a batch update: all of them).
+   */
+  size_t new_poses;
+  /**
+   * Edges, loop candidates included, added since the last update.
+   */
+  size_t new_edges;
+  /**
+   * Loop candidates among them.
+   */
+  size_t new_candidates;
+  /**
+   * Earlier loop candidates whose decision this update changed: read
+   * them with `pgo_result_change`.
+   */
+  size_t num_changed;
+} PgoUpdate;
+
+/**
+ * An earlier loop candidate's decision that an update changed (a plain
+ * struct the caller owns, filled by `pgo_result_change`); why it ends
+ * where it does now is `pgo_result_change_reason`.
+ */
+typedef struct PgoDecisionChange {
+  /**
+   * Its index, as `pgo_graph_add_loop_candidate` stored it (that of its
+   * `PgoLoopDecision`).
+   */
+  size_t index;
+  /**
+   * Its first vertex id.
+   */
+  uint64_t from;
+  /**
+   * Its second vertex id.
+   */
+  uint64_t to;
+  /**
+   * Whether it is in the map now (it was not before, or the reverse).
+   */
+  bool accepted;
+} PgoDecisionChange;
 
 /**
  * How the optimisation decided one loop candidate (a plain struct the
@@ -325,6 +417,18 @@ enum PgoStatus pgo_graph_add_loop_candidate(struct PgoGraph *graph,
 enum PgoStatus pgo_graph_fix(struct PgoGraph *graph, uint64_t id);
 
 /**
+ * Drops what `pgo_graph_update` keeps (the last update's poses,
+ * decisions and report): the next update runs the whole job. The graph's
+ * poses, edges and candidates stay.
+ *
+ * Errors: `PGO_ERR_INVALID_ARGUMENT`.
+ *
+ * # Safety
+ * `graph` is NULL or a live graph nothing else uses during the call.
+ */
+enum PgoStatus pgo_graph_forget(struct PgoGraph *graph);
+
+/**
  * Whether edges added from now on with an information matrix that is not
  * positive definite have it projected to the nearest positive-definite
  * one instead of being refused (off by default; the report counts the
@@ -425,6 +529,80 @@ enum PgoStatus pgo_graph_optimize(const struct PgoGraph *graph,
                                   struct PgoResult **out);
 
 /**
+ * The job again after poses, edges or loop candidates were added, for a
+ * mapping front end that asks for the map every keyframe: the map and
+ * decisions `pgo_graph_optimize` would give the graph as it now is, with
+ * `options` (NULL: the defaults), reached from the last update's. The
+ * graph keeps that update's poses, decisions and report; only as much is
+ * solved as the additions need — nothing when nothing was added, a
+ * composition when only odometry was (`PgoUpdate.solve` says which).
+ * The first update, one with other options than the last, and one after
+ * `pgo_graph_fix` or `pgo_graph_forget` run the whole job
+ * (`PGO_UPDATE_BATCH`). Stores the result at `*out` (NULL on failure;
+ * the graph then keeps its earlier state); free it with
+ * `pgo_result_free`.
+ *
+ * Errors: those of `pgo_graph_optimize`.
+ *
+ * # Safety
+ * `graph` is NULL or a live graph nothing else uses during the call;
+ * `options` is NULL or live options; `out` is NULL or writable.
+ */
+enum PgoStatus pgo_graph_update(struct PgoGraph *graph,
+                                const struct PgoOptions *options,
+                                struct PgoResult **out);
+
+/**
+ * Stores what the update that made `result` did at `*out`: how it
+ * reached the map, what was added since the last update, and how many
+ * earlier decisions it changed. For a result of `pgo_graph_optimize`,
+ * `solve` is `PGO_NOT_AN_UPDATE` and the counts are 0.
+ *
+ * Errors: `PGO_ERR_INVALID_ARGUMENT`.
+ *
+ * # Safety
+ * `result` is NULL or a live result; `out` is NULL or writable.
+ */
+enum PgoStatus pgo_result_update(const struct PgoResult *result, struct PgoUpdate *out);
+
+/**
+ * Why the update reached its map the way it did, in a few words (e.g.
+ * "no earlier solution", "options changed"), as a NUL-terminated string
+ * owned by the result: valid until `pgo_result_free`, never free it.
+ * NULL on failure (`PGO_ERR_INVALID_ARGUMENT` in `pgo_last_error`: NULL
+ * `result`, or a result of `pgo_graph_optimize`).
+ *
+ * # Safety
+ * `result` is NULL or a live result.
+ */
+const char *pgo_result_update_reason(const struct PgoResult *result);
+
+/**
+ * Copies the `k`-th earlier decision the update changed (0 ≤ `k` <
+ * `PgoUpdate.num_changed`, in the order of their indices) into `*out`.
+ *
+ * Errors: `PGO_ERR_INVALID_ARGUMENT` (also for `k` out of range, and for
+ * a result of `pgo_graph_optimize`, which changed none).
+ *
+ * # Safety
+ * `result` is NULL or a live result; `out` is NULL or writable.
+ */
+enum PgoStatus pgo_result_change(const struct PgoResult *result,
+                                 size_t k,
+                                 struct PgoDecisionChange *out);
+
+/**
+ * Why the `k`-th changed decision ends where it does now, named as
+ * `pgo_result_loop_reason` names it. The string is static: never free
+ * it. NULL on failure (`PGO_ERR_INVALID_ARGUMENT` in `pgo_last_error`:
+ * NULL `result`, `k` out of range, a result of `pgo_graph_optimize`).
+ *
+ * # Safety
+ * `result` is NULL or a live result.
+ */
+const char *pgo_result_change_reason(const struct PgoResult *result, size_t k);
+
+/**
  * Copies the optimised pose with id `id` into the `len` numbers at `out`
  * (`x y θ` in 2D, `len` = 3; `x y z qx qy qz qw` in 3D, `len` = 7).
  *
@@ -522,8 +700,8 @@ enum PgoStatus pgo_result_verdict(const struct PgoResult *result, int32_t *out);
 const char *pgo_result_report_json(const struct PgoResult *result);
 
 /**
- * Frees a result made by `pgo_graph_optimize`, and the strings it handed
- * out. NULL is allowed and does nothing.
+ * Frees a result made by `pgo_graph_optimize` or `pgo_graph_update`, and
+ * the strings it handed out. NULL is allowed and does nothing.
  *
  * # Safety
  * `result` is NULL or a result from this API not yet freed, which nothing

@@ -15,7 +15,9 @@ use std::ptr;
 ///
 /// Made by `pgo_graph_new` or `pgo_graph_read_g2o`, owned by the caller,
 /// freed by `pgo_graph_free`. A graph may be read (optimised, written) by
-/// several threads at once, but not changed while anything else uses it.
+/// several threads at once, but not changed (added to, updated, forgotten)
+/// while anything else uses it. It keeps the last `pgo_graph_update`'s
+/// poses and decisions, which the next update starts from.
 pub struct PgoGraph {
     pub(crate) graph: AnyPoseGraph,
 }
@@ -248,6 +250,24 @@ pub unsafe extern "C" fn pgo_graph_fix(graph: *mut PgoGraph, id: u64) -> PgoStat
         // SAFETY: the caller's contract.
         let graph = unsafe { borrow_mut(graph, "graph")? };
         Ok(graph.graph.fix(id)?)
+    })
+}
+
+/// Drops what `pgo_graph_update` keeps (the last update's poses,
+/// decisions and report): the next update runs the whole job. The graph's
+/// poses, edges and candidates stay.
+///
+/// Errors: `PGO_ERR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `graph` is NULL or a live graph nothing else uses during the call.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_graph_forget(graph: *mut PgoGraph) -> PgoStatus {
+    status(|| {
+        // SAFETY: the caller's contract.
+        let graph = unsafe { borrow_mut(graph, "graph")? };
+        graph.graph.forget();
+        Ok(())
     })
 }
 

@@ -1,13 +1,15 @@
-//! The C ABI of pgo: build a pose graph, optimise it, and read the poses,
-//! the loop decisions, the χ² test's verdict and the report, from C (or
-//! any language with a C FFI). The header is `include/pgo.h`, generated
-//! from this crate by cbindgen; `README.md` says how to build and link.
+//! The C ABI of pgo: build a pose graph, optimise it (as one job, or
+//! incrementally as it grows), and read the poses, the loop decisions, the
+//! χ² test's verdict and the report, from C (or any language with a C
+//! FFI). The header is `include/pgo.h`, generated from this crate by
+//! cbindgen; `README.md` says how to build and link.
 //!
 //! Every function returns a `PgoStatus` (or, for a string, NULL on
 //! failure) and records a message for `pgo_last_error`; no panic crosses
 //! the boundary. Handles (`PgoGraph`, `PgoOptions`, `PgoResult`) are
-//! opaque, made by a `_new` (or `pgo_graph_read_g2o`, `pgo_graph_optimize`)
-//! and freed by their `_free`; strings handed out are owned by the API.
+//! opaque, made by a `_new` (or `pgo_graph_read_g2o`, `pgo_graph_optimize`,
+//! `pgo_graph_update`) and freed by their `_free`; strings handed out are
+//! owned by the API.
 
 mod graph;
 mod options;

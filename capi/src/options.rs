@@ -4,13 +4,13 @@
 use crate::status::{PgoStatus, borrow_mut, out_ptr, status, text, value};
 use pgo::Options;
 
-/// The options of `pgo_graph_optimize` (opaque): the gate, the robust
-/// back end, the solver and the χ² test, each set by the long flag
-/// `pgo optimize` spells it with.
+/// The options of `pgo_graph_optimize` and `pgo_graph_update` (opaque):
+/// the gate, the robust back end, the solver and the χ² test, each set by
+/// the long flag `pgo optimize` spells it with.
 ///
 /// Made by `pgo_options_new`, owned by the caller, freed by
-/// `pgo_options_free`. Passing NULL to `pgo_graph_optimize` means the
-/// defaults.
+/// `pgo_options_free`. Passing NULL to `pgo_graph_optimize` or
+/// `pgo_graph_update` means the defaults.
 pub struct PgoOptions {
     pub(crate) options: Options,
 }

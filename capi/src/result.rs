@@ -1,23 +1,43 @@
-//! The optimisation and what it returns: `PgoResult`, with one
-//! `PgoLoopDecision` per loop candidate.
+//! The optimisation, batch (`pgo_graph_optimize`) or incremental
+//! (`pgo_graph_update`), and what it returns: `PgoResult`, with one
+//! `PgoLoopDecision` per loop candidate and, for an update, a `PgoUpdate`
+//! and one `PgoDecisionChange` per earlier decision it changed.
 
 use crate::graph::PgoGraph;
 use crate::options::PgoOptions;
-use crate::status::{Failure, PgoStatus, borrow, out_ptr, status, value};
-use pgo::{AnySolution, LoopDecision, Options, Reason};
+use crate::status::{Failure, PgoStatus, borrow, borrow_mut, out_ptr, status, value};
+use pgo::{AnySolution, DecisionChange, LoopDecision, Options, Reason, UpdateSolve};
 use std::ffi::{CStr, CString, c_char};
 use std::ptr;
 use std::sync::{Mutex, OnceLock};
 
-/// What `pgo_graph_optimize` returns (opaque): the optimised poses by id,
-/// one decision per loop candidate, χ², the χ² test's verdict and the
-/// report `pgo optimize --json` prints.
+/// What `pgo_graph_optimize` or `pgo_graph_update` returns (opaque): the
+/// optimised poses by id, one decision per loop candidate, χ², the χ²
+/// test's verdict, the report `pgo optimize --json` prints and, for an
+/// update, what it did (`pgo_result_update`).
 ///
 /// Owned by the caller, freed by `pgo_result_free`; the strings it hands
 /// out live as long as it. It may be read by several threads at once.
 pub struct PgoResult {
     solution: AnySolution,
     report_json: OnceLock<CString>,
+    /// An update's reason, as `pgo_result_update_reason` hands it out.
+    update_reason: Option<CString>,
+}
+
+impl PgoResult {
+    /// A result holding `solution`.
+    fn new(solution: AnySolution) -> Box<Self> {
+        // The library's words: no NUL (one would be written out).
+        let update_reason = solution
+            .incremental()
+            .map(|i| CString::new(i.reason.replace('\0', "\\0")).unwrap_or_default());
+        Box::new(Self {
+            solution,
+            report_json: OnceLock::new(),
+            update_reason,
+        })
+    }
 }
 
 /// How the optimisation decided one loop candidate (a plain struct the
@@ -96,13 +116,257 @@ pub unsafe extern "C" fn pgo_graph_optimize(
             Some(o) => graph.graph.optimize(&o.options)?,
             None => graph.graph.optimize(&Options::default())?,
         };
-        let result = Box::new(PgoResult {
-            solution,
-            report_json: OnceLock::new(),
-        });
         // SAFETY: as above.
-        unsafe { *slot = Box::into_raw(result) };
+        unsafe { *slot = Box::into_raw(PgoResult::new(solution)) };
         Ok(())
+    })
+}
+
+/// The job again after poses, edges or loop candidates were added, for a
+/// mapping front end that asks for the map every keyframe: the map and
+/// decisions `pgo_graph_optimize` would give the graph as it now is, with
+/// `options` (NULL: the defaults), reached from the last update's. The
+/// graph keeps that update's poses, decisions and report; only as much is
+/// solved as the additions need — nothing when nothing was added, a
+/// composition when only odometry was (`PgoUpdate.solve` says which).
+/// The first update, one with other options than the last, and one after
+/// `pgo_graph_fix` or `pgo_graph_forget` run the whole job
+/// (`PGO_UPDATE_BATCH`). Stores the result at `*out` (NULL on failure;
+/// the graph then keeps its earlier state); free it with
+/// `pgo_result_free`.
+///
+/// Errors: those of `pgo_graph_optimize`.
+///
+/// # Safety
+/// `graph` is NULL or a live graph nothing else uses during the call;
+/// `options` is NULL or live options; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_graph_update(
+    graph: *mut PgoGraph,
+    options: *const PgoOptions,
+    out: *mut *mut PgoResult,
+) -> PgoStatus {
+    status(|| {
+        let slot = out_ptr(out, "out")?;
+        // SAFETY: writable, by the caller's contract.
+        unsafe { *slot = ptr::null_mut() };
+        // SAFETY: the caller's contract.
+        let graph = unsafe { borrow_mut(graph, "graph")? };
+        // SAFETY: NULL or live, by the caller's contract.
+        let solution = match unsafe { options.as_ref() } {
+            Some(o) => graph.graph.update(&o.options)?,
+            None => graph.graph.update(&Options::default())?,
+        };
+        // SAFETY: as above.
+        unsafe { *slot = Box::into_raw(PgoResult::new(solution)) };
+        Ok(())
+    })
+}
+
+/// How a result was reached (`PgoUpdate.solve`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PgoUpdateSolve {
+    /// Not an update: the result of `pgo_graph_optimize`.
+    PgoNotAnUpdate = 0,
+    /// The whole job from scratch: the first update, the first with
+    /// other options, or the first after `pgo_graph_fix` or
+    /// `pgo_graph_forget` (`pgo_result_update_reason` says which).
+    PgoUpdateBatch,
+    /// Nothing was added since the last update: its map stands.
+    PgoUpdateNone,
+    /// Only new poses, each hung on the map by one trusted edge: composed
+    /// from the map, which is otherwise unchanged; nothing solved.
+    PgoUpdateExtended,
+    /// From the last map and decisions: EM's decisions by innovation and
+    /// its χ² search, without annealing.
+    PgoUpdateWarm,
+    /// From the last map, every candidate weighed again by the robust
+    /// kernel (a kernel method, or fewer candidates than EM's model needs).
+    PgoUpdateFull,
+}
+
+impl From<UpdateSolve> for PgoUpdateSolve {
+    fn from(solve: UpdateSolve) -> Self {
+        match solve {
+            UpdateSolve::Batch => Self::PgoUpdateBatch,
+            UpdateSolve::None => Self::PgoUpdateNone,
+            UpdateSolve::Extended => Self::PgoUpdateExtended,
+            UpdateSolve::Warm => Self::PgoUpdateWarm,
+            UpdateSolve::Full => Self::PgoUpdateFull,
+        }
+    }
+}
+
+/// What an update did (a plain struct the caller owns, filled by
+/// `pgo_result_update`); all zero (`PGO_NOT_AN_UPDATE`) for the result of
+/// `pgo_graph_optimize`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PgoUpdate {
+    /// How the map was reached.
+    pub solve: PgoUpdateSolve,
+    /// Poses added since the last update (a batch update: all of them).
+    pub new_poses: usize,
+    /// Edges, loop candidates included, added since the last update.
+    pub new_edges: usize,
+    /// Loop candidates among them.
+    pub new_candidates: usize,
+    /// Earlier loop candidates whose decision this update changed: read
+    /// them with `pgo_result_change`.
+    pub num_changed: usize,
+}
+
+/// An earlier loop candidate's decision that an update changed (a plain
+/// struct the caller owns, filled by `pgo_result_change`); why it ends
+/// where it does now is `pgo_result_change_reason`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PgoDecisionChange {
+    /// Its index, as `pgo_graph_add_loop_candidate` stored it (that of its
+    /// `PgoLoopDecision`).
+    pub index: usize,
+    /// Its first vertex id.
+    pub from: u64,
+    /// Its second vertex id.
+    pub to: u64,
+    /// Whether it is in the map now (it was not before, or the reverse).
+    pub accepted: bool,
+}
+
+impl From<&DecisionChange> for PgoDecisionChange {
+    fn from(c: &DecisionChange) -> Self {
+        Self {
+            index: c.index,
+            from: c.from,
+            to: c.to,
+            accepted: c.accepted,
+        }
+    }
+}
+
+/// Stores what the update that made `result` did at `*out`: how it
+/// reached the map, what was added since the last update, and how many
+/// earlier decisions it changed. For a result of `pgo_graph_optimize`,
+/// `solve` is `PGO_NOT_AN_UPDATE` and the counts are 0.
+///
+/// Errors: `PGO_ERR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `result` is NULL or a live result; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_update(
+    result: *const PgoResult,
+    out: *mut PgoUpdate,
+) -> PgoStatus {
+    // SAFETY: the caller's contract.
+    unsafe {
+        get(result, out, |s| match s.incremental() {
+            Some(i) => PgoUpdate {
+                solve: i.solve.into(),
+                new_poses: i.new_poses,
+                new_edges: i.new_edges,
+                new_candidates: i.new_candidates,
+                num_changed: i.changed.len(),
+            },
+            None => PgoUpdate {
+                solve: PgoUpdateSolve::PgoNotAnUpdate,
+                new_poses: 0,
+                new_edges: 0,
+                new_candidates: 0,
+                num_changed: 0,
+            },
+        })
+    }
+}
+
+/// Why the update reached its map the way it did, in a few words (e.g.
+/// "no earlier solution", "options changed"), as a NUL-terminated string
+/// owned by the result: valid until `pgo_result_free`, never free it.
+/// NULL on failure (`PGO_ERR_INVALID_ARGUMENT` in `pgo_last_error`: NULL
+/// `result`, or a result of `pgo_graph_optimize`).
+///
+/// # Safety
+/// `result` is NULL or a live result.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_update_reason(result: *const PgoResult) -> *const c_char {
+    value(ptr::null(), || {
+        // SAFETY: the caller's contract.
+        let result = unsafe { borrow(result, "result")? };
+        result
+            .update_reason
+            .as_ref()
+            .map(|r| r.as_ptr())
+            .ok_or_else(not_an_update)
+    })
+}
+
+/// Copies the `k`-th earlier decision the update changed (0 ≤ `k` <
+/// `PgoUpdate.num_changed`, in the order of their indices) into `*out`.
+///
+/// Errors: `PGO_ERR_INVALID_ARGUMENT` (also for `k` out of range, and for
+/// a result of `pgo_graph_optimize`, which changed none).
+///
+/// # Safety
+/// `result` is NULL or a live result; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_change(
+    result: *const PgoResult,
+    k: usize,
+    out: *mut PgoDecisionChange,
+) -> PgoStatus {
+    status(|| {
+        // SAFETY: the caller's contract.
+        let change = unsafe { change(result, k)? };
+        let slot = out_ptr(out, "out")?;
+        // SAFETY: writable, by the caller's contract.
+        unsafe { slot.write(change.into()) };
+        Ok(())
+    })
+}
+
+/// Why the `k`-th changed decision ends where it does now, named as
+/// `pgo_result_loop_reason` names it. The string is static: never free
+/// it. NULL on failure (`PGO_ERR_INVALID_ARGUMENT` in `pgo_last_error`:
+/// NULL `result`, `k` out of range, a result of `pgo_graph_optimize`).
+///
+/// # Safety
+/// `result` is NULL or a live result.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_change_reason(
+    result: *const PgoResult,
+    k: usize,
+) -> *const c_char {
+    value(ptr::null(), || {
+        // SAFETY: the caller's contract.
+        let change = unsafe { change(result, k)? };
+        Ok(reason_name(&change.reason).as_ptr())
+    })
+}
+
+/// The failure of asking a result of `pgo_graph_optimize` what an update
+/// did.
+fn not_an_update() -> Failure {
+    Failure::invalid("the result is not an update's (pgo_graph_optimize made it)")
+}
+
+/// The `k`-th changed decision of an update's result.
+///
+/// # Safety
+/// `result` is NULL or a live result.
+unsafe fn change<'a>(result: *const PgoResult, k: usize) -> Result<&'a DecisionChange, Failure> {
+    // SAFETY: the caller's contract.
+    let result = unsafe { borrow(result, "result")? };
+    let changed = &result
+        .solution
+        .incremental()
+        .ok_or_else(not_an_update)?
+        .changed;
+    changed.get(k).ok_or_else(|| {
+        Failure::invalid(format!(
+            "change {k} out of range: the update changed {} decisions",
+            changed.len()
+        ))
     })
 }
 
@@ -309,8 +573,8 @@ pub unsafe extern "C" fn pgo_result_report_json(result: *const PgoResult) -> *co
     })
 }
 
-/// Frees a result made by `pgo_graph_optimize`, and the strings it handed
-/// out. NULL is allowed and does nothing.
+/// Frees a result made by `pgo_graph_optimize` or `pgo_graph_update`, and
+/// the strings it handed out. NULL is allowed and does nothing.
 ///
 /// # Safety
 /// `result` is NULL or a result from this API not yet freed, which nothing

@@ -1,7 +1,8 @@
 //! The C API called as C calls it: every bad argument refused with its
-//! status and a message, no panic across, and a graph built call by call
-//! (or read) through it optimised to the same poses, decisions and χ² as
-//! the library's own `AnyPoseGraph::optimize`.
+//! status and a message, no panic across, a graph built call by call (or
+//! read) through it optimised to the same poses, decisions and χ² as the
+//! library's own `AnyPoseGraph::optimize`, and updated as it grows as the
+//! library's `AnyPoseGraph::update` updates it, ending with the batch job.
 
 use pgo::{AnyPoseGraph, AnySolution, Options};
 use pgo_c::*;
@@ -640,4 +641,537 @@ fn a_planar_sample_through_c_is_the_librarys_job() {
 #[test]
 fn a_spatial_sample_through_c_is_the_librarys_job() {
     check_sample("sphere3d.g2o", 3);
+}
+
+/// What `pgo_result_update` stores.
+fn update_of(r: *const PgoResult) -> PgoUpdate {
+    let mut u = PgoUpdate {
+        solve: PgoUpdateSolve::PgoUpdateFull,
+        new_poses: usize::MAX,
+        new_edges: usize::MAX,
+        new_candidates: usize::MAX,
+        num_changed: usize::MAX,
+    };
+    ok(unsafe { pgo_result_update(r, &mut u) });
+    u
+}
+
+/// `pgo_result_update_reason`, which must not fail.
+fn update_reason(r: *const PgoResult) -> String {
+    let p = unsafe { pgo_result_update_reason(r) };
+    assert!(!p.is_null(), "{}", last_error());
+    unsafe { CStr::from_ptr(p) }.to_str().unwrap().to_owned()
+}
+
+/// The changed decisions of an update's result, with their reasons.
+fn changes_of(r: *const PgoResult) -> Vec<(PgoDecisionChange, String)> {
+    (0..update_of(r).num_changed)
+        .map(|k| {
+            let mut c = PgoDecisionChange {
+                index: usize::MAX,
+                from: 0,
+                to: 0,
+                accepted: false,
+            };
+            ok(unsafe { pgo_result_change(r, k, &mut c) });
+            let reason = unsafe { pgo_result_change_reason(r, k) };
+            assert!(!reason.is_null(), "{}", last_error());
+            let reason = unsafe { CStr::from_ptr(reason) }.to_str().unwrap();
+            (c, reason.to_owned())
+        })
+        .collect()
+}
+
+/// Each loop decision's (index, accepted) through C.
+fn decisions_of(r: *const PgoResult) -> Vec<(usize, bool)> {
+    let mut n = 0;
+    ok(unsafe { pgo_result_num_loops(r, &mut n) });
+    (0..n)
+        .map(|k| {
+            let mut d = PgoLoopDecision {
+                index: 0,
+                from: 0,
+                to: 0,
+                inliers: 0,
+                gated: false,
+                weight: 0.0,
+                accepted: false,
+                posterior: 0.0,
+                innovation: 0.0,
+            };
+            ok(unsafe { pgo_result_loop(r, k, &mut d) });
+            (d.index, d.accepted)
+        })
+        .collect()
+}
+
+fn update(g: *mut PgoGraph, options: *const PgoOptions) -> *mut PgoResult {
+    let mut r = ptr::dangling_mut::<PgoResult>();
+    ok(unsafe { pgo_graph_update(g, options, &mut r) });
+    assert!(!r.is_null());
+    r
+}
+
+fn solve_of(g: *mut PgoGraph, options: *const PgoOptions) -> (PgoUpdateSolve, String) {
+    let r = update(g, options);
+    let out = (update_of(r).solve, update_reason(r));
+    unsafe { pgo_result_free(r) };
+    out
+}
+
+/// A pose 1 m further along x from the last of `n` poses, by odometry.
+fn extend(g: *mut PgoGraph, n: u64) {
+    unsafe {
+        ok(pgo_graph_add_pose(g, n, [0.0; 3].as_ptr(), 3));
+        let z = [1.0, 0.0, 0.0];
+        ok(pgo_graph_add_edge(
+            g,
+            n - 1,
+            n,
+            z.as_ptr(),
+            3,
+            IDENTITY3.as_ptr(),
+            9,
+        ));
+    }
+}
+
+#[test]
+fn update_and_forget_refuse_null_and_optimize_is_no_update() {
+    unsafe {
+        let mut r = ptr::dangling_mut::<PgoResult>();
+        assert_fails(
+            pgo_graph_update(ptr::null_mut(), ptr::null(), &mut r),
+            PgoStatus::PgoErrInvalidArgument,
+            "graph is NULL",
+        );
+        assert!(r.is_null(), "a failed call leaves NULL at *out");
+        let g = chain();
+        assert_fails(
+            pgo_graph_update(g, ptr::null(), ptr::null_mut()),
+            PgoStatus::PgoErrInvalidArgument,
+            "out is NULL",
+        );
+        assert_fails(
+            pgo_graph_forget(ptr::null_mut()),
+            PgoStatus::PgoErrInvalidArgument,
+            "graph is NULL",
+        );
+        let mut u = std::mem::MaybeUninit::<PgoUpdate>::uninit();
+        assert_fails(
+            pgo_result_update(ptr::null(), u.as_mut_ptr()),
+            PgoStatus::PgoErrInvalidArgument,
+            "result is NULL",
+        );
+        assert!(pgo_result_update_reason(ptr::null()).is_null());
+        assert!(pgo_result_change_reason(ptr::null(), 0).is_null());
+        assert!(last_error().contains("result is NULL"));
+
+        // A result of pgo_graph_optimize: no update, nothing changed.
+        ok(pgo_graph_optimize(g, ptr::null(), &mut r));
+        assert_eq!(
+            update_of(r),
+            PgoUpdate {
+                solve: PgoUpdateSolve::PgoNotAnUpdate,
+                new_poses: 0,
+                new_edges: 0,
+                new_candidates: 0,
+                num_changed: 0,
+            }
+        );
+        assert!(pgo_result_update_reason(r).is_null());
+        assert!(last_error().contains("not an update's"), "{}", last_error());
+        let mut c = std::mem::MaybeUninit::<PgoDecisionChange>::uninit();
+        assert_fails(
+            pgo_result_change(r, 0, c.as_mut_ptr()),
+            PgoStatus::PgoErrInvalidArgument,
+            "not an update's",
+        );
+        assert_fails(
+            pgo_result_update(r, ptr::null_mut()),
+            PgoStatus::PgoErrInvalidArgument,
+            "out is NULL",
+        );
+        pgo_result_free(r);
+
+        // An update's result: out-of-range changes are refused.
+        let r = update(g, ptr::null());
+        assert_eq!(update_of(r).num_changed, 0);
+        assert_fails(
+            pgo_result_change(r, 0, c.as_mut_ptr()),
+            PgoStatus::PgoErrInvalidArgument,
+            "change 0 out of range: the update changed 0 decisions",
+        );
+        assert!(pgo_result_change_reason(r, 0).is_null());
+        assert_fails(
+            pgo_result_change(r, 0, ptr::null_mut()),
+            PgoStatus::PgoErrInvalidArgument,
+            "out of range",
+        );
+        pgo_result_free(r);
+        pgo_graph_free(g);
+    }
+}
+
+#[test]
+fn updates_say_how_they_solved() {
+    use PgoUpdateSolve::*;
+    let g = chain();
+    unsafe {
+        let r = update(g, ptr::null());
+        assert_eq!(
+            update_of(r),
+            PgoUpdate {
+                solve: PgoUpdateBatch,
+                new_poses: 3,
+                new_edges: 2,
+                new_candidates: 0,
+                num_changed: 0,
+            }
+        );
+        assert_eq!(update_reason(r), "no earlier solution");
+        let json = CStr::from_ptr(pgo_result_report_json(r)).to_str().unwrap();
+        let report: serde_json::Value = serde_json::from_str(json).unwrap();
+        assert_eq!(report["incremental"]["solve"], "batch");
+        assert_eq!(report["incremental"]["reason"], "no earlier solution");
+        pgo_result_free(r);
+
+        assert_eq!(solve_of(g, ptr::null()).0, PgoUpdateNone);
+        // Odometry alone: composed from the last map.
+        extend(g, 3);
+        extend(g, 4);
+        let r = update(g, ptr::null());
+        let u = update_of(r);
+        assert_eq!(
+            (u.solve, u.new_poses, u.new_edges, u.new_candidates),
+            (PgoUpdateExtended, 2, 2, 0)
+        );
+        let mut p = [f64::NAN; 3];
+        ok(pgo_result_pose(r, 4, p.as_mut_ptr(), 3));
+        assert!((p[0] - 4.0).abs() < 1e-9 && p[1].abs() < 1e-9, "{p:?}");
+        pgo_result_free(r);
+
+        // Other options, fix and forget start again.
+        let mut o = ptr::null_mut();
+        ok(pgo_options_new(&mut o));
+        ok(pgo_options_set(o, c"alpha".as_ptr(), c"0.01".as_ptr()));
+        let batch = (PgoUpdateBatch, "options changed".to_owned());
+        assert_eq!(solve_of(g, o), batch);
+        assert_eq!(solve_of(g, o).0, PgoUpdateNone);
+        ok(pgo_graph_fix(g, 2));
+        assert_eq!(solve_of(g, o).0, PgoUpdateBatch);
+        assert_eq!(solve_of(g, o).0, PgoUpdateNone);
+        ok(pgo_graph_forget(g));
+        assert_eq!(solve_of(g, o).0, PgoUpdateBatch);
+        // pgo_graph_optimize leaves the kept state alone.
+        let mut r = ptr::null_mut();
+        ok(pgo_graph_optimize(g, ptr::null(), &mut r));
+        pgo_result_free(r);
+        assert_eq!(solve_of(g, o).0, PgoUpdateNone);
+        pgo_options_free(o);
+        pgo_graph_free(g);
+    }
+}
+
+#[test]
+fn a_failed_update_keeps_the_earlier_state() {
+    let g = chain();
+    unsafe {
+        let empty = new_graph(2);
+        let mut r = ptr::dangling_mut::<PgoResult>();
+        assert_fails(
+            pgo_graph_update(empty, ptr::null(), &mut r),
+            PgoStatus::PgoErrEmptyGraph,
+            "no poses",
+        );
+        assert!(r.is_null());
+        pgo_graph_free(empty);
+
+        assert_eq!(solve_of(g, ptr::null()).0, PgoUpdateSolve::PgoUpdateBatch);
+        // A pose nothing ties to the map: the update fails, its out NULL.
+        ok(pgo_graph_add_pose(g, 3, [3.0, 0.0, 0.0].as_ptr(), 3));
+        let mut r = ptr::dangling_mut::<PgoResult>();
+        assert_fails(
+            pgo_graph_update(g, ptr::null(), &mut r),
+            PgoStatus::PgoErrUnconstrained,
+            "not connected to the fixed vertex 0",
+        );
+        assert!(r.is_null());
+        // Tied by odometry, it extends the map the failed update found.
+        let z = [1.0, 0.0, 0.0];
+        ok(pgo_graph_add_edge(
+            g,
+            2,
+            3,
+            z.as_ptr(),
+            3,
+            IDENTITY3.as_ptr(),
+            9,
+        ));
+        let r = update(g, ptr::null());
+        let u = update_of(r);
+        assert_eq!(
+            (u.solve, u.new_poses, u.new_edges),
+            (PgoUpdateSolve::PgoUpdateExtended, 1, 1)
+        );
+        pgo_result_free(r);
+        pgo_graph_free(g);
+    }
+}
+
+#[test]
+fn an_outvoted_loop_is_listed_as_changed() {
+    // A candidate 1 m off the odometry, accepted while alone, then
+    // outvoted by three that agree with the odometry.
+    let odometry = [400.0, 0.0, 0.0, 0.0, 400.0, 0.0, 0.0, 0.0, 2500.0];
+    let loop_info = [400.0, 0.0, 0.0, 0.0, 400.0, 0.0, 0.0, 0.0, 2500.0];
+    let g = new_graph(2);
+    unsafe {
+        let mut off = usize::MAX;
+        for k in 0..8u64 {
+            ok(pgo_graph_add_pose(g, k, [0.0; 3].as_ptr(), 3));
+            if k > 0 {
+                let z = [1.0, 0.0, 0.0];
+                ok(pgo_graph_add_edge(
+                    g,
+                    k - 1,
+                    k,
+                    z.as_ptr(),
+                    3,
+                    odometry.as_ptr(),
+                    9,
+                ));
+            }
+        }
+        let z = [8.0, 0.0, 0.0];
+        ok(pgo_graph_add_loop_candidate(
+            g,
+            0,
+            7,
+            z.as_ptr(),
+            3,
+            loop_info.as_ptr(),
+            9,
+            90,
+            &mut off,
+        ));
+        let first = update(g, ptr::null());
+        assert_eq!(decisions_of(first), [(off, true)]);
+        ok(pgo_graph_add_pose(g, 8, [0.0; 3].as_ptr(), 3));
+        let z = [1.0, 0.0, 0.0];
+        ok(pgo_graph_add_edge(
+            g,
+            7,
+            8,
+            z.as_ptr(),
+            3,
+            odometry.as_ptr(),
+            9,
+        ));
+        for i in 1..4u64 {
+            let z = [8.0 - i as f64, 0.0, 0.0];
+            ok(pgo_graph_add_loop_candidate(
+                g,
+                i,
+                8,
+                z.as_ptr(),
+                3,
+                loop_info.as_ptr(),
+                9,
+                100,
+                ptr::null_mut(),
+            ));
+        }
+        let r = update(g, ptr::null());
+        let u = update_of(r);
+        assert_eq!((u.new_poses, u.new_edges, u.new_candidates), (1, 4, 3));
+        assert!(matches!(
+            u.solve,
+            PgoUpdateSolve::PgoUpdateWarm | PgoUpdateSolve::PgoUpdateFull
+        ));
+        let changes = changes_of(r);
+        assert_eq!(changes.len(), 1, "{changes:?}");
+        let (c, reason) = &changes[0];
+        assert_eq!(
+            *c,
+            PgoDecisionChange {
+                index: off,
+                from: 0,
+                to: 7,
+                accepted: false,
+            }
+        );
+        let k = decisions_of(r).iter().position(|d| d.0 == off).unwrap();
+        let loop_reason = CStr::from_ptr(pgo_result_loop_reason(r, k));
+        assert_eq!(loop_reason.to_str().unwrap(), reason);
+        assert_eq!(
+            pgo_result_change_reason(r, 0),
+            loop_reason.as_ptr(),
+            "the same static string"
+        );
+        pgo_result_free(first);
+        pgo_result_free(r);
+        pgo_graph_free(g);
+    }
+}
+
+/// A 2D g2o sample as a front end feeds it: each vertex in file order with
+/// the edges whose later end it is.
+type Step = (
+    (u64, Vec<f64>),
+    Vec<(u64, u64, Vec<f64>, Vec<f64>, Option<u64>)>,
+);
+
+fn steps_2d(name: &str) -> Vec<Step> {
+    let text = std::fs::read_to_string(sample(name)).unwrap();
+    let (mut steps, mut edges) = (Vec::<Step>::new(), Vec::new());
+    let mut order = std::collections::HashMap::new();
+    for line in text.lines() {
+        let t: Vec<&str> = line.split_whitespace().collect();
+        match t.first() {
+            Some(&"VERTEX_SE2") => {
+                let id: u64 = t[1].parse().unwrap();
+                order.insert(id, steps.len());
+                steps.push(((id, numbers(&t[2..5])), Vec::new()));
+            }
+            Some(&"EDGE_SE2") => {
+                let (i, j) = (t[1].parse().unwrap(), t[2].parse().unwrap());
+                let inliers = t.get(12).map(|n| n.parse().unwrap());
+                edges.push((
+                    i,
+                    j,
+                    numbers(&t[3..6]),
+                    full(&numbers(&t[6..12]), 3),
+                    inliers,
+                ));
+            }
+            _ => {}
+        }
+    }
+    for e in edges {
+        let due = order[&e.0].max(order[&e.1]);
+        steps[due].1.push(e);
+    }
+    steps
+}
+
+/// Replays the aliased sample through C and through the library side by
+/// side, an update every 50 poses: each C update is the library's (its
+/// account of itself, its poses and decisions), every changed decision
+/// is one that flipped, and the last map is the batch job's.
+#[test]
+fn a_replay_through_c_is_the_librarys_and_ends_with_the_batch_job() {
+    let g = new_graph(2);
+    let mut library = AnyPoseGraph::new(2).unwrap();
+    let steps = steps_2d("aliased.g2o");
+    let n = steps.len();
+    let (mut previous, mut kinds, mut changes) = (None::<*mut PgoResult>, Vec::new(), 0);
+    for (k, ((id, pose), edges)) in steps.into_iter().enumerate() {
+        ok(unsafe { pgo_graph_add_pose(g, id, pose.as_ptr(), 3) });
+        library.add_pose(id, &pose).unwrap();
+        for (i, j, z, info, inliers) in edges {
+            match inliers {
+                None => {
+                    ok(unsafe { pgo_graph_add_edge(g, i, j, z.as_ptr(), 3, info.as_ptr(), 9) });
+                    library.add_edge(i, j, &z, &info).unwrap();
+                }
+                Some(count) => {
+                    ok(unsafe {
+                        pgo_graph_add_loop_candidate(
+                            g,
+                            i,
+                            j,
+                            z.as_ptr(),
+                            3,
+                            info.as_ptr(),
+                            9,
+                            i64::try_from(count).unwrap(),
+                            ptr::null_mut(),
+                        )
+                    });
+                    library
+                        .add_loop_candidate(i, j, &z, &info, Some(count))
+                        .unwrap();
+                }
+            }
+        }
+        if (k + 1) % 50 != 0 && k + 1 != n {
+            continue;
+        }
+        let r = update(g, ptr::null());
+        let expected = library.update(&Options::default()).unwrap();
+        assert_same(r, &expected, library.ids());
+        let want = expected.incremental().unwrap();
+        let u = update_of(r);
+        assert_eq!(
+            u,
+            PgoUpdate {
+                solve: want.solve.into(),
+                new_poses: want.new_poses,
+                new_edges: want.new_edges,
+                new_candidates: want.new_candidates,
+                num_changed: want.changed.len(),
+            }
+        );
+        assert_eq!(update_reason(r), want.reason);
+        let got = changes_of(r);
+        for ((c, reason), w) in got.iter().zip(&want.changed) {
+            assert_eq!(*c, PgoDecisionChange::from(w));
+            let name = format!("{:?}", w.reason).to_lowercase();
+            assert!(
+                name.starts_with(&reason.replace('_', "")),
+                "{reason} for {name}"
+            );
+        }
+        if let Some(p) = previous {
+            let before: std::collections::HashMap<usize, bool> =
+                decisions_of(p).into_iter().collect();
+            let flipped: Vec<(usize, bool)> = decisions_of(r)
+                .into_iter()
+                .filter(|(i, a)| before.get(i).is_some_and(|b| b != a))
+                .collect();
+            let listed: Vec<(usize, bool)> =
+                got.iter().map(|(c, _)| (c.index, c.accepted)).collect();
+            assert_eq!(flipped, listed, "update at {} poses", k + 1);
+            unsafe { pgo_result_free(p) };
+        }
+        changes += got.len();
+        kinds.push(u.solve);
+        previous = Some(r);
+    }
+    use PgoUpdateSolve::*;
+    assert_eq!(kinds[0], PgoUpdateBatch);
+    assert!(!kinds[1..].contains(&PgoUpdateBatch), "{kinds:?}");
+    assert!(kinds.contains(&PgoUpdateWarm), "{kinds:?}");
+    assert!(changes > 0, "some update changed an earlier decision");
+
+    // The last update is the batch job: poses, decisions, χ².
+    let last = previous.unwrap();
+    let mut r = ptr::null_mut();
+    ok(unsafe { pgo_graph_optimize(g, ptr::null(), &mut r) });
+    assert_eq!(update_of(r).solve, PgoNotAnUpdate);
+    assert_eq!(decisions_of(last), decisions_of(r));
+    for &id in library.ids() {
+        let (mut a, mut b) = ([f64::NAN; 3], [f64::NAN; 3]);
+        ok(unsafe { pgo_result_pose(last, id, a.as_mut_ptr(), 3) });
+        ok(unsafe { pgo_result_pose(r, id, b.as_mut_ptr(), 3) });
+        let dtheta = (a[2] - b[2]).sin().atan2((a[2] - b[2]).cos());
+        let worst = (a[0] - b[0])
+            .abs()
+            .max((a[1] - b[1]).abs())
+            .max(dtheta.abs());
+        assert!(worst < 1e-5, "vertex {id}: {a:?} vs {b:?}");
+    }
+    let (mut chi2_last, mut chi2_batch) = (f64::NAN, f64::NAN);
+    ok(unsafe { pgo_result_chi2(last, &mut chi2_last) });
+    ok(unsafe { pgo_result_chi2(r, &mut chi2_batch) });
+    assert!(
+        (chi2_last / chi2_batch - 1.0).abs() < 1e-6,
+        "{chi2_last} vs {chi2_batch}"
+    );
+    unsafe {
+        pgo_result_free(last);
+        pgo_result_free(r);
+        pgo_graph_free(g);
+    }
 }

@@ -5,7 +5,10 @@ then :meth:`PoseGraph.optimize` it: the whole job of ``pgo optimize`` — the
 geometric-verification gate learned from the loop candidates' inlier
 counts, the robust weighting of the loops, and the χ² test of the result —
 returning a :class:`Result` with the optimised poses, one decision per loop
-candidate and the report ``pgo optimize --json`` prints. Bad input raises
+candidate and the report ``pgo optimize --json`` prints. A mapping front
+end that wants the map as the graph grows calls :meth:`PoseGraph.update`
+instead: the same map, reached from the last update's, solving only what
+the additions need (:attr:`Result.incremental` says how). Bad input raises
 :class:`Error` (a ``ValueError``) with the library's message.
 """
 

@@ -1,7 +1,7 @@
 """Type stubs of the extension module ``pgo._pgo`` (re-exported by ``pgo``)."""
 
 import os
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Literal, Optional, Sequence, Tuple, TypedDict, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -71,10 +71,30 @@ class PoseGraph:
         """Writes the graph as a g2o file, atomically."""
     def optimize(self, **options: OptionValue) -> Result:
         """Runs the job of ``pgo optimize``; options are its flags, ``_`` for ``-``."""
+    def update(self, **options: OptionValue) -> Result:
+        """The job again after additions, from the last update's map; options as optimize's."""
+    def forget(self) -> None:
+        """Drops what update keeps: the next update runs the whole job."""
     def __repr__(self) -> str: ...
 
+#: An earlier loop candidate whose decision an update changed.
+DecisionChange = TypedDict(
+    "DecisionChange",
+    {"index": int, "from": VertexId, "to": VertexId, "accepted": bool, "reason": str},
+)
+
+class Incremental(TypedDict):
+    """What :meth:`PoseGraph.update` did (:attr:`Result.incremental`)."""
+
+    solve: Literal["batch", "none", "extended", "warm", "full"]
+    reason: str
+    new_poses: int
+    new_edges: int
+    new_candidates: int
+    changed: List[DecisionChange]
+
 class Result:
-    """What :meth:`PoseGraph.optimize` returns."""
+    """What :meth:`PoseGraph.optimize` and :meth:`PoseGraph.update` return."""
 
     @property
     def poses(self) -> Dict[VertexId, PoseTuple]:
@@ -91,6 +111,9 @@ class Result:
     @property
     def report(self) -> Dict[str, Any]:
         """The report ``pgo optimize --json`` prints."""
+    @property
+    def incremental(self) -> Optional[Incremental]:
+        """What update did (solve, reason, new_poses, new_edges, new_candidates, changed); None for optimize."""
     @property
     def chi2(self) -> float:
         """Σ eᵀΩe over all edges at the optimised poses."""

@@ -1,11 +1,12 @@
 //! `pgo.PoseGraph`: the library's [`AnyPoseGraph`] — poses, edges and loop
 //! candidates added call by call or read from a g2o file — and its
-//! optimisation with options named as `pgo optimize`'s flags.
+//! optimisation with options named as `pgo optimize`'s flags, as one batch
+//! job or incrementally (`update`).
 
 use crate::Error;
 use crate::convert::{self, error};
 use crate::solution::Solution;
-use pgo::{AnyPoseGraph, Options};
+use pgo::{AnyPoseGraph, AnySolution, Options};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use std::panic::{self, AssertUnwindSafe};
@@ -187,16 +188,46 @@ impl PoseGraph {
     fn optimize(&self, py: Python<'_>, options: Option<&Bound<'_, PyDict>>) -> PyResult<Solution> {
         let options = parse_options(options)?;
         let graph = &self.graph;
-        let solved =
-            py.detach(|| panic::catch_unwind(AssertUnwindSafe(|| graph.optimize(&options))));
-        let solution = solved
-            .map_err(|panic| Error::new_err(format!("internal failure: {}", panic_text(&panic))))?
-            .map_err(error)?;
+        let solution = detached(py, || graph.optimize(&options))?;
         Ok(Solution::new(
             graph.ids().to_vec(),
             graph.dimension(),
             solution,
         ))
+    }
+
+    /// The job again after poses, edges or loop candidates were added,
+    /// for a mapping front end that asks for the map every keyframe: the
+    /// map and decisions `optimize` would give the graph as it now is,
+    /// reached from the last update's. The graph keeps that update's
+    /// poses, decisions and report; only as much is solved as the
+    /// additions need (nothing when nothing was added, a composition when
+    /// only odometry was). `Result.incremental` says how and which
+    /// earlier decisions changed. The first update, one with other options
+    /// than the last, and one after `fix` or `forget` run the whole job
+    /// ("batch"); a failed one leaves the kept state as it was. Options as
+    /// `optimize`'s. The GIL is released while it runs; meanwhile another
+    /// thread's use of the graph raises `RuntimeError`.
+    #[pyo3(signature = (**options))]
+    fn update(
+        &mut self,
+        py: Python<'_>,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Solution> {
+        let options = parse_options(options)?;
+        let graph = &mut self.graph;
+        let solution = detached(py, || graph.update(&options))?;
+        Ok(Solution::new(
+            graph.ids().to_vec(),
+            graph.dimension(),
+            solution,
+        ))
+    }
+
+    /// Drops what `update` keeps (the last update's poses, decisions and
+    /// report): the next update runs the whole job.
+    fn forget(&mut self) {
+        self.graph.forget();
     }
 
     /// `PoseGraph(dim=…, poses=…, edges=…, loop_candidates=…)`.
@@ -224,6 +255,17 @@ fn parse_options(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
         options.set(&name, &text).map_err(error)?;
     }
     Ok(options)
+}
+
+/// Runs a job of the library with the GIL released; its error, or a
+/// panic (a bug), as a `pgo.Error`.
+fn detached(
+    py: Python<'_>,
+    job: impl Send + FnOnce() -> Result<AnySolution, pgo::Error>,
+) -> PyResult<AnySolution> {
+    py.detach(|| panic::catch_unwind(AssertUnwindSafe(job)))
+        .map_err(|panic| Error::new_err(format!("internal failure: {}", panic_text(&panic))))?
+        .map_err(error)
 }
 
 /// A panic's message.

@@ -1,20 +1,22 @@
-//! `pgo.Result`: what `PoseGraph.optimize` returns — the optimised poses,
-//! one decision per loop candidate, the χ² test and the report — read from
-//! the library's [`AnySolution`].
+//! `pgo.Result`: what `PoseGraph.optimize` and `PoseGraph.update` return —
+//! the optimised poses, one decision per loop candidate, the χ² test, the
+//! report and, for an update, what it did — read from the library's
+//! [`AnySolution`].
 
 use crate::Error;
 use crate::convert::error;
 use numpy::{PyArray1, PyArray2};
-use pgo::{AnySolution, LoopDecision, Reason};
+use pgo::{AnySolution, DecisionChange, LoopDecision, Reason};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 
 /// `(ids, poses)` as numpy arrays.
 type PosesArrays<'py> = (Bound<'py, PyArray1<u64>>, Bound<'py, PyArray2<f64>>);
 
-/// The result of `PoseGraph.optimize`: the optimised poses by id, one
-/// decision per loop candidate, χ², the χ² test of the map, and the report
-/// `pgo optimize --json` prints.
+/// The result of `PoseGraph.optimize` or `PoseGraph.update`: the optimised
+/// poses by id, one decision per loop candidate, χ², the χ² test of the
+/// map, the report `pgo optimize --json` prints, and (an update's) what
+/// the update did.
 #[pyclass(name = "Result", module = "pgo", frozen)]
 pub struct Solution {
     /// The ids of the poses, in the graph's order.
@@ -105,6 +107,38 @@ impl Solution {
         py.import("json")?.call_method1("loads", (text,))
     }
 
+    /// What `PoseGraph.update` did, as a dict; `None` for `optimize`'s
+    /// result. `solve` is how it reached the map: "batch" (the whole job:
+    /// the first update, other options, after `fix` or `forget`), "none"
+    /// (nothing was added: the last map stands), "extended" (only new
+    /// poses hung by one trusted edge each: composed, nothing solved),
+    /// "warm" (EM's decisions from the last ones) or "full" (every
+    /// candidate weighed again by the kernel); `reason` says why in a few
+    /// words; `new_poses`, `new_edges` (loop candidates included) and
+    /// `new_candidates` count the additions since the last update; and
+    /// `changed` lists the earlier candidates whose decision this update
+    /// changed, one dict each: `index`, `from`, `to`, `accepted` (now)
+    /// and `reason` (named as in `loops`). The same as
+    /// `report["incremental"]`.
+    #[getter]
+    fn incremental<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(update) = self.solution.incremental() else {
+            return Ok(None);
+        };
+        let dict = PyDict::new(py);
+        dict.set_item("solve", snake_case(&update.solve))?;
+        dict.set_item("reason", &update.reason)?;
+        dict.set_item("new_poses", update.new_poses)?;
+        dict.set_item("new_edges", update.new_edges)?;
+        dict.set_item("new_candidates", update.new_candidates)?;
+        let changed = PyList::empty(py);
+        for change in &update.changed {
+            changed.append(change_dict(py, change)?)?;
+        }
+        dict.set_item("changed", changed)?;
+        Ok(Some(dict))
+    }
+
     /// `Σ eᵀΩe` over all edges at the optimised poses (g2o's χ², the
     /// candidates left out of the map included).
     #[getter]
@@ -167,12 +201,29 @@ fn loop_dict<'py>(py: Python<'py>, d: &LoopDecision) -> PyResult<Bound<'py, PyDi
     Ok(dict)
 }
 
+/// An earlier decision an update changed, as a dict.
+fn change_dict<'py>(py: Python<'py>, c: &DecisionChange) -> PyResult<Bound<'py, PyDict>> {
+    let dict = PyDict::new(py);
+    dict.set_item("index", c.index)?;
+    dict.set_item("from", c.from)?;
+    dict.set_item("to", c.to)?;
+    dict.set_item("accepted", c.accepted)?;
+    dict.set_item("reason", reason_name(&c.reason))?;
+    Ok(dict)
+}
+
 /// The name of why a loop ended where it did: the variant's name in
 /// snake case (`Consistent` → "consistent", `ExplainsChi2` →
-/// "explains_chi2"), taken
-/// from its `Debug` text so that new variants name themselves.
+/// "explains_chi2"), as the JSON report spells it.
 pub fn reason_name(reason: &Reason) -> String {
-    let debug = format!("{reason:?}");
+    snake_case(reason)
+}
+
+/// The name of a field-less enum's variant in snake case, as the JSON
+/// report spells it (serde's `snake_case`), taken from its `Debug` text so
+/// that new variants name themselves.
+fn snake_case(variant: &dyn std::fmt::Debug) -> String {
+    let debug = format!("{variant:?}");
     let mut name = String::new();
     for c in debug
         .chars()

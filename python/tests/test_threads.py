@@ -1,15 +1,24 @@
-"""optimize releases the GIL: other Python threads run while it solves, and
-several threads can optimise at once without deadlock."""
+"""optimize and update release the GIL: other Python threads run while they
+solve, and several threads can optimise at once without deadlock."""
 
 import sys
 import threading
 import time
 
+import pytest
+
 import pgo
 from conftest import SAMPLES, assert_close
 
 
-def test_python_runs_while_optimize_solves():
+def batch_update(graph):
+    """An update that runs the whole job."""
+    graph.forget()
+    return graph.update()
+
+
+@pytest.mark.parametrize("job", [pgo.PoseGraph.optimize, batch_update], ids=["optimize", "update"])
+def test_python_runs_while_a_job_solves(job):
     graph = pgo.read_g2o(SAMPLES / "sphere3d.g2o")
     old = sys.getswitchinterval()
     sys.setswitchinterval(1e-4)
@@ -19,7 +28,7 @@ def test_python_runs_while_optimize_solves():
         def solve():
             started.append(time.perf_counter())
             for _ in range(3):
-                graph.optimize()
+                job(graph)
             finished.append(time.perf_counter())
 
         worker = threading.Thread(target=solve)
@@ -54,3 +63,22 @@ def test_concurrent_optimizations_agree():
     assert not any(t.is_alive() for t in threads)
     for poses in results:
         assert_close(poses, expected, "poses")
+
+
+def test_the_graph_is_busy_while_update_solves():
+    """update changes the graph: while it runs, another thread's use of the
+    graph raises RuntimeError (PyO3's borrow check) instead of racing it;
+    the update then stands."""
+    graph = pgo.read_g2o(SAMPLES / "sphere3d.g2o")
+    results, refused = [], []
+    worker = threading.Thread(target=lambda: results.append(graph.update()))
+    worker.start()
+    while worker.is_alive():
+        try:
+            graph.len()
+        except RuntimeError as e:
+            refused.append(str(e))
+    worker.join()
+    assert refused and all("borrowed" in e for e in refused), refused[:1]
+    assert results[0].incremental["solve"] == "batch"
+    assert graph.update().incremental["solve"] == "none"

@@ -1,0 +1,319 @@
+"""PoseGraph.update: a graph fed as a mapping front end feeds it, the map
+asked for every few poses. Each update says how it solved (Result.incremental,
+the same as report["incremental"]) and which earlier decisions it changed;
+odometry alone is composed, nothing added changes nothing, and the last
+update's map and decisions are those of a batch optimize() of the graph."""
+
+import math
+import random
+
+import pytest
+
+import pgo
+from conftest import SAMPLES, symmetric
+
+SIDE = 4  # poses per side of the square
+LAP = 4 * SIDE  # poses per lap
+ODOMETRY_SIGMA = (0.03, 0.03, 0.01)
+LOOP_SIGMA = (0.05, 0.05, 0.02)
+
+
+def information(sigma):
+    return [[1.0 / sigma[0] ** 2, 0.0, 0.0],
+            [0.0, 1.0 / sigma[1] ** 2, 0.0],
+            [0.0, 0.0, 1.0 / sigma[2] ** 2]]
+
+
+def wrap(angle):
+    return math.atan2(math.sin(angle), math.cos(angle))
+
+
+def compose(a, b):
+    """a ⊕ b for planar poses (x, y, θ)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap(a[2] + b[2]))
+
+
+def between(a, b):
+    """a⁻¹ ⊕ b: the pose of b in the frame of a."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return (c * dx + s * dy, -s * dx + c * dy, wrap(b[2] - a[2]))
+
+
+def noisy(pose, sigma, rng):
+    return tuple(p + rng.gauss(0.0, s) for p, s in zip(pose, sigma))
+
+
+def pose_difference(p, q):
+    """The largest absolute difference of two planar poses' numbers (the
+    angle wrapped)."""
+    return max(abs(p[0] - q[0]), abs(p[1] - q[1]), abs(wrap(p[2] - q[2])))
+
+
+def square_walk(laps=3, tail=8, seed=5):
+    """A robot driving a 4 m square `laps` times, then `tail` more poses
+    without loop closures. Returns the steps a front end makes, one per
+    pose: (id, initial guess, [edges]) with each edge (i, j, measurement,
+    information, inliers) — inliers None for odometry. Loop candidates:
+    to the same place one lap before at every other pose (right, many
+    inliers), and a few to a place 2 m away claimed to be the same (wrong,
+    few inliers)."""
+    rng = random.Random(seed)
+    truth = [(0.0, 0.0, 0.0)]
+    guess = [(0.0, 0.0, 0.0)]
+    steps = [(0, guess[0], [])]
+    odometry, loop_info = information(ODOMETRY_SIGMA), information(LOOP_SIGMA)
+    for k in range(1, laps * LAP + tail + 1):
+        turn = math.pi / 2 if k % SIDE == 0 else 0.0
+        truth.append(compose(truth[-1], (1.0, 0.0, turn)))
+        z = noisy(between(truth[k - 1], truth[k]), ODOMETRY_SIGMA, rng)
+        guess.append(compose(guess[-1], z))
+        edges = [(k - 1, k, z, odometry, None)]
+        if LAP <= k <= laps * LAP:
+            if k % 2 == 0:
+                i = k - LAP
+                meas = noisy(between(truth[i], truth[k]), LOOP_SIGMA, rng)
+                edges.append((i, k, meas, loop_info, rng.randint(60, 150)))
+            if k % 8 == 5:
+                i = k - LAP + 2  # 2 m along the square from pose k
+                meas = noisy((0.0, 0.0, 0.0), LOOP_SIGMA, rng)
+                edges.append((i, k, meas, loop_info, rng.randint(5, 20)))
+        steps.append((k, guess[k], edges))
+    return steps
+
+
+def add_step(graph, step):
+    """Adds one step's pose and edges; returns (edges, candidates) added."""
+    pose_id, pose, edges = step
+    graph.add_pose(pose_id, pose)
+    candidates = 0
+    for i, j, meas, info, inliers in edges:
+        if inliers is None:
+            graph.add_edge(i, j, meas, info)
+        else:
+            graph.add_loop_candidate(i, j, meas, info, inliers=inliers)
+            candidates += 1
+    return len(edges), candidates
+
+
+def accepted(result):
+    return [d["index"] for d in result.loops if d["accepted"]]
+
+
+def assert_same_as_batch(last, batch):
+    """The last update's map, decisions and χ² are the batch job's."""
+    assert batch.incremental is None and "incremental" not in batch.report
+    assert last.poses.keys() == batch.poses.keys()
+    worst = max(pose_difference(last.pose(i), batch.pose(i)) for i in batch.poses)
+    assert worst < 1e-5, f"poses differ from the batch ones by {worst:e}"
+    assert accepted(last) == accepted(batch)
+    assert [d["reason"] for d in last.loops] == [d["reason"] for d in batch.loops]
+    assert abs(last.chi2 / batch.chi2 - 1.0) < 1e-6, (last.chi2, batch.chi2)
+    assert last.passed == batch.passed
+
+
+def assert_changed_lists_the_flips(result, previous):
+    """`changed` lists exactly the earlier candidates whose decision differs
+    from the previous update's, as they are now."""
+    before = {d["index"]: d["accepted"] for d in previous.loops}
+    flipped = [
+        {"index": d["index"], "from": d["from"], "to": d["to"],
+         "accepted": d["accepted"], "reason": d["reason"]}
+        for d in result.loops
+        if d["index"] in before and before[d["index"]] != d["accepted"]
+    ]
+    assert result.incremental["changed"] == flipped
+
+
+def test_a_replay_of_a_square_walk_ends_with_the_batch_job():
+    steps = square_walk()
+    graph = pgo.PoseGraph(2)
+    every = 4
+    previous, added = None, [0, 0, 0]  # poses, edges, candidates
+    kinds = []
+    for k, step in enumerate(steps):
+        edges, candidates = add_step(graph, step)
+        added = [added[0] + 1, added[1] + edges, added[2] + candidates]
+        if (k + 1) % every != 0 and k + 1 != len(steps):
+            continue
+        result = graph.update()
+        inc = result.incremental
+        kinds.append(inc["solve"])
+        assert inc == result.report["incremental"]
+        if previous is None:
+            assert (inc["solve"], inc["reason"]) == ("batch", "no earlier solution")
+            assert inc["changed"] == []
+        else:
+            assert inc["solve"] != "batch", (k, inc)
+            assert [inc["new_poses"], inc["new_edges"], inc["new_candidates"]] == added
+            assert_changed_lists_the_flips(result, previous)
+        new_ids = [s[0] for s in steps[k + 1 - added[0]:k + 1]]
+        if previous is not None and added[2] == 0 and added[1] == added[0]:
+            # Odometry alone: the new poses are the last map's composed
+            # with it, and the rest of the map is the last one.
+            assert inc["solve"] == "extended", (k, inc)
+            assert inc["changed"] == []
+            pose = previous.pose(new_ids[0] - 1)
+            for step in steps[k + 1 - added[0]:k + 1]:
+                pose = compose(pose, step[2][0][2])
+                assert pose_difference(result.pose(step[0]), pose) < 1e-9, step[0]
+            for i in previous.poses:
+                assert pose_difference(result.pose(i), previous.pose(i)) < 1e-12, i
+            assert accepted(result) == accepted(previous)
+        elif previous is not None:
+            assert inc["solve"] in ("warm", "full"), (k, inc)
+        previous, added = result, [0, 0, 0]
+    assert kinds.count("extended") >= 4 and kinds.count("warm") + kinds.count("full") >= 4, kinds
+
+    # Nothing added: the last map stands.
+    again = graph.update()
+    assert again.incremental["solve"] == "none"
+    assert again.incremental["new_poses"] == again.incremental["new_edges"] == 0
+    assert again.poses == previous.poses and again.chi2 == previous.chi2
+    assert again.loops == previous.loops
+
+    batch = graph.optimize()
+    assert_same_as_batch(again, batch)
+    # The map is right: every right loop in, every wrong one out.
+    right = {d["index"] for d in batch.loops if d["inliers"] >= 60}
+    assert set(accepted(batch)) == right and 0 < len(right) < len(batch.loops)
+
+
+def walk(n):
+    """n poses 1 m apart along x, odometry between neighbours, and one loop
+    candidate from the first to the last."""
+    graph = pgo.PoseGraph(2)
+    info = information(ODOMETRY_SIGMA)
+    for k in range(n):
+        graph.add_pose(k, (0.0, 0.0, 0.0))
+        if k > 0:
+            graph.add_edge(k - 1, k, (1.0, 0.0, 0.0), info)
+    graph.add_loop_candidate(0, n - 1, (n - 1.02, 0.01, 0.0), information(LOOP_SIGMA), inliers=90)
+    return graph
+
+
+def solve(result):
+    return result.incremental["solve"], result.incremental["reason"]
+
+
+def test_other_options_fix_and_forget_start_again():
+    graph = walk(6)
+    assert solve(graph.update(alpha=0.05)) == ("batch", "no earlier solution")
+    assert solve(graph.update(alpha=0.05))[0] == "none"
+    assert solve(graph.update(alpha=0.01)) == ("batch", "options changed")
+    assert solve(graph.update(alpha=0.01))[0] == "none"
+    # An option given its default value is the same options.
+    assert solve(graph.update(alpha=0.01, robust=None))[0] == "none"
+    graph.fix(3)
+    assert solve(graph.update(alpha=0.01))[0] == "batch"
+    assert solve(graph.update(alpha=0.01))[0] == "none"
+    graph.forget()
+    first = graph.update(alpha=0.01)
+    assert solve(first)[0] == "batch"
+    inc = first.incremental
+    # A batch update counts the whole graph as new.
+    assert (inc["new_poses"], inc["new_edges"], inc["new_candidates"]) == (6, 6, 1)
+    graph.forget()
+    graph.forget()  # twice is once
+    assert solve(graph.update(alpha=0.01))[0] == "batch"
+
+
+def test_optimize_is_no_update_and_leaves_the_state_alone():
+    graph = walk(5)
+    batch = graph.optimize()
+    assert batch.incremental is None and "incremental" not in batch.report
+    first = graph.update()
+    assert solve(first)[0] == "batch"
+    graph.optimize(alpha=0.2)
+    assert solve(graph.update())[0] == "none"
+    assert_same_as_batch(first, batch)
+
+
+def test_failed_updates_keep_the_earlier_state():
+    with pytest.raises(pgo.Error, match="no poses"):
+        pgo.PoseGraph(2).update()
+    graph = walk(5)
+    graph.update()
+    with pytest.raises(pgo.Error, match="alpha"):
+        graph.update(alpha=2.0)
+    with pytest.raises(pgo.Error, match="unknown option"):
+        graph.update(no_such_option=1)
+    assert solve(graph.update())[0] == "none"
+
+
+def test_a_decision_an_update_changes_is_listed():
+    """A loop candidate 1 m off the odometry, accepted while it is alone
+    (the odometry gives way), then outvoted by three that agree with the
+    odometry: the update lists it as changed, rejected now."""
+    graph = pgo.PoseGraph(2)
+    odometry, loop = information((0.05, 0.05, 0.02)), information(LOOP_SIGMA)
+    for k in range(9):
+        graph.add_pose(k, (0.0, 0.0, 0.0))
+        if k > 0:
+            graph.add_edge(k - 1, k, (1.0, 0.0, 0.0), odometry)
+        if k == 7:
+            off = graph.add_loop_candidate(0, 7, (8.0, 0.0, 0.0), loop, inliers=90)
+            first = graph.update()
+    assert accepted(first) == [off]
+    agreeing = [graph.add_loop_candidate(i, 8, (8.0 - i, 0.0, 0.0), loop, inliers=100)
+                for i in (1, 2, 3)]
+    result = graph.update()
+    inc = result.incremental
+    assert inc["solve"] in ("warm", "full")
+    assert (inc["new_poses"], inc["new_edges"], inc["new_candidates"]) == (1, 4, 3)
+    assert [c["index"] for c in inc["changed"]] == [off]
+    assert inc["changed"][0]["accepted"] is False
+    assert inc["changed"][0]["reason"] in ("kernel", "inconsistent", "explains_chi2")
+    assert_changed_lists_the_flips(result, first)
+    assert accepted(result) == agreeing
+    assert_same_as_batch(result, graph.optimize())
+
+
+def g2o_steps(path):
+    """The additions of a 2D g2o file in the order a front end makes them:
+    each VERTEX_SE2 in file order, with the EDGE_SE2 lines whose later end
+    it is (a trailing inlier count makes a loop candidate)."""
+    vertices, edges = [], []
+    for line in path.read_text().splitlines():
+        t = line.split()
+        if not t:
+            continue
+        if t[0] == "VERTEX_SE2":
+            vertices.append((int(t[1]), tuple(float(x) for x in t[2:5])))
+        elif t[0] == "EDGE_SE2":
+            i, j = int(t[1]), int(t[2])
+            meas = tuple(float(x) for x in t[3:6])
+            info = symmetric([float(x) for x in t[6:12]], 3)
+            inliers = int(t[12]) if len(t) > 12 else None
+            edges.append((i, j, meas, info, inliers))
+    order = {v: k for k, (v, _) in enumerate(vertices)}
+    due = [[] for _ in vertices]
+    for e in edges:
+        due[max(order[e[0]], order[e[1]])].append(e)
+    return [(v, pose, due[k]) for k, (v, pose) in enumerate(vertices)]
+
+
+def test_a_replay_of_the_aliased_sample_ends_with_the_batch_job():
+    steps = g2o_steps(SAMPLES / "aliased.g2o")
+    assert len(steps) == 800 and sum(len(s[2]) for s in steps) == 1059
+    graph = pgo.PoseGraph(2)
+    every = 50
+    kinds, changes, previous = [], 0, None
+    for k, step in enumerate(steps):
+        add_step(graph, step)
+        if (k + 1) % every != 0 and k + 1 != len(steps):
+            continue
+        result = graph.update()
+        kinds.append(result.incremental["solve"])
+        assert result.incremental == result.report["incremental"]
+        if previous is not None:
+            assert_changed_lists_the_flips(result, previous)
+        changes += len(result.incremental["changed"])
+        previous = result
+    assert kinds[0] == "batch" and "batch" not in kinds[1:], kinds
+    assert "warm" in kinds, kinds
+    # Some update changed an earlier decision: `changed` was checked.
+    assert changes > 0
+    assert graph.num_loop_candidates == len(previous.loops) > 0
+    assert_same_as_batch(previous, graph.optimize())
