@@ -308,13 +308,21 @@ pub fn em(
     let floor = options.floor();
     let k = start.len();
     let mut mixture = start;
-    let mut responsibilities = vec![0.0; y.len() * k];
+    // Inlier counts repeat: EM over the distinct values, each weighed by
+    // how often it occurs, is EM over `y` at a fraction of the cost.
+    let (values, times) = tally(y);
+    let mut responsibilities = vec![0.0; values.len() * k];
     let mut converged = false;
     let mut iterations = 0;
     while iterations < options.max_iterations {
         iterations += 1;
-        observe(e_step(y, &mixture, &mut responsibilities));
-        let next = m_step(y, &responsibilities, k, floor)?;
+        observe(weighted_e_step(
+            &values,
+            &times,
+            &mixture,
+            &mut responsibilities,
+        ));
+        let next = weighted_m_step(&values, &times, &responsibilities, k, floor)?;
         let change = mixture.max_abs_change(&next);
         mixture = next;
         if change < options.tolerance {
@@ -332,37 +340,79 @@ pub fn em(
     })
 }
 
+/// The distinct values of `y`, sorted, and how often each occurs.
+fn tally(y: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let mut sorted = y.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let (mut values, mut times): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
+    for v in sorted {
+        match (values.last(), times.last_mut()) {
+            (Some(&last), Some(t)) if last.total_cmp(&v).is_eq() => *t += 1.0,
+            _ => {
+                values.push(v);
+                times.push(1.0);
+            }
+        }
+    }
+    (values, times)
+}
+
+/// E-step on `y`, each value once.
+#[cfg(test)]
+fn e_step(y: &[f64], mixture: &NormalMixture, responsibilities: &mut [f64]) -> f64 {
+    weighted_e_step(y, &vec![1.0; y.len()], mixture, responsibilities)
+}
+
 /// E-step: `r(n,k) = exp(ln π_k N_k(y_n) − ln p(y_n))` into
 /// `responsibilities` (`K` per value, value-major). Returns the
-/// log-likelihood of `mixture`.
-fn e_step(y: &[f64], mixture: &NormalMixture, responsibilities: &mut [f64]) -> f64 {
+/// log-likelihood of `mixture`, value `n` counted `times[n]` times.
+fn weighted_e_step(
+    y: &[f64],
+    times: &[f64],
+    mixture: &NormalMixture,
+    responsibilities: &mut [f64],
+) -> f64 {
     let mut log_likelihood = 0.0;
-    for (&v, r) in y
+    for ((&v, &t), r) in y
         .iter()
+        .zip(times)
         .zip(responsibilities.chunks_exact_mut(mixture.len()))
     {
         let log_p = mixture.log_terms(v, r);
-        for t in r.iter_mut() {
-            *t = (*t - log_p).exp();
+        for x in r.iter_mut() {
+            *x = (*x - log_p).exp();
         }
-        log_likelihood += log_p;
+        log_likelihood += t * log_p;
     }
     log_likelihood
 }
 
-/// M-step: each component's weighted mean, weighted variance around that
-/// *new* mean (raised to `floor`), and weight. `None` when a component has
-/// no mass or a parameter is not finite.
+/// M-step on `y`, each value once.
+#[cfg(test)]
 fn m_step(y: &[f64], responsibilities: &[f64], k: usize, floor: f64) -> Option<NormalMixture> {
-    let n = y.len() as f64;
-    let rows = || responsibilities.chunks_exact(k);
+    weighted_m_step(y, &vec![1.0; y.len()], responsibilities, k, floor)
+}
+
+/// M-step: each component's weighted mean, weighted variance around that
+/// *new* mean (raised to `floor`), and weight, value `n` counted
+/// `times[n]` times. `None` when a component has no mass or a parameter is
+/// not finite.
+fn weighted_m_step(
+    y: &[f64],
+    times: &[f64],
+    responsibilities: &[f64],
+    k: usize,
+    floor: f64,
+) -> Option<NormalMixture> {
+    let n: f64 = times.iter().sum();
+    let rows = || responsibilities.chunks_exact(k).zip(times);
     let mut components = Vec::with_capacity(k);
     for j in 0..k {
-        let mass: f64 = rows().map(|r| r[j]).sum();
+        let mass: f64 = rows().map(|(r, t)| t * r[j]).sum();
         if !(mass > 0.0 && mass.is_finite()) {
             return None;
         }
-        let weighted = || rows().map(move |r| r[j]).zip(y);
+        let weighted = || rows().map(move |(r, t)| t * r[j]).zip(y);
         let mean = weighted().map(|(r, v)| r * v).sum::<f64>() / mass;
         let var = weighted().map(|(r, v)| r * (v - mean).powi(2)).sum::<f64>() / mass;
         components.push(NormalComponent {
