@@ -68,6 +68,13 @@ pub struct SolverOptions {
     /// Stop when the step's largest component is below this (radians /
     /// metres-ish: the units of the tangent space).
     pub step_tolerance: f64,
+    /// Also stop after a lightly damped step whose decrease the
+    /// Gauss–Newton model foresaw to within this share of the objective:
+    /// what the model missed is the nonlinearity the next step would take
+    /// out, and near an optimum that next decrease is smaller still (off by
+    /// default; incremental updates, which start next to the optimum, use
+    /// it to save the iteration that would only confirm convergence).
+    pub model_tolerance: Option<f64>,
     /// Stop when this much time has passed; the best estimate so far is kept.
     pub time_limit: Option<Duration>,
     /// LM damping `λ` (relative to the diagonal of `H`) after the first
@@ -89,6 +96,7 @@ impl Default for SolverOptions {
             max_iterations: 100,
             relative_tolerance: 1e-9,
             step_tolerance: 1e-12,
+            model_tolerance: None,
             time_limit: None,
             initial_lambda: 1e-6,
             threads: 0,
@@ -506,7 +514,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             let record = step.record(summary.iterations, progress.watch.elapsed());
             summary.history.push(record);
             observer.iteration(&record);
-            if ((previous - objective) / previous).abs() < self.options.relative_tolerance {
+            if ((previous - objective) / previous).abs() < self.options.relative_tolerance
+                || self.model_agreed(previous, objective)
+            {
                 break if self.model_trusted(previous, objective) {
                     StopReason::RelativeDecrease
                 } else {

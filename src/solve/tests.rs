@@ -401,6 +401,32 @@ fn threads_start_a_private_pool_of_that_size_only_from_two() {
         .unwrap();
     assert!(!opt.parallelism.is_parallel());
 }
+#[test]
+fn a_step_the_model_foresaw_ends_the_run_when_asked() {
+    // From a solved square with one loop moved a little (a nearby start, as
+    // an incremental update has), the model tolerance spares the
+    // confirming iteration and lands on the same optimum.
+    let mut g = square(0.3, 6);
+    optimize(&mut g, &SolverOptions::default()).unwrap();
+    let k = g.edges.len() - 1;
+    g.edges[k].measurement.x += 0.05;
+    let runs: Vec<(usize, f64)> = [None, Some(1e-8)]
+        .into_iter()
+        .map(|model_tolerance| {
+            let mut h = g.clone();
+            let options = SolverOptions {
+                model_tolerance,
+                ..Default::default()
+            };
+            let s = optimize(&mut h, &options).unwrap();
+            assert!(s.converged(), "{s:?}");
+            (s.iterations, h.chi2())
+        })
+        .collect();
+    assert!(runs[1].0 < runs[0].0, "{runs:?}");
+    assert!((runs[1].1 / runs[0].1 - 1.0).abs() < 1e-8, "{runs:?}");
+}
+
 /// The tests on simulated graphs (the `simulate` feature).
 #[cfg(feature = "simulate")]
 mod simulated {
