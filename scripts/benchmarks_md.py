@@ -11,6 +11,7 @@ Result files
   robust_1000.json  scripts/bench_robust.py, 1000 wrong candidates per case
   aliased.json      scripts/bench_robust.py --policies aliased
   scale.json        scripts/bench_scale.py
+  replay.json       scripts/bench_replay.py --aliased (iSAM2 and pgo's update, keyframe by keyframe)
 """
 import argparse
 import json
@@ -296,6 +297,110 @@ def plain_section(path):
     return out
 
 
+REPLAY = {
+    "file": "replay.json",
+    "title": "Incremental replay: iSAM2 and pgo's update",
+    "intro": (
+        "Each dataset is replayed keyframe by keyframe: poses in file order, each edge added "
+        "once both its ends exist, an optimisation after every N poses (and after the last). "
+        "Both tools get the same poses, edges and initial values (the odometry composed onto "
+        "the latest estimate of the previous pose) and hold the first pose at its file value. "
+        "iSAM2 is GTSAM's `ISAM2` with its default parameters, one step being `update` with "
+        "the new factors and values followed by `calculateEstimate`; pgo's step is "
+        "`PoseGraph.update()` of the Python module with its defaults. A step's latency is "
+        "the time of those calls; total = the sum over the steps. final χ² / batch χ² − 1: "
+        "the χ² of the last estimate (pgo's error definition) over the batch optimum's "
+        "(`pgo optimize` of the whole graph); map error: the largest distance of a final "
+        "position from the batch optimum's, as % of the diagonal of its bounding box. pgo "
+        "solves: how many of its steps needed no solve (none), only composed new poses along "
+        "odometry (extended), solved from the last map and decisions (warm), from the last "
+        "map with every candidate weighed again (full), or ran the whole job (batch)."),
+    "aliased_intro": (
+        "The aliased case: manhattan corrupted by `pgo corrupt --wrong 100 --wrong-mode "
+        "aliased --group-size 5 --true-like-counts 0.5 --seed 1` (100 wrong candidates i–j "
+        "measuring the pose j+s seen from i, in groups of 5 sharing s, half of them with "
+        "counts drawn like a true loop's); every loop edge carries an inlier count, pgo gets "
+        "them as loop candidates and iSAM2 as plain factors (it has no gate: it takes every "
+        "candidate). Precision = accepted true / accepted, recall = accepted true / true "
+        "candidates added so far, at the end and (precision) at its lowest over the steps; "
+        "map error against the optimum of the clean graph; \"= batch\": whether pgo's final "
+        "accepted set equals that of a batch `optimize()` of the same graph."),
+    "default_cmd": ".venv/bin/python scripts/bench_replay.py --aliased",
+}
+
+
+SOLVES = ("none", "extended", "warm", "full", "batch")
+
+
+def replay_section(path):
+    out = ["## " + REPLAY["title"], "", REPLAY["intro"], ""]
+    if not os.path.exists(path):
+        out += ["**Not run yet.** Command:", "", "```sh", REPLAY["default_cmd"], "```", ""]
+        return out
+    data = json.load(open(path))
+    cases = data["cases"]
+    out += ["Made by:", "", "```sh", data.get("command", REPLAY["default_cmd"]), "```", ""]
+    if not data.get("complete"):
+        out += ["**Partial:** the run had not finished when this file was copied; runs in it: %d." %
+                len(cases), ""]
+    p = data.get("isam2_params") or {}
+    if p:
+        out += ["GTSAM %s, `ISAM2Params()` as it comes: %s, relinearizeThreshold %s, relinearizeSkip %s, "
+                "factorization %s." % (data.get("gtsam_version"), p.get("type"), p.get("relinearizeThreshold"),
+                                       p.get("relinearizeSkip"), p.get("factorization")), ""]
+    svg = os.path.join(os.path.dirname(path), "replay_latency.svg")
+    if os.path.exists(svg):
+        out += ["Latency per step: [%s](%s)." % (os.path.basename(svg),
+                                                 os.path.relpath(svg, os.path.join(ROOT, "docs"))), ""]
+
+    def lat(r):
+        l = r["latency_ms"]
+        return "%d | %.2f | %.2f | %.2f | %.1f" % (r["steps"], r["total_s"], l["median"], l["p99"], l["max"])
+
+    def rel(x):
+        return "–" if x is None else "%.2g" % x
+
+    datasets = []
+    for r in cases:
+        if r["dataset"] not in datasets:
+            datasets.append(r["dataset"])
+    for ds in datasets:
+        rows = [r for r in cases if r["dataset"] == ds]
+        if ds.endswith(" aliased"):
+            out += ["### %s" % ds, "", REPLAY["aliased_intro"], "",
+                    "| N | tool | steps | total (s) | median (ms) | p99 (ms) | max (ms) | precision | recall "
+                    "| lowest precision | map error max / RMS % | = batch |",
+                    "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+            for r in rows:
+                if "error" in r:
+                    out.append("| %d | %s | %s |" % (r["every"], r["tool"], r["error"]))
+                    continue
+                m = r.get("map_error")
+                same = r.get("accepted_vs_batch")
+                out.append("| %d | %s | %s | %s | %s | %s | %s | %s |" % (
+                    r["every"], r["tool"], lat(r), fmt(r.get("precision")), fmt(r.get("recall")),
+                    fmt(r.get("min_precision")),
+                    "%.3g / %.3g" % (m["max_pct"], m["rms_pct"]) if m else "–",
+                    "–" if same is None else ("yes" if same["identical"] else "no (%d / %d differ)" % (
+                        same["only_incremental"], same["only_batch"]))))
+        else:
+            out += ["### %s" % ds, "",
+                    "| N | tool | steps | total (s) | median (ms) | p99 (ms) | max (ms) | final χ² / batch χ² − 1 "
+                    "| map error max % | pgo solves none / extended / warm / full / batch |",
+                    "|---|---|---|---|---|---|---|---|---|---|"]
+            for r in rows:
+                if "error" in r:
+                    out.append("| %d | %s | %s |" % (r["every"], r["tool"], r["error"]))
+                    continue
+                s = r.get("pgo_solves")
+                out.append("| %d | %s | %s | %s | %s | %s |" % (
+                    r["every"], r["tool"], lat(r), rel(r.get("chi2_rel")),
+                    "%.3g" % r["map_error"]["max_pct"] if "map_error" in r else "–",
+                    "–" if s is None else " / ".join(str(s.get(k, 0)) for k in SOLVES)))
+        out.append("")
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=os.path.join(ROOT, "bench", "results"))
@@ -312,6 +417,7 @@ def main():
         out += robust_section(os.path.join(args.results, spec["file"]), spec)
     out += ablation_section(os.path.join(args.results, "ablation"))
     out += scale_section(os.path.join(args.results, SCALE["file"]))
+    out += replay_section(os.path.join(args.results, REPLAY["file"]))
     for world in ["grid2d", "sphere3d"]:
         out += plain_section(os.path.join(args.results, "plain_vs_robust_%s.json" % world))
     text = "\n".join(out).rstrip("\n") + "\n"
