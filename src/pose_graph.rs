@@ -481,7 +481,9 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     ///
     /// The first update, one with other options than the last, and one
     /// after [`PoseGraph::fix`] or [`PoseGraph::forget`] run the whole job
-    /// ([`UpdateSolve::Batch`]). A cancelled update keeps the earlier state.
+    /// ([`UpdateSolve::Batch`]). A cancelled update keeps the earlier state;
+    /// one cut short by `options.solver.time_limit` (a bound on an update's
+    /// latency) leaves its map as the start of the next.
     /// Errors: those of [`PoseGraph::optimize`].
     ///
     /// ```
