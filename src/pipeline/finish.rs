@@ -5,9 +5,9 @@ use super::{OptimizeConfig, PipelineError};
 use crate::graph::PoseGraph;
 use crate::io::g2o::G2oPose;
 use crate::report::{InitializationReport, LoopReport, OptimizerReport, Report, RobustReport};
-use crate::robust::{Candidate, Outcome, RobustMethod};
+use crate::robust::{self, Candidate, Outcome, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization, initialize as init_poses};
-use crate::solve::{Optimizer, Summary};
+use crate::solve::{Budget, Observer, Optimizer, Session, SolveError, SolverOptions, Summary};
 use crate::stats::{Chi2Test, StatsError};
 use std::path::Path;
 use std::time::Instant;
@@ -60,6 +60,68 @@ pub fn initialize<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         time_s: start.elapsed().as_secs_f64(),
         vertices_without_line: missing.len(),
     };
+    Ok(())
+}
+
+/// The robust solve (`method`: how the job weighs `candidates`, from
+/// `weights`, with kernel width `c` and the χ² test EM's search acts on) within
+/// the job's iteration and time budget, then the χ² test of the map it
+/// returns and the report (`initial_chi2`: the objective it started from).
+#[allow(clippy::too_many_arguments)]
+pub fn solve_and_test<P: G2oPose<D>, const D: usize, M>(
+    graph: &mut PoseGraph<P, D>,
+    optimizer: &mut Optimizer<P, D>,
+    solver: SolverOptions,
+    weights: &mut [f64],
+    candidates: &[Candidate],
+    kind: RobustMethod,
+    method: M,
+    config: &OptimizeConfig,
+    report: &mut Report,
+    observer: &mut dyn Observer,
+) -> Result<(), PipelineError>
+where
+    M: FnOnce(
+        &mut Session<'_, P, D>,
+        &mut [f64],
+        f64,
+        &Test<'_, P, D>,
+    ) -> Result<Outcome, SolveError>,
+{
+    let initial_chi2 = graph.chi2();
+    let budget = Budget {
+        iterations: config.iteration_budget.unwrap_or(usize::MAX),
+        deadline: config.solver.time_limit.map(|t| Instant::now() + t),
+    };
+    let c = (config.robust_c).unwrap_or_else(|| robust::default_c(kind, D));
+    let test = |g: &PoseGraph<P, D>, w: &[f64]| chi2_test(g, w, config).ok();
+    let mut session = Session::new(optimizer, graph, solver, budget, observer);
+    let outcome =
+        method(&mut session, weights, c, &test).map_err(|source| PipelineError::Solve {
+            path: config.input.clone(),
+            source,
+        })?;
+    let summary = session.finish(outcome.cut_short);
+    if graph.poses.iter().any(|p| !p.is_finite()) {
+        return Err(PipelineError::NonFiniteResult {
+            path: config.input.clone(),
+        });
+    }
+    match chi2_test(graph, weights, config) {
+        Ok(t) => report.chi2_test = Some(t),
+        Err(e) => report.warnings.push(format!("no χ² test: {e}")),
+    }
+    self::report(
+        graph,
+        optimizer,
+        summary,
+        initial_chi2,
+        candidates,
+        &outcome,
+        kind,
+        c,
+        report,
+    );
     Ok(())
 }
 

@@ -22,9 +22,9 @@ use crate::io::g2o::G2oPose;
 use crate::report::{
     DecisionChange, IncrementalReport, InitializationReport, OptimizerReport, Report, UpdateSolve,
 };
-use crate::robust::{self, RobustMethod};
+use crate::robust::{self, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization, spanning_tree};
-use crate::solve::{Budget, Observer, Optimizer, Session, SolverOptions};
+use crate::solve::{Observer, Optimizer, Session, SolverOptions};
 use std::time::Instant;
 
 /// An update's solves stop once an iteration lowers the objective by less
@@ -262,45 +262,32 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         time_s: start.elapsed().as_secs_f64(),
         vertices_without_line: 0,
     };
-    let budget = Budget {
-        iterations: config.iteration_budget.unwrap_or(usize::MAX),
-        deadline: config.solver.time_limit.map(|t| Instant::now() + t),
-    };
-    let c = config
-        .robust_c
-        .unwrap_or_else(|| robust::default_c(method, D));
-    let test = |g: &PoseGraph<P, D>, w: &[f64]| finish::chi2_test(g, w, config).ok();
-    let mut session = Session::new(&mut optimizer, graph, solver, budget, observer);
-    let (outcome, full) = robust::resume(
-        &mut session,
+    let mut full = false;
+    let weigh =
+        |session: &mut Session<'_, P, D>, weights: &mut [f64], c: f64, test: &Test<'_, P, D>| {
+            let (outcome, all) = robust::resume(
+                session,
+                weights,
+                &candidates,
+                method,
+                c,
+                &config.layers,
+                test,
+            )?;
+            full = all;
+            Ok(outcome)
+        };
+    finish::solve_and_test(
+        graph,
+        &mut optimizer,
+        solver,
         &mut weights,
         &candidates,
         method,
-        c,
-        &config.layers,
-        &test,
-    )
-    .map_err(solve_error)?;
-    let summary = session.finish(outcome.cut_short);
-    if graph.poses.iter().any(|p| !p.is_finite()) {
-        return Err(PipelineError::NonFiniteResult {
-            path: config.input.clone(),
-        });
-    }
-    match finish::chi2_test(graph, &weights, config) {
-        Ok(t) => report.chi2_test = Some(t),
-        Err(e) => report.warnings.push(format!("no χ² test: {e}")),
-    }
-    finish::report(
-        graph,
-        &optimizer,
-        summary,
-        initial_chi2,
-        &candidates,
-        &outcome,
-        method,
-        c,
+        weigh,
+        config,
         report,
-    );
+        observer,
+    )?;
     Ok((full, previous))
 }

@@ -14,9 +14,9 @@ use crate::io::g2o::{self, G2oFile, G2oPose, ReadError, ReadOptions};
 use crate::io::inliers::InlierCsvError;
 use crate::options::Options;
 use crate::report::Report;
-use crate::robust::{self, RobustMethod};
+use crate::robust::{self, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization};
-use crate::solve::{Budget, Observer, Optimizer, Session, SolveError, SolverOptions};
+use crate::solve::{Observer, Optimizer, Session, SolveError, SolverOptions};
 use crate::stats::DofConvention;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -269,59 +269,34 @@ pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         .plot
         .as_ref()
         .map(|_| crate::plot::top_view(&graph.poses));
-    let initial_chi2 = graph.chi2();
 
-    // The robust solve, within the iteration and time budget.
-    let budget = Budget {
-        iterations: config.iteration_budget.unwrap_or(usize::MAX),
-        deadline: config.solver.time_limit.map(|t| Instant::now() + t),
-    };
-    let c = config
-        .robust_c
-        .unwrap_or_else(|| robust::default_c(method, D));
-    let test = |g: &PoseGraph<P, D>, w: &[f64]| finish::chi2_test(g, w, config).ok();
-    let mut session = Session::new(
-        &mut optimizer,
-        graph,
-        config.solver.clone(),
-        budget,
-        observer,
-    );
+    // The robust solve within the budget, the χ² test of its map, the report.
     let chordal = config.initialization == Initialization::Chordal;
-    let outcome = robust::solve(
-        &mut session,
-        chordal,
+    let weigh =
+        |session: &mut Session<'_, P, D>, weights: &mut [f64], c: f64, test: &Test<'_, P, D>| {
+            robust::solve(
+                session,
+                chordal,
+                weights,
+                &candidates,
+                method,
+                c,
+                &config.layers,
+                test,
+            )
+        };
+    finish::solve_and_test(
+        graph,
+        &mut optimizer,
+        config.solver.clone(),
         &mut weights,
         &candidates,
         method,
-        c,
-        &config.layers,
-        &test,
-    )
-    .map_err(solve_error)?;
-    let summary = session.finish(outcome.cut_short);
-    if graph.poses.iter().any(|p| !p.is_finite()) {
-        return Err(PipelineError::NonFiniteResult {
-            path: config.input.clone(),
-        });
-    }
-
-    // The χ² test of the map returned, and the report.
-    match finish::chi2_test(graph, &weights, config) {
-        Ok(t) => report.chi2_test = Some(t),
-        Err(e) => report.warnings.push(format!("no χ² test: {e}")),
-    }
-    finish::report(
-        graph,
-        &optimizer,
-        summary,
-        initial_chi2,
-        &candidates,
-        &outcome,
-        method,
-        c,
+        weigh,
+        config,
         report,
-    );
+        observer,
+    )?;
     if let (Some(dir), Some(before)) = (&config.plot, before) {
         finish::plot(dir, graph, &before, &weights, config, report)?;
     }
