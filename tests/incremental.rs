@@ -270,3 +270,11 @@ fn a_cancelled_update_keeps_the_earlier_state() {
     let batch = g.optimize(&options).unwrap();
     assert!((s.chi2() / batch.chi2() - 1.0).abs() < 1e-6);
 }
+
+#[test]
+fn the_kept_state_costs_about_a_hundred_bytes_a_candidate() {
+    // What the docs say an update keeps per loop candidate: its report
+    // entry (and a byte for its decision).
+    let per_candidate = std::mem::size_of::<pgo::report::LoopReport>() + 1;
+    assert!((64..=128).contains(&per_candidate), "{per_candidate} bytes");
+}

@@ -105,17 +105,32 @@ pub unsafe extern "C" fn pgo_graph_optimize(
     options: *const PgoOptions,
     out: *mut *mut PgoResult,
 ) -> PgoStatus {
+    // SAFETY: the caller's contract, for `graph`, `options` and `out`.
+    unsafe {
+        run_job(options, out, |o| {
+            Ok(borrow(graph, "graph")?.graph.optimize(o)?)
+        })
+    }
+}
+
+/// Runs `job` with `options` (NULL: the defaults) and stores its result at
+/// `*out` (NULL on failure).
+///
+/// # Safety
+/// `options` is NULL or live options; `out` is NULL or writable.
+unsafe fn run_job(
+    options: *const PgoOptions,
+    out: *mut *mut PgoResult,
+    job: impl FnOnce(&Options) -> Result<AnySolution, Failure>,
+) -> PgoStatus {
     status(|| {
         let slot = out_ptr(out, "out")?;
         // SAFETY: writable, by the caller's contract.
         unsafe { *slot = ptr::null_mut() };
-        // SAFETY: the caller's contract.
-        let graph = unsafe { borrow(graph, "graph")? };
+        let defaults = Options::default();
         // SAFETY: NULL or live, by the caller's contract.
-        let solution = match unsafe { options.as_ref() } {
-            Some(o) => graph.graph.optimize(&o.options)?,
-            None => graph.graph.optimize(&Options::default())?,
-        };
+        let options = unsafe { options.as_ref() }.map_or(&defaults, |o| &o.options);
+        let solution = job(options)?;
         // SAFETY: as above.
         unsafe { *slot = Box::into_raw(PgoResult::new(solution)) };
         Ok(())
@@ -146,21 +161,12 @@ pub unsafe extern "C" fn pgo_graph_update(
     options: *const PgoOptions,
     out: *mut *mut PgoResult,
 ) -> PgoStatus {
-    status(|| {
-        let slot = out_ptr(out, "out")?;
-        // SAFETY: writable, by the caller's contract.
-        unsafe { *slot = ptr::null_mut() };
-        // SAFETY: the caller's contract.
-        let graph = unsafe { borrow_mut(graph, "graph")? };
-        // SAFETY: NULL or live, by the caller's contract.
-        let solution = match unsafe { options.as_ref() } {
-            Some(o) => graph.graph.update(&o.options)?,
-            None => graph.graph.update(&Options::default())?,
-        };
-        // SAFETY: as above.
-        unsafe { *slot = Box::into_raw(PgoResult::new(solution)) };
-        Ok(())
-    })
+    // SAFETY: the caller's contract, for `graph`, `options` and `out`.
+    unsafe {
+        run_job(options, out, |o| {
+            Ok(borrow_mut(graph, "graph")?.graph.update(o)?)
+        })
+    }
 }
 
 /// How a result was reached (`PgoUpdate.solve`).
