@@ -227,6 +227,16 @@ impl<const D: usize> BlockSystem<D> {
         self.parallelism = parallelism;
     }
 
+    /// The elimination position of each variable block.
+    pub fn positions(&self) -> &[usize] {
+        &self.position
+    }
+
+    /// The damping `λ` of the last factorisation.
+    pub fn damping(&self) -> f64 {
+        self.lambda
+    }
+
     /// Number of variable blocks.
     pub fn num_blocks(&self) -> usize {
         self.n_blocks

@@ -518,10 +518,14 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         options.validate()?;
         let (mut report, config) = self.start(options)?;
         let mut graph = self.graph.clone();
+        let mut chi2 = None;
         let warm = match self.state.as_deref() {
             Some((last, warm)) if last == options => {
-                pipeline::update_graph(&mut graph, warm, &config, &mut report, observer)
-                    .map_err(from_pipeline)?
+                let warm = pipeline::update_graph(&mut graph, warm, &config, &mut report, observer)
+                    .map_err(from_pipeline)?;
+                // An update's report has the χ² of the map it leaves.
+                chi2 = Some(report.optimizer.final_chi2);
+                warm
             }
             last => {
                 pipeline::optimize_graph(&mut graph, &self.missing, &config, &mut report, observer)
@@ -539,7 +543,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
                     new_candidates: graph.num_candidates(),
                     changed: Vec::new(),
                 });
-                Warm::after(&graph, &report)
+                Warm::after(&graph, &report, Default::default())
             }
         };
         if report.optimizer.stop_reason != StopReason::Cancelled {
@@ -548,7 +552,10 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         for w in &report.warnings {
             log::warn!("{w}");
         }
-        Ok(Solution::new(&graph, report))
+        Ok(match chi2 {
+            Some(chi2) => Solution::with_chi2(&graph, report, chi2),
+            None => Solution::new(&graph, report),
+        })
     }
 
     /// Drops what [`PoseGraph::update`] keeps: the next update runs the

@@ -55,6 +55,19 @@ impl<P> Solution<P> {
     where
         P: Pose<D>,
     {
+        let chi2 = graph.chi2();
+        Self::with_chi2(graph, report, chi2)
+    }
+
+    /// [`Solution::new`] with the graph's χ² already known.
+    pub(crate) fn with_chi2<const D: usize>(
+        graph: &graph::PoseGraph<P, D>,
+        report: Report,
+        chi2: f64,
+    ) -> Self
+    where
+        P: Pose<D>,
+    {
         let candidates = (0..graph.edges.len()).filter(|&k| graph.edges[k].is_candidate());
         let loops = candidates
             .zip(&report.loops)
@@ -78,7 +91,7 @@ impl<P> Solution<P> {
             poses: graph.poses.clone(),
             index,
             loops,
-            chi2: graph.chi2(),
+            chi2,
             report,
         }
     }

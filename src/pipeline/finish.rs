@@ -88,7 +88,8 @@ where
         &Test<'_, P, D>,
     ) -> Result<Outcome, SolveError>,
 {
-    let initial_chi2 = graph.chi2();
+    // The caller's initialisation left the map whose χ² it reported.
+    let initial_chi2 = report.initialization.chi2;
     let budget = Budget {
         iterations: config.iteration_budget.unwrap_or(usize::MAX),
         deadline: config.solver.time_limit.map(|t| Instant::now() + t),
@@ -169,6 +170,11 @@ pub fn report<P: G2oPose<D>, const D: usize>(
             optimizer.system(),
             optimizer.max_nnz_factor(),
         );
+    } else {
+        // No solver run (a budget spent before the first): the map is the
+        // one it started from.
+        report.optimizer.initial_chi2 = initial_chi2;
+        report.optimizer.final_chi2 = graph.chi2();
     }
     let accepted = outcome.accepted.iter().filter(|&&a| a).count();
     report.robust = RobustReport {

@@ -23,8 +23,9 @@ use crate::report::{
     DecisionChange, IncrementalReport, InitializationReport, OptimizerReport, Report, UpdateSolve,
 };
 use crate::robust::{self, RobustMethod, Test};
-use crate::solve::init::{ChordalInit, Initialization, spanning_tree};
-use crate::solve::{Observer, Optimizer, Session, SolverOptions};
+use crate::solve::init::{ChordalInit, Initialization, grow_tree};
+use crate::solve::{Observer, Optimizer, Ordering, Session, SolverOptions};
+use crate::stats::Chi2Test;
 use std::time::Instant;
 
 /// An update's solves stop once an iteration lowers the objective by less
@@ -60,11 +61,17 @@ pub(crate) struct Warm<P> {
     /// trusted edge.
     accepted: Vec<Option<bool>>,
     report: Report,
+    /// The elimination order of the last solve, for the next.
+    ordering: Ordering,
 }
 
 impl<P: Clone> Warm<P> {
     /// The state after a job on `graph` that made `report`.
-    pub(crate) fn after<const D: usize>(graph: &PoseGraph<P, D>, report: &Report) -> Self
+    pub(crate) fn after<const D: usize>(
+        graph: &PoseGraph<P, D>,
+        report: &Report,
+        ordering: Ordering,
+    ) -> Self
     where
         P: crate::geometry::Pose<D>,
     {
@@ -78,6 +85,7 @@ impl<P: Clone> Warm<P> {
             edges: graph.edges.len(),
             accepted,
             report: report.clone(),
+            ordering,
         }
     }
 }
@@ -118,9 +126,9 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         step.solve = UpdateSolve::Extended;
         step.reason = "only poses hung on the map by one trusted edge each".into();
         report.incremental = Some(step);
-        return Ok(Warm::after(graph, report));
+        return Ok(Warm::after(graph, report, warm.ordering.clone()));
     }
-    let (full, previous) = resolve(graph, warm, config, report, observer, start)?;
+    let (full, previous, ordering) = resolve(graph, warm, config, report, observer, start)?;
     step.solve = if full {
         UpdateSolve::Full
     } else {
@@ -148,7 +156,7 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         }
     }
     report.incremental = Some(step);
-    Ok(Warm::after(graph, report))
+    Ok(Warm::after(graph, report, ordering))
 }
 
 /// How the new poses were placed.
@@ -164,11 +172,13 @@ struct Placed {
 fn place<P: G2oPose<D>, const D: usize>(graph: &mut PoseGraph<P, D>, warm: &Warm<P>) -> Placed {
     let old = warm.poses.len();
     graph.poses[..old].clone_from_slice(&warm.poses);
-    let trusted: Vec<f64> = (graph.edges.iter())
-        .map(|e| if e.is_candidate() { 0.0 } else { 1.0 })
+    // Old edges join old poses only: the new trusted edges reach every
+    // new pose that any trusted edge reaches.
+    let trusted: Vec<usize> = (warm.edges..graph.edges.len())
+        .filter(|&k| !graph.edges[k].is_candidate())
         .collect();
     let mut known: Vec<bool> = (0..graph.num_vertices()).map(|k| k < old).collect();
-    spanning_tree(graph, &mut known, Some(&trusted));
+    grow_tree(graph, &mut known, &trusted);
     let new_edges = &graph.edges[warm.edges..];
     Placed {
         all_by_tree: known.iter().all(|&k| k)
@@ -177,8 +187,10 @@ fn place<P: G2oPose<D>, const D: usize>(graph: &mut PoseGraph<P, D>, warm: &Warm
     }
 }
 
-/// The report of an extension: the last decisions, the χ² test at the
-/// composed map (it changes neither D² nor the degrees of freedom).
+/// The report of an extension: the last decisions, and the last χ² and
+/// χ² test with the new edges' own χ² (composition meets them to rounding)
+/// and constraints added; the degrees of freedom of the residual do not
+/// change, as each new edge brings one new pose.
 fn extended<P: G2oPose<D>, const D: usize>(
     graph: &PoseGraph<P, D>,
     warm: &Warm<P>,
@@ -186,13 +198,9 @@ fn extended<P: G2oPose<D>, const D: usize>(
     report: &mut Report,
     start: Instant,
 ) {
-    let weights: Vec<f64> = (0..graph.edges.len())
-        .map(|k| match warm.accepted.get(k).copied().flatten() {
-            Some(false) => 0.0,
-            _ => 1.0,
-        })
-        .collect();
-    let chi2 = graph.chi2();
+    let new_edges = &graph.edges[warm.edges..];
+    let added: f64 = new_edges.iter().map(|e| graph.edge_chi2(e)).sum();
+    let chi2 = warm.report.optimizer.final_chi2 + added;
     report.gate = warm.report.gate.clone();
     report.robust = warm.report.robust.clone();
     report.loops = warm.report.loops.clone();
@@ -212,14 +220,33 @@ fn extended<P: G2oPose<D>, const D: usize>(
         converged: true,
         ..OptimizerReport::default()
     };
-    match finish::chi2_test(graph, &weights, config) {
+    let test = match &warm.report.chi2_test {
+        Some(t) => Chi2Test::new(
+            t.d2 + added,
+            t.dof_constraints + new_edges.len() as u64,
+            t.dof_residual,
+            config.dof,
+            config.alpha,
+        ),
+        None => {
+            let weights: Vec<f64> = (0..graph.edges.len())
+                .map(|k| match warm.accepted.get(k).copied().flatten() {
+                    Some(false) => 0.0,
+                    _ => 1.0,
+                })
+                .collect();
+            finish::chi2_test(graph, &weights, config)
+        }
+    };
+    match test {
         Ok(t) => report.chi2_test = Some(t),
         Err(e) => report.warnings.push(format!("no χ² test: {e}")),
     }
 }
 
 /// The gate, and the robust solve from the last decisions. Returns whether
-/// every candidate was weighed again, and each edge's earlier decision.
+/// every candidate was weighed again, each edge's earlier decision, and the
+/// elimination order used.
 fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     graph: &mut PoseGraph<P, D>,
     warm: &Warm<P>,
@@ -227,7 +254,7 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     report: &mut Report,
     observer: &mut dyn Observer,
     start: Instant,
-) -> Result<(bool, Vec<Option<bool>>), PipelineError> {
+) -> Result<(bool, Vec<Option<bool>>, Ordering), PipelineError> {
     let solve_error = |source| PipelineError::Solve {
         path: config.input.clone(),
         source,
@@ -250,10 +277,12 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let solver = SolverOptions {
         relative_tolerance: UPDATE_TOLERANCE,
         model_tolerance: Some(MODEL_TOLERANCE),
+        reuse_factorization: true,
         ..config.solver.clone()
     };
-    let mut optimizer =
-        Optimizer::new(graph, Some(&weights), solver.clone()).map_err(solve_error)?;
+    let ordering = Some(warm.ordering.clone());
+    let mut optimizer = Optimizer::with_ordering(graph, Some(&weights), solver.clone(), ordering)
+        .map_err(solve_error)?;
     let initial_chi2 = graph.chi2();
     report.input_chi2 = initial_chi2;
     report.initialization = InitializationReport {
@@ -289,5 +318,6 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         report,
         observer,
     )?;
-    Ok((full, previous))
+    let ordering = optimizer.ordering().cloned().unwrap_or_default();
+    Ok((full, previous, ordering))
 }

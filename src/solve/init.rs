@@ -95,32 +95,49 @@ pub fn spanning_tree<P: Pose<D>, const D: usize>(
     known: &mut [bool],
     weights: Option<&[f64]>,
 ) {
-    let n = graph.num_vertices();
-    let mut adjacency: Vec<Vec<usize>> = vec![Vec::new(); n];
-    for (k, e) in graph.edges.iter().enumerate() {
-        if weights.is_none_or(|w| w[k] > 0.0) {
-            adjacency[e.from].push(k);
-            adjacency[e.to].push(k);
-        }
-    }
+    let edges: Vec<usize> = (0..graph.edges.len())
+        .filter(|&k| weights.is_none_or(|w| w[k] > 0.0))
+        .collect();
+    grow_tree(graph, known, &edges);
+}
+
+/// [`spanning_tree`] over the given `edges` only (indices, increasing): its
+/// cost follows their number, not the graph's size, so that poses added to
+/// a solved map are placed in time proportional to what was added.
+pub fn grow_tree<P: Pose<D>, const D: usize>(
+    graph: &mut PoseGraph<P, D>,
+    known: &mut [bool],
+    edges: &[usize],
+) {
+    // Each edge at both its ends, by vertex (edges in increasing order at
+    // each vertex).
+    let mut ends: Vec<(usize, usize)> = (edges.iter())
+        .flat_map(|&k| [(graph.edges[k].from, k), (graph.edges[k].to, k)])
+        .collect();
+    ends.sort_unstable();
+    let at = |v: usize| {
+        let first = ends.partition_point(|&(u, _)| u < v);
+        let last = ends.partition_point(|&(u, _)| u <= v);
+        &ends[first..last]
+    };
+    let mut seeds: Vec<usize> = ends.iter().map(|&(v, _)| v).filter(|&v| known[v]).collect();
+    seeds.dedup();
     for odometry_only in [true, false] {
-        let mut queue: VecDeque<usize> = (0..n).filter(|&v| known[v]).collect();
+        let mut queue: VecDeque<usize> = seeds.iter().copied().collect();
         while let Some(v) = queue.pop_front() {
-            for &k in &adjacency[v] {
+            for &(_, k) in at(v) {
                 let e = &graph.edges[k];
-                if odometry_only && !is_odometry(graph, e) {
+                let w = if e.from == v { e.to } else { e.from };
+                if known[w] || odometry_only && !is_odometry(graph, e) {
                     continue;
                 }
-                let (w, pose) = if e.from == v {
-                    (e.to, graph.poses[v].compose(&e.measurement))
+                graph.poses[w] = if e.from == v {
+                    graph.poses[v].compose(&e.measurement)
                 } else {
-                    (e.from, graph.poses[v].compose(&e.measurement.inverse()))
+                    graph.poses[v].compose(&e.measurement.inverse())
                 };
-                if !known[w] {
-                    known[w] = true;
-                    graph.poses[w] = pose;
-                    queue.push_back(w);
-                }
+                known[w] = true;
+                queue.push_back(w);
             }
         }
     }
@@ -631,6 +648,26 @@ mod tests {
         for (p, t) in o.poses.iter().zip(&truth) {
             assert!((p.translation() - t.translation()).norm() < 1e-9);
         }
+    }
+
+    #[test]
+    fn grow_tree_places_only_what_the_given_edges_reach() {
+        let truth = grid_truth();
+        let mut g = planar_graph(&truth, 0.0, 5);
+        let before = g.poses.clone();
+        let mut known: Vec<bool> = (0..g.num_vertices()).map(|v| v < 20).collect();
+        g.poses[..20].clone_from_slice(&truth[..20]);
+        // The edges that reach vertices 20–22, and none beyond.
+        let edges: Vec<usize> = (0..g.edges.len())
+            .filter(|&k| g.edges[k].to <= 22 && g.edges[k].to >= 20)
+            .collect();
+        grow_tree(&mut g, &mut known, &edges);
+        for v in 20..=22 {
+            assert!(known[v]);
+            assert!((g.poses[v].translation() - truth[v].translation()).norm() < 1e-9);
+        }
+        assert!(!known[23] && !known[24]);
+        assert_eq!(g.poses[23..], before[23..]);
     }
 
     #[test]

@@ -27,6 +27,7 @@ use crate::graph::{PoseGraph, VertexId};
 use crate::linear::{BlockSystem, LinearError, Parallelism};
 use lm::Damping;
 use normal::EdgeTerms;
+pub use pattern::Ordering;
 pub use progress::{Cancel, Cancellable, Observer};
 use serde::Serialize;
 pub(crate) use session::{Budget, Session};
@@ -75,6 +76,12 @@ pub struct SolverOptions {
     /// default; incremental updates, which start next to the optimum, use
     /// it to save the iteration that would only confirm convergence).
     pub model_tolerance: Option<f64>,
+    /// After a run that converged by a small undamped step, let the
+    /// covariances of the innovations ([`Optimizer::innovation_chi2`])
+    /// use that step's factorisation instead of factorising again at the
+    /// poses one small step away (off by default; incremental updates use
+    /// it to save a factorisation an update).
+    pub reuse_factorization: bool,
     /// Stop when this much time has passed; the best estimate so far is kept.
     pub time_limit: Option<Duration>,
     /// LM damping `λ` (relative to the diagonal of `H`) after the first
@@ -97,6 +104,7 @@ impl Default for SolverOptions {
             relative_tolerance: 1e-9,
             step_tolerance: 1e-12,
             model_tolerance: None,
+            reuse_factorization: false,
             time_limit: None,
             initial_lambda: 1e-6,
             threads: 0,
@@ -353,6 +361,10 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     trial: Vec<P>,
     best: Vec<P>,
     step: Vec<f64>,
+    /// The weights of the last run if it converged by a small undamped step
+    /// ([`SolverOptions::reuse_factorization`]): the factor is then of the
+    /// undamped `H` of those weights at the poses that step started from.
+    converged_factor: Option<Vec<f64>>,
     terms: Vec<EdgeTerms<D>>,
     /// Each edge's weighted χ² at the last trial point.
     edge_chi2: Vec<f64>,
@@ -363,6 +375,8 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     /// Where the parallel work runs ([`SolverOptions::threads`]); shared
     /// with `system`.
     parallelism: Parallelism,
+    /// The order kept across a growing graph's solves, if any.
+    ordering: Option<Ordering>,
 }
 
 impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
@@ -373,6 +387,19 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         graph: &PoseGraph<P, D>,
         weights: Option<&[f64]>,
         options: SolverOptions,
+    ) -> Result<Self, SolveError> {
+        Self::with_ordering(graph, weights, options, None)
+    }
+
+    /// [`Optimizer::new`] that orders the pattern as `ordering` does while
+    /// that costs little more fill than a fresh order ([`Ordering`]), and
+    /// keeps the order it uses there ([`Optimizer::ordering`]): the same
+    /// graph grown by a few poses is then not ordered afresh.
+    pub fn with_ordering(
+        graph: &PoseGraph<P, D>,
+        weights: Option<&[f64]>,
+        options: SolverOptions,
+        ordering: Option<Ordering>,
     ) -> Result<Self, SolveError> {
         if let Some(w) = weights {
             if w.len() != graph.edges.len() {
@@ -396,13 +423,14 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             .map(|k| weights.is_none_or(|w| w[k] != 0.0))
             .collect();
         let parallelism = Parallelism::new(options.threads)?;
-        let system = Self::pattern(graph, &variable, &in_pattern, vertex_of.len(), &parallelism)?;
-        Ok(Self {
-            max_nnz_factor: system.nnz_factor(),
+        let mut optimizer = Self {
+            max_nnz_factor: 0,
             factorized: false,
-            system,
+            system: BlockSystem::new(0, &[], parallelism.clone())?,
+            ordering,
             in_pattern,
             step: vec![0.0; vertex_of.len() * D],
+            converged_factor: None,
             vertex_of,
             trial: graph.poses.clone(),
             best: graph.poses.clone(),
@@ -416,7 +444,16 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 .collect(),
             prepared: graph.poses.iter().map(|p| p.prepare()).collect(),
             parallelism,
-        })
+        };
+        optimizer.system = optimizer.pattern(graph, &variable)?;
+        optimizer.max_nnz_factor = optimizer.system.nnz_factor();
+        Ok(optimizer)
+    }
+
+    /// The elimination order kept for a later [`Optimizer::with_ordering`]
+    /// (`None` for an optimiser made by [`Optimizer::new`]).
+    pub fn ordering(&self) -> Option<&Ordering> {
+        self.ordering.as_ref()
     }
 
     /// Starts or stops the private pool if [`SolverOptions::threads`] was
@@ -480,6 +517,10 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let mut best_objective = objective;
         // Every run starts undamped (see `Damping`).
         let mut damping = Damping::undamped();
+        // Whether the last step was undamped and lowered the objective by
+        // less than the relative tolerance (see `converged_factor`).
+        let mut small_last_step = false;
+        self.converged_factor = None;
         let stop = loop {
             if let Some(reason) = self.stop_before_step(objective, &progress, observer) {
                 break reason;
@@ -514,9 +555,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             let record = step.record(summary.iterations, progress.watch.elapsed());
             summary.history.push(record);
             observer.iteration(&record);
-            if ((previous - objective) / previous).abs() < self.options.relative_tolerance
-                || self.model_agreed(previous, objective)
-            {
+            let small = ((previous - objective) / previous).abs() < self.options.relative_tolerance;
+            small_last_step = small && step.lambda == 0.0;
+            if small || self.model_agreed(previous, objective) {
                 break if self.model_trusted(previous, objective) {
                     StopReason::RelativeDecrease
                 } else {
@@ -529,6 +570,12 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         if objective > best_objective {
             graph.poses.clone_from(&self.best);
             objective = best_objective;
+        } else if self.options.reuse_factorization
+            && (stop == StopReason::RelativeDecrease && small_last_step
+                || stop == StopReason::SmallStep && self.system.damping() == 0.0)
+        {
+            self.converged_factor =
+                Some(weights.map_or_else(|| vec![1.0; graph.edges.len()], <[f64]>::to_vec));
         }
         Ok(progress.finish(stop, objective))
     }

@@ -432,6 +432,83 @@ fn a_step_the_model_foresaw_ends_the_run_when_asked() {
 mod simulated {
     use super::*;
 
+    /// The first `n` poses of `g` and the edges among them.
+    fn prefix(g: &PoseGraph<Se2, 3>, n: usize) -> PoseGraph<Se2, 3> {
+        let mut h = PoseGraph::new();
+        for v in 0..n {
+            h.add_vertex(g.id(v), g.poses[v]).unwrap();
+        }
+        for e in g.edges.iter().filter(|e| e.from < n && e.to < n) {
+            h.add_edge(g.id(e.from), g.id(e.to), e.measurement, e.information, None)
+                .unwrap();
+        }
+        h
+    }
+
+    #[test]
+    fn a_kept_order_is_followed_while_its_fill_stays_close() {
+        let (g, _) = simulated_grid();
+        let small = prefix(&g, 3000);
+        let o = Optimizer::with_ordering(
+            &small,
+            None,
+            SolverOptions::default(),
+            Some(Ordering::default()),
+        )
+        .unwrap();
+        let kept = o.ordering().unwrap().clone();
+        // Grown by 50 poses: the old vertices keep their order, the new
+        // ones come last, and the factor is at most 10 % above AMD's.
+        let grown = prefix(&g, 3050);
+        let fresh = Optimizer::new(&grown, None, SolverOptions::default()).unwrap();
+        let o =
+            Optimizer::with_ordering(&grown, None, SolverOptions::default(), Some(kept.clone()))
+                .unwrap();
+        let positions = o.system().positions();
+        let (old, new) = positions.split_at(2999);
+        assert!(old.windows(2).all(|w| w[0] < w[1]) || old.iter().max() < new.iter().min());
+        let fill = o.system().nnz_factor() as f64 / fresh.system().nnz_factor() as f64;
+        assert!(fill <= 1.1 * 3050.0 / 3000.0, "{fill}");
+        // The same optimum either way.
+        let (mut a, mut b) = (grown.clone(), grown.clone());
+        let mut fresh = fresh;
+        let mut o = o;
+        fresh
+            .run(&mut a, None, &mut |_: &IterationRecord| {})
+            .unwrap();
+        o.run(&mut b, None, &mut |_: &IterationRecord| {}).unwrap();
+        assert!((a.chi2() / b.chi2() - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn innovations_from_the_converged_factor_match_a_fresh_one() {
+        let (g, weights) = simulated_grid();
+        let edges: Vec<usize> = (0..g.edges.len()).filter(|&k| weights[k] == 0.0).collect();
+        let nu2: Vec<Vec<f64>> = [false, true]
+            .into_iter()
+            .map(|reuse| {
+                let options = SolverOptions {
+                    reuse_factorization: reuse,
+                    ..Default::default()
+                };
+                let mut h = g.clone();
+                let mut o = Optimizer::new(&h, Some(&weights), options).unwrap();
+                let s = o
+                    .run(&mut h, Some(&weights), &mut |_: &IterationRecord| {})
+                    .unwrap();
+                assert!(s.converged());
+                // The run ends on a small undamped step, so the factor is
+                // kept only when asked.
+                assert_eq!(o.converged_factor.is_some(), reuse);
+                o.innovation_chi2(&h, &weights, &edges).unwrap()
+            })
+            .collect();
+        let worst =
+            (nu2[0].iter().zip(&nu2[1])).fold(0.0f64, |m, (a, b)| m.max((a / b - 1.0).abs()));
+        // The factor is one small step behind: 7·10⁻⁶ here.
+        assert!(worst < 1e-4, "{worst}");
+    }
+
     /// A simulated grid of 4000 poses with 40 wrong loops, and weights that
     /// switch half of them off and halve the others (as a robust round would).
     fn simulated_grid() -> (PoseGraph<Se2, 3>, Vec<f64>) {
