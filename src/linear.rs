@@ -300,6 +300,13 @@ impl<const D: usize> BlockSystem<D> {
         self.factor = Vec::new();
     }
 
+    /// The factor values a covariance ([`Self::propagate`]) reads per block
+    /// it starts from, on average: those on the block's path to the root
+    /// of the elimination tree.
+    pub fn mean_path_values(&self) -> f64 {
+        self.symbolic.mean_path_values()
+    }
+
     /// Supernodes of the factor and the floating-point operations of one
     /// numeric factorisation (a multiply–add counts as two).
     pub fn factor_stats(&self) -> (usize, f64) {

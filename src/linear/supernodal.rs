@@ -384,6 +384,29 @@ impl<const D: usize> Symbolic<D> {
         self.begin.len() - 1
     }
 
+    /// The factor values a sparse solve from one block column reads, on
+    /// average over the block columns: the panels on its path to the root
+    /// of the elimination tree ([`Symbolic::reach`]).
+    pub(super) fn mean_path_values(&self) -> f64 {
+        let ns = self.supernodes();
+        let n = self.begin[ns];
+        if n == 0 {
+            return 0.0;
+        }
+        // Parents come after their children: from the roots down.
+        let mut path = vec![0usize; ns];
+        let mut total = 0.0;
+        for s in (0..ns).rev() {
+            let above = match self.parent[s] {
+                u32::MAX => 0,
+                p => path[p as usize],
+            };
+            path[s] = above + self.val_ptr[s + 1] - self.val_ptr[s];
+            total += (self.begin[s + 1] - self.begin[s]) as f64 * path[s] as f64;
+        }
+        total / n as f64
+    }
+
     /// Values stored for the factor (dense panels, upper triangles of the
     /// diagonal blocks included).
     pub(super) fn len_values(&self) -> usize {

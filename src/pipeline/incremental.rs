@@ -283,7 +283,8 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         reuse_factorization: true,
         ..config.solver.clone()
     };
-    let ordering = Some(warm.ordering.clone());
+    let evaluated = method != RobustMethod::None;
+    let ordering = Some(warm.ordering.clone().for_innovations(evaluated));
     let mut optimizer = Optimizer::with_ordering(graph, Some(&weights), solver.clone(), ordering)
         .map_err(solve_error)?;
     let initial_chi2 = graph.chi2();

@@ -7,29 +7,41 @@ use crate::geometry::Pose;
 use crate::graph::PoseGraph;
 use crate::linear::BlockSystem;
 
-/// How much more factor an earlier elimination order may cost than the
-/// fill-reducing order it started as, per variable block, before a pattern
-/// is ordered afresh ([`Ordering`]). Ordering (AMD) costs about half a
-/// numeric factorisation of a pose graph (an update of city10000 or
-/// manhattanOlson3500: ordering 10–12 % of the time, two factorisations
-/// 27 %), and 10 % more factor values cost at most about 10 % more work in
-/// each factorisation and solve that follows, so the old order is kept
-/// while it is within 10 %.
+/// How much more an earlier elimination order may cost than the
+/// fill-reducing order it started as before a pattern is ordered afresh
+/// ([`Ordering`]): in factor values per variable block (each factorisation
+/// and solve), and in values on a block's path to the root of the
+/// elimination tree (each innovation's covariance; appended poses lengthen
+/// every path). Ordering (AMD) costs about half a numeric factorisation of
+/// a pose graph (an update of city10000 or manhattanOlson3500: ordering
+/// 10–12 % of the time, two factorisations 27 %), and 10 % more of either
+/// costs at most about 10 % more of the work that follows, so the old order
+/// is kept while it is within 10 % on both.
 const ORDER_SLACK: f64 = 0.1;
 
 /// An elimination order kept from an earlier solve of a graph that has
 /// grown since (incremental updates): each vertex's rank in it, and the
-/// factor values per variable block of the fill-reducing order it started
-/// as. A pattern built with it orders the old vertices as before and
-/// appends the new ones, unless that costs more than [`ORDER_SLACK`] of
-/// extra factor.
+/// cost of the fill-reducing order it started as (factor values per
+/// variable block, values per path to the root). A pattern built with it
+/// orders the old vertices as before and appends the new ones, unless that
+/// costs more than [`ORDER_SLACK`] more.
 #[derive(Clone, Debug, Default)]
 pub struct Ordering {
     rank: Vec<u32>,
     values_per_block: f64,
+    path_values: f64,
+    /// Whether the paths' cost counts (innovations will be computed).
+    paths_matter: bool,
 }
 
 impl Ordering {
+    /// This order, for solves whose innovations are needed (`true`: the
+    /// paths to the root count too) or not.
+    pub fn for_innovations(mut self, needed: bool) -> Self {
+        self.paths_matter = needed;
+        self
+    }
+
     /// Bytes held: four per vertex.
     pub fn bytes(&self) -> usize {
         self.rank.len() * std::mem::size_of::<u32>()
@@ -78,13 +90,19 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         };
         let position = ordering.positions(&self.vertex_of);
         let kept = BlockSystem::with_positions(n_blocks, &pairs, parallelism.clone(), position)?;
-        let budget = (1.0 + ORDER_SLACK) * ordering.values_per_block * n_blocks as f64;
-        let system = if kept.nnz_factor() as f64 <= budget {
+        let within = |cost: f64, fresh: f64| cost <= (1.0 + ORDER_SLACK) * fresh;
+        let system = if within(
+            kept.nnz_factor() as f64,
+            ordering.values_per_block * n_blocks as f64,
+        ) && (!ordering.paths_matter
+            || within(kept.mean_path_values(), ordering.path_values))
+        {
             kept
         } else {
             drop(kept);
             let fresh = BlockSystem::new(n_blocks, &pairs, parallelism)?;
             ordering.values_per_block = fresh.nnz_factor() as f64 / n_blocks.max(1) as f64;
+            ordering.path_values = fresh.mean_path_values();
             fresh
         };
         ordering.rank = vec![u32::MAX; graph.num_vertices()];
