@@ -567,17 +567,42 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             self.linearize(graph, weights);
             progress.lap(|t| &mut t.linearize_s);
         };
+        let objective = self.end_run(
+            graph,
+            weights,
+            stop,
+            objective,
+            best_objective,
+            small_last_step,
+        );
+        Ok(progress.finish(stop, objective))
+    }
+
+    /// After a run stopped for `stop` at `objective`: the best poses back
+    /// if they beat the last (returns the objective of the poses left), else
+    /// the factorisation kept for the innovations if the run converged by a
+    /// small undamped step ([`SolverOptions::reuse_factorization`]).
+    fn end_run(
+        &mut self,
+        graph: &mut PoseGraph<P, D>,
+        weights: Option<&[f64]>,
+        stop: StopReason,
+        objective: f64,
+        best_objective: f64,
+        small_last_step: bool,
+    ) -> f64 {
         if objective > best_objective {
             graph.poses.clone_from(&self.best);
-            objective = best_objective;
-        } else if self.options.reuse_factorization
+            return best_objective;
+        }
+        if self.options.reuse_factorization
             && (stop == StopReason::RelativeDecrease && small_last_step
                 || stop == StopReason::SmallStep && self.system.damping() == 0.0)
         {
             self.converged_factor =
                 Some(weights.map_or_else(|| vec![1.0; graph.edges.len()], <[f64]>::to_vec));
         }
-        Ok(progress.finish(stop, objective))
+        objective
     }
 
     /// Fails unless `weights` (if any) and the pattern have one entry per
