@@ -53,9 +53,10 @@ pub const MODEL_TOLERANCE: f64 = 1e-8;
 
 /// What a graph keeps between updates: the last solution's poses (of its
 /// first `poses.len()` vertices), how many edges it had, whether each
-/// candidate edge was accepted, and the last report (returned again when
-/// nothing was added). Its memory is that of the poses, one byte per edge
-/// and the report (about 100 bytes per loop candidate).
+/// candidate edge was accepted, the last report (returned again when
+/// nothing was added) and the elimination order. Its memory is that of the
+/// poses, one byte per edge, four bytes per pose (the order) and the report
+/// (about 100 bytes per loop candidate).
 #[derive(Clone, Debug)]
 pub(crate) struct Warm<P> {
     poses: Vec<P>,
