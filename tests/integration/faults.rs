@@ -306,6 +306,7 @@ fn no_panic(err: &str, status: Option<i32>, what: &str) {
     assert!(!err.contains("panicked"), "{what}: {err}");
 }
 
+#[cfg(unix)]
 #[test]
 fn a_reader_that_goes_away_ends_the_run_quietly_with_status_141() {
     use std::process::Stdio;
@@ -322,9 +323,14 @@ fn a_reader_that_goes_away_ends_the_run_quietly_with_status_141() {
         vec!["--help"],
     ] {
         let _ = std::fs::remove_file(&out);
-        let mut child = run_with(&args, Stdio::piped(), Stdio::piped());
-        // The reader goes away before pgo writes anything.
-        drop(child.stdout.take());
+        // The reader is gone before pgo starts (closing it after the spawn
+        // would race with pgo's first write: `--help` can fill the pipe
+        // before the reader closes). A socket pair, one end closed, makes
+        // every write fail with EPIPE as a pipe would.
+        let (reader, writer) = std::os::unix::net::UnixStream::pair().expect("socket pair");
+        drop(reader);
+        let writer = std::os::fd::OwnedFd::from(writer);
+        let child = run_with(&args, Stdio::from(writer), Stdio::piped());
         let done = child.wait_with_output().expect("wait");
         let err = String::from_utf8_lossy(&done.stderr).into_owned();
         no_panic(&err, done.status.code(), &format!("{args:?}"));
