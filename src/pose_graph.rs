@@ -473,8 +473,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// is, reached from the last update's. The graph keeps that update's
     /// poses, decisions, report and elimination order (its memory: the
     /// poses, a byte per edge, 4 bytes per pose, about 100 bytes per loop
-    /// candidate); a new pose is composed along
-    /// trusted edges from them. Only as much is solved as the additions
+    /// candidate); a new pose is composed along trusted edges from them. Only as much is solved as the additions
     /// need: nothing when nothing was added, no factorisation when the new
     /// poses hang on the map by one trusted edge each (odometry), else
     /// EM's decisions from the last ones ([`UpdateSolve`]). The report's
@@ -519,14 +518,10 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         options.validate()?;
         let (mut report, config) = self.start(options)?;
         let mut graph = self.graph.clone();
-        let mut chi2 = None;
         let warm = match self.state.as_deref() {
             Some((last, warm)) if last == options => {
-                let warm = pipeline::update_graph(&mut graph, warm, &config, &mut report, observer)
-                    .map_err(from_pipeline)?;
-                // An update's report has the χ² of the map it leaves.
-                chi2 = Some(report.optimizer.final_chi2);
-                warm
+                pipeline::update_graph(&mut graph, warm, &config, &mut report, observer)
+                    .map_err(from_pipeline)?
             }
             last => {
                 pipeline::optimize_graph(&mut graph, &self.missing, &config, &mut report, observer)
@@ -553,10 +548,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         for w in &report.warnings {
             log::warn!("{w}");
         }
-        Ok(match chi2 {
-            Some(chi2) => Solution::with_chi2(&graph, report, chi2),
-            None => Solution::new(&graph, report),
-        })
+        Ok(Solution::new(&graph, report))
     }
 
     /// Drops what [`PoseGraph::update`] keeps: the next update runs the

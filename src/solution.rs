@@ -16,7 +16,6 @@ pub struct Solution<P> {
     poses: Vec<P>,
     index: HashMap<VertexId, usize>,
     loops: Vec<LoopDecision>,
-    chi2: f64,
     report: Report,
 }
 
@@ -55,19 +54,6 @@ impl<P> Solution<P> {
     where
         P: Pose<D>,
     {
-        let chi2 = graph.chi2();
-        Self::with_chi2(graph, report, chi2)
-    }
-
-    /// [`Solution::new`] with the graph's χ² already known.
-    pub(crate) fn with_chi2<const D: usize>(
-        graph: &graph::PoseGraph<P, D>,
-        report: Report,
-        chi2: f64,
-    ) -> Self
-    where
-        P: Pose<D>,
-    {
         let candidates = (0..graph.edges.len()).filter(|&k| graph.edges[k].is_candidate());
         let loops = candidates
             .zip(&report.loops)
@@ -91,7 +77,6 @@ impl<P> Solution<P> {
             poses: graph.poses.clone(),
             index,
             loops,
-            chi2,
             report,
         }
     }
@@ -123,7 +108,7 @@ impl<P> Solution<P> {
     /// `Σ eᵀΩe` over all edges at the optimised poses (g2o's χ²; dropped
     /// candidates included).
     pub fn chi2(&self) -> f64 {
-        self.chi2
+        self.report.optimizer.final_chi2
     }
 
     /// The χ² test of the result, over the edges in the map (weight ≥ ½);

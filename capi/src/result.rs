@@ -43,7 +43,7 @@ impl PgoResult {
 /// How the optimisation decided one loop candidate (a plain struct the
 /// caller owns, filled by `pgo_result_loop`).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PgoLoopDecision {
     /// Its index, as `pgo_graph_add_loop_candidate` stored it (edges and
     /// candidates numbered together).

@@ -314,17 +314,7 @@ fn vertices_must_exist_once_and_messages_name_them() {
         );
         ok(pgo_result_pose(r, 2, out.as_mut_ptr(), 3));
         assert!((out[0] - 2.0).abs() < 1e-9, "{out:?}");
-        let mut d = PgoLoopDecision {
-            index: 0,
-            from: 0,
-            to: 0,
-            inliers: 0,
-            gated: false,
-            weight: 0.0,
-            accepted: false,
-            posterior: 0.0,
-            innovation: 0.0,
-        };
+        let mut d = PgoLoopDecision::default();
         ok(pgo_result_loop(r, 0, &mut d));
         assert_eq!((d.index, d.from, d.to, d.inliers), (2, 0, 2, -1));
         assert_fails(
@@ -688,17 +678,7 @@ fn decisions_of(r: *const PgoResult) -> Vec<(usize, bool)> {
     ok(unsafe { pgo_result_num_loops(r, &mut n) });
     (0..n)
         .map(|k| {
-            let mut d = PgoLoopDecision {
-                index: 0,
-                from: 0,
-                to: 0,
-                inliers: 0,
-                gated: false,
-                weight: 0.0,
-                accepted: false,
-                posterior: 0.0,
-                innovation: 0.0,
-            };
+            let mut d = PgoLoopDecision::default();
             ok(unsafe { pgo_result_loop(r, k, &mut d) });
             (d.index, d.accepted)
         })

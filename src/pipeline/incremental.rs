@@ -46,9 +46,9 @@ pub const UPDATE_TOLERANCE: f64 = 1e-4;
 /// ([`crate::solve::SolverOptions::model_tolerance`]): from the last map
 /// one step usually takes out all but the nonlinearity, and this spares
 /// the iteration that would only confirm it (16 % of the factorisations of
-/// a city10000 replay in steps of 10 poses). At 10⁻⁷ the last update of a replay of the
-/// bundled `aliased.g2o` (an objective of 4·10⁶) ended 10⁻⁵ from the batch
-/// poses, at 10⁻⁸ within the 10⁻⁵ its test allows.
+/// a city10000 replay in steps of 10 poses). At 10⁻⁷ the last update of a
+/// replay of the bundled `aliased.g2o` (an objective of 4·10⁶) ended 10⁻⁵
+/// from the batch poses, at 10⁻⁸ within the 10⁻⁵ its test allows.
 pub const MODEL_TOLERANCE: f64 = 1e-8;
 
 /// What a graph keeps between updates: the last solution's poses (of its

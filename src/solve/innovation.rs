@@ -167,12 +167,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         self.update_pattern(graph, Some(weights))?;
         let reuse = self.converged_factor.take().is_some_and(|w| w == weights);
         self.factorized = true;
-        match if reuse {
+        let factorized = if reuse {
             Ok(())
         } else {
             self.linearize(graph, Some(weights));
             self.system.factorize(0.0)
-        } {
+        };
+        match factorized {
             Ok(()) => {}
             Err(LinearError::NotPositiveDefinite { block }) => {
                 return Err(SolveError::NotPositiveDefinite {

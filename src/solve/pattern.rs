@@ -5,7 +5,7 @@
 use super::{Optimizer, SolveError};
 use crate::geometry::Pose;
 use crate::graph::PoseGraph;
-use crate::linear::BlockSystem;
+use crate::linear::{BlockSystem, LinearError, Parallelism};
 
 /// How much more an earlier elimination order may cost than the
 /// fill-reducing order it started as before a pattern is ordered afresh
@@ -42,9 +42,28 @@ impl Ordering {
         self
     }
 
-    /// Bytes held: four per vertex.
-    pub fn bytes(&self) -> usize {
-        self.rank.len() * std::mem::size_of::<u32>()
+    /// The system of the edges `pairs` between the blocks of `vertex_of`
+    /// in this order, if there is one and it costs at most [`ORDER_SLACK`]
+    /// more than the fresh order it started as.
+    fn kept<const D: usize>(
+        &self,
+        vertex_of: &[usize],
+        pairs: &[(Option<usize>, Option<usize>)],
+        parallelism: &Parallelism,
+    ) -> Result<Option<BlockSystem<D>>, LinearError> {
+        if self.rank.is_empty() {
+            return Ok(None);
+        }
+        let n_blocks = vertex_of.len();
+        let position = self.positions(vertex_of);
+        let kept = BlockSystem::with_positions(n_blocks, pairs, parallelism.clone(), position)?;
+        let within = |cost: f64, fresh: f64| cost <= (1.0 + ORDER_SLACK) * fresh;
+        let fill = within(
+            kept.nnz_factor() as f64,
+            self.values_per_block * n_blocks as f64,
+        );
+        let paths = !self.paths_matter || within(kept.mean_path_values(), self.path_values);
+        Ok((fill && paths).then_some(kept))
     }
 
     /// The elimination position of each of `n_blocks` variable blocks
@@ -88,22 +107,14 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let Some(ordering) = &mut self.ordering else {
             return Ok(BlockSystem::new(n_blocks, &pairs, parallelism)?);
         };
-        let position = ordering.positions(&self.vertex_of);
-        let kept = BlockSystem::with_positions(n_blocks, &pairs, parallelism.clone(), position)?;
-        let within = |cost: f64, fresh: f64| cost <= (1.0 + ORDER_SLACK) * fresh;
-        let system = if within(
-            kept.nnz_factor() as f64,
-            ordering.values_per_block * n_blocks as f64,
-        ) && (!ordering.paths_matter
-            || within(kept.mean_path_values(), ordering.path_values))
-        {
-            kept
-        } else {
-            drop(kept);
-            let fresh = BlockSystem::new(n_blocks, &pairs, parallelism)?;
-            ordering.values_per_block = fresh.nnz_factor() as f64 / n_blocks.max(1) as f64;
-            ordering.path_values = fresh.mean_path_values();
-            fresh
+        let system = match ordering.kept(&self.vertex_of, &pairs, &parallelism)? {
+            Some(kept) => kept,
+            None => {
+                let fresh = BlockSystem::new(n_blocks, &pairs, parallelism)?;
+                ordering.values_per_block = fresh.nnz_factor() as f64 / n_blocks.max(1) as f64;
+                ordering.path_values = fresh.mean_path_values();
+                fresh
+            }
         };
         ordering.rank = vec![u32::MAX; graph.num_vertices()];
         for (&v, &p) in self.vertex_of.iter().zip(system.positions()) {
