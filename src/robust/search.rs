@@ -17,9 +17,11 @@
 //! which no candidate shaped — with the scale learned, then with the true
 //! loops' innovations centred where the file's information puts them
 //! ([`super::Scale::File`], as the χ² test takes it: when wrong loops are
-//! the majority, a learned scale fits them instead) — and keeps whichever
-//! end fits better: the one that passes the test, or with all failing the
-//! one of smallest `D² / critical value`.
+//! the majority, a learned scale fits them instead) — and keeps that end
+//! only if its map passes the test. One that still fails explains nothing:
+//! with information the file states too tight (every loop a little off),
+//! fewer loops always fail by less, and keeping the end that fails least
+//! would throw away true loops to shrink `D²`.
 
 use super::Candidate;
 use super::innovation::Evaluation;
@@ -151,18 +153,9 @@ pub fn fails<P: Pose<D>, const D: usize>(
     test(session.graph, weights).is_some_and(|t| !t.passed)
 }
 
-/// How badly a map fails: `D²` over the critical value (≤ 1 passes).
-fn excess<P: Pose<D>, const D: usize>(
-    session: &Session<'_, P, D>,
-    weights: &[f64],
-    test: &Test<'_, P, D>,
-) -> f64 {
-    test(session.graph, weights).map_or(f64::INFINITY, |t| t.d2 / t.critical)
-}
-
 /// The restart of the module doc: `decide` run again from no candidate
-/// accepted; keeps the better end (the map, `weights` and the decisions),
-/// and says whether it is the new one.
+/// accepted; keeps its end (the map, `weights` and the decisions) if that
+/// passes the test, and says whether it did.
 pub fn restart<P: Pose<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -171,13 +164,12 @@ pub fn restart<P: Pose<D>, const D: usize>(
     test: &Test<'_, P, D>,
     decide: impl FnOnce(&mut Session<'_, P, D>, &mut [f64]) -> Result<Decided, SolveError>,
 ) -> Result<bool, SolveError> {
-    let before = excess(session, weights, test);
     let saved = (session.graph.poses.clone(), weights.to_vec());
     for c in candidates {
         weights[c.edge] = 0.0;
     }
     let again = decide(session, weights)?;
-    if !again.cut_short && excess(session, weights, test) < before {
+    if !again.cut_short && !fails(session, weights, test) {
         *decided = again;
         return Ok(true);
     }
