@@ -133,19 +133,11 @@ pub fn chi2_test<P: G2oPose<D>, const D: usize>(
     weights: &[f64],
     config: &OptimizeConfig,
 ) -> Result<Chi2Test, StatsError> {
-    let used: Vec<usize> = (0..graph.edges.len())
-        .filter(|&k| weights[k] >= 0.5)
-        .collect();
-    let d2: f64 = used.iter().map(|&k| graph.edge_chi2(&graph.edges[k])).sum();
+    let used = weights.iter().filter(|&&w| w >= 0.5).count();
+    let d2 = graph.chi2_where(|k| weights[k] >= 0.5);
     let free = graph.num_vertices() - graph.gauge().len();
-    let dof_residual = (used.len() * D) as i64 - (free * D) as i64;
-    Chi2Test::new(
-        d2,
-        used.len() as u64,
-        dof_residual,
-        config.dof,
-        config.alpha,
-    )
+    let dof_residual = (used * D) as i64 - (free * D) as i64;
+    Chi2Test::new(d2, used as u64, dof_residual, config.dof, config.alpha)
 }
 
 /// Fills the optimiser's, the robust back end's and every loop's part of
