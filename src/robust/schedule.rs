@@ -86,12 +86,11 @@ impl Annealing {
         let r2: Vec<f64> = (self.kept.iter())
             .map(|&k| graph.edge_chi2(&graph.edges[k]))
             .collect();
-        let floor = self.floor(&r2, D);
         let factor = match self.factor {
             None => median(&r2) / (self.c * self.c),
             Some(f) => f / ANNEAL_STEP,
         }
-        .max(floor);
+        .max(1.0);
         self.factor = Some(factor);
         let width = self.c * factor.sqrt();
         for (&k, &r) in self.kept.iter().zip(&r2) {
@@ -100,25 +99,7 @@ impl Annealing {
         let set: Vec<bool> = self.kept.iter().map(|&k| weights[k] >= 0.5).collect();
         self.stable = if set == self.last { self.stable + 1 } else { 0 };
         self.last = set;
-        factor == floor && self.stable >= STABLE_STEPS
-    }
-
-    /// The narrowest width's square over `c²`: the residual scale `ŝ²` of
-    /// the candidates the last E-step weighed ≥ ½ (their median `r²` over
-    /// `χ²_D`'s median), so that the final width is `c` in units of the
-    /// noise the loops show rather than of the file's information; 1 at the
-    /// first E-step.
-    fn floor(&self, r2: &[f64], dimension: usize) -> f64 {
-        let held: Vec<f64> = (r2.iter().zip(&self.last))
-            .filter(|(_, a)| **a)
-            .map(|(r, _)| *r)
-            .collect();
-        let chi2_median = crate::stats::chi2_critical(dimension as u64, 0.5).unwrap_or(1.0);
-        if held.is_empty() {
-            1.0
-        } else {
-            median(&held) / chi2_median
-        }
+        factor == 1.0 && self.stable >= STABLE_STEPS
     }
 }
 
