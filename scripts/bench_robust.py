@@ -5,6 +5,7 @@ robust kernels on pose graphs with wrong loop closures, in one run.
 usage: .venv/bin/python scripts/bench_robust.py [--only NAME ...] [--policies random local grouped aliased]
            [--alias-group-size 5] [--alias-true-like 0.5] [--outliers 100 1000] [--maxmix | --no-maxmix] [--scales published calibrated overconfident]
            [--tools TOOL ...] [--timeout 300] [--seed 1] [--out bench-out/robust.json]
+           [--peers-from EARLIER.json]
 
 Run it with the Python of the peers' virtual environment (scripts/setup_peers.sh
 makes .venv; numpy and the peers' peerlib are imported). CI does not run it.
@@ -401,6 +402,10 @@ def main():
     ap.add_argument("--timeout", type=int, default=300)
     ap.add_argument("--pgo-flags", nargs="*", default=[], help="extra flags for every pgo run (e.g. --robust-c 4)")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--peers-from", default=None, metavar="JSON",
+                    help="take the peers' results from an earlier --out file of the same cases "
+                         "(same --policies, --outliers, --only, --seed and alias options) instead of "
+                         "running them: a peer's result does not depend on pgo")
     ap.add_argument("--tables-from", nargs="*", default=None, metavar="JSON",
                     help="print the tables of earlier runs' --out files (merged) and exit")
     args = ap.parse_args()
@@ -418,6 +423,7 @@ def main():
     if unknown:
         ap.error("unknown tools: %s" % ", ".join(sorted(unknown)))
 
+    earlier = peers_from(args) if args.peers_from else {}
     t_start = time.perf_counter()
     cases = prepare(args, args.work)
     refs = {}
@@ -442,6 +448,14 @@ def main():
                 out_g2o = os.path.join(args.work, "result-%d.g2o" % os.getpid())
                 if tool in PGO_TOOLS:
                     r = run_pgo(args, path, PGO_TOOLS[tool], out_g2o)
+                elif args.peers_from:
+                    r = earlier.get((c["case"], scale, tool))
+                    if r is None:
+                        raise SystemExit("--peers-from %s has no %s on %s (%s)" % (
+                            args.peers_from, tool, c["case"], scale))
+                    row["tools"][tool] = copy.deepcopy(r)
+                    log("%-40s %-10s %-14s %s (from %s)" % (c["case"], scale, tool, brief(r), args.peers_from))
+                    continue
                 else:
                     # A peer's result on a file depends on nothing pgo does:
                     # cached per input, tool and timeout, so that pgo can be
@@ -480,6 +494,19 @@ def main():
     md += "\nTotal benchmark time: %.0f s.\n" % total
     open(os.path.splitext(args.out)[0] + ".md", "w").write(md)
     print(md)
+
+
+def peers_from(args):
+    """The peers' results of an earlier run of the same cases, by (case, scale, tool)."""
+    with open(args.peers_from) as f:
+        earlier = json.load(f)
+    same = ("policies", "outliers", "only", "seed", "alias_group_size", "alias_true_like", "maxmix", "timeout")
+    for key in same:
+        if earlier["args"].get(key) != getattr(args, key):
+            raise SystemExit("--peers-from %s: its --%s was %r, not %r: not the same cases" % (
+                args.peers_from, key.replace("_", "-"), earlier["args"].get(key), getattr(args, key)))
+    return {(r["case"], r["scale"], tool): res for r in earlier["results"]
+            for tool, res in r["tools"].items() if tool in PEER_TOOLS}
 
 
 def brief(r):

@@ -81,7 +81,7 @@ def robust_command(args, out):
     """The bench_robust.py command that made a result file, from its args."""
     parts = [".venv/bin/python", "scripts/bench_robust.py"]
     for key in ("policies", "alias_group_size", "alias_true_like", "outliers", "maxmix",
-                "scales", "tools", "timeout", "pgo_flags", "seed", "only"):
+                "scales", "tools", "timeout", "pgo_flags", "seed", "only", "peers_from"):
         if key not in args or key in LOCAL_ARGS:
             continue
         value = args[key]
@@ -141,6 +141,11 @@ def robust_section(path, spec):
     data = json.load(open(path))
     results = data["results"]
     out += ["Made by (`%s`):" % rel, "", "```sh", robust_command(data.get("args", {}), rel), "```", ""]
+    if data.get("args", {}).get("peers_from"):
+        out += ["The peers' results (and times) are those of the run in `%s` (the same command "
+                "without `--peers-from`) on the same files: no peer depends on pgo, so only pgo ran "
+                "again." %
+                data["args"]["peers_from"], ""]
     if "total_s" not in data:
         out += ["**Partial:** the run had not finished when this file was copied; cases in it: %d." %
                 len(results), ""]
@@ -210,7 +215,7 @@ def scale_section(path):
     out.append("")
     big = os.path.join(os.path.dirname(path), SCALE_1E6["file"])
     if os.path.exists(big):
-        out += ["10⁶ poses (2D), made by:", "", "```sh", SCALE_1E6["cmd"], "```", "",
+        out += ["10⁶ poses, made by:", "", "```sh", SCALE_1E6["cmd"], "```", "",
                 "| world | poses | edges | candidates | wall (s) | optimiser (s) | iterations / factorisations "
                 "| peak RSS (MB) | largest factor (MB) |", "|---|---|---|---|---|---|---|---|---|"]
         for r in json.load(open(big)):
@@ -223,7 +228,7 @@ def scale_section(path):
 
 SCALE_1E6 = {
     "file": "scale_1e6.json",
-    "cmd": (".venv/bin/python scripts/bench_scale.py --sizes 1e6 --worlds grid2d "
+    "cmd": (".venv/bin/python scripts/bench_scale.py --sizes 1e6 --worlds grid2d sphere3d "
             "--work /tmp/scale --out bench/results/scale_1e6.json --svg /tmp/scale_1e6.svg"),
 }
 
