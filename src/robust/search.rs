@@ -153,9 +153,20 @@ pub fn fails<P: Pose<D>, const D: usize>(
     test(session.graph, weights).is_some_and(|t| !t.passed)
 }
 
+/// Whether the map in the session's graph has a χ² test with `weights`,
+/// and passes it (a map of no redundancy, such as the trusted edges'
+/// tree, has no test and explains nothing).
+fn passes<P: Pose<D>, const D: usize>(
+    session: &Session<'_, P, D>,
+    weights: &[f64],
+    test: &Test<'_, P, D>,
+) -> bool {
+    test(session.graph, weights).is_some_and(|t| t.passed)
+}
+
 /// The restart of the module doc: `decide` run again from no candidate
 /// accepted; keeps its end (the map, `weights` and the decisions) if that
-/// passes the test, and says whether it did.
+/// has a χ² test and passes it, and says whether it did.
 pub fn restart<P: Pose<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -169,7 +180,7 @@ pub fn restart<P: Pose<D>, const D: usize>(
         weights[c.edge] = 0.0;
     }
     let again = decide(session, weights)?;
-    if !again.cut_short && !fails(session, weights, test) {
+    if !again.cut_short && passes(session, weights, test) {
         *decided = again;
         return Ok(true);
     }
