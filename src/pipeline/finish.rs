@@ -133,8 +133,9 @@ pub fn chi2_test<P: G2oPose<D>, const D: usize>(
     weights: &[f64],
     config: &OptimizeConfig,
 ) -> Result<Chi2Test, StatsError> {
-    let used = weights.iter().filter(|&&w| w >= 0.5).count();
-    let d2 = graph.chi2_where(|k| weights[k] >= 0.5);
+    let in_map = |k: usize| weights[k] >= 0.5;
+    let used = (0..weights.len()).filter(|&k| in_map(k)).count();
+    let d2 = graph.chi2_where(in_map);
     let free = graph.num_vertices() - graph.gauge().len();
     let dof_residual = (used * D) as i64 - (free * D) as i64;
     Chi2Test::new(d2, used as u64, dof_residual, config.dof, config.alpha)

@@ -417,7 +417,7 @@ fn settle<P: Pose<D>, const D: usize>(
     // edges' map, with the scale learned and with the file's.
     for scale in [Scale::Learned, Scale::File] {
         if search.as_ref().is_none_or(|s| s.suspects.is_empty())
-            || !search::fails(session, weights, test)
+            || search::verdict(session, weights, test) != Some(false)
         {
             break;
         }

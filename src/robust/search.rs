@@ -144,24 +144,15 @@ fn passes_without(t: &Chi2Test, drop: f64, loops: usize, dimension: usize) -> bo
     .is_ok_and(|t| t.passed)
 }
 
-/// Whether the test of the session's map with `weights` failed.
-pub fn fails<P: Pose<D>, const D: usize>(
+/// The verdict of the χ² test of the session's map with `weights`:
+/// `Some(passed)`, or `None` when the map has no test (no redundancy, such
+/// as a tree of trusted edges without loops).
+pub fn verdict<P: Pose<D>, const D: usize>(
     session: &Session<'_, P, D>,
     weights: &[f64],
     test: &Test<'_, P, D>,
-) -> bool {
-    test(session.graph, weights).is_some_and(|t| !t.passed)
-}
-
-/// Whether the map in the session's graph has a χ² test with `weights`,
-/// and passes it (a map of no redundancy, such as the trusted edges'
-/// tree, has no test and explains nothing).
-fn passes<P: Pose<D>, const D: usize>(
-    session: &Session<'_, P, D>,
-    weights: &[f64],
-    test: &Test<'_, P, D>,
-) -> bool {
-    test(session.graph, weights).is_some_and(|t| t.passed)
+) -> Option<bool> {
+    test(session.graph, weights).map(|t| t.passed)
 }
 
 /// The restart of the module doc: `decide` run again from no candidate
@@ -180,7 +171,8 @@ pub fn restart<P: Pose<D>, const D: usize>(
         weights[c.edge] = 0.0;
     }
     let again = decide(session, weights)?;
-    if !again.cut_short && passes(session, weights, test) {
+    // Only a passing map explains the failure; one without a test does not.
+    if !again.cut_short && verdict(session, weights, test) == Some(true) {
         *decided = again;
         return Ok(true);
     }

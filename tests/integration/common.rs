@@ -31,6 +31,27 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     p
 }
 
+/// Writes a 2D graph as g2o to `path`.
+pub fn write_graph(graph: &pgo::graph::PoseGraph<pgo::geometry::Se2, 3>, path: &Path) {
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).expect("create"));
+    pgo::io::g2o::write_graph(graph, &mut f).expect("write");
+}
+
+/// For every loop candidate (an edge between poses not one apart) of a
+/// `pgo corrupt --labels` CSV (`edge,from,to,wrong`), in file order,
+/// whether it is wrong.
+pub fn candidate_wrong(labels_csv: &str) -> Vec<bool> {
+    labels_csv
+        .lines()
+        .skip(1)
+        .filter_map(|line| {
+            let f: Vec<&str> = line.split(',').collect();
+            let (from, to): (u64, u64) = (f[1].parse().ok()?, f[2].parse().ok()?);
+            (from.abs_diff(to) != 1).then(|| f[3] == "1")
+        })
+        .collect()
+}
+
 /// The public benchmark datasets: `$PGO_DATASETS`, else `../shared/datasets`
 /// beside the crate. `None` (with a printed reason) when absent, so the
 /// tests that need them skip.

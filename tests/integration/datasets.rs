@@ -2,7 +2,7 @@
 //! the optimum against g2o and GTSAM, and every quirk in MANIFEST.md.
 //! Each test prints a reason and passes when the datasets are absent.
 
-use crate::common::{datasets, pgo, stderr};
+use crate::common::{candidate_wrong, datasets, pgo, stderr, write_graph};
 use pgo::graph::AnyPoseGraph;
 use pgo::io::g2o::{self, ReadError, ReadOptions};
 use pgo::pipeline::{self, OptimizeConfig};
@@ -359,19 +359,8 @@ fn tight_information_keeps_the_true_loops(name: &str, wrong: usize, seed: u64) {
         e.information *= factor;
     }
     let tight = work.join("m-tight.g2o");
-    let mut f = std::io::BufWriter::new(std::fs::File::create(&tight).expect("create"));
-    g2o::write_graph(&g, &mut f).expect("write");
-    drop(f);
-    let wrong: Vec<bool> = std::fs::read_to_string(&labels)
-        .expect("labels")
-        .lines()
-        .skip(1)
-        .filter_map(|line| {
-            let f: Vec<&str> = line.split(',').collect();
-            let (from, to): (u64, u64) = (f[1].parse().ok()?, f[2].parse().ok()?);
-            (from.abs_diff(to) != 1).then(|| f[3] == "1")
-        })
-        .collect();
+    write_graph(&g, &tight);
+    let wrong = candidate_wrong(&std::fs::read_to_string(&labels).expect("labels"));
     let r = pipeline::run(&OptimizeConfig::new(&tight), &mut |_: &_| {}).expect("optimise");
     assert_eq!(r.loops.len(), wrong.len());
     let count = |keep: &dyn Fn(&pgo::report::LoopReport, bool) -> bool| {

@@ -1,7 +1,7 @@
 //! The robust back end through the pipeline: simulated graphs with planted
 //! wrong loop candidates whose labels the tests know.
 
-use crate::common::{sample, temp_dir};
+use crate::common::{candidate_wrong, sample, temp_dir, write_graph};
 use pgo::gate::{DegeneratePolicy, GateMode};
 use pgo::geometry::Se2;
 use pgo::graph::{AnyPoseGraph, PoseGraph};
@@ -24,7 +24,7 @@ struct Case {
 fn case(dir: &Path, name: &str, options: SimulationOptions) -> Case {
     let sim = simulate_planar(&options).expect("simulate");
     let noisy = dir.join(format!("{name}.g2o"));
-    write(&sim.noisy, &noisy);
+    write_graph(&sim.noisy, &noisy);
     let mut clean_graph = sim.noisy.clone();
     clean_graph.edges = sim
         .noisy
@@ -35,7 +35,7 @@ fn case(dir: &Path, name: &str, options: SimulationOptions) -> Case {
         .map(|(e, _)| e.clone())
         .collect();
     let clean = dir.join(format!("{name}_clean.g2o"));
-    write(&clean_graph, &clean);
+    write_graph(&clean_graph, &clean);
     let wrong = candidate_labels(&sim.noisy, &sim.wrong);
     Case {
         noisy,
@@ -54,11 +54,6 @@ fn candidate_labels(graph: &PoseGraph<Se2, 3>, wrong: &[bool]) -> Vec<bool> {
         .filter(|(e, _)| e.is_candidate())
         .map(|(_, w)| *w)
         .collect()
-}
-
-fn write(graph: &PoseGraph<Se2, 3>, path: &Path) {
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).expect("create"));
-    g2o::write_graph(graph, &mut f).expect("write");
 }
 
 fn options(policy: OutlierPolicy, outliers: usize, seed: u64) -> SimulationOptions {
@@ -248,15 +243,7 @@ fn degenerate_counts_are_flagged_before_optimisation_or_fail_the_chi2_test() {
     // (g2o_samples/make.sh).
     let input = PathBuf::from(sample("degenerate.g2o"));
     let labels = std::fs::read_to_string(sample("degenerate_labels.csv")).expect("labels");
-    let wrong: Vec<bool> = labels
-        .lines()
-        .skip(1)
-        .filter_map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            let (a, b): (u64, u64) = (f[1].parse().unwrap(), f[2].parse().unwrap());
-            (a.abs_diff(b) != 1).then(|| f[3] == "1")
-        })
-        .collect();
+    let wrong = candidate_wrong(&labels);
     // Flagged before optimisation, whatever the policy.
     let r = run(&input, GateMode::Auto, RobustMethod::Em, None);
     assert!(r.gate.degenerate);
@@ -412,7 +399,7 @@ fn em_learns_the_spread_of_heavy_tailed_true_loops() {
         }
     }
     let path = dir.join("heavy.g2o");
-    write(&sim.noisy, &path);
+    write_graph(&sim.noisy, &path);
     let wrong = candidate_labels(&sim.noisy, &sim.wrong);
     let r = run(&path, GateMode::Off, RobustMethod::Em, None);
     let (tp, fp, _) = counts(&r, &wrong);
@@ -431,7 +418,7 @@ fn em_learns_the_scale_of_under_confident_information() {
         e.information *= 0.01;
     }
     let noisy = dir.join("under_confident.g2o");
-    write(&sim.noisy, &noisy);
+    write_graph(&sim.noisy, &noisy);
     let wrong = candidate_labels(&sim.noisy, &sim.wrong);
     let r = run(&noisy, GateMode::Off, RobustMethod::Em, None);
     let (tp, fp, true_loops) = counts(&r, &wrong);
