@@ -130,11 +130,14 @@ pub struct BlockSystem<const D: usize> {
     /// scratch.
     rhs: Vec<f64>,
     solve_work: Vec<f64>,
-    /// Scratch of [`BlockSystem::propagate`]: `D` right-hand sides (zero
-    /// between calls), the supernodes they reach, and a flag per supernode.
+    /// Scratch of [`BlockSystem::propagate_group`]: its packed right-hand
+    /// sides, the supernodes they reach, and a flag per supernode.
     cov_rhs: Vec<f64>,
     cov_reach: Vec<u32>,
     cov_mark: Vec<bool>,
+    /// Scratch of [`BlockSystem::propagate_group`]: each block column's
+    /// block row in its packed solution.
+    cov_slot: Vec<u32>,
     lambda: f64,
     symbolic: Symbolic<D>,
     /// The factor's panels, allocated by the first factorisation (so that a
@@ -215,6 +218,7 @@ impl<const D: usize> BlockSystem<D> {
             cov_rhs: Vec::new(),
             cov_reach: Vec::new(),
             cov_mark: Vec::new(),
+            cov_slot: Vec::new(),
             lambda: 0.0,
             symbolic,
             factor: Vec::new(),
@@ -554,68 +558,8 @@ impl<const D: usize> BlockSystem<D> {
         j: Option<usize>,
         a_j: &SMatrix<f64, D, D>,
     ) -> SMatrix<f64, D, D> {
-        let mut out = SMatrix::<f64, D, D>::zeros();
-        // The elimination positions of the blocks present (no allocation:
-        // this runs once per edge judged).
-        let mut blocks = [(0, a_i); 2];
-        let mut positions = [0; 2];
-        let mut count = 0;
-        for (b, a) in [(i, a_i), (j, a_j)] {
-            if let Some(b) = b {
-                blocks[count] = (self.position[b], a);
-                positions[count] = self.position[b];
-                count += 1;
-            }
-        }
-        let (blocks, positions) = (&blocks[..count], &positions[..count]);
-        if blocks.is_empty() || self.n_blocks == 0 {
-            return out;
-        }
-        assert!(
-            !self.factor.is_empty(),
-            "BlockSystem::propagate needs a factorisation first"
-        );
-        let n = self.n_blocks * D;
-        if self.cov_rhs.len() != D * n {
-            self.cov_rhs = vec![0.0; D * n];
-        }
-        self.symbolic
-            .reach(positions, &mut self.cov_mark, &mut self.cov_reach);
-        // Column a of Aᵀ: row a of each block, at its block row.
-        for a in 0..D {
-            let rhs = &mut self.cov_rhs[a * n..(a + 1) * n];
-            for &(p, block) in blocks {
-                for r in 0..D {
-                    rhs[p * D + r] += block[(a, r)];
-                }
-            }
-            self.symbolic
-                .forward_sparse(&self.factor, rhs, &self.cov_reach, &mut self.solve_work);
-        }
-        // YᵀY over the columns the solves reached; the scratch is zeroed
-        // there for the next call.
-        for &s in &self.cov_reach {
-            let cols = self.symbolic.supernode_range(s as usize).0;
-            let range = D * cols.start..D * cols.end;
-            for a in 0..D {
-                for b in 0..=a {
-                    let ya = &self.cov_rhs[a * n..(a + 1) * n][range.clone()];
-                    let yb = &self.cov_rhs[b * n..(b + 1) * n][range.clone()];
-                    let d: f64 = ya.iter().zip(yb).map(|(x, y)| x * y).sum();
-                    out[(a, b)] += d;
-                }
-            }
-        }
-        for a in 0..D {
-            for b in 0..a {
-                out[(b, a)] = out[(a, b)];
-            }
-            for &s in &self.cov_reach {
-                let cols = self.symbolic.supernode_range(s as usize).0;
-                self.cov_rhs[a * n..(a + 1) * n][D * cols.start..D * cols.end].fill(0.0);
-            }
-        }
-        out
+        let gram = self.propagate_group(&[[(i, *a_i), (j, *a_j)]]);
+        SMatrix::from_fn(|r, c| gram[(r, c)])
     }
 
     /// The *selected inverse* of the last factorisation: the blocks of

@@ -3,6 +3,8 @@
 //! candidates' errors inherit from the map.
 
 use super::{BlockSystem, SelectedInverse};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatRef, Par};
 use nalgebra::{DMatrix, SMatrix};
 
 /// The Jacobian of one edge's error: its blocks (variable block index, or
@@ -11,81 +13,71 @@ pub type EdgeJacobian<const D: usize> = [(Option<usize>, SMatrix<f64, D, D>); 2]
 
 impl<const D: usize> BlockSystem<D> {
     /// The Gram matrix `A·H⁻¹·Aᵀ` of the stacked Jacobians `A` of `edges`
-    /// (`D·m × D·m` for `m` edges, edge `e`'s rows at `D·e..D·e + D`), from
-    /// one sparse forward solve `L⁻¹·Pᵀ·aᵀ` per row `a` of `A` over the
-    /// supernodes the group reaches: `A·H⁻¹·Aᵀ = YᵀY`. With one edge it is
+    /// (`D·m × D·m` for `m` edges, edge `e`'s rows at `D·e..D·e + D`): one
+    /// sparse forward solve `Y = L⁻¹·Pᵀ·Aᵀ` with all `D·m` right-hand sides
+    /// at once, over the supernodes the group reaches (their paths to the
+    /// root), then `A·H⁻¹·Aᵀ = YᵀY`. With one edge it is
     /// [`BlockSystem::propagate`].
     ///
     /// # Panics
     /// If no factorisation succeeded before, or a block index is out of
     /// range.
     pub fn propagate_group(&mut self, edges: &[EdgeJacobian<D>]) -> DMatrix<f64> {
-        let m = edges.len();
-        let mut gram = DMatrix::zeros(D * m, D * m);
+        let k = D * edges.len();
         let positions: Vec<usize> = edges
             .iter()
             .flat_map(|e| e.iter().filter_map(|(b, _)| b.map(|b| self.position[b])))
             .collect();
         if positions.is_empty() || self.n_blocks == 0 {
-            return gram;
+            return DMatrix::zeros(k, k);
         }
         assert!(
             !self.factor.is_empty(),
             "BlockSystem::propagate_group needs a factorisation first"
         );
-        let n = self.n_blocks * D;
-        if self.cov_rhs.len() < n {
-            self.cov_rhs.resize(n, 0.0);
-        }
         self.symbolic
             .reach(&positions, &mut self.cov_mark, &mut self.cov_reach);
-        // The scalar columns the solves reach, packed: Y holds only those.
-        let ranges: Vec<std::ops::Range<usize>> = self
-            .cov_reach
-            .iter()
-            .map(|&s| {
-                let cols = self.symbolic.supernode_range(s as usize).0;
-                D * cols.start..D * cols.end
-            })
-            .collect();
-        let packed: usize = ranges.iter().map(|r| r.len()).sum();
-        let mut y = vec![0.0; packed * D * m];
+        // Y holds only the rows of the supernodes the solve reaches, packed
+        // in their order; `cov_slot` maps a block column to its packed block.
+        if self.cov_slot.len() < self.n_blocks {
+            self.cov_slot.resize(self.n_blocks, 0);
+        }
+        let mut packed = 0;
+        for &s in &self.cov_reach {
+            for b in self.symbolic.supernode_range(s as usize).0 {
+                self.cov_slot[b] = packed;
+                packed += 1;
+            }
+        }
+        let packed = D * packed as usize;
+        let y = &mut self.cov_rhs;
+        y.clear();
+        y.resize(packed * k, 0.0);
+        // Column D·e + a of Aᵀ: row a of each of edge e's blocks.
         for (e, edge) in edges.iter().enumerate() {
-            for a in 0..D {
-                let rhs = &mut self.cov_rhs[..n];
-                for (b, block) in edge {
-                    if let Some(b) = b {
-                        let p = self.position[*b];
-                        for r in 0..D {
-                            rhs[p * D + r] += block[(a, r)];
-                        }
+            for (b, block) in edge {
+                let Some(b) = b else { continue };
+                let row = D * self.cov_slot[self.position[*b]] as usize;
+                for a in 0..D {
+                    let column = &mut y[(D * e + a) * packed + row..][..D];
+                    for (r, v) in column.iter_mut().enumerate() {
+                        *v += block[(a, r)];
                     }
                 }
-                self.symbolic.forward_sparse(
-                    &self.factor,
-                    rhs,
-                    &self.cov_reach,
-                    &mut self.solve_work,
-                );
-                let column = &mut y[(D * e + a) * packed..(D * e + a + 1) * packed];
-                let mut at = 0;
-                for range in &ranges {
-                    column[at..at + range.len()].copy_from_slice(&rhs[range.clone()]);
-                    rhs[range.clone()].fill(0.0);
-                    at += range.len();
-                }
             }
         }
-        for r in 0..D * m {
-            let yr = &y[r * packed..(r + 1) * packed];
-            for c in 0..=r {
-                let yc = &y[c * packed..(c + 1) * packed];
-                let d: f64 = yr.iter().zip(yc).map(|(x, z)| x * z).sum();
-                gram[(r, c)] = d;
-                gram[(c, r)] = d;
-            }
-        }
-        gram
+        self.symbolic.forward_packed(
+            &self.factor,
+            &self.cov_reach,
+            &self.cov_slot,
+            y,
+            k,
+            &mut self.solve_work,
+        );
+        let y = MatRef::from_column_major_slice(y, packed, k);
+        let mut gram = faer::Mat::<f64>::zeros(k, k);
+        matmul(gram.as_mut(), Accum::Replace, y.transpose(), y, 1.0, Par::Seq);
+        DMatrix::from_fn(k, k, |r, c| 0.5 * (gram[(r, c)] + gram[(c, r)]))
     }
 }
 

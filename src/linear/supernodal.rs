@@ -782,22 +782,64 @@ impl<const D: usize> Symbolic<D> {
         }
     }
 
-    /// The forward half of [`Symbolic::solve`], `L·y = b` in place, on the
-    /// supernodes of `reach` only ([`Symbolic::reach`] of the block columns
-    /// where `b` is nonzero; `x` must be zero on every other column the
-    /// reach touches). `y` is nonzero only on the columns of `reach`.
-    pub(super) fn forward_sparse(
+    /// The forward half of [`Symbolic::solve`], `L·y = b` in place, for `k`
+    /// right-hand sides nonzero only in block columns whose [`Symbolic::reach`]
+    /// is `reach`, on the supernodes of `reach` only, with dense kernels: `x` (`packed × k`, column-major) holds only the scalar
+    /// rows of the supernodes of `reach`, block column `b`'s at
+    /// `D·slot[b]`, each supernode's columns consecutive. `x` is zero
+    /// wherever the right-hand sides are; on return it holds `L⁻¹·b` on
+    /// those rows (nothing else is nonzero).
+    pub(super) fn forward_packed(
         &self,
         values: &[f64],
-        x: &mut [f64],
         reach: &[u32],
+        slot: &[u32],
+        x: &mut [f64],
+        k: usize,
         work: &mut Vec<f64>,
     ) {
-        if work.len() < self.max_below {
-            work.resize(self.max_below, 0.0);
+        let packed = x.len() / k.max(1);
+        if work.len() < self.max_below * k {
+            work.resize(self.max_below * k, 0.0);
         }
         for &s in reach {
-            self.forward_supernode(s as usize, values, x, work);
+            let s = s as usize;
+            let g = self.panel(s);
+            let (wc, ld, below) = (g.cols::<D>(), g.ld::<D>(), D * g.p);
+            let l = MatRef::from_column_major_slice(
+                &values[self.val_ptr[s]..self.val_ptr[s + 1]],
+                ld,
+                wc,
+            );
+            let at = D * slot[g.b0] as usize;
+            {
+                let mut xs = MatMut::from_column_major_slice_mut(x, packed, k).subrows_mut(at, wc);
+                solve_lower_triangular_in_place(l.submatrix(0, 0, wc, wc), xs.rb_mut(), Par::Seq);
+                if below == 0 {
+                    continue;
+                }
+                let y = MatMut::from_column_major_slice_mut(&mut work[..below * k], below, k);
+                matmul(
+                    y,
+                    Accum::Replace,
+                    l.submatrix(wc, 0, below, wc),
+                    xs.rb(),
+                    1.0,
+                    Par::Seq,
+                );
+            }
+            for (i, &r) in self.rows[self.row_ptr[s]..self.row_ptr[s + 1]]
+                .iter()
+                .enumerate()
+            {
+                let dst = D * slot[r as usize] as usize;
+                for c in 0..k {
+                    let (to, from) = (&mut x[c * packed + dst..][..D], &work[c * below + D * i..][..D]);
+                    for (t, f) in to.iter_mut().zip(from) {
+                        *t -= f;
+                    }
+                }
+            }
         }
     }
 
