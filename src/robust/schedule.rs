@@ -144,11 +144,14 @@ pub fn anneal_chordal<P: ChordalInit<D>, const D: usize>(
     if annealing.kept.is_empty() {
         return Ok((0, false));
     }
+    // The weights change every step, the edges of positive weight do not:
+    // the linear problems' structure is built once.
+    let mut reuse = P::Reuse::default();
     for step in 0..MAX_ANNEAL_STEPS {
         if session.exhausted() {
             return Ok((step, true));
         }
-        P::chordal(session.graph, Some(weights))?;
+        P::chordal_reusing(session.graph, Some(weights), &mut reuse)?;
         if annealing.e_step(session.graph, weights) {
             return Ok((step + 1, false));
         }

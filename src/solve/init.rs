@@ -41,9 +41,52 @@ pub enum Initialization {
 
 /// Pose types that have a chordal initialisation.
 pub trait ChordalInit<const D: usize>: Pose<D> {
+    /// What repeated chordal solves of one graph share: the linear
+    /// problem's structure (elimination order, symbolic factorisation), kept
+    /// while the same edges have a positive weight.
+    type Reuse: Default;
+
     /// Replaces every non-gauge pose by the chordal estimate, using the
     /// edges whose weight is positive.
-    fn chordal(graph: &mut PoseGraph<Self, D>, weights: Option<&[f64]>) -> Result<(), SolveError>;
+    fn chordal(graph: &mut PoseGraph<Self, D>, weights: Option<&[f64]>) -> Result<(), SolveError> {
+        Self::chordal_reusing(graph, weights, &mut Self::Reuse::default())
+    }
+
+    /// [`ChordalInit::chordal`] with the structure of an earlier solve of
+    /// the same graph, for a sequence of solves whose weights change but
+    /// whose set of positive weights does not (an annealing): `reuse` is
+    /// rebuilt when that set changed.
+    fn chordal_reusing(
+        graph: &mut PoseGraph<Self, D>,
+        weights: Option<&[f64]>,
+        reuse: &mut Self::Reuse,
+    ) -> Result<(), SolveError>;
+}
+
+/// The [`ChordalInit::Reuse`] of a chordal relaxation with `D` unknowns per
+/// free vertex: its linear problem and which edges it holds.
+#[derive(Default)]
+pub struct ChordalReuse<const D: usize> {
+    problem: Option<(Vec<bool>, LinearProblem<D>)>,
+}
+
+impl<const D: usize> ChordalReuse<D> {
+    /// The linear problem of `graph` over the edges of positive weight,
+    /// built again only when that set differs from the last call's.
+    fn problem<P: Pose<D2>, const D2: usize>(
+        &mut self,
+        graph: &PoseGraph<P, D2>,
+        weights: Option<&[f64]>,
+    ) -> Result<&mut LinearProblem<D>, SolveError> {
+        let held: Vec<bool> = (0..graph.edges.len())
+            .map(|k| weight(weights, k) != 0.0)
+            .collect();
+        let stale = self.problem.as_ref().is_none_or(|(h, _)| *h != held);
+        if stale {
+            self.problem = Some((held, LinearProblem::new(graph, weights)?));
+        }
+        Ok(&mut self.problem.as_mut().expect("built above").1)
+    }
 }
 
 /// Sets the initial poses of `graph`. `missing` lists the vertices that the
@@ -302,8 +345,14 @@ fn rotation_precision<const D: usize>(
 }
 
 impl ChordalInit<3> for Se2 {
-    fn chordal(graph: &mut PoseGraph<Self, 3>, weights: Option<&[f64]>) -> Result<(), SolveError> {
-        let mut lp = LinearProblem::<2>::new(graph, weights)?;
+    type Reuse = ChordalReuse<2>;
+
+    fn chordal_reusing(
+        graph: &mut PoseGraph<Self, 3>,
+        weights: Option<&[f64]>,
+        reuse: &mut ChordalReuse<2>,
+    ) -> Result<(), SolveError> {
+        let lp = reuse.problem(graph, weights)?;
         // Rotations: r = (cos θ, sin θ), r_j − M(θ_ij) r_i = 0.
         lp.system.clear();
         for (k, e) in graph.edges.iter().enumerate() {
@@ -369,8 +418,14 @@ impl ChordalInit<3> for Se2 {
 }
 
 impl ChordalInit<6> for Se3 {
-    fn chordal(graph: &mut PoseGraph<Self, 6>, weights: Option<&[f64]>) -> Result<(), SolveError> {
-        let mut lp = LinearProblem::<3>::new(graph, weights)?;
+    type Reuse = ChordalReuse<3>;
+
+    fn chordal_reusing(
+        graph: &mut PoseGraph<Self, 6>,
+        weights: Option<&[f64]>,
+        reuse: &mut ChordalReuse<3>,
+    ) -> Result<(), SolveError> {
+        let lp = reuse.problem(graph, weights)?;
         let n = graph.num_vertices();
         // Rotations, one row at a time: row_k(R_j) = row_k(R_i)·R_ij, i.e.
         // ρ_j − R_ijᵀ ρ_i = 0 for the row vectors ρ.
@@ -586,6 +641,40 @@ mod tests {
             "{} vs {best}",
             s.final_objective
         );
+    }
+
+    #[test]
+    fn chordal_with_a_reused_structure_equals_a_fresh_solve() {
+        let truth = grid_truth();
+        let g = planar_graph(&truth, 0.05, 4);
+        let loops: Vec<usize> = (0..g.edges.len())
+            .filter(|&k| g.id(g.edges[k].to) - g.id(g.edges[k].from) > 1)
+            .collect();
+        let mut reuse = ChordalReuse::default();
+        // Weights that change (first two), then a set of positive weights
+        // that changes too (last): each must give the fresh solve's poses.
+        let mut steps = Vec::new();
+        for (scale, dropped) in [(1.0, None), (0.3, None), (0.3, Some(loops[0]))] {
+            let mut w = vec![1.0; g.edges.len()];
+            for (i, &k) in loops.iter().enumerate() {
+                w[k] = scale / (1.0 + i as f64);
+            }
+            if let Some(k) = dropped {
+                w[k] = 0.0;
+            }
+            steps.push(w);
+        }
+        for w in &steps {
+            let (mut fresh, mut reused) = (g.clone(), g.clone());
+            Se2::chordal(&mut fresh, Some(w)).unwrap();
+            Se2::chordal_reusing(&mut reused, Some(w), &mut reuse).unwrap();
+            assert_eq!(fresh.poses, reused.poses);
+        }
+        // The poses differ between the steps: the weights reached the solve.
+        let (mut a, mut b) = (g.clone(), g.clone());
+        Se2::chordal(&mut a, Some(&steps[0])).unwrap();
+        Se2::chordal(&mut b, Some(&steps[1])).unwrap();
+        assert_ne!(a.poses, b.poses);
     }
 
     #[test]
