@@ -76,7 +76,14 @@ impl<const D: usize> BlockSystem<D> {
         );
         let y = MatRef::from_column_major_slice(y, packed, k);
         let mut gram = faer::Mat::<f64>::zeros(k, k);
-        matmul(gram.as_mut(), Accum::Replace, y.transpose(), y, 1.0, Par::Seq);
+        matmul(
+            gram.as_mut(),
+            Accum::Replace,
+            y.transpose(),
+            y,
+            1.0,
+            Par::Seq,
+        );
         DMatrix::from_fn(k, k, |r, c| 0.5 * (gram[(r, c)] + gram[(c, r)]))
     }
 }

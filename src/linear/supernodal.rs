@@ -834,7 +834,10 @@ impl<const D: usize> Symbolic<D> {
             {
                 let dst = D * slot[r as usize] as usize;
                 for c in 0..k {
-                    let (to, from) = (&mut x[c * packed + dst..][..D], &work[c * below + D * i..][..D]);
+                    let (to, from) = (
+                        &mut x[c * packed + dst..][..D],
+                        &work[c * below + D * i..][..D],
+                    );
                     for (t, f) in to.iter_mut().zip(from) {
                         *t -= f;
                     }

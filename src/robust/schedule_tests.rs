@@ -1,0 +1,126 @@
+use super::*;
+use crate::geometry::Se2;
+use crate::graph::LoopCandidate;
+use crate::solve::Budget;
+use crate::solve::{Cancel, Optimizer, SolverOptions};
+use nalgebra::Matrix3;
+
+/// A square walk of 16 poses with odometry, four true loops between the
+/// walk's laps and one wrong loop, all candidates; odometry file poses.
+fn walk() -> (PoseGraph<Se2, 3>, Vec<Candidate>) {
+    let side = 4;
+    let mut truth = Vec::new();
+    for k in 0..4 * side {
+        let (lap, step) = (k / side, k % side);
+        let th = lap as f64 * std::f64::consts::FRAC_PI_2;
+        let corner = [(0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (0.0, 4.0)][lap];
+        truth.push(Se2::new(
+            corner.0 + step as f64 * th.cos(),
+            corner.1 + step as f64 * th.sin(),
+            th,
+        ));
+    }
+    let mut g = PoseGraph::new();
+    let mut pose = truth[0];
+    for (k, t) in truth.iter().enumerate() {
+        if k > 0 {
+            // Odometry with a drift in heading.
+            let z = truth[k - 1].inverse().compose(t);
+            pose = pose.compose(&Se2::new(z.x, z.y, z.theta + 0.02));
+        }
+        g.add_vertex(k as u64, if k == 0 { *t } else { pose })
+            .unwrap();
+    }
+    for k in 1..truth.len() {
+        let z = truth[k - 1].inverse().compose(&truth[k]);
+        g.add_edge(k as u64 - 1, k as u64, z, Matrix3::identity() * 100.0, None)
+            .unwrap();
+    }
+    let mut candidates = Vec::new();
+    for (i, j, wrong) in [
+        (0, 15, false),
+        (1, 14, false),
+        (4, 12, false),
+        (3, 9, false),
+        (2, 10, true),
+    ] {
+        let z = truth[i].inverse().compose(&truth[j]);
+        let z = if wrong {
+            Se2::new(z.x + 3.0, z.y - 2.0, z.theta + 1.0)
+        } else {
+            z
+        };
+        candidates.push(Candidate {
+            edge: g.edges.len(),
+            count_posterior: Some(0.9),
+            kept: true,
+        });
+        g.add_edge(
+            i as u64,
+            j as u64,
+            z,
+            Matrix3::identity() * 100.0,
+            Some(LoopCandidate { inliers: Some(60) }),
+        )
+        .unwrap();
+    }
+    (g, candidates)
+}
+
+#[test]
+fn the_chordal_annealing_ends_at_the_relaxation_of_the_accepted_set() {
+    let (mut g, candidates) = walk();
+    let mut weights = vec![1.0; g.edges.len()];
+    let mut optimizer = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
+    let mut observer = Cancel::new();
+    let mut session = Session::new(
+        &mut optimizer,
+        &mut g,
+        SolverOptions::default(),
+        Budget::unlimited(),
+        &mut observer,
+    );
+    let (steps, cut) = anneal_chordal(&mut session, &mut weights, &candidates, 2.0).unwrap();
+    assert!(steps > 1 && !cut);
+    // The wrong loop is down-weighted, the true ones held, not all at 1.
+    let held: Vec<bool> = candidates.iter().map(|c| weights[c.edge] >= 0.5).collect();
+    assert_eq!(held, [true, true, true, true, false]);
+    assert!(
+        candidates
+            .iter()
+            .any(|c| weights[c.edge] != 0.0 && weights[c.edge] != 1.0)
+    );
+    // The map is the relaxation with the held loops at full weight and
+    // the others left out, not the one at the annealing's weights.
+    let mut full = weights.clone();
+    for c in &candidates {
+        full[c.edge] = if weights[c.edge] >= 0.5 { 1.0 } else { 0.0 };
+    }
+    let (mut expected, mut annealed) = (session.graph.clone(), session.graph.clone());
+    Se2::chordal(&mut expected, Some(&full)).unwrap();
+    Se2::chordal(&mut annealed, Some(&weights)).unwrap();
+    assert_eq!(session.graph.poses, expected.poses);
+    assert_ne!(session.graph.poses, annealed.poses);
+}
+
+#[test]
+fn the_decisions_keep_the_annealed_map_where_it_fits_the_accepted_set_better() {
+    // At the least-squares map of the accepted set no relaxation fits it
+    // better: that map stays.
+    let (mut g, candidates) = walk();
+    let mut weights = vec![1.0; g.edges.len()];
+    weights[candidates[4].edge] = 0.0;
+    let mut optimizer = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
+    let summary = optimizer
+        .run(&mut g, Some(&weights), &mut Cancel::new())
+        .unwrap();
+    assert!(summary.converged());
+    let optimum = g.poses.clone();
+    // Held loops at Cauchy-like weights, the wrong one low.
+    for (c, w) in candidates.iter().zip([0.9, 0.8, 0.95, 0.7, 0.1]) {
+        weights[c.edge] = w;
+    }
+    let kept: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    relax_accepted(&mut g, &weights, &kept).unwrap();
+    assert_eq!(g.poses, optimum);
+}
