@@ -223,6 +223,10 @@ pub struct RobustReport {
     pub c: f64,
     /// EM: E-steps of the annealing; the kernels: reweighting rounds.
     pub rounds: usize,
+    /// EM with the chordal initial guess: chordal relaxations solved (two
+    /// linear solves each): one per E-step of the annealing and one for the
+    /// decisions' start.
+    pub relaxations: usize,
     /// EM: accepted sets solved while deciding by innovation.
     pub decisions: usize,
     /// EM: clusters of candidates judged together.

@@ -174,6 +174,7 @@ pub fn report<P: G2oPose<D>, const D: usize>(
         method,
         c,
         rounds: outcome.rounds,
+        relaxations: outcome.relaxations,
         decisions: outcome.decisions,
         clusters: outcome.clusters,
         accepted_loops: accepted,

@@ -221,6 +221,8 @@ pub struct Outcome {
     pub model: Option<LoopModel>,
     /// E-steps of the annealing, or reweighting rounds of a kernel.
     pub rounds: usize,
+    /// EM with the chordal guess: chordal relaxations solved.
+    pub relaxations: usize,
     /// EM: accepted sets solved.
     pub decisions: usize,
     /// EM: the clusters of candidates.
@@ -242,6 +244,7 @@ impl Outcome {
             reasons: vec![Reason::Gated; n],
             model: None,
             rounds: 0,
+            relaxations: 0,
             decisions: 0,
             clusters: 0,
             search: None,
@@ -351,13 +354,14 @@ fn em<P: ChordalInit<D>, const D: usize>(
         out.cut_short = true;
         return Ok(());
     }
-    let (steps, cut) = match (layers.annealing, chordal) {
-        (false, _) => (0, false),
+    let annealed = match (layers.annealing, chordal) {
+        (false, _) => schedule::Annealed::default(),
         (true, true) => schedule::anneal_chordal(session, weights, candidates, c)?,
         (true, false) => schedule::anneal(session, weights, candidates, c)?,
     };
-    out.rounds = steps;
-    if cut {
+    out.rounds = annealed.steps;
+    out.relaxations = annealed.relaxations;
+    if annealed.cut_short {
         // The annealed map so far stands (a run of no iteration records it).
         session.run(weights, 0)?;
         out.cut_short = true;

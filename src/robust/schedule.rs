@@ -103,62 +103,79 @@ impl Annealing {
     }
 }
 
+/// What an annealing did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Annealed {
+    /// E-steps taken.
+    pub steps: usize,
+    /// Chordal relaxations solved (on the chordal relaxation: one per
+    /// E-step, and one for the decisions' start).
+    pub relaxations: usize,
+    /// Whether the session's budget cut it short.
+    pub cut_short: bool,
+}
+
 /// The annealing (step 1 of the module doc): leaves the weights of the
 /// candidates that passed the gate in `weights` (one per edge; the others
-/// stay 0) and the map in the session's graph. Returns the E-steps taken
-/// and whether the budget cut it short.
+/// stay 0) and the map in the session's graph.
 pub fn anneal<P: Pose<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
     candidates: &[Candidate],
     c: f64,
-) -> Result<(usize, bool), SolveError> {
+) -> Result<Annealed, SolveError> {
     let mut annealing = Annealing::new(candidates, c);
+    let mut out = Annealed::default();
     if annealing.kept.is_empty() {
-        return Ok((0, false));
+        return Ok(out);
     }
-    for step in 0..MAX_ANNEAL_STEPS {
+    while out.steps < MAX_ANNEAL_STEPS {
+        out.steps += 1;
         if annealing.e_step(session.graph, weights) {
-            return Ok((step + 1, false));
+            break;
         }
         session.run(weights, 1)?;
         if session.exhausted() {
-            return Ok((step + 1, true));
+            out.cut_short = true;
+            break;
         }
     }
-    Ok((MAX_ANNEAL_STEPS, false))
+    Ok(out)
 }
 
 /// The annealing on the chordal relaxation: each E-step is followed by a
 /// chordal solve (rotations, then translations; two linear solves) with the
 /// candidates at their weights, from scratch — a convex stand-in for the
-/// map that is cheap to solve and that no earlier map biases. Returns the
-/// E-steps taken, and whether the session's budget cut them short.
+/// map that is cheap to solve and that no earlier map biases — and the
+/// decisions' start is chosen at the end ([`relax_accepted`]).
 pub fn anneal_chordal<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
     candidates: &[Candidate],
     c: f64,
-) -> Result<(usize, bool), SolveError> {
+) -> Result<Annealed, SolveError> {
     let mut annealing = Annealing::new(candidates, c);
+    let mut out = Annealed::default();
     if annealing.kept.is_empty() {
-        return Ok((0, false));
+        return Ok(out);
     }
     // The weights change every step, the edges of positive weight do not:
     // the linear problems' structure is built once.
     let mut reuse = P::Reuse::default();
-    for step in 0..MAX_ANNEAL_STEPS {
+    let mut done = false;
+    while !done && out.steps < MAX_ANNEAL_STEPS {
         if session.exhausted() {
-            return Ok((step, true));
+            out.cut_short = true;
+            return Ok(out);
         }
         P::chordal_reusing(session.graph, Some(weights), &mut reuse)?;
-        if annealing.e_step(session.graph, weights) {
-            relax_accepted(session.graph, weights, &annealing.kept)?;
-            return Ok((step + 1, false));
-        }
+        out.relaxations += 1;
+        out.steps += 1;
+        done = annealing.e_step(session.graph, weights);
     }
     relax_accepted(session.graph, weights, &annealing.kept)?;
-    Ok((MAX_ANNEAL_STEPS, false))
+    out.relaxations += 1;
+    Ok(out)
 }
 
 /// The map the decisions start from, for the problem the first decision

@@ -80,8 +80,9 @@ fn the_chordal_annealing_ends_at_the_relaxation_of_the_accepted_set() {
         Budget::unlimited(),
         &mut observer,
     );
-    let (steps, cut) = anneal_chordal(&mut session, &mut weights, &candidates, 2.0).unwrap();
-    assert!(steps > 1 && !cut);
+    let annealed = anneal_chordal(&mut session, &mut weights, &candidates, 2.0).unwrap();
+    assert!(annealed.steps > 1 && !annealed.cut_short);
+    assert_eq!(annealed.relaxations, annealed.steps + 1);
     // The wrong loop is down-weighted, the true ones held, not all at 1.
     let held: Vec<bool> = candidates.iter().map(|c| weights[c.edge] >= 0.5).collect();
     assert_eq!(held, [true, true, true, true, false]);
