@@ -292,7 +292,7 @@ def plain_section(path):
             "wrong candidates and optimised with `--gate off --robust none` (a plain solve). "
             "Made by:" % (data.get("world", "grid2d"), data["poses"], data["true_loops"], data["wrong"]), "", "```sh", data["command"], "```", "",
             "| run | LM factorisations | EM evaluations (one factorisation and a selected inverse each) "
-            "| chordal relaxations (two linear solves each) | optimiser (s) | wall (s) | peak RSS (MB) "
+            "| EM's chordal relaxations (two linear solves each; both runs' initial guess is one more) | optimiser (s) | wall (s) | peak RSS (MB) "
             "| accepted true / wrong |", "|---|---|---|---|---|---|---|---|"]
     for r in data["runs"]:
         out.append("| %s | %d | %s | %s | %.2f | %.2f | %.0f | %s |" % (
