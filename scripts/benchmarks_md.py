@@ -228,7 +228,7 @@ def scale_section(path):
 
 SCALE_1E6 = {
     "file": "scale_1e6.json",
-    "cmd": (".venv/bin/python scripts/bench_scale.py --sizes 1e6 --worlds grid2d "
+    "cmd": (".venv/bin/python scripts/bench_scale.py --sizes 1e6 --worlds sphere3d grid2d "
             "--work /tmp/scale --out bench/results/scale_1e6.json --svg /tmp/scale_1e6.svg"),
 }
 
