@@ -12,6 +12,7 @@
 
 use pgo::{AnyPoseGraph, Options, UpdateSolve};
 use std::collections::HashMap;
+use std::io::Write;
 use std::time::Instant;
 
 /// One edge of the file: its ends, measurement, information (full, row by
@@ -83,6 +84,8 @@ fn read(path: &str) -> Result<(usize, Vec<Vertex>, Vec<Edge>), String> {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let verbose = args.iter().any(|a| a == "-v");
+    // A closed stdout (`| head`) ends the replay with an error, not a panic.
+    let mut out = std::io::stdout().lock();
     let args: Vec<&String> = args.iter().filter(|a| *a != "-v").collect();
     let (Some(path), every) = (args.first(), args.get(1)) else {
         return Err("usage: replay FILE.g2o [EVERY_N_POSES] [-v]".into());
@@ -139,14 +142,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         changed += solution.incremental().map_or(0, |i| i.changed.len());
         if verbose {
             let o = &solution.report().optimizer;
-            println!(
+            writeln!(
+                out,
                 "{:>7} poses  {name:<8} {ms:8.2} ms  {} iterations, {} factorisations ({:.2} ms), optimiser {:.2} ms",
                 k + 1,
                 o.iterations,
                 o.factorizations,
                 o.timing.factorize_s * 1e3,
                 o.time_s * 1e3
-            );
+            )?;
         }
         last = Some(solution);
     }
@@ -164,13 +168,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .map(|d| d.index)
             .collect()
     };
-    println!(
+    writeln!(
+        out,
         "{} updates every {every} poses: {total:.1} ms in all, median {:.2} ms, p99 {p99:.2} ms, max {:.2} ms; {kinds:?}; {changed} earlier decisions changed",
         times.len(),
         times[times.len() / 2],
         times[times.len() - 1],
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "final χ² {:.10e}, batch {:.10e} ({batch_ms:.1} ms): relative difference {:.1e}; accepted sets {}",
         last.chi2(),
         batch.chi2(),
@@ -180,6 +186,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         } else {
             "DIFFER"
         }
-    );
+    )?;
     Ok(())
 }
