@@ -783,12 +783,12 @@ impl<const D: usize> Symbolic<D> {
     }
 
     /// The forward half of [`Symbolic::solve`], `L·y = b` in place, for `k`
-    /// right-hand sides nonzero only in block columns whose [`Symbolic::reach`]
-    /// is `reach`, on the supernodes of `reach` only, with dense kernels: `x` (`packed × k`, column-major) holds only the scalar
-    /// rows of the supernodes of `reach`, block column `b`'s at
-    /// `D·slot[b]`, each supernode's columns consecutive. `x` is zero
-    /// wherever the right-hand sides are; on return it holds `L⁻¹·b` on
-    /// those rows (nothing else is nonzero).
+    /// right-hand sides at once, on the supernodes of `reach` only
+    /// ([`Symbolic::reach`] of the block columns where `b` is nonzero), with
+    /// dense kernels per supernode. `x` (`packed × k`, column-major) holds
+    /// only the scalar rows of those supernodes, block column `b`'s at
+    /// `D·slot[b]`, each supernode's columns consecutive: `b` on entry,
+    /// `y` on return (`y` is zero on every other row).
     pub(super) fn forward_packed(
         &self,
         values: &[f64],

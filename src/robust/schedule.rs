@@ -96,7 +96,7 @@ impl Annealing {
         for (&k, &r) in self.kept.iter().zip(&r2) {
             weights[k] = cauchy_weight(r, width);
         }
-        let set: Vec<bool> = self.kept.iter().map(|&k| weights[k] >= 0.5).collect();
+        let set: Vec<bool> = self.kept.iter().map(|&k| held(weights[k])).collect();
         self.stable = if set == self.last { self.stable + 1 } else { 0 };
         self.last = set;
         factor == 1.0 && self.stable >= STABLE_STEPS
@@ -189,8 +189,8 @@ pub fn anneal_chordal<P: ChordalInit<D>, const D: usize>(
 /// small weights, made Gauss–Newton overshoot and LM crawl (28 iterations,
 /// χ² 9.4·10⁴ at the start) where the relaxation of the accepted set took 4
 /// (6.5·10⁴); on intel with 1000 random wrong candidates and its
-/// square-root information the relaxation started lower χ² worse (7650
-/// against 6106) and LM ended in a local minimum 12 % of the map off.
+/// square-root information the relaxation fitted worse (χ² 7650 against
+/// 6106) and LM from it ended in a local minimum 12 % of the map off.
 fn relax_accepted<P: ChordalInit<D>, const D: usize>(
     graph: &mut PoseGraph<P, D>,
     weights: &[f64],
@@ -198,7 +198,7 @@ fn relax_accepted<P: ChordalInit<D>, const D: usize>(
 ) -> Result<(), SolveError> {
     let mut full = weights.to_vec();
     for &k in kept {
-        full[k] = if weights[k] >= 0.5 { 1.0 } else { 0.0 };
+        full[k] = if held(weights[k]) { 1.0 } else { 0.0 };
     }
     let annealed = graph.poses.clone();
     let fit = |g: &PoseGraph<P, D>| g.chi2_where(|k| full[k] > 0.0);
@@ -263,7 +263,7 @@ pub fn decide<P: Pose<D>, const D: usize>(
         })
         .collect();
     let mut out = Decided {
-        accepted: edges.iter().map(|&k| weights[k] >= 0.5).collect(),
+        accepted: edges.iter().map(|&k| held(weights[k])).collect(),
         model: None,
         innovations: Innovations::default(),
         clusters: if layers.clusters {
@@ -372,6 +372,12 @@ fn judge(
         })
         .collect();
     (model, next)
+}
+
+/// Whether a candidate of annealing weight `w` is held: the decisions start
+/// from the candidates of weight ≥ ½.
+fn held(w: f64) -> bool {
+    w >= 0.5
 }
 
 /// The median of a slice (0 when empty).

@@ -84,8 +84,8 @@ fn the_chordal_annealing_ends_at_the_relaxation_of_the_accepted_set() {
     assert!(annealed.steps > 1 && !annealed.cut_short);
     assert_eq!(annealed.relaxations, annealed.steps + 1);
     // The wrong loop is down-weighted, the true ones held, not all at 1.
-    let held: Vec<bool> = candidates.iter().map(|c| weights[c.edge] >= 0.5).collect();
-    assert_eq!(held, [true, true, true, true, false]);
+    let kept: Vec<bool> = candidates.iter().map(|c| held(weights[c.edge])).collect();
+    assert_eq!(kept, [true, true, true, true, false]);
     assert!(
         candidates
             .iter()
@@ -95,7 +95,7 @@ fn the_chordal_annealing_ends_at_the_relaxation_of_the_accepted_set() {
     // the others left out, not the one at the annealing's weights.
     let mut full = weights.clone();
     for c in &candidates {
-        full[c.edge] = if weights[c.edge] >= 0.5 { 1.0 } else { 0.0 };
+        full[c.edge] = if held(weights[c.edge]) { 1.0 } else { 0.0 };
     }
     let (mut expected, mut annealed) = (session.graph.clone(), session.graph.clone());
     Se2::chordal(&mut expected, Some(&full)).unwrap();

@@ -598,6 +598,10 @@ mod tests {
         let zero = nearest_rotation(&Matrix3::zeros());
         assert!(zero.coords.iter().all(|v| v.is_finite()));
     }
+    use crate::solve::{SolverOptions, optimize};
+    use nalgebra::{Matrix3, Matrix6, Vector6};
+    use rand::{Rng, SeedableRng, rngs::StdRng};
+
     #[test]
     fn polar_newton_gives_the_svd_nearest_rotation() {
         let mut rng = StdRng::seed_from_u64(7);
@@ -620,10 +624,6 @@ mod tests {
         assert!(polar_newton(&Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0))).is_none());
         assert!(polar_newton(&Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 0.0))).is_none());
     }
-
-    use crate::solve::{SolverOptions, optimize};
-    use nalgebra::{Matrix3, Matrix6, Vector6};
-    use rand::{Rng, SeedableRng, rngs::StdRng};
 
     fn grid_truth() -> Vec<Se2> {
         // A 5×5 serpentine walk.
