@@ -44,7 +44,7 @@ pub trait ChordalInit<const D: usize>: Pose<D> {
     /// What repeated chordal solves of one graph share: the linear
     /// problem's structure (elimination order, symbolic factorisation), kept
     /// while the same edges have a positive weight.
-    type Reuse: Default;
+    type Reuse: Default + From<Parallelism>;
 
     /// Replaces every non-gauge pose by the chordal estimate, using the
     /// edges whose weight is positive.
@@ -65,12 +65,24 @@ pub trait ChordalInit<const D: usize>: Pose<D> {
 
 /// The [`ChordalInit::Reuse`] of a chordal relaxation with `D` unknowns per
 /// free vertex: its linear problem and which edges it holds.
+/// Made by `From<Parallelism>` to factorise on the threads of a pool
+/// (`Default`: in the calling thread).
 #[derive(Default)]
 pub struct ChordalReuse<const D: usize> {
     problem: Option<(Vec<bool>, LinearProblem<D>)>,
     /// Each edge's rotation precision ([`rotation_precision`]): the
     /// information does not change between the solves.
     rotation: Vec<f64>,
+    parallelism: Parallelism,
+}
+
+impl<const D: usize> From<Parallelism> for ChordalReuse<D> {
+    fn from(parallelism: Parallelism) -> Self {
+        Self {
+            parallelism,
+            ..Self::default()
+        }
+    }
 }
 
 impl<const D: usize> ChordalReuse<D> {
@@ -94,7 +106,10 @@ impl<const D: usize> ChordalReuse<D> {
         }
         let problem = match &mut self.problem {
             Some((_, problem)) => problem,
-            slot @ None => &mut slot.insert((held, LinearProblem::new(graph, weights)?)).1,
+            slot @ None => {
+                let problem = LinearProblem::new(graph, weights, self.parallelism.clone())?;
+                &mut slot.insert((held, problem)).1
+            }
         };
         Ok((problem, &self.rotation))
     }
@@ -223,6 +238,7 @@ impl<const D: usize> LinearProblem<D> {
     fn new<P: Pose<D2>, const D2: usize>(
         graph: &PoseGraph<P, D2>,
         weights: Option<&[f64]>,
+        parallelism: Parallelism,
     ) -> Result<Self, SolveError> {
         let unconstrained = graph.unconstrained_vertices(weights);
         if !unconstrained.is_empty() {
@@ -248,7 +264,7 @@ impl<const D: usize> LinearProblem<D> {
             })
             .collect();
         Ok(Self {
-            system: BlockSystem::new(n_free, &pairs, Parallelism::sequential())?,
+            system: BlockSystem::new(n_free, &pairs, parallelism)?,
             variable,
             n_free,
         })
@@ -291,22 +307,13 @@ impl<const D: usize> LinearProblem<D> {
             .add_edge_gradient(k, &(a_i.transpose() * wc), &(a_j.transpose() * wc));
     }
 
-    /// Solves the assembled problem; the solution by variable block.
-    /// `refactorize = false` reuses the last factorisation (same matrix,
-    /// new right-hand side).
-    fn solve<P: Pose<D2>, const D2: usize>(
+    /// Factorises the assembled matrix.
+    fn factorize<P: Pose<D2>, const D2: usize>(
         &mut self,
         graph: &PoseGraph<P, D2>,
-        refactorize: bool,
-    ) -> Result<Vec<f64>, SolveError> {
-        let mut x = vec![0.0; self.n_free * D];
-        let factorized = if refactorize {
-            self.system.factorize(0.0)
-        } else {
-            Ok(())
-        };
-        match factorized {
-            Ok(()) => {}
+    ) -> Result<(), SolveError> {
+        match self.system.factorize(0.0) {
+            Ok(()) => Ok(()),
             Err(LinearError::NotPositiveDefinite { block }) => {
                 let vertex = self
                     .variable
@@ -314,10 +321,20 @@ impl<const D: usize> LinearProblem<D> {
                     .position(|v| *v == Some(block))
                     .map(|k| graph.id(k))
                     .unwrap_or(0);
-                return Err(SolveError::NotPositiveDefinite { vertex });
+                Err(SolveError::NotPositiveDefinite { vertex })
             }
-            Err(e) => return Err(e.into()),
+            Err(e) => Err(e.into()),
         }
+    }
+
+    /// Factorises and solves the assembled problem; the solution by
+    /// variable block.
+    fn solve<P: Pose<D2>, const D2: usize>(
+        &mut self,
+        graph: &PoseGraph<P, D2>,
+    ) -> Result<Vec<f64>, SolveError> {
+        self.factorize(graph)?;
+        let mut x = vec![0.0; self.n_free * D];
         self.system.solve(&mut x);
         Ok(x)
     }
@@ -392,7 +409,7 @@ impl ChordalInit<3> for Se2 {
                 &(Matrix2::identity() * w),
             );
         }
-        let x = lp.solve(graph, true)?;
+        let x = lp.solve(graph)?;
         for v in 0..graph.num_vertices() {
             if let Some(r) = lp.value(&x, v) {
                 graph.poses[v].theta = r.y.atan2(r.x);
@@ -417,7 +434,7 @@ impl ChordalInit<3> for Se2 {
             }
             lp.add(k, &(-rt), &rt, &c0, &omega);
         }
-        let x = lp.solve(graph, true)?;
+        let x = lp.solve(graph)?;
         for v in 0..graph.num_vertices() {
             if let Some(t) = lp.value(&x, v) {
                 graph.poses[v].x = t.x;
@@ -440,9 +457,10 @@ impl ChordalInit<6> for Se3 {
         let n = graph.num_vertices();
         // Rotations, one row at a time: row_k(R_j) = row_k(R_i)·R_ij, i.e.
         // ρ_j − R_ijᵀ ρ_i = 0 for the row vectors ρ.
-        let mut rows = vec![Matrix3::<f64>::zeros(); n];
         // The matrix is the same for the three rows: factorise once, solve
-        // three times.
+        // the three right-hand sides together.
+        let len = lp.n_free * 3;
+        let mut x = vec![0.0; 3 * len];
         for row in 0..3 {
             if row == 0 {
                 lp.system.clear();
@@ -471,9 +489,16 @@ impl ChordalInit<6> for Se3 {
                     lp.add_rhs(k, &(-m), &Matrix3::identity(), &c0, &w);
                 }
             }
-            let x = lp.solve(graph, row == 0)?;
+            if row == 0 {
+                lp.factorize(graph)?;
+            }
+            lp.system.gradient_into(&mut x[row * len..(row + 1) * len]);
+        }
+        lp.system.solve_many(&mut x, 3);
+        let mut rows = vec![Matrix3::<f64>::zeros(); n];
+        for (row, x) in x.chunks_exact(len.max(1)).enumerate() {
             for (v, r) in rows.iter_mut().enumerate() {
-                if let Some(value) = lp.value(&x, v) {
+                if let Some(value) = lp.value(x, v) {
                     r.set_row(row, &value.transpose());
                 }
             }
@@ -501,7 +526,7 @@ impl ChordalInit<6> for Se3 {
             }
             lp.add(k, &(-rt), &rt, &c0, &omega);
         }
-        let x = lp.solve(graph, true)?;
+        let x = lp.solve(graph)?;
         for v in 0..n {
             if let Some(t) = lp.value(&x, v) {
                 graph.poses[v].translation = t;

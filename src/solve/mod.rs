@@ -466,6 +466,12 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         Ok(())
     }
 
+    /// The threads the optimiser's linear algebra runs on, for other
+    /// linear solves of the same job.
+    pub fn parallelism(&self) -> &Parallelism {
+        &self.parallelism
+    }
+
     /// The options, e.g. to change the iteration limit between runs.
     pub fn options_mut(&mut self) -> &mut SolverOptions {
         &mut self.options
