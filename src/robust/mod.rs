@@ -116,6 +116,10 @@ pub struct Layers {
     pub populations: bool,
     /// Act on a failed χ² test ([`search`]).
     pub search: bool,
+    /// Seek each accepted set's map also from its chordal relaxation, when
+    /// that fits better than the minimum reached
+    /// ([`schedule::decide`]; with the chordal guess only).
+    pub relaxation: bool,
 }
 
 impl Default for Layers {
@@ -127,19 +131,21 @@ impl Default for Layers {
             aliasing: true,
             populations: true,
             search: true,
+            relaxation: true,
         }
     }
 }
 
 impl Layers {
     /// The layer names, as `--expert` takes them (with `no-`).
-    pub const NAMES: [&'static str; 6] = [
+    pub const NAMES: [&'static str; 7] = [
         "annealing",
         "decisions",
         "clusters",
         "aliasing",
         "populations",
         "search",
+        "relaxation",
     ];
 
     /// Parses `no-LAYER[,no-LAYER…]` (empty: every layer on).
@@ -159,6 +165,7 @@ impl Layers {
                 "no-aliasing" => &mut layers.aliasing,
                 "no-populations" => &mut layers.populations,
                 "no-search" => &mut layers.search,
+                "no-relaxation" => &mut layers.relaxation,
                 _ => {
                     return Err(format!(
                         "unknown layer '{item}': expected no-LAYER with LAYER one of {}",
@@ -225,6 +232,9 @@ pub struct Outcome {
     pub relaxations: usize,
     /// EM: accepted sets solved.
     pub decisions: usize,
+    /// EM with the chordal guess: accepted sets whose map a solve from
+    /// their relaxation lowered.
+    pub lower_minima: usize,
     /// EM: the clusters of candidates.
     pub clusters: usize,
     /// EM: what the χ² search did.
@@ -246,6 +256,7 @@ impl Outcome {
             rounds: 0,
             relaxations: 0,
             decisions: 0,
+            lower_minima: 0,
             clusters: 0,
             search: None,
             cut_short: false,
@@ -367,7 +378,7 @@ fn em<P: ChordalInit<D>, const D: usize>(
         out.cut_short = true;
         return Ok(());
     }
-    settle(session, weights, candidates, layers, test, out)
+    settle(session, chordal, weights, candidates, layers, test, out)
 }
 
 /// Re-decides every candidate from an earlier solution: the decisions by
@@ -396,7 +407,7 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
         session.run(weights, 0)?;
         out.cut_short = true;
     } else {
-        settle(session, weights, candidates, layers, test, &mut out)?;
+        settle(session, false, weights, candidates, layers, test, &mut out)?;
     }
     for (k, cand) in candidates.iter().enumerate() {
         out.weights[k] = weights[cand.edge];
@@ -407,15 +418,23 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
 
 /// EM from an accepted set: decisions by innovation until the set repeats,
 /// the χ² search, and each candidate's posterior and reason.
-fn settle<P: Pose<D>, const D: usize>(
+fn settle<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
+    chordal: bool,
     weights: &mut [f64],
     candidates: &[Candidate],
     layers: &Layers,
     test: &Test<'_, P, D>,
     out: &mut Outcome,
 ) -> Result<(), SolveError> {
-    let mut decided = schedule::decide(session, weights, candidates, Scale::Learned, layers)?;
+    let mut decided = schedule::decide(
+        session,
+        weights,
+        candidates,
+        Scale::Learned,
+        layers,
+        chordal,
+    )?;
     let mut search = explain(session, weights, candidates, &mut decided, layers, test)?;
     // A failed test no cluster explains: decide again from the trusted
     // edges' map, with the scale learned and with the file's.
@@ -431,7 +450,9 @@ fn settle<P: Pose<D>, const D: usize>(
             candidates,
             &mut decided,
             test,
-            |session, weights| schedule::decide(session, weights, candidates, scale, layers),
+            |session, weights| {
+                schedule::decide(session, weights, candidates, scale, layers, chordal)
+            },
         )?;
         if restarted {
             search = explain(session, weights, candidates, &mut decided, layers, test)?;
@@ -441,6 +462,8 @@ fn settle<P: Pose<D>, const D: usize>(
         }
     }
     out.decisions = decided.decisions;
+    out.relaxations += decided.relaxations;
+    out.lower_minima = decided.lower_minima;
     out.clusters = decided.clusters.len();
     out.cut_short = decided.cut_short;
     let removed: Vec<usize> = search

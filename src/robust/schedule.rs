@@ -161,7 +161,7 @@ pub fn anneal_chordal<P: ChordalInit<D>, const D: usize>(
     }
     // The weights change every step, the edges of positive weight do not:
     // the linear problems' structure is built once.
-    let mut reuse = P::Reuse::default();
+    let mut reuse = P::Reuse::from(session.optimizer.parallelism().clone());
     let mut done = false;
     while !done && out.steps < MAX_ANNEAL_STEPS {
         if session.exhausted() {
@@ -173,7 +173,7 @@ pub fn anneal_chordal<P: ChordalInit<D>, const D: usize>(
         out.steps += 1;
         done = annealing.e_step(session.graph, weights);
     }
-    relax_accepted(session.graph, weights, &annealing.kept)?;
+    relax_accepted(session.graph, weights, &annealing.kept, &mut reuse)?;
     out.relaxations += 1;
     Ok(out)
 }
@@ -195,6 +195,7 @@ fn relax_accepted<P: ChordalInit<D>, const D: usize>(
     graph: &mut PoseGraph<P, D>,
     weights: &[f64],
     kept: &[usize],
+    reuse: &mut P::Reuse,
 ) -> Result<(), SolveError> {
     let mut full = weights.to_vec();
     for &k in kept {
@@ -203,7 +204,7 @@ fn relax_accepted<P: ChordalInit<D>, const D: usize>(
     let annealed = graph.poses.clone();
     let fit = |g: &PoseGraph<P, D>| g.chi2_where(|k| full[k] > 0.0);
     let before = fit(graph);
-    P::chordal(graph, Some(&full))?;
+    P::chordal_reusing(graph, Some(&full), reuse)?;
     let after = fit(graph);
     if after.is_nan() || after >= before {
         graph.poses = annealed;
@@ -224,6 +225,11 @@ pub struct Decided {
     pub clusters: Vec<Vec<usize>>,
     /// Accepted sets solved.
     pub decisions: usize,
+    /// Chordal relaxations of accepted sets solved ([`lower_minimum`]).
+    pub relaxations: usize,
+    /// Accepted sets whose map was replaced by a lower minimum reached
+    /// from their relaxation.
+    pub lower_minima: usize,
     /// Whether the budget cut them short.
     pub cut_short: bool,
 }
@@ -245,13 +251,16 @@ fn evidence(candidates: &[Candidate], innov: &Innovations, k: usize) -> Option<E
 /// The decisions by innovation (step 2 of the module doc), starting from
 /// the candidates of weight ≥ ½ in `weights`; leaves the final weights (1
 /// accepted, 0 not) in `weights` and the least-squares map of the accepted
-/// set in the session's graph.
-pub fn decide<P: Pose<D>, const D: usize>(
+/// set in the session's graph. With `relax` (a job on the chordal guess and
+/// the layer on), each accepted set's map is also sought from its chordal
+/// relaxation ([`lower_minimum`]).
+pub fn decide<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
     candidates: &[Candidate],
     scale: Scale,
     layers: &Layers,
+    relax: bool,
 ) -> Result<Decided, SolveError> {
     let graph = &*session.graph;
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
@@ -272,6 +281,8 @@ pub fn decide<P: Pose<D>, const D: usize>(
             (0..ends.len()).map(|k| vec![k]).collect()
         },
         decisions: 0,
+        relaxations: 0,
+        lower_minima: 0,
         cut_short: false,
     };
     let mut seen: Vec<Vec<bool>> = Vec::new();
@@ -281,6 +292,10 @@ pub fn decide<P: Pose<D>, const D: usize>(
         }
         session.converge(weights)?;
         out.decisions += 1;
+        if relax && layers.relaxation && !session.exhausted() {
+            out.relaxations += 1;
+            out.lower_minima += usize::from(lower_minimum(session, weights)?);
+        }
         if session.exhausted() {
             out.cut_short = true;
             break;
@@ -310,6 +325,37 @@ pub fn decide<P: Pose<D>, const D: usize>(
         }
     }
     Ok(out)
+}
+
+/// Replaces the map the solve of an accepted set reached by a lower minimum
+/// of the same problem when there is evidence of one: the chordal
+/// relaxation of that problem (`weights` 1 or 0) fits it better — which no
+/// map does at the global minimum — so Gauss–Newton/LM from the relaxation
+/// ends lower still. Returns whether the map was replaced; otherwise the
+/// reached map is left as it was.
+///
+/// On loose information the decisions' warm-started solves can settle in a
+/// local minimum that a fresh start avoids: intel with 1000 random wrong
+/// candidates and its published information ended at `Σ eᵀΩe` 2.5 times
+/// the accepted set's optimum, 3.4 % of the map off, while LM from the
+/// relaxation reached the optimum in 4 iterations.
+fn lower_minimum<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &[f64],
+) -> Result<bool, SolveError> {
+    let fit = |g: &PoseGraph<P, D>| g.chi2_where(|k| weights[k] > 0.0);
+    let reached = session.graph.poses.clone();
+    let at = fit(session.graph);
+    let mut reuse = P::Reuse::from(session.optimizer.parallelism().clone());
+    P::chordal_reusing(session.graph, Some(weights), &mut reuse)?;
+    if fit(session.graph) < at {
+        session.converge(weights)?;
+        if fit(session.graph) < at {
+            return Ok(true);
+        }
+    }
+    session.graph.poses = reached;
+    Ok(false)
 }
 
 /// [`judge`], with the candidates whose innovation is only a lower bound
