@@ -27,7 +27,7 @@ mod search;
 pub use clusters::{MAX_CLUSTER, NEIGHBOURHOOD};
 pub use kernels::{cauchy_weight, dcs_weight, gnc_tls_weight, huber_weight};
 pub use model::{Evidence, LoopModel, Scale, ln_chi2_mean, ln_chi2_sigma};
-pub use schedule::{ANNEAL_STEP, MAX_ANNEAL_STEPS, MAX_DECISIONS, STABLE_STEPS};
+pub use schedule::{ANNEAL_STEP, MAX_ANNEAL_STEPS, MAX_DECISIONS, SETTLE_STEPS};
 pub use search::{MAX_REMOVALS, SUSPECTS, Search, Suspect, Test};
 
 use crate::geometry::Pose;

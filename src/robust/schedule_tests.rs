@@ -159,3 +159,31 @@ fn a_local_minimum_of_the_accepted_set_is_left_for_the_one_below_its_relaxation(
     assert!(!lower_minimum(&mut session, &weights).unwrap());
     assert_eq!(session.graph.poses, at);
 }
+
+#[test]
+fn the_annealing_ends_at_the_first_step_that_does_not_grow_the_held_set() {
+    // Each candidate is 0.1 off its ends' poses along x, so its r² is its
+    // information over 100: 1 (held, r² ≤ c² = 4) or 100 (not held).
+    let (mut g, candidates) = walk();
+    let mut annealing = Annealing::new(&candidates, 2.0);
+    // At the final width from the first E-step.
+    annealing.factor = Some(ANNEAL_STEP);
+    let mut weights = vec![0.0; g.edges.len()];
+    let mut ends = Vec::new();
+    // Held per E-step: 2, 1 (shrinks while settling), 3, 4, 4.
+    for held_now in [2, 1, 3, 4, 4] {
+        for (k, c) in candidates.iter().enumerate() {
+            let e = &g.edges[c.edge];
+            let rel = g.poses[e.from].inverse().compose(&g.poses[e.to]);
+            let r2 = if k < held_now { 1.0 } else { 100.0 };
+            g.edges[c.edge].measurement = rel.compose(&Se2::new(0.1, 0.0, 0.0));
+            g.edges[c.edge].information = Matrix3::identity() * (r2 / 0.01);
+        }
+        ends.push(annealing.e_step(&g, &mut weights));
+        let held_set = candidates.iter().filter(|c| held(weights[c.edge])).count();
+        assert_eq!(held_set, held_now);
+    }
+    // Not while settling (the first SETTLE_STEPS), not while growing.
+    assert_eq!(SETTLE_STEPS, 2);
+    assert_eq!(ends, [false, false, false, false, true]);
+}
