@@ -224,15 +224,14 @@ pub struct RobustReport {
     /// EM: E-steps of the annealing; the kernels: reweighting rounds.
     pub rounds: usize,
     /// EM with the chordal initial guess: chordal relaxations solved (two
-    /// linear solves each): one per E-step of the annealing, one for the
-    /// decisions' start, and one per accepted set solved.
+    /// linear solves each): one per E-step of the annealing and one per
+    /// accepted set solved.
     pub relaxations: usize,
     /// EM: accepted sets solved while deciding by innovation.
     pub decisions: usize,
-    /// EM with the chordal initial guess: accepted sets whose solve ended in
-    /// a local minimum that a solve from their chordal relaxation improved
-    /// on.
-    pub lower_minima: usize,
+    /// EM with the chordal initial guess: accepted sets solved from their
+    /// chordal relaxation, which fitted them better than the map before.
+    pub relaxed_starts: usize,
     /// EM: clusters of candidates judged together.
     pub clusters: usize,
     /// Candidates accepted at the end (the final map was solved with them).

@@ -176,7 +176,7 @@ pub fn report<P: G2oPose<D>, const D: usize>(
         rounds: outcome.rounds,
         relaxations: outcome.relaxations,
         decisions: outcome.decisions,
-        lower_minima: outcome.lower_minima,
+        relaxed_starts: outcome.relaxed_starts,
         clusters: outcome.clusters,
         accepted_loops: accepted,
         rejected_loops: candidates.len() - accepted,

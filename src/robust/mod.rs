@@ -116,9 +116,9 @@ pub struct Layers {
     pub populations: bool,
     /// Act on a failed χ² test ([`search`]).
     pub search: bool,
-    /// Seek each accepted set's map also from its chordal relaxation, when
-    /// that fits better than the minimum reached
-    /// ([`schedule::decide`]; with the chordal guess only).
+    /// Solve each accepted set from its chordal relaxation when that fits
+    /// it better than the map before ([`schedule::decide`]; with the
+    /// chordal guess only).
     pub relaxation: bool,
 }
 
@@ -232,9 +232,9 @@ pub struct Outcome {
     pub relaxations: usize,
     /// EM: accepted sets solved.
     pub decisions: usize,
-    /// EM with the chordal guess: accepted sets whose map a solve from
-    /// their relaxation lowered.
-    pub lower_minima: usize,
+    /// EM with the chordal guess: accepted sets solved from their
+    /// relaxation.
+    pub relaxed_starts: usize,
     /// EM: the clusters of candidates.
     pub clusters: usize,
     /// EM: what the χ² search did.
@@ -256,7 +256,7 @@ impl Outcome {
             rounds: 0,
             relaxations: 0,
             decisions: 0,
-            lower_minima: 0,
+            relaxed_starts: 0,
             clusters: 0,
             search: None,
             cut_short: false,
@@ -463,7 +463,7 @@ fn settle<P: ChordalInit<D>, const D: usize>(
     }
     out.decisions = decided.decisions;
     out.relaxations += decided.relaxations;
-    out.lower_minima = decided.lower_minima;
+    out.relaxed_starts = decided.relaxed_starts;
     out.clusters = decided.clusters.len();
     out.cut_short = decided.cut_short;
     let removed: Vec<usize> = search

@@ -49,14 +49,16 @@ pub const SETTLE_STEPS: usize = 2;
 /// settle.
 pub const MAX_ANNEAL_STEPS: usize = 120;
 
-/// The relative decrease per iteration at which a decision's solve stops
-/// before the accepted set has settled (the settled set is solved again at
-/// the job's own tolerance and judged once more). On long trajectories LM
-/// can crawl along bending modes of the map: on a 3·10⁵-pose sphere the
-/// first decision's solve took 80 iterations, each lowering the objective
-/// by ~3·10⁻⁶ of it. Those modes are where the map is least certain, so the
-/// innovations, whose covariance holds that uncertainty, barely move with
-/// them; the same share ends an incremental update's solves
+/// The relative decrease of a damped LM step at which a decision's solve
+/// stops before the accepted set has settled (the settled set is then
+/// solved again to the job's own tolerance and judged once more). On long
+/// trajectories LM can crawl along bending modes of the map: on a
+/// 3·10⁵-pose sphere the first decision's solve took 80 damped iterations,
+/// each lowering the objective by ~3·10⁻⁶ of it. Those modes are where the
+/// map is least certain, so the innovations, whose covariance holds that
+/// uncertainty, barely move with them. Undamped (Gauss–Newton) solves are
+/// left to converge: they do so quadratically, in an iteration or two
+/// more. The same share ends an incremental update's solves
 /// (`UPDATE_TOLERANCE` in `pipeline/incremental.rs`).
 pub const DECIDING_TOLERANCE: f64 = 1e-4;
 
@@ -145,7 +147,7 @@ pub struct Annealed {
     /// E-steps taken.
     pub steps: usize,
     /// Chordal relaxations solved (on the chordal relaxation: one per
-    /// E-step, and one for the decisions' start).
+    /// E-step).
     pub relaxations: usize,
     /// Whether the session's budget cut it short.
     pub cut_short: bool,
@@ -182,8 +184,7 @@ pub fn anneal<P: Pose<D>, const D: usize>(
 /// The annealing on the chordal relaxation: each E-step is followed by a
 /// chordal solve (rotations, then translations; two linear solves) with the
 /// candidates at their weights, from scratch — a convex stand-in for the
-/// map that is cheap to solve and that no earlier map biases — and the
-/// decisions' start is chosen at the end ([`relax_accepted`]).
+/// map that is cheap to solve and that no earlier map biases.
 pub fn anneal_chordal<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -209,43 +210,7 @@ pub fn anneal_chordal<P: ChordalInit<D>, const D: usize>(
         out.steps += 1;
         done = annealing.e_step(session.graph, weights);
     }
-    relax_accepted(session.graph, weights, &annealing.kept, &mut reuse)?;
-    out.relaxations += 1;
     Ok(out)
-}
-
-/// The map the decisions start from, for the problem the first decision
-/// solves (the candidates of weight ≥ ½ at full weight, the others left
-/// out): the annealing's last map — the chordal relaxation at the Cauchy
-/// weights — or the relaxation of that problem itself, whichever fits it
-/// better (the lower `Σ eᵀΩe` over its edges).
-///
-/// Neither start is better everywhere. On the 10⁵-pose sphere of the scale
-/// benchmark the annealed map, bent by the wrong loops it still holds at
-/// small weights, made Gauss–Newton overshoot and LM crawl (28 iterations,
-/// χ² 9.4·10⁴ at the start) where the relaxation of the accepted set took 4
-/// (6.5·10⁴); on intel with 1000 random wrong candidates and its
-/// square-root information the relaxation fitted worse (χ² 7650 against
-/// 6106) and LM from it ended in a local minimum 12 % of the map off.
-fn relax_accepted<P: ChordalInit<D>, const D: usize>(
-    graph: &mut PoseGraph<P, D>,
-    weights: &[f64],
-    kept: &[usize],
-    reuse: &mut P::Reuse,
-) -> Result<(), SolveError> {
-    let mut full = weights.to_vec();
-    for &k in kept {
-        full[k] = if held(weights[k]) { 1.0 } else { 0.0 };
-    }
-    let annealed = graph.poses.clone();
-    let fit = |g: &PoseGraph<P, D>| g.chi2_where(|k| full[k] > 0.0);
-    let before = fit(graph);
-    P::chordal_reusing(graph, Some(&full), reuse)?;
-    let after = fit(graph);
-    if after.is_nan() || after >= before {
-        graph.poses = annealed;
-    }
-    Ok(())
 }
 
 /// What the decisions found.
@@ -261,11 +226,11 @@ pub struct Decided {
     pub clusters: Vec<Vec<usize>>,
     /// Accepted sets solved.
     pub decisions: usize,
-    /// Chordal relaxations of accepted sets solved ([`lower_minimum`]).
+    /// Chordal relaxations of accepted sets solved ([`relaxed_start`]).
     pub relaxations: usize,
-    /// Accepted sets whose map was replaced by a lower minimum reached
-    /// from their relaxation.
-    pub lower_minima: usize,
+    /// Accepted sets solved from their relaxation (it fitted them better
+    /// than the map before).
+    pub relaxed_starts: usize,
     /// Whether the budget cut them short.
     pub cut_short: bool,
 }
@@ -288,8 +253,8 @@ fn evidence(candidates: &[Candidate], innov: &Innovations, k: usize) -> Option<E
 /// the candidates of weight ≥ ½ in `weights`; leaves the final weights (1
 /// accepted, 0 not) in `weights` and the least-squares map of the accepted
 /// set in the session's graph. With `relax` (a job on the chordal guess and
-/// the layer on), each accepted set's map is also sought from its chordal
-/// relaxation ([`lower_minimum`]).
+/// the layer on), each accepted set is solved from the better fitting of
+/// the map before and its chordal relaxation ([`relaxed_start`]).
 pub fn decide<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -318,7 +283,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
         },
         decisions: 0,
         relaxations: 0,
-        lower_minima: 0,
+        relaxed_starts: 0,
         cut_short: false,
     };
     let mut seen: Vec<Vec<bool>> = Vec::new();
@@ -330,16 +295,17 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             weights[k] = if a { 1.0 } else { 0.0 };
         }
         converged = if converged {
+            // The same set again, from its map: to the job's tolerance.
             session.converge(weights)?;
             true
         } else {
-            session.converge_within(weights, DECIDING_TOLERANCE)?
+            if relax && layers.relaxation {
+                out.relaxations += 1;
+                out.relaxed_starts += usize::from(relaxed_start(session, weights)?);
+            }
+            session.converge_unless_crawling(weights, DECIDING_TOLERANCE)?
         };
         out.decisions += 1;
-        if relax && layers.relaxation && !session.exhausted() {
-            out.relaxations += 1;
-            out.lower_minima += usize::from(lower_minimum(session, weights)?);
-        }
         if session.exhausted() {
             out.cut_short = true;
             break;
@@ -378,34 +344,38 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
     Ok(out)
 }
 
-/// Replaces the map the solve of an accepted set reached by a lower minimum
-/// of the same problem when there is evidence of one: the chordal
-/// relaxation of that problem (`weights` 1 or 0) fits it better — which no
-/// map does at the global minimum — so Gauss–Newton/LM from the relaxation
-/// ends lower still. Returns whether the map was replaced; otherwise the
-/// reached map is left as it was.
+/// Starts the solve of an accepted set (`weights` 1 or 0) from its chordal
+/// relaxation when that fits it better (lower `Σ eᵀΩe` over its edges) than
+/// the map before; returns whether it did, else leaves the map as it was.
 ///
-/// On loose information the decisions' warm-started solves can settle in a
-/// local minimum that a fresh start avoids: intel with 1000 random wrong
-/// candidates and its published information ended at `Σ eᵀΩe` 2.5 times
-/// the accepted set's optimum, 3.4 % of the map off, while LM from the
-/// relaxation reached the optimum in 4 iterations.
-fn lower_minimum<P: ChordalInit<D>, const D: usize>(
+/// The map before is the last decision's (or the annealing's last
+/// relaxation, at the Cauchy weights), and neither start is better
+/// everywhere:
+/// * a set that gained or lost many loops leaves the map before far from
+///   its optimum. On the 10⁵-pose sphere of the scale benchmark the
+///   annealed map, bent by the wrong loops it still held at small weights,
+///   made LM crawl for 28 iterations where the relaxation of the accepted
+///   set took 4.
+/// * On loose information a warm start can settle in a local minimum a
+///   fresh start avoids: intel with 1000 random wrong candidates and its
+///   published information ended at `Σ eᵀΩe` 2.5 times the accepted set's
+///   optimum, 3.4 % of the map off; LM from the relaxation reached the
+///   optimum in 4 iterations.
+/// * Where the map before fits better, LM from it ends lower than the
+///   relaxation: no map fits a problem better than its minimum.
+fn relaxed_start<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &[f64],
 ) -> Result<bool, SolveError> {
     let fit = |g: &PoseGraph<P, D>| g.chi2_where(|k| weights[k] > 0.0);
-    let reached = session.graph.poses.clone();
+    let before = session.graph.poses.clone();
     let at = fit(session.graph);
     let mut reuse = P::Reuse::from(session.optimizer.parallelism().clone());
     P::chordal_reusing(session.graph, Some(weights), &mut reuse)?;
     if fit(session.graph) < at {
-        session.converge(weights)?;
-        if fit(session.graph) < at {
-            return Ok(true);
-        }
+        return Ok(true);
     }
-    session.graph.poses = reached;
+    session.graph.poses = before;
     Ok(false)
 }
 

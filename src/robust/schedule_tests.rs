@@ -68,7 +68,7 @@ fn walk() -> (PoseGraph<Se2, 3>, Vec<Candidate>) {
 }
 
 #[test]
-fn the_chordal_annealing_ends_at_the_relaxation_of_the_accepted_set() {
+fn the_chordal_annealing_holds_the_true_loops_at_one_relaxation_per_e_step() {
     let (mut g, candidates) = walk();
     let mut weights = vec![1.0; g.edges.len()];
     let mut optimizer = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
@@ -82,7 +82,7 @@ fn the_chordal_annealing_ends_at_the_relaxation_of_the_accepted_set() {
     );
     let annealed = anneal_chordal(&mut session, &mut weights, &candidates, 2.0).unwrap();
     assert!(annealed.steps > 1 && !annealed.cut_short);
-    assert_eq!(annealed.relaxations, annealed.steps + 1);
+    assert_eq!(annealed.relaxations, annealed.steps);
     // The wrong loop is down-weighted, the true ones held, not all at 1.
     let kept: Vec<bool> = candidates.iter().map(|c| held(weights[c.edge])).collect();
     assert_eq!(kept, [true, true, true, true, false]);
@@ -91,43 +91,32 @@ fn the_chordal_annealing_ends_at_the_relaxation_of_the_accepted_set() {
             .iter()
             .any(|c| weights[c.edge] != 0.0 && weights[c.edge] != 1.0)
     );
-    // The map is the relaxation with the held loops at full weight and
-    // the others left out, not the one at the annealing's weights.
-    let mut full = weights.clone();
-    for c in &candidates {
-        full[c.edge] = if held(weights[c.edge]) { 1.0 } else { 0.0 };
-    }
-    let (mut expected, mut annealed) = (session.graph.clone(), session.graph.clone());
-    Se2::chordal(&mut expected, Some(&full)).unwrap();
-    Se2::chordal(&mut annealed, Some(&weights)).unwrap();
-    assert_eq!(session.graph.poses, expected.poses);
-    assert_ne!(session.graph.poses, annealed.poses);
 }
 
 #[test]
-fn the_decisions_keep_the_annealed_map_where_it_fits_the_accepted_set_better() {
+fn a_map_at_the_optimum_of_the_accepted_set_is_kept_over_its_relaxation() {
     // At the least-squares map of the accepted set no relaxation fits it
     // better: that map stays.
     let (mut g, candidates) = walk();
     let mut weights = vec![1.0; g.edges.len()];
     weights[candidates[4].edge] = 0.0;
     let mut optimizer = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
-    let summary = optimizer
-        .run(&mut g, Some(&weights), &mut Cancel::new())
-        .unwrap();
-    assert!(summary.converged());
-    let optimum = g.poses.clone();
-    // Held loops at Cauchy-like weights, the wrong one low.
-    for (c, w) in candidates.iter().zip([0.9, 0.8, 0.95, 0.7, 0.1]) {
-        weights[c.edge] = w;
-    }
-    let kept: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
-    relax_accepted(&mut g, &weights, &kept, &mut Default::default()).unwrap();
-    assert_eq!(g.poses, optimum);
+    let mut cancel = Cancel::new();
+    let mut session = Session::new(
+        &mut optimizer,
+        &mut g,
+        SolverOptions::default(),
+        Budget::unlimited(),
+        &mut cancel,
+    );
+    session.converge(&weights).unwrap();
+    let optimum = session.graph.poses.clone();
+    assert!(!relaxed_start(&mut session, &weights).unwrap());
+    assert_eq!(session.graph.poses, optimum);
 }
 
 #[test]
-fn a_local_minimum_of_the_accepted_set_is_left_for_the_one_below_its_relaxation() {
+fn a_solve_that_would_end_in_a_local_minimum_starts_from_the_relaxation() {
     // The walk's true loops at weight 1, the wrong one out, solved from a
     // map whose headings wind a full extra turn along the walk: LM settles
     // in a twisted local minimum.
@@ -148,16 +137,17 @@ fn a_local_minimum_of_the_accepted_set_is_left_for_the_one_below_its_relaxation(
         Budget::unlimited(),
         &mut cancel,
     );
+    let twisted = session.graph.poses.clone();
     session.converge(&weights).unwrap();
     let fit = |g: &PoseGraph<Se2, 3>| g.chi2_where(|k| weights[k] > 0.0);
     let local = fit(session.graph);
-    assert!(lower_minimum(&mut session, &weights).unwrap());
+    // From the twisted map, the relaxation fits better: the solve starts
+    // there and ends far lower.
+    session.graph.poses = twisted;
+    assert!(relaxed_start(&mut session, &weights).unwrap());
+    session.converge(&weights).unwrap();
     let lower = fit(session.graph);
     assert!(lower < 0.5 * local, "{lower} against {local}");
-    // At that minimum the relaxation fits no better: the map stays.
-    let at = session.graph.poses.clone();
-    assert!(!lower_minimum(&mut session, &weights).unwrap());
-    assert_eq!(session.graph.poses, at);
 }
 
 #[test]
@@ -190,9 +180,10 @@ fn the_annealing_ends_at_the_first_step_that_does_not_grow_the_held_set() {
 
 #[test]
 fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
-    // From the drifted odometry map the first solve stops at the looser
-    // DECIDING_TOLERANCE; the settled set is solved again at the job's (here
-    // 0: until the step is negligible).
+    // From a map whose headings wind a full extra turn, LM is damped from
+    // its first step and crawls: a solve stops there (DECIDING_TOLERANCE),
+    // and the job still ends on the accepted set's map solved to its own
+    // tolerance (here 0: until the step is negligible).
     let (mut g, candidates) = walk();
     // The true loops a little off, so that the optimum is not exact.
     for (k, c) in candidates[..4].iter().enumerate() {
@@ -200,14 +191,20 @@ fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
         let off = 0.01 * (k as f64 + 1.0);
         g.edges[c.edge].measurement = z.compose(&Se2::new(off, -off, off));
     }
+    let n = g.poses.len();
+    for (k, p) in g.poses.iter_mut().enumerate() {
+        let twist = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
+        *p = Se2::new(p.x, p.y, p.theta + twist);
+    }
     let mut weights = vec![1.0; g.edges.len()];
     weights[candidates[4].edge] = 0.0;
-    let mut optimizer = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
-    let mut cancel = Cancel::new();
     let options = SolverOptions {
         relative_tolerance: 0.0,
+        initial_lambda: 1e2,
         ..SolverOptions::default()
     };
+    let mut optimizer = Optimizer::new(&g, Some(&weights), options.clone()).unwrap();
+    let mut cancel = Cancel::new();
     let mut session = Session::new(
         &mut optimizer,
         &mut g,
@@ -225,13 +222,8 @@ fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
         false,
     )
     .unwrap();
-    assert_eq!(decided.accepted, [true, true, true, true, false]);
-    // The set settled at once: one solve to DECIDING_TOLERANCE, one to the
-    // job's.
-    assert_eq!(decided.decisions, 2);
-    let fit = |g: &PoseGraph<Se2, 3>| g.chi2_where(|k| weights[k] > 0.0);
-    let at = fit(session.graph);
-    session.converge(&weights).unwrap();
-    let after = fit(session.graph);
-    assert!(at - after <= 1e-12 * at, "{at} then {after}");
+    let summary = session.finish(false).unwrap();
+    assert!(summary.history.iter().any(|r| r.lambda > 0.0));
+    assert!(summary.converged(), "{summary:?}");
+    assert!(decided.decisions >= 2);
 }

@@ -76,6 +76,12 @@ pub struct SolverOptions {
     /// default; incremental updates, which start next to the optimum, use
     /// it to save the iteration that would only confirm convergence).
     pub model_tolerance: Option<f64>,
+    /// Also stop after a damped LM step (λ > 0) that lowered the objective
+    /// by less than this share of it: LM crawling along a curved valley,
+    /// where each step is cut short by the damping. Not convergence
+    /// ([`StopReason::Crawling`]); off by default (EM's decisions use it
+    /// for accepted sets that have not settled yet).
+    pub crawl_tolerance: Option<f64>,
     /// After a run that converged by a small undamped step, let the
     /// covariances of the innovations ([`Optimizer::innovation_chi2`])
     /// use that step's factorisation instead of factorising again at the
@@ -104,6 +110,7 @@ impl Default for SolverOptions {
             relative_tolerance: 1e-9,
             step_tolerance: 1e-12,
             model_tolerance: None,
+            crawl_tolerance: None,
             reuse_factorization: false,
             time_limit: None,
             initial_lambda: 1e-6,
@@ -134,6 +141,9 @@ pub enum StopReason {
     NothingToOptimize,
     /// The observer asked to stop ([`Observer::should_stop`]).
     Cancelled,
+    /// Damped steps lowered the objective by less than
+    /// [`SolverOptions::crawl_tolerance`]: LM was crawling. Not a minimum.
+    Crawling,
     /// The objective stopped decreasing (the relative decrease or the step
     /// fell below its tolerance) where the Gauss–Newton model is not
     /// trusted: under heavy damping, or after a step that gave far less
@@ -561,8 +571,15 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             let record = step.record(summary.iterations, progress.watch.elapsed());
             summary.history.push(record);
             observer.iteration(&record);
-            let small = ((previous - objective) / previous).abs() < self.options.relative_tolerance;
+            let decrease = ((previous - objective) / previous).abs();
+            let small = decrease < self.options.relative_tolerance;
             small_last_step = small && step.lambda == 0.0;
+            if !small
+                && step.lambda > 0.0
+                && self.options.crawl_tolerance.is_some_and(|t| decrease < t)
+            {
+                break StopReason::Crawling;
+            }
             if small || self.model_agreed(previous, objective) {
                 break if self.model_trusted(previous, objective) {
                     StopReason::RelativeDecrease

@@ -110,28 +110,24 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
         self.run(weights, self.options.max_iterations)
     }
 
-    /// [`Self::converge`] with the relative tolerance loosened to
-    /// `tolerance` (never tightened). Returns whether the run also met the
-    /// options' own tolerance: it stopped with a small step, or its last
-    /// iteration lowered the objective by less than that share.
-    pub fn converge_within(&mut self, weights: &[f64], tolerance: f64) -> Result<bool, SolveError> {
-        let own = self.options.relative_tolerance;
-        self.options.relative_tolerance = tolerance.max(own);
-        let before = self.summary.as_ref().map_or(0, |s| s.history.len());
+    /// [`Self::converge`], stopping also once LM crawls: a damped step
+    /// lowers the objective by less than `tolerance` of it
+    /// ([`SolverOptions::crawl_tolerance`]). Returns whether the run
+    /// converged (then not crawling).
+    pub fn converge_unless_crawling(
+        &mut self,
+        weights: &[f64],
+        tolerance: f64,
+    ) -> Result<bool, SolveError> {
+        let own = self.options.crawl_tolerance;
+        self.options.crawl_tolerance = Some(tolerance);
         let ran = self.converge(weights);
-        self.options.relative_tolerance = own;
+        self.options.crawl_tolerance = own;
         ran?;
-        let Some(summary) = &self.summary else {
-            return Ok(false);
-        };
-        if summary.stop_reason == StopReason::SmallStep {
-            return Ok(true);
-        }
-        let run = &summary.history[before.min(summary.history.len())..];
-        Ok(match run {
-            [.., a, b] => (a.objective - b.objective).abs() < own * a.objective.abs(),
-            _ => false,
-        })
+        Ok(self
+            .summary
+            .as_ref()
+            .is_some_and(|s| s.stop_reason.converged()))
     }
 
     /// The summary of every run, `None` before the first. `cut_short`: the

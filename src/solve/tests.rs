@@ -740,6 +740,31 @@ mod simulated {
     }
 
     #[test]
+    fn a_crawl_ends_the_run_only_when_asked_and_only_under_damping() {
+        // A far start: the first undamped step is rejected and LM goes on
+        // damped, each step lowering the objective a little.
+        let options = SolverOptions {
+            initial_lambda: 1e2,
+            ..Default::default()
+        };
+        let s = optimize(&mut far_start(0, 1e3), &options).unwrap();
+        assert!(s.history.iter().any(|r| r.lambda > 0.0), "{s:?}");
+        let crawl = |t: f64| SolverOptions {
+            crawl_tolerance: Some(t),
+            ..options.clone()
+        };
+        let s = optimize(&mut far_start(0, 1e3), &crawl(0.5)).unwrap();
+        assert_eq!(s.stop_reason, StopReason::Crawling, "{s:?}");
+        assert!(!s.converged() && s.iterations >= 1);
+        let last = s.history.last().unwrap();
+        assert!(last.lambda > 0.0);
+        // Undamped steps are never a crawl: Gauss–Newton converges.
+        let s = optimize(&mut square(0.3, 1), &crawl(0.5)).unwrap();
+        assert!(s.converged(), "{s:?}");
+        assert!(s.history.iter().all(|r| r.lambda == 0.0));
+    }
+
+    #[test]
     fn a_far_start_converges_only_where_the_model_is_trusted() {
         // Far starts end in local minima of the wrapped angles (converged, the
         // model foreseeing nothing more), or not converged.
