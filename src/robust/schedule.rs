@@ -236,6 +236,37 @@ pub struct Decided {
 }
 
 impl Decided {
+    /// Nothing decided yet: the candidates `edges` of weight ≥ ½ accepted,
+    /// and their clusters (each its own with the layer off).
+    fn start<P: Pose<D>, const D: usize>(
+        graph: &PoseGraph<P, D>,
+        edges: &[usize],
+        weights: &[f64],
+        layers: &Layers,
+    ) -> Self {
+        let ends: Vec<(u64, u64)> = edges
+            .iter()
+            .map(|&k| {
+                let e = &graph.edges[k];
+                (graph.id(e.from), graph.id(e.to))
+            })
+            .collect();
+        Self {
+            accepted: edges.iter().map(|&k| held(weights[k])).collect(),
+            model: None,
+            innovations: Innovations::default(),
+            clusters: if layers.clusters {
+                clusters(&ends)
+            } else {
+                (0..ends.len()).map(|k| vec![k]).collect()
+            },
+            decisions: 0,
+            relaxations: 0,
+            relaxed_starts: 0,
+            cut_short: false,
+        }
+    }
+
     /// The evidence the model weighed for candidate `k`.
     pub fn evidence(&self, candidates: &[Candidate], k: usize) -> Option<Evidence> {
         evidence(candidates, &self.innovations, k)
@@ -263,29 +294,8 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
     layers: &Layers,
     relax: bool,
 ) -> Result<Decided, SolveError> {
-    let graph = &*session.graph;
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
-    let ends: Vec<(u64, u64)> = edges
-        .iter()
-        .map(|&k| {
-            let e = &graph.edges[k];
-            (graph.id(e.from), graph.id(e.to))
-        })
-        .collect();
-    let mut out = Decided {
-        accepted: edges.iter().map(|&k| held(weights[k])).collect(),
-        model: None,
-        innovations: Innovations::default(),
-        clusters: if layers.clusters {
-            clusters(&ends)
-        } else {
-            (0..ends.len()).map(|k| vec![k]).collect()
-        },
-        decisions: 0,
-        relaxations: 0,
-        relaxed_starts: 0,
-        cut_short: false,
-    };
+    let mut out = Decided::start(session.graph, &edges, weights, layers);
     let mut seen: Vec<Vec<bool>> = Vec::new();
     // Whether the map of the set in `out.accepted` met the job's own
     // tolerance; a set that repeats on a map that did not is solved again.
