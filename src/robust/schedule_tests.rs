@@ -67,6 +67,16 @@ fn walk() -> (PoseGraph<Se2, 3>, Vec<Candidate>) {
     (g, candidates)
 }
 
+/// Winds the headings of `g`'s poses a full extra turn along the walk: LM
+/// from there settles in a twisted local minimum.
+fn twist(g: &mut PoseGraph<Se2, 3>) {
+    let n = g.poses.len();
+    for (k, p) in g.poses.iter_mut().enumerate() {
+        let turn = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
+        *p = Se2::new(p.x, p.y, p.theta + turn);
+    }
+}
+
 #[test]
 fn the_chordal_annealing_holds_the_true_loops_at_one_relaxation_per_e_step() {
     let (mut g, candidates) = walk();
@@ -123,11 +133,7 @@ fn a_solve_that_would_end_in_a_local_minimum_starts_from_the_relaxation() {
     let (mut g, candidates) = walk();
     let mut weights = vec![1.0; g.edges.len()];
     weights[candidates[4].edge] = 0.0;
-    let n = g.poses.len();
-    for (k, p) in g.poses.iter_mut().enumerate() {
-        let twist = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
-        *p = Se2::new(p.x, p.y, p.theta + twist);
-    }
+    twist(&mut g);
     let mut optimizer = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
     let mut cancel = Cancel::new();
     let mut session = Session::new(
@@ -180,10 +186,12 @@ fn the_annealing_ends_at_the_first_step_that_does_not_grow_the_held_set() {
 
 #[test]
 fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
-    // From a map whose headings wind a full extra turn, LM is damped from
-    // its first step and crawls: a solve stops there (DECIDING_TOLERANCE),
-    // and the job still ends on the accepted set's map solved to its own
-    // tolerance (here 0: until the step is negligible).
+    // From a twisted map LM is damped from its first step and crawls: a
+    // solve stops there (DECIDING_TOLERANCE), and the job still ends on a
+    // map solved to its own tolerance (here 0: until the step is
+    // negligible). Here the set changes after the crawl, so the last set's
+    // map converges on its own; the second solve of a set that repeats
+    // after a crawl has no test of its own.
     let (mut g, candidates) = walk();
     // The true loops a little off, so that the optimum is not exact.
     for (k, c) in candidates[..4].iter().enumerate() {
@@ -191,11 +199,7 @@ fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
         let off = 0.01 * (k as f64 + 1.0);
         g.edges[c.edge].measurement = z.compose(&Se2::new(off, -off, off));
     }
-    let n = g.poses.len();
-    for (k, p) in g.poses.iter_mut().enumerate() {
-        let twist = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
-        *p = Se2::new(p.x, p.y, p.theta + twist);
-    }
+    twist(&mut g);
     let mut weights = vec![1.0; g.edges.len()];
     weights[candidates[4].edge] = 0.0;
     let options = SolverOptions {
