@@ -615,6 +615,9 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
         Ok(report) => {
             if !args.quiet {
                 console::err(format_args!("{}", report.human_summary()));
+                if verbose {
+                    console::err(format_args!("{}\n", report.time_summary()));
+                }
             }
             if args.json {
                 match serde_json::to_string_pretty(&report) {

@@ -59,10 +59,36 @@ pub struct Report {
     pub plots: Vec<String>,
     /// Warnings, one line each.
     pub warnings: Vec<String>,
+    /// Where the job's time went.
+    pub time: JobTime,
     /// What an incremental update did ([`crate::PoseGraph::update`]);
     /// absent from a batch job's report.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub incremental: Option<IncrementalReport>,
+}
+
+/// Where a job's time went, in seconds: the phases in the order they ran,
+/// and parts of the solve. A phase that did not run is 0.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct JobTime {
+    /// Reading and parsing the input.
+    pub read_s: f64,
+    /// The gate: the mixture fit on the inlier counts.
+    pub gate_s: f64,
+    /// The initial guess ([`InitializationReport::time_s`]).
+    pub initialize_s: f64,
+    /// The (robust) solve and the χ² test: the optimiser's runs
+    /// ([`OptimizerReport::time_s`]), the next two, and EM's own steps.
+    pub solve_s: f64,
+    /// Of the solve: EM's chordal relaxations (outside the optimiser).
+    pub relaxation_s: f64,
+    /// Of the solve: EM's evaluations of maps (innovations and their
+    /// covariances, the loop model, the decisions).
+    pub evaluation_s: f64,
+    /// Writing the output.
+    pub write_s: f64,
+    /// The whole job.
+    pub total_s: f64,
 }
 
 /// How an incremental update ([`crate::PoseGraph::update`]) reached its
@@ -446,6 +472,7 @@ impl Report {
             loops: Vec::new(),
             plots: Vec::new(),
             warnings: read.warnings.clone(),
+            time: JobTime::default(),
             incremental: None,
         }
     }
@@ -514,6 +541,24 @@ impl Report {
             s += &format!("wrote {out}\n");
         }
         s
+    }
+
+    /// One line for humans: where the job's time went ([`JobTime`]).
+    pub fn time_summary(&self) -> String {
+        let t = &self.time;
+        format!(
+            "time: read {:.2} s, gate {:.2} s, initial guess {:.2} s, solve {:.2} s (optimiser \
+             {:.2} s, relaxations {:.2} s, evaluations {:.2} s), write {:.2} s; {:.2} s in all",
+            t.read_s,
+            t.gate_s,
+            t.initialize_s,
+            t.solve_s,
+            self.optimizer.time_s,
+            t.relaxation_s,
+            t.evaluation_s,
+            t.write_s,
+            t.total_s
+        )
     }
 }
 

@@ -7,7 +7,9 @@ use crate::io::g2o::G2oPose;
 use crate::report::{InitializationReport, LoopReport, OptimizerReport, Report, RobustReport};
 use crate::robust::{self, Candidate, Outcome, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization, initialize as init_poses};
-use crate::solve::{Budget, Observer, Optimizer, Session, SolveError, SolverOptions, Summary};
+use crate::solve::{
+    Budget, Observer, Optimizer, PhaseTimes, Session, SolveError, SolverOptions, Summary,
+};
 use crate::stats::{Chi2Test, StatsError};
 use std::path::Path;
 use std::time::Instant;
@@ -102,6 +104,7 @@ where
             path: config.input.clone(),
             source,
         })?;
+    let phases = session.phases();
     let summary = session.finish(outcome.cut_short);
     if graph.poses.iter().any(|p| !p.is_finite()) {
         return Err(PipelineError::NonFiniteResult {
@@ -121,6 +124,7 @@ where
         &outcome,
         kind,
         c,
+        phases,
         report,
     );
     Ok(())
@@ -153,6 +157,7 @@ pub fn report<P: G2oPose<D>, const D: usize>(
     outcome: &Outcome,
     method: RobustMethod,
     c: f64,
+    phases: PhaseTimes,
     report: &mut Report,
 ) {
     if let Some(summary) = &summary {
@@ -188,6 +193,8 @@ pub fn report<P: G2oPose<D>, const D: usize>(
         model: outcome.model.clone(),
         search: outcome.search.clone(),
     };
+    report.time.relaxation_s = phases.relaxation.as_secs_f64();
+    report.time.evaluation_s = phases.evaluation.as_secs_f64();
     report.loops = candidates
         .iter()
         .enumerate()

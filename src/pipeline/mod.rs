@@ -212,6 +212,7 @@ pub fn run(config: &OptimizeConfig, observer: &mut dyn Observer) -> Result<Repor
     if let Some(dir) = &config.plot {
         return Err(crate::plot::PlotError::Disabled { path: dir.clone() }.into());
     }
+    let start = Instant::now();
     let mut file = g2o::read(
         &config.input,
         ReadOptions {
@@ -219,6 +220,7 @@ pub fn run(config: &OptimizeConfig, observer: &mut dyn Observer) -> Result<Repor
         },
     )?;
     let mut report = Report::new(&config.input, &file);
+    report.time.read_s = start.elapsed().as_secs_f64();
     match &mut file.graph {
         AnyPoseGraph::Planar(g) => optimize_graph(g, &file.missing, config, &mut report, observer)?,
         AnyPoseGraph::Spatial(g) => {
@@ -229,9 +231,12 @@ pub fn run(config: &OptimizeConfig, observer: &mut dyn Observer) -> Result<Repor
         log::warn!("{w}");
     }
     if let Some(out) = &config.output {
+        let writing = Instant::now();
         write_output(&file, out)?;
         report.output = Some(out.display().to_string());
+        report.time.write_s = writing.elapsed().as_secs_f64();
     }
+    report.time.total_s = start.elapsed().as_secs_f64();
     Ok(report)
 }
 
@@ -251,7 +256,9 @@ pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     // Which edges are loop candidates, and what the gate makes of them.
     candidates::apply_inlier_csv(graph, config, report)?;
     candidates::mark(graph, config.candidates);
+    let gating = Instant::now();
     let candidates = candidates::gate(graph, config, report);
+    report.time.gate_s = gating.elapsed().as_secs_f64();
     let method = if candidates.iter().any(|c| c.kept) {
         config.robust
     } else {
@@ -265,12 +272,14 @@ pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         Optimizer::new(graph, Some(&weights), config.solver.clone()).map_err(solve_error)?;
     let start = Instant::now();
     finish::initialize(graph, missing, config, &weights, report, start)?;
+    report.time.initialize_s = report.initialization.time_s;
     let before = config
         .plot
         .as_ref()
         .map(|_| crate::plot::top_view(&graph.poses));
 
     // The robust solve within the budget, the χ² test of its map, the report.
+    let solving = Instant::now();
     let chordal = config.initialization == Initialization::Chordal;
     let weigh =
         |session: &mut Session<'_, P, D>, weights: &mut [f64], c: f64, test: &Test<'_, P, D>| {
@@ -297,6 +306,7 @@ pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         report,
         observer,
     )?;
+    report.time.solve_s = solving.elapsed().as_secs_f64();
     if let (Some(dir), Some(before)) = (&config.plot, before) {
         finish::plot(dir, graph, &before, &weights, config, report)?;
     }

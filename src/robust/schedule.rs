@@ -28,6 +28,7 @@ use crate::geometry::Pose;
 use crate::graph::PoseGraph;
 use crate::solve::init::ChordalInit;
 use crate::solve::{Session, SolveError};
+use std::time::Instant;
 
 /// The kernel width's square is divided by this every E-step until it
 /// reaches `c²` (GTSAM's GNC grows μ by the same factor).
@@ -205,7 +206,9 @@ pub fn anneal_chordal<P: ChordalInit<D>, const D: usize>(
             out.cut_short = true;
             return Ok(out);
         }
+        let start = Instant::now();
         P::chordal_reusing(session.graph, Some(weights), &mut reuse)?;
+        session.relaxed_since(start);
         out.relaxations += 1;
         out.steps += 1;
         done = annealing.e_step(session.graph, weights);
@@ -320,6 +323,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             out.cut_short = true;
             break;
         }
+        let start = Instant::now();
         let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?;
         let mut innov = eval.innovations(&edges, &out.accepted, &out.clusters);
         let (model, next) = judge_exactly(
@@ -331,6 +335,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             scale,
             layers,
         );
+        session.evaluated_since(start);
         out.innovations = innov;
         out.model = Some(model);
         if !layers.decisions {
@@ -380,13 +385,15 @@ fn relaxed_start<P: ChordalInit<D>, const D: usize>(
     let fit = |g: &PoseGraph<P, D>| g.chi2_where(|k| weights[k] > 0.0);
     let before = session.graph.poses.clone();
     let at = fit(session.graph);
+    let start = Instant::now();
     let mut reuse = P::Reuse::from(session.optimizer.parallelism().clone());
     P::chordal_reusing(session.graph, Some(weights), &mut reuse)?;
-    if fit(session.graph) < at {
-        return Ok(true);
+    let better = fit(session.graph) < at;
+    if !better {
+        session.graph.poses = before;
     }
-    session.graph.poses = before;
-    Ok(false)
+    session.relaxed_since(start);
+    Ok(better)
 }
 
 /// [`judge`], with the candidates whose innovation is only a lower bound

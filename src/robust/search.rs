@@ -31,6 +31,7 @@ use crate::graph::PoseGraph;
 use crate::solve::{Session, SolveError};
 use crate::stats::Chi2Test;
 use serde::Serialize;
+use std::time::Instant;
 
 /// Most clusters removed: each removal is a solve and an evaluation, and a
 /// failure that needs more is not explained by a few wrong loops.
@@ -100,8 +101,10 @@ pub fn explain<P: Pose<D>, const D: usize>(
         if session.exhausted() {
             return Ok(search);
         }
+        let start = Instant::now();
         decided.innovations = Evaluation::new(session.optimizer, session.graph, weights)?
             .innovations(&edges, &decided.accepted, &decided.clusters);
+        session.evaluated_since(start);
     }
 }
 

@@ -30,7 +30,7 @@ use normal::EdgeTerms;
 pub use pattern::Ordering;
 pub use progress::{Cancel, Cancellable, Observer};
 use serde::Serialize;
-pub(crate) use session::{Budget, Session};
+pub(crate) use session::{Budget, PhaseTimes, Session};
 use std::time::{Duration, Instant};
 
 /// The nonlinear least-squares method.

@@ -5,7 +5,7 @@
 use super::{Observer, Optimizer, SolveError, SolverOptions, StopReason, Summary};
 use crate::geometry::Pose;
 use crate::graph::PoseGraph;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Iterations and time left for all the runs of a session.
 #[derive(Clone, Copy, Debug)]
@@ -39,6 +39,17 @@ pub struct Session<'a, P: Pose<D>, const D: usize> {
     observer: &'a mut dyn Observer,
     summary: Option<Summary>,
     cancelled: bool,
+    phases: PhaseTimes,
+}
+
+/// Time a robust method spent outside the optimiser's runs, by phase.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// Chordal relaxations (the annealing's E-steps, relaxed starts).
+    pub relaxation: Duration,
+    /// Evaluations of the map: innovations and their covariances, the
+    /// model fitted to them, the decisions they give.
+    pub evaluation: Duration,
 }
 
 impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
@@ -58,7 +69,23 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
             observer,
             summary: None,
             cancelled: false,
+            phases: PhaseTimes::default(),
         }
+    }
+
+    /// Adds the time since `start` to the relaxations' time.
+    pub fn relaxed_since(&mut self, start: Instant) {
+        self.phases.relaxation += start.elapsed();
+    }
+
+    /// Adds the time since `start` to the evaluations' time.
+    pub fn evaluated_since(&mut self, start: Instant) {
+        self.phases.evaluation += start.elapsed();
+    }
+
+    /// The time spent so far in each phase outside the optimiser's runs.
+    pub fn phases(&self) -> PhaseTimes {
+        self.phases
     }
 
     /// Iterations run so far.

@@ -474,3 +474,33 @@ fn the_same_command_writes_the_same_bits() {
         }
     }
 }
+
+#[test]
+fn the_report_says_where_the_time_went() {
+    let dir = temp_dir("time");
+    let out = dir.join("aliased.g2o");
+    let o = pgo(&[
+        "optimize",
+        &sample("aliased.g2o"),
+        "-o",
+        out.to_str().unwrap(),
+        "--json",
+        "-v",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let t = |key: &str| r["time"][key].as_f64().unwrap_or(-1.0);
+    let phases = ["read_s", "gate_s", "initialize_s", "solve_s", "write_s"];
+    for key in phases {
+        assert!(t(key) > 0.0, "time.{key} = {}", t(key));
+    }
+    // The phases ran one after the other inside the whole job.
+    let sum: f64 = phases.iter().map(|&k| t(k)).sum();
+    assert!(sum <= t("total_s"), "{sum} > {}", t("total_s"));
+    // EM on the chordal guess relaxes and evaluates, inside its solve.
+    let (relax, eval) = (t("relaxation_s"), t("evaluation_s"));
+    assert!(relax > 0.0 && eval > 0.0, "{relax} {eval}");
+    let optimiser = r["optimizer"]["time_s"].as_f64().unwrap();
+    assert!(optimiser + relax + eval <= t("solve_s"));
+    assert!(stderr(&o).contains("time: read "), "{}", stderr(&o));
+}
