@@ -2,6 +2,7 @@
 //! covariance, under the current factorisation, that a group of loop
 //! candidates' errors inherit from the map.
 
+use super::supernodal::OffPatternBlocks;
 use super::{BlockSystem, SelectedInverse};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatRef, Par};
@@ -90,14 +91,29 @@ impl<const D: usize> BlockSystem<D> {
 
 impl<const D: usize> BlockSystem<D> {
     /// [`BlockSystem::propagate_group`] from the selected inverse `z` of the
-    /// current factorisation, without a solve: `None` when some pair of the
-    /// edges' blocks is not on the factor's pattern.
+    /// current factorisation, without a solve. The blocks of `H⁻¹` between
+    /// the edges' blocks that are off the factor's pattern follow from the
+    /// selected inverse by its own recurrence, in at most `budget` `D×D`
+    /// products (0: none off the pattern); `None` when that is not enough.
     pub fn propagate_group_selected(
         &self,
         z: &SelectedInverse,
         edges: &[EdgeJacobian<D>],
+        budget: usize,
     ) -> Option<DMatrix<f64>> {
         let m = edges.len();
+        let mut memo = OffPatternBlocks::new();
+        let mut budget = budget;
+        let mut inverse_block = |p: usize, q: usize| {
+            self.symbolic.inverse_block_anywhere(
+                &self.factor,
+                &z.values,
+                p,
+                q,
+                &mut memo,
+                &mut budget,
+            )
+        };
         let mut gram = DMatrix::zeros(D * m, D * m);
         for (e, ea) in edges.iter().enumerate() {
             for (f, fa) in edges.iter().enumerate().take(e + 1) {
@@ -110,7 +126,7 @@ impl<const D: usize> BlockSystem<D> {
                         .iter()
                         .filter_map(|(b, a)| Some((self.position[(*b)?], a)))
                     {
-                        block += a * self.symbolic.inverse_block(&z.values, p, q)? * b.transpose();
+                        block += a * inverse_block(p, q)? * b.transpose();
                     }
                 }
                 gram.view_mut((D * e, D * f), (D, D)).copy_from(&block);
@@ -195,16 +211,105 @@ mod tests {
         // From the selected inverse: the same where the blocks are on the
         // pattern (a chain: x₀–x₂ is not).
         let z = sys.selected_inverse();
-        assert!(sys.propagate_group_selected(&z, &edges).is_none());
-        let near = sys.propagate_group_selected(&z, &edges[1..]).unwrap();
+        assert!(sys.propagate_group_selected(&z, &edges, 0).is_none());
+        let near = sys.propagate_group_selected(&z, &edges[1..], 0).unwrap();
         for r in 0..2 {
             for c in 0..2 {
                 assert!((near[(r, c)] - expected[(r + 1, c + 1)]).abs() < 1e-12);
             }
         }
+        // Off the pattern by the recurrence, with a budget: the whole Gram.
+        let all = sys.propagate_group_selected(&z, &edges, 10).unwrap();
+        for r in 0..3 {
+            for c in 0..3 {
+                assert!((all[(r, c)] - expected[(r, c)]).abs() < 1e-12, "{r},{c}");
+            }
+        }
         // The bound is above the Gram of each edge.
         for (k, e) in edges.iter().enumerate() {
             assert!(sys.propagate_bound(&z, e)[(0, 0)] >= expected[(k, k)] - 1e-12);
+        }
+    }
+
+    /// A ring of `n` 2-D blocks with chords every few blocks and a prior on
+    /// block 0, pseudo-random symmetric positive definite blocks.
+    fn ring(n: usize) -> (BlockSystem<2>, nalgebra::DMatrix<f64>) {
+        let mut pairs: Vec<(Option<usize>, Option<usize>)> = vec![(Some(0), None)];
+        for i in 0..n {
+            pairs.push((Some(i), Some((i + 1) % n)));
+            if i % 5 == 0 {
+                pairs.push((Some(i), Some((i + 7) % n)));
+            }
+        }
+        let mut sys =
+            BlockSystem::<2>::new(n, &pairs, crate::linear::Parallelism::sequential()).unwrap();
+        sys.clear();
+        let mut dense = nalgebra::DMatrix::<f64>::zeros(2 * n, 2 * n);
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let z = nalgebra::Vector2::zeros();
+        for (k, &(i, j)) in pairs.iter().enumerate() {
+            // An edge's block [[A, −B], [−Bᵀ, C]] = Jᵀ·J of a random J.
+            let j1 = nalgebra::Matrix2::from_fn(|_, _| next()) + nalgebra::Matrix2::identity();
+            let j2 = nalgebra::Matrix2::from_fn(|_, _| next()) - nalgebra::Matrix2::identity();
+            let (h_ii, h_ij, h_jj) = (
+                j1.transpose() * j1,
+                j1.transpose() * j2,
+                j2.transpose() * j2,
+            );
+            sys.add_edge(k, &h_ii, &h_ij, &h_jj, &z, &z);
+            let i = i.unwrap();
+            let mut add = |r: usize, c: usize, m: &nalgebra::Matrix2<f64>| {
+                let mut v = dense.view_mut((2 * r, 2 * c), (2, 2));
+                v += m;
+            };
+            add(i, i, &h_ii);
+            if let Some(j) = j {
+                add(i, j, &h_ij);
+                add(j, i, &h_ij.transpose());
+                add(j, j, &h_jj);
+            }
+        }
+        sys.factorize(0.0).unwrap();
+        (sys, dense.try_inverse().unwrap())
+    }
+
+    #[test]
+    fn blocks_off_the_pattern_follow_from_the_selected_inverse() {
+        let n = 40;
+        let (sys, hinv) = ring(n);
+        let z = sys.selected_inverse();
+        let one = nalgebra::Matrix2::identity();
+        let mut off_pattern = 0;
+        for i in 0..n {
+            for j in (i + 1)..n {
+                // The edge x_j − x_i: A = [−I, I].
+                let edge = [(Some(i), -one), (Some(j), one)];
+                let m = sys
+                    .propagate_group_selected(&z, &[edge], usize::MAX)
+                    .unwrap();
+                let expected = hinv.view((2 * i, 2 * i), (2, 2))
+                    - hinv.view((2 * i, 2 * j), (2, 2))
+                    - hinv.view((2 * j, 2 * i), (2, 2))
+                    + hinv.view((2 * j, 2 * j), (2, 2));
+                assert!(
+                    (&m - &expected).abs().max() < 1e-9,
+                    "{i} {j}: {m} {expected}"
+                );
+                off_pattern += usize::from(sys.propagate_group_selected(&z, &[edge], 0).is_none());
+            }
+        }
+        // Most pairs of a ring are off its factor's pattern.
+        assert!(off_pattern > n * (n - 1) / 4, "{off_pattern}");
+        // A budget too small for a far pair gives up rather than guess.
+        let far = [(Some(1), -one), (Some(n / 2 + 3), one)];
+        if sys.propagate_group_selected(&z, &[far], 0).is_none() {
+            assert!(sys.propagate_group_selected(&z, &[far], 1).is_none());
         }
     }
 }

@@ -19,6 +19,8 @@
 //!   tree and the work of each subtree) is computed once; a factorisation
 //!   allocates nothing but its thread's workspace on first use.
 
+mod off_pattern;
+
 use super::{LinearError, Parallelism};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{
@@ -36,6 +38,7 @@ use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
 };
 use faer::{Accum, MatMut, MatRef, Par, Side};
+pub(super) use off_pattern::OffPatternBlocks;
 use rayon::prelude::*;
 use std::cell::RefCell;
 use std::sync::atomic::{AtomicUsize, Ordering};

@@ -49,6 +49,12 @@ pub struct Evaluation<'a, P: Pose<D>, const D: usize> {
     graph: &'a PoseGraph<P, D>,
     block: Vec<Option<usize>>,
     inverse: SelectedInverse,
+    /// `D×D` products of the recurrence for blocks of `H⁻¹` off the
+    /// pattern worth spending per candidate of a cluster: what the sparse
+    /// solve that would replace them costs, about the values on one path
+    /// to the root for each of a candidate's `D` columns, at `D³`
+    /// multiply–adds a product.
+    budget_per_candidate: f64,
 }
 
 impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
@@ -62,11 +68,13 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     ) -> Result<Self, SolveError> {
         let block = optimizer.factor_at(graph, weights)?;
         let inverse = optimizer.system().selected_inverse();
+        let budget_per_candidate = optimizer.system().mean_path_values() / (D * D) as f64;
         Ok(Self {
             optimizer,
             graph,
             block,
             inverse,
+            budget_per_candidate,
         })
     }
 
@@ -136,11 +144,20 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             covariances.push(e.information.try_inverse());
         }
         let system = self.optimizer.system_mut();
-        if let Some(gram) = system.propagate_group_selected(&self.inverse, &jacobians) {
+        // A lone candidate outside the map gets its bound unless asked for
+        // more; else blocks of H⁻¹ off the pattern are worth their
+        // recurrence while it costs less than the solve.
+        let bound_will_do = a == 0 && members.len() == 1 && !exact;
+        let budget = if bound_will_do {
+            0
+        } else {
+            (self.budget_per_candidate * members.len() as f64) as usize
+        };
+        if let Some(gram) = system.propagate_group_selected(&self.inverse, &jacobians, budget) {
             let (nu2, joint) = judge_cluster(&errors, &covariances, &gram, a);
             return (nu2, joint, true);
         }
-        if a == 0 && members.len() == 1 && !exact {
+        if bound_will_do {
             let bound = system.propagate_bound(&self.inverse, &jacobians[0]);
             let nu2 = covariances[0]
                 .and_then(|c| (c + bound).cholesky())

@@ -1,0 +1,127 @@
+//! Blocks of `Z = H⁻¹` off the factor's pattern, from the selected inverse
+//! and the factor, by the recurrence the selected inverse itself follows.
+//!
+//! `Z·L = L⁻ᵀ` is upper triangular, so for block column `b` of `L`, whose
+//! rows below the diagonal are `s(b)`, and any block row `r` eliminated
+//! after `b`:
+//!
+//! `Z_rb = −(Σ_{k ∈ s(b)} Z_rk·L_kb)·L_bb⁻¹`.
+//!
+//! For `r ∈ s(b)` that block is on the pattern (the selected inverse has
+//! it). For `r ∉ s(b)` each `Z_rk` is again on the pattern or, off it, the
+//! same recurrence on the column eliminated first of `r` and `k`, which
+//! comes after `b`: the dependencies end at the root. For two blocks whose
+//! paths in the elimination tree meet soon (the ends of neighbouring loop
+//! candidates) that is a handful of `D×D` products, where a sparse solve
+//! ([`super::super::BlockSystem::propagate_group`]) reads every panel on
+//! the paths to the root. For two far apart it can be more; a budget of
+//! block products bounds it, and the caller falls back to the solve.
+
+use super::Symbolic;
+use nalgebra::SMatrix;
+use std::collections::HashMap;
+
+/// Blocks of `Z` computed off the pattern, by `(row, column)` in
+/// elimination positions (row after column).
+pub(in crate::linear) type OffPatternBlocks<const D: usize> =
+    HashMap<(u32, u32), SMatrix<f64, D, D>>;
+
+impl<const D: usize> Symbolic<D> {
+    /// Block `(row, col)` of `Z = H⁻¹` (elimination positions) from the
+    /// factor `l` and its selected inverse `z`: on the pattern, read; off
+    /// it, by the recurrence of the module doc, each block computed kept in
+    /// `memo`. `budget`: `D×D` products (and blocks queued) still allowed;
+    /// `None` when it runs out.
+    pub(in crate::linear) fn inverse_block_anywhere(
+        &self,
+        l: &[f64],
+        z: &[f64],
+        row: usize,
+        col: usize,
+        memo: &mut OffPatternBlocks<D>,
+        budget: &mut usize,
+    ) -> Option<SMatrix<f64, D, D>> {
+        if let Some(block) = self.known_block(z, memo, row, col) {
+            return Some(block);
+        }
+        let (hi, lo) = (row.max(col), row.min(col));
+        let mut stack = vec![(hi, lo)];
+        while let Some(&(r, b)) = stack.last() {
+            if memo.contains_key(&(r as u32, b as u32)) {
+                stack.pop();
+                continue;
+            }
+            let mut ready = true;
+            for k in self.column_structure(b) {
+                if self.known_block(z, memo, r, k).is_none() {
+                    *budget = budget.checked_sub(1)?;
+                    stack.push((r.max(k), r.min(k)));
+                    ready = false;
+                }
+            }
+            if ready {
+                let block = self.recurrence(l, z, memo, r, b, budget)?;
+                memo.insert((r as u32, b as u32), block);
+                stack.pop();
+            }
+        }
+        self.known_block(z, memo, row, col)
+    }
+
+    /// `Z_rb = −(Σ_{k ∈ s(b)} Z_rk·L_kb)·L_bb⁻¹`, every `Z_rk` known.
+    fn recurrence(
+        &self,
+        l: &[f64],
+        z: &[f64],
+        memo: &OffPatternBlocks<D>,
+        r: usize,
+        b: usize,
+        budget: &mut usize,
+    ) -> Option<SMatrix<f64, D, D>> {
+        let mut sum = SMatrix::<f64, D, D>::zeros();
+        for k in self.column_structure(b) {
+            *budget = budget.checked_sub(1)?;
+            sum += self.known_block(z, memo, r, k)? * self.factor_block(l, k, b)?;
+        }
+        let l_bb = self.factor_block(l, b, b)?.lower_triangle();
+        // X·L_bb = −sum, as L_bbᵀ·Xᵀ = −sumᵀ.
+        let xt = l_bb
+            .transpose()
+            .solve_upper_triangular(&(-sum.transpose()))?;
+        Some(xt.transpose())
+    }
+
+    /// Block `(r, c)` of `Z` if it is on the pattern or in `memo`.
+    fn known_block(
+        &self,
+        z: &[f64],
+        memo: &OffPatternBlocks<D>,
+        r: usize,
+        c: usize,
+    ) -> Option<SMatrix<f64, D, D>> {
+        if let Some(block) = self.inverse_block(z, r, c) {
+            return Some(block);
+        }
+        if r > c {
+            memo.get(&(r as u32, c as u32)).copied()
+        } else {
+            memo.get(&(c as u32, r as u32)).map(|m| m.transpose())
+        }
+    }
+
+    /// Block `(row, b)` of the factor (`row` on column `b`'s pattern, at or
+    /// below its diagonal).
+    fn factor_block(&self, l: &[f64], row: usize, b: usize) -> Option<SMatrix<f64, D, D>> {
+        let (off, ld) = self.offset(b, self.local_row(row, b).ok()?);
+        Some(SMatrix::from_fn(|a, c| l[off + c * ld + a]))
+    }
+
+    /// The block rows of column `b` below its diagonal block, `s(b)`: the
+    /// later columns of its supernode, then the rows below the supernode.
+    fn column_structure(&self, b: usize) -> impl Iterator<Item = usize> + '_ {
+        let s = self.supernode_of[b] as usize;
+        let end = self.begin[s + 1];
+        let below = &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]];
+        (b + 1..end).chain(below.iter().map(|&r| r as usize))
+    }
+}
