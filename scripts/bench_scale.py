@@ -12,8 +12,9 @@ usage: .venv/bin/python scripts/bench_scale.py [--sizes 1e4 1e5 1e6]
 Needs a release build and matplotlib (in the peers' .venv). The graphs
 (up to ~230 MB for 10^6 poses in 2D) go to --work (default: the system's
 temporary directory), never into the repository. Reported per graph:
-optimiser time (`optimizer.time_s`), the whole command's wall time (read,
-gate, initial guess, optimisation, report), peak RSS, the Cholesky factor's
+optimiser time (`optimizer.time_s`), EM's chordal relaxations and
+evaluations (count and seconds, the report's `time`), the whole command's
+wall time (read, gate, initial guess, optimisation, report), peak RSS, the Cholesky factor's
 size (max_nnz_factor x 8 bytes: the largest factor of the run, the first
 pattern before robust weighting removed loops; the last one in parentheses),
 iterations and factorisations. --plot-only
@@ -58,7 +59,9 @@ def optimize(pgo, path):
             "last_factor_mb": o["nnz_factor"] * 8 / 1e6,
             "iterations": o["iterations"], "factorizations": o["factorizations"],
             "timing": o["timing"], "final_objective": o["final_objective"],
-            "robust_rounds": r["robust"]["rounds"], "kept": r["gate"].get("kept")}
+            "robust_rounds": r["robust"]["rounds"], "kept": r["gate"].get("kept"),
+            "relaxations": r["robust"].get("relaxations"), "decisions": r["robust"].get("decisions"),
+            "time": r.get("time")}
 
 
 def plot(results, svg):

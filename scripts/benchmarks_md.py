@@ -206,23 +206,31 @@ def scale_section(path):
     if len(results) < SCALE["expected_rows"]:
         out += ["**Partial:** %d of the command's %d graphs are in the file; the run had not finished "
                 "when it was copied." % (len(results), SCALE["expected_rows"]), ""]
-    out += ["| world | poses | edges | candidates | wall (s) | optimiser (s) | iterations / factorisations "
-            "| peak RSS (MB) | largest factor (MB) |", "|---|---|---|---|---|---|---|---|---|"]
-    for r in sorted(results, key=lambda r: (r["world"], r["poses"])):
-        out.append("| %s | %d | %d | %d | %.2f | %.2f | %d / %d | %.0f | %.0f |" % (
-            r["world"], r["poses"], r["edges"], r["candidates"], r["wall_s"], r["optimizer_s"],
-            r["iterations"], r["factorizations"], r["rss_mb"], r["factor_mb"]))
-    out.append("")
+    out += scale_table(sorted(results, key=lambda r: (r["world"], r["poses"])))
     big = os.path.join(os.path.dirname(path), SCALE_1E6["file"])
     if os.path.exists(big):
-        out += ["10⁶ poses, made by:", "", "```sh", SCALE_1E6["cmd"], "```", "",
-                "| world | poses | edges | candidates | wall (s) | optimiser (s) | iterations / factorisations "
-                "| peak RSS (MB) | largest factor (MB) |", "|---|---|---|---|---|---|---|---|---|"]
-        for r in json.load(open(big)):
-            out.append("| %s | %d | %d | %d | %.2f | %.2f | %d / %d | %.0f | %.0f |" % (
-                r["world"], r["poses"], r["edges"], r["candidates"], r["wall_s"], r["optimizer_s"],
-                r["iterations"], r["factorizations"], r["rss_mb"], r["factor_mb"]))
-        out.append("")
+        out += ["10⁶ poses, made by:", "", "```sh", SCALE_1E6["cmd"], "```", ""]
+        out += scale_table(json.load(open(big)))
+    return out
+
+
+def scale_table(rows):
+    """One row per graph; EM's relaxations and evaluations where the run reported them."""
+    def phase(r, key, count):
+        t = (r.get("time") or {}).get(key)
+        n = r.get(count) if count else None
+        if t is None:
+            return "–"
+        return ("%d in %.1f s" % (n, t)) if n is not None else "%.1f s" % t
+    out = ["| world | poses | edges | candidates | wall (s) | optimiser (s) | iterations / factorisations "
+           "| EM relaxations | EM evaluations | peak RSS (MB) | largest factor (MB) |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        out.append("| %s | %d | %d | %d | %.2f | %.2f | %d / %d | %s | %s | %.0f | %.0f |" % (
+            r["world"], r["poses"], r["edges"], r["candidates"], r["wall_s"], r["optimizer_s"],
+            r["iterations"], r["factorizations"], phase(r, "relaxation_s", "relaxations"),
+            phase(r, "evaluation_s", "decisions"), r["rss_mb"], r["factor_mb"]))
+    out.append("")
     return out
 
 

@@ -189,9 +189,10 @@ fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
     // From a twisted map LM is damped from its first step and crawls: a
     // solve stops there (DECIDING_TOLERANCE), and the job still ends on a
     // map solved to its own tolerance (here 0: until the step is
-    // negligible). Here the set changes after the crawl, so the last set's
-    // map converges on its own; the second solve of a set that repeats
-    // after a crawl has no test of its own.
+    // negligible). Here the sets cycle after a crawl: the final solve of
+    // the set kept converges it (without that solve this test fails). The
+    // second solve of a set that repeats after a crawl has no test of its
+    // own.
     let (mut g, candidates) = walk();
     // The true loops a little off, so that the optimum is not exact.
     for (k, c) in candidates[..4].iter().enumerate() {
