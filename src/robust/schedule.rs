@@ -64,6 +64,7 @@ pub const MAX_ANNEAL_STEPS: usize = 120;
 ///   walks a long valley: on the 10⁶-pose sphere of the scale benchmark
 ///   the second decision took 36 damped iterations of 0.02–2.5 % each,
 ///   and the next evaluation dropped much of what it had fitted.
+///
 /// Damped steps that gain less than 1 % of the objective are that walk;
 /// Gauss–Newton steps are left to converge (quadratically, in an
 /// iteration or two). At 10⁶ poses this took the LM iterations from 51 to
