@@ -306,10 +306,16 @@ mod tests {
         }
         // Most pairs of a ring are off its factor's pattern.
         assert!(off_pattern > n * (n - 1) / 4, "{off_pattern}");
-        // A budget too small for a far pair gives up rather than guess.
-        let far = [(Some(1), -one), (Some(n / 2 + 3), one)];
-        if sys.propagate_group_selected(&z, &[far], 0).is_none() {
-            assert!(sys.propagate_group_selected(&z, &[far], 1).is_none());
-        }
+        // A budget too small for a pair off the pattern gives up rather
+        // than guess.
+        let far = (0..n)
+            .flat_map(|i| ((i + 1)..n).map(move |j| [(Some(i), -one), (Some(j), one)]))
+            .find(|e| sys.propagate_group_selected(&z, &[*e], 0).is_none())
+            .unwrap();
+        assert!(sys.propagate_group_selected(&z, &[far], 1).is_none());
+        assert!(
+            sys.propagate_group_selected(&z, &[far], usize::MAX)
+                .is_some()
+        );
     }
 }
