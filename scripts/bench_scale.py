@@ -3,10 +3,11 @@
 graphs of 10^4, 10^5 and 10^6 poses (2D grid world, 3D sphere world) with
 loop-closure candidates on 10 % of the poses (9 % true, 1 % wrong, all with
 inlier counts), each optimised once by `pgo optimize` with its defaults
-(gate, chordal guess, robust EM, one thread) under /usr/bin/time -v.
+(gate, chordal guess, robust EM) and --threads (default 1) under
+/usr/bin/time -v.
 
 usage: .venv/bin/python scripts/bench_scale.py [--sizes 1e4 1e5 1e6]
-           [--worlds grid2d sphere3d] [--work DIR] [--out bench-out/scale.json]
+           [--worlds grid2d sphere3d] [--threads 1 2] [--work DIR] [--out bench-out/scale.json]
            [--svg docs/scaling.svg] [--plot-only]
 
 Needs a release build and matplotlib (in the peers' .venv). The graphs
@@ -43,9 +44,10 @@ def simulate(pgo, world, poses, path):
                    check=True, capture_output=True)
 
 
-def optimize(pgo, path):
+def optimize(pgo, path, threads):
     start = time.perf_counter()
-    out = subprocess.run(["/usr/bin/time", "-v", pgo, "optimize", path, "--json", "-q"],
+    out = subprocess.run(["/usr/bin/time", "-v", pgo, "optimize", path, "--json", "-q",
+                          "--threads", str(threads)],
                          capture_output=True, text=True)
     wall = time.perf_counter() - start
     if out.returncode != 0:
@@ -53,7 +55,7 @@ def optimize(pgo, path):
     r = json.loads(out.stdout)
     rss_kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", out.stderr).group(1))
     o = r["optimizer"]
-    return {"poses": r["poses"], "edges": r["edges"], "candidates": r["loop_candidates"],
+    return {"poses": r["poses"], "edges": r["edges"], "candidates": r["loop_candidates"], "threads": threads,
             "optimizer_s": o["time_s"], "init_s": r["initialization"]["time_s"], "wall_s": wall,
             "rss_mb": rss_kb * 1024 / 1e6, "factor_mb": o["max_nnz_factor"] * 8 / 1e6,
             "last_factor_mb": o["nnz_factor"] * 8 / 1e6,
@@ -70,7 +72,9 @@ def plot(results, svg):
     import matplotlib.pyplot as plt
     fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(9, 3.8))
     for world, marker in (("grid2d", "o"), ("sphere3d", "s")):
-        rows = sorted((r for r in results if r["world"] == world), key=lambda r: r["poses"])
+        # One curve per world: its single-threaded runs.
+        rows = sorted((r for r in results if r["world"] == world and r.get("threads", 1) == 1),
+                      key=lambda r: r["poses"])
         if not rows:
             continue
         n = [r["poses"] for r in rows]
@@ -96,6 +100,8 @@ def main():
     ap.add_argument("--pgo", default=os.path.join(ROOT, "target/release/pgo"))
     ap.add_argument("--sizes", nargs="*", default=["1e4", "1e5", "1e6"])
     ap.add_argument("--worlds", nargs="*", default=["grid2d", "sphere3d"])
+    ap.add_argument("--threads", nargs="*", type=int, default=[1],
+                    help="run each graph once per thread count (pgo's --threads)")
     ap.add_argument("--work", default=tempfile.gettempdir())
     ap.add_argument("--out", default=os.path.join(ROOT, "bench-out/scale.json"))
     ap.add_argument("--svg", default=os.path.join(ROOT, "docs/scaling.svg"))
@@ -113,24 +119,27 @@ def main():
             poses = int(float(size))
             path = os.path.join(args.work, "pgo-scale-%s-%d.g2o" % (world, poses))
             simulate(args.pgo, world, poses, path)
-            r = optimize(args.pgo, path)
-            r["world"] = world
-            print("%s %d poses: %s" % (world, poses, {k: r[k] for k in (
-                "wall_s", "optimizer_s", "rss_mb", "factor_mb", "iterations", "factorizations")}), file=sys.stderr)
-            results = [x for x in results if not (x["world"] == world and x["poses"] == r["poses"])] + [r]
-            json.dump(results, open(args.out, "w"), indent=1)
+            for threads in args.threads:
+                r = optimize(args.pgo, path, threads)
+                r["world"] = world
+                print("%s %d poses, %d threads: %s" % (world, poses, threads, {k: r[k] for k in (
+                    "wall_s", "optimizer_s", "rss_mb", "factor_mb", "iterations", "factorizations")}),
+                      file=sys.stderr)
+                same = lambda x: (x["world"], x["poses"], x.get("threads", 1)) == (world, r["poses"], threads)
+                results = [x for x in results if not same(x)] + [r]
+                json.dump(results, open(args.out, "w"), indent=1)
     plot(results, args.svg)
     table(results)
 
 
 def table(results):
     """The results as a Markdown table on stdout."""
-    print("| world | poses | edges | candidates | pgo optimize wall (s) | optimiser (s) | iterations / "
+    print("| world | poses | edges | candidates | threads | pgo optimize wall (s) | optimiser (s) | iterations / "
           "factorisations | peak RSS (MB) | largest (last) factor (MB) | RSS / factor |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for r in sorted(results, key=lambda r: (r["world"], r["poses"])):
-        print("| %s | %d | %d | %d | %.2f | %.2f | %d / %d | %.0f | %.0f (%.0f) | %.2f |" % (
-            r["world"], r["poses"], r["edges"], r["candidates"], r["wall_s"], r["optimizer_s"],
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in sorted(results, key=lambda r: (r["world"], r["poses"], r.get("threads", 1))):
+        print("| %s | %d | %d | %d | %d | %.2f | %.2f | %d / %d | %.0f | %.0f (%.0f) | %.2f |" % (
+            r["world"], r["poses"], r["edges"], r["candidates"], r.get("threads", 1), r["wall_s"], r["optimizer_s"],
             r["iterations"], r["factorizations"], r["rss_mb"], r["factor_mb"], r.get("last_factor_mb", r["factor_mb"]),
             r["rss_mb"] / r["factor_mb"]))
 

@@ -6,6 +6,7 @@
 //! touches rayon's global pool.
 
 use super::LinearError;
+use rayon::prelude::*;
 use std::sync::Arc;
 
 /// The threads parallel work runs on: the calling thread alone
@@ -60,11 +61,44 @@ impl Parallelism {
             None => op(),
         }
     }
+
+    /// `f` of every item, in order: on the pool's threads, or one after the
+    /// other in the calling thread.
+    pub fn map<T: Sync, R: Send>(&self, items: &[T], f: impl Fn(&T) -> R + Sync + Send) -> Vec<R> {
+        match &self.pool {
+            Some(pool) => pool.install(|| items.par_iter().with_max_len(1).map(f).collect()),
+            None => items.iter().map(f).collect(),
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn map_keeps_the_order_and_runs_where_it_is_told() {
+        let items: Vec<u64> = (0..1000).collect();
+        let square = |x: &u64| x * x;
+        let want: Vec<u64> = items.iter().map(square).collect();
+        let caller = std::thread::current().id();
+        let sequential = Parallelism::sequential();
+        assert_eq!(sequential.map(&items, square), want);
+        assert!(
+            sequential
+                .map(&items, |_| std::thread::current().id())
+                .iter()
+                .all(|&t| t == caller)
+        );
+        let pool = Parallelism::new(2).unwrap();
+        assert_eq!(pool.map(&items, square), want);
+        let names = pool.map(&items, |_| std::thread::current().name().map(str::to_owned));
+        assert!(
+            names
+                .iter()
+                .all(|n| n.as_deref().is_some_and(|n| n.starts_with("pgo-solver-")))
+        );
+    }
 
     #[test]
     fn sequential_runs_in_the_calling_thread_and_a_pool_has_its_size() {

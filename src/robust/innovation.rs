@@ -23,9 +23,9 @@
 
 use crate::geometry::Pose;
 use crate::graph::PoseGraph;
-use crate::linear::{EdgeJacobian, SelectedInverse};
+use crate::linear::{EdgeJacobian, Parallelism, SelectedInverse};
 use crate::solve::{Optimizer, SolveError};
-use nalgebra::{DMatrix, DVector, SMatrix};
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
 /// What the innovations of one evaluation found.
 #[derive(Clone, Debug, Default)]
@@ -107,14 +107,57 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         out
     }
 
-    /// Makes candidate `k`'s innovation exact (a lone candidate outside the
-    /// map).
-    pub fn refine(&mut self, edges: &[usize], k: usize, innov: &mut Innovations) {
-        if !innov.exact[k] {
-            let (nu2, _, _) = self.cluster(edges, &[k], 0, true);
-            innov.nu2[k] = nu2[0];
+    /// The threads the solver works on.
+    pub fn parallelism(&self) -> &Parallelism {
+        self.optimizer.parallelism()
+    }
+
+    /// Makes the innovations of candidates `open` exact (lone candidates
+    /// outside the map). Their blocks of `H⁻¹` come from the selected
+    /// inverse's recurrence, which only reads the factor, so the candidates
+    /// share the solver's threads; those whose recurrence runs over its
+    /// budget fall back to the sparse solve, one after the other. The
+    /// values are those of one candidate at a time, whatever the threads.
+    pub fn refine(&mut self, edges: &[usize], open: &[usize], innov: &mut Innovations) {
+        let open: Vec<usize> = open.iter().copied().filter(|&k| !innov.exact[k]).collect();
+        let this = &*self;
+        let selected = this.optimizer.parallelism().map(&open, |&k| {
+            let lin = this.linearise(edges, &[k]);
+            let system = this.optimizer.system();
+            let budget = this.budget_per_candidate as usize;
+            system
+                .propagate_group_selected(&this.inverse, &lin.jacobians, budget)
+                .map(|gram| judge_cluster(&lin.errors, &lin.covariances, &gram, 0).0[0])
+        });
+        for (&k, nu2) in open.iter().zip(selected) {
+            innov.nu2[k] = nu2.unwrap_or_else(|| {
+                let lin = self.linearise(edges, &[k]);
+                let gram = self.optimizer.system_mut().propagate_group(&lin.jacobians);
+                judge_cluster(&lin.errors, &lin.covariances, &gram, 0).0[0]
+            });
             innov.exact[k] = true;
         }
+    }
+
+    /// The errors, Jacobians and covariances of candidates `members` at the
+    /// map.
+    fn linearise(&self, edges: &[usize], members: &[usize]) -> Linearised<D> {
+        let graph = self.graph;
+        let mut lin = Linearised {
+            errors: Vec::with_capacity(members.len()),
+            jacobians: Vec::with_capacity(members.len()),
+            covariances: Vec::with_capacity(members.len()),
+        };
+        for &k in members {
+            let e = &graph.edges[edges[k]];
+            let l =
+                P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
+            lin.errors.push(l.error);
+            lin.jacobians
+                .push([(self.block[e.from], l.jac_i), (self.block[e.to], l.jac_j)]);
+            lin.covariances.push(e.information.try_inverse());
+        }
+        lin
     }
 
     /// One cluster's members (the first `a` in the map): their `ν²`, the
@@ -128,21 +171,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         a: usize,
         exact: bool,
     ) -> (Vec<Option<f64>>, Option<f64>, bool) {
-        let graph = self.graph;
-        let mut errors = Vec::with_capacity(members.len());
-        let mut jacobians: Vec<EdgeJacobian<D>> = Vec::with_capacity(members.len());
-        let mut covariances = Vec::with_capacity(members.len());
-        for &k in members {
-            let e = &graph.edges[edges[k]];
-            let lin =
-                P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
-            errors.push(lin.error);
-            jacobians.push([
-                (self.block[e.from], lin.jac_i),
-                (self.block[e.to], lin.jac_j),
-            ]);
-            covariances.push(e.information.try_inverse());
-        }
+        let lin = self.linearise(edges, members);
         let system = self.optimizer.system_mut();
         // A lone candidate outside the map gets its bound unless asked for
         // more; else blocks of H⁻¹ off the pattern are worth their
@@ -153,25 +182,30 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         } else {
             (self.budget_per_candidate * members.len() as f64) as usize
         };
-        if let Some(gram) = system.propagate_group_selected(&self.inverse, &jacobians, budget) {
-            let (nu2, joint) = judge_cluster(&errors, &covariances, &gram, a);
+        if let Some(gram) = system.propagate_group_selected(&self.inverse, &lin.jacobians, budget) {
+            let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
             return (nu2, joint, true);
         }
         if bound_will_do {
-            let bound = system.propagate_bound(&self.inverse, &jacobians[0]);
-            let nu2 = covariances[0]
+            let bound = system.propagate_bound(&self.inverse, &lin.jacobians[0]);
+            let nu2 = lin.covariances[0]
                 .and_then(|c| (c + bound).cholesky())
-                .map(|c| errors[0].dot(&c.solve(&errors[0])));
+                .map(|c| lin.errors[0].dot(&c.solve(&lin.errors[0])));
             return (vec![nu2], Some(0.0), false);
         }
-        let gram = system.propagate_group(&jacobians);
-        let (nu2, joint) = judge_cluster(&errors, &covariances, &gram, a);
+        let gram = system.propagate_group(&lin.jacobians);
+        let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
         (nu2, joint, true)
     }
 }
 
-/// The formulas of the module doc for one cluster: `errors`, covariances
-/// and Gram matrix of its members, the first `a` of them in the map.
+/// Candidates linearised at the map: what their innovations are made of.
+struct Linearised<const D: usize> {
+    errors: Vec<SVector<f64, D>>,
+    jacobians: Vec<EdgeJacobian<D>>,
+    covariances: Vec<Option<SMatrix<f64, D, D>>>,
+}
+
 fn judge_cluster<const D: usize>(
     errors: &[nalgebra::SVector<f64, D>],
     covariances: &[Option<SMatrix<f64, D, D>>],

@@ -31,6 +31,7 @@
 //! evidence for it.
 
 use super::Layers;
+use crate::linear::Parallelism;
 use crate::stats::mixture::NormalComponent;
 use serde::Serialize;
 
@@ -171,33 +172,105 @@ fn ln_sum_exp(x: impl Iterator<Item = f64> + Clone) -> f64 {
     m + x.map(|v| (v - m).exp()).sum::<f64>().ln()
 }
 
-/// Weighted mean and standard deviation (floored) of `(weight, value)`
-/// pairs, and the total weight.
-fn moments(points: impl Iterator<Item = (f64, f64)>, floor: f64) -> (f64, f64, f64) {
-    let (mut n, mut s1, mut s2) = (0.0, 0.0, 0.0);
-    for (w, y) in points {
-        n += w;
-        s1 += w * y;
-        s2 += w * y * y;
-    }
-    if n <= 0.0 {
-        return (0.0, 0.0, floor);
-    }
-    let mean = s1 / n;
-    (n, mean, (s2 / n - mean * mean).max(0.0).sqrt().max(floor))
+/// The candidates' count posteriors, each distinct value once: a count
+/// posterior is a function of an integer count, so a few hundred values
+/// serve any number of candidates, and the E-step takes their priors'
+/// logarithms once per value instead of once per candidate.
+struct Counts {
+    distinct: Vec<Option<f64>>,
+    /// Each candidate's value in `distinct`.
+    index: Vec<u32>,
 }
 
-/// [`moments`] about a given mean.
-fn pinned_moments(
-    points: impl Iterator<Item = (f64, f64)>,
-    mean: f64,
-    floor: f64,
-) -> (f64, f64, f64) {
-    let (n, s2) = points.fold((0.0, 0.0), |(n, s2), (w, y)| {
-        (n + w, s2 + w * (y - mean) * (y - mean))
-    });
-    let sigma = if n > 0.0 { (s2 / n).sqrt() } else { 0.0 };
-    (n, mean, sigma.max(floor))
+impl Counts {
+    fn new(evidence: &[Evidence]) -> Self {
+        let mut seen = std::collections::HashMap::new();
+        let mut distinct = Vec::new();
+        let index = (evidence.iter())
+            .map(|e| {
+                let key = e.count_posterior.map(f64::to_bits);
+                *seen.entry(key).or_insert_with(|| {
+                    distinct.push(e.count_posterior);
+                    (distinct.len() - 1) as u32
+                })
+            })
+            .collect();
+        Self { distinct, index }
+    }
+}
+
+/// What an M-step needs of the responsibilities `r`: per population
+/// `(Σ r, Σ r·y, Σ r·y²)` — for the true loops with a pinned mean
+/// `(Σ r, 0, Σ r·(y − μ)²)` — and the sums behind the two rates.
+struct Sums {
+    /// The true loops' mean when it is not learned.
+    pinned: Option<f64>,
+    columns: [(f64, f64, f64); MAX_WRONG_POPULATIONS + 1],
+    /// `Σ (1 − r₀)`: the expected number of wrong loops.
+    wrong_total: f64,
+    /// Over candidates with a count: `Σ p·(1 − r₀)` and `Σ p`.
+    fooled: f64,
+    counted: f64,
+    /// Over candidates without a count: `Σ (1 − r₀)` and their number.
+    wrong: f64,
+    uncounted: f64,
+}
+
+impl Sums {
+    fn new(pinned: Option<f64>) -> Self {
+        Self {
+            pinned,
+            columns: [(0.0, 0.0, 0.0); MAX_WRONG_POPULATIONS + 1],
+            wrong_total: 0.0,
+            fooled: 0.0,
+            counted: 0.0,
+            wrong: 0.0,
+            uncounted: 0.0,
+        }
+    }
+
+    /// Adds one candidate of evidence `e`, `y = ln ν²` and responsibilities
+    /// `r` (true loops first).
+    fn add(&mut self, e: &Evidence, y: f64, r: &[f64]) {
+        for (j, (c, &w)) in self.columns.iter_mut().zip(r).enumerate() {
+            c.0 += w;
+            match self.pinned {
+                Some(mean) if j == 0 => c.2 += w * (y - mean) * (y - mean),
+                _ => {
+                    c.1 += w * y;
+                    c.2 += w * y * y;
+                }
+            }
+        }
+        self.wrong_total += 1.0 - r[0];
+        match e.count_posterior {
+            Some(p) => {
+                self.fooled += p * (1.0 - r[0]);
+                self.counted += p;
+            }
+            None => {
+                self.wrong = self.wrong + 1.0 - r[0];
+                self.uncounted += 1.0;
+            }
+        }
+    }
+
+    /// Population `j`'s weighted mean and standard deviation (at least
+    /// `floor`).
+    fn moments(&self, j: usize, floor: f64) -> (f64, f64) {
+        let (n, s1, s2) = self.columns[j];
+        match self.pinned {
+            Some(mean) if j == 0 => {
+                let sigma = if n > 0.0 { (s2 / n).sqrt() } else { 0.0 };
+                (mean, sigma.max(floor))
+            }
+            _ if n <= 0.0 => (0.0, floor),
+            _ => {
+                let mean = s1 / n;
+                (mean, (s2 / n - mean * mean).max(0.0).sqrt().max(floor))
+            }
+        }
+    }
 }
 
 impl LoopModel {
@@ -205,13 +278,14 @@ impl LoopModel {
     /// `dimension`, for each number of wrong populations from 0 to
     /// [`MAX_WRONG_POPULATIONS`], and keeps the fit of the lowest BIC.
     /// `start` marks the candidates taken as true loops for the first
-    /// M-step (e.g. those the map was solved with).
+    /// M-step (e.g. those the map was solved with). The fits for each
+    /// number of populations run on `parallelism`'s threads.
     pub fn fit(
         evidence: &[Evidence],
         start: &[bool],
-        dimension: usize,
-        scale: Scale,
+        (dimension, scale): (usize, Scale),
         layers: &Layers,
+        parallelism: &Parallelism,
     ) -> Self {
         let floor = ln_chi2_sigma(dimension);
         let pinned = (scale == Scale::File).then(|| ln_chi2_mean(dimension));
@@ -221,17 +295,28 @@ impl LoopModel {
             1
         };
         let y: Vec<f64> = evidence.iter().map(|e| e.innovation.ln()).collect();
+        let mut order: Vec<usize> = (0..y.len()).collect();
+        order.sort_by(|&a, &b| y[a].total_cmp(&y[b]));
+        let counts = Counts::new(evidence);
         let n = y.len().max(1) as f64;
         let mut best: Option<(f64, Self)> = None;
         // Every number of populations: a second tight population can pay for
-        // itself where a first one spread over both does not.
+        // itself where a first one spread over both does not. The fits are
+        // independent, so they run side by side where there are threads.
         for start in starts(&y, start) {
-            for k in 0..=most {
-                let Some(model) =
-                    Self::fit_k(evidence, &y, &start, k, (floor, pinned), layers.aliasing)
-                else {
-                    break;
-                };
+            let fit_k = |k: usize| {
+                Self::fit_k(
+                    (evidence, &counts),
+                    (&y, &order),
+                    &start,
+                    k,
+                    (floor, pinned),
+                    layers.aliasing,
+                )
+            };
+            let ks: Vec<usize> = (0..=most).collect();
+            let fits = parallelism.map(&ks, |&k| fit_k(k));
+            for (k, model) in fits.into_iter().map_while(|f| f).enumerate() {
                 // Free parameters: the true loops' mean and spread, each
                 // wrong population's mean and spread, their k − 1 shares,
                 // and the two rates.
@@ -251,7 +336,13 @@ impl LoopModel {
 
     /// A model of nothing: every candidate a true loop.
     fn empty(y: &[f64], floor: f64) -> Self {
-        let (_, mean, sigma) = moments(y.iter().map(|&y| (1.0, y)), floor);
+        let mut sums = Sums::new(None);
+        for &yi in y {
+            sums.columns[0].0 += 1.0;
+            sums.columns[0].1 += yi;
+            sums.columns[0].2 += yi * yi;
+        }
+        let (mean, sigma) = sums.moments(0, floor);
         Self {
             inlier: Population {
                 weight: 1.0,
@@ -271,16 +362,15 @@ impl LoopModel {
     /// marks as true loops and the others split by rank into `k` groups (or,
     /// with fewer than `k` others, the upper quarter of all split so);
     /// `None` when there are fewer than `k` candidates to start from.
+    /// `order` ranks the candidates by `y`.
     fn fit_k(
-        evidence: &[Evidence],
-        y: &[f64],
+        (evidence, counts): (&[Evidence], &Counts),
+        (y, order): (&[f64], &[usize]),
         start: &[bool],
         k: usize,
         (floor, pinned): (f64, Option<f64>),
         aliasing: bool,
     ) -> Option<Self> {
-        let mut order: Vec<usize> = (0..y.len()).collect();
-        order.sort_by(|&a, &b| y[a].total_cmp(&y[b]));
         let mut rest: Vec<usize> = order.iter().copied().filter(|&i| !start[i]).collect();
         if rest.len() < k {
             rest = order[order.len() - order.len() / 4..].to_vec();
@@ -288,26 +378,29 @@ impl LoopModel {
         if rest.len() < k {
             return None;
         }
-        // Responsibilities: column 0 the true loops, 1..=k the wrong
-        // populations.
-        let mut r = vec![vec![0.0; k + 1]; y.len()];
-        for ri in r.iter_mut() {
-            ri[0] = 1.0;
-        }
-        for (rank, &i) in rest.iter().enumerate() {
-            if k > 0 {
-                r[i][0] = 0.0;
-                r[i][1 + rank * k / rest.len()] = 1.0;
+        // The first responsibilities, one-hot: population 0 the true loops,
+        // 1..=k the wrong ones.
+        let mut column = vec![0; y.len()];
+        if k > 0 {
+            for (rank, &i) in rest.iter().enumerate() {
+                column[i] = 1 + rank * k / rest.len();
             }
+        }
+        let mut sums = Sums::new(pinned);
+        for ((e, &yi), &c) in evidence.iter().zip(y).zip(&column) {
+            let mut r = [0.0; MAX_WRONG_POPULATIONS + 1];
+            r[c] = 1.0;
+            sums.add(e, yi, &r[..=k]);
         }
         let mut model = Self::empty(y, floor);
         let mut last = f64::NEG_INFINITY;
         for _ in 0..MAX_ITERATIONS {
-            model = Self::m_step(evidence, y, &r, k, (floor, pinned), model.span);
+            model = Self::m_step(&sums, k, floor, model.span);
             if !aliasing {
                 model.aliasing_rate = 0.0;
             }
-            let ll = model.e_step(evidence, y, &mut r);
+            sums = Sums::new(pinned);
+            let ll = model.e_step((evidence, counts), y, k, &mut sums);
             model.ln_likelihood = ll;
             if (ll - last).abs() < TOLERANCE * ll.abs().max(1.0) {
                 break;
@@ -318,32 +411,20 @@ impl LoopModel {
     }
 
     /// The parameters that maximise the expected log-likelihood under the
-    /// responsibilities `r`.
-    fn m_step(
-        evidence: &[Evidence],
-        y: &[f64],
-        r: &[Vec<f64>],
-        k: usize,
-        (floor, pinned): (f64, Option<f64>),
-        span: f64,
-    ) -> Self {
-        let column = |j: usize| r.iter().map(move |ri| ri[j]).zip(y.iter().copied());
-        let (_, mean, sigma) = match pinned {
-            Some(mean) => pinned_moments(column(0), mean, floor),
-            None => moments(column(0), floor),
-        };
+    /// responsibilities summed in `sums`.
+    fn m_step(sums: &Sums, k: usize, floor: f64, span: f64) -> Self {
+        let (mean, sigma) = sums.moments(0, floor);
         let inlier = Population {
             weight: 1.0,
             mean,
             sigma,
         };
-        let wrong_total: f64 = r.iter().map(|ri| 1.0 - ri[0]).sum();
         let outliers = (1..=k)
             .map(|j| {
-                let (n, mean, sigma) = moments(column(j), floor);
+                let (mean, sigma) = sums.moments(j, floor);
                 Population {
-                    weight: if wrong_total > 0.0 {
-                        n / wrong_total
+                    weight: if sums.wrong_total > 0.0 {
+                        sums.columns[j].0 / sums.wrong_total
                     } else {
                         1.0 / k as f64
                     },
@@ -352,16 +433,6 @@ impl LoopModel {
                 }
             })
             .collect();
-        let (fooled, counted, wrong, uncounted) =
-            evidence
-                .iter()
-                .zip(r)
-                .fold((0.0, 0.0, 0.0, 0.0), |(f, c, w, u), (e, ri)| {
-                    match e.count_posterior {
-                        Some(p) => (f + p * (1.0 - ri[0]), c + p, w, u),
-                        None => (f, c, w + 1.0 - ri[0], u + 1.0),
-                    }
-                });
         Self {
             inlier,
             outliers,
@@ -370,15 +441,22 @@ impl LoopModel {
             // count looks like a true loop's, and of true loops among those
             // without a count, each with a uniform (Beta(1, 1)) prior so
             // that neither is ever 0 or 1.
-            aliasing_rate: (fooled + 1.0) / (counted + 2.0),
-            inlier_share: (uncounted - wrong + 1.0) / (uncounted + 2.0),
+            aliasing_rate: (sums.fooled + 1.0) / (sums.counted + 2.0),
+            inlier_share: (sums.uncounted - sums.wrong + 1.0) / (sums.uncounted + 2.0),
             ln_likelihood: 0.0,
             envelope: Vec::new(),
         }
     }
 
-    /// The responsibilities under this model, and the log-likelihood.
-    fn e_step(&self, evidence: &[Evidence], y: &[f64], r: &mut [Vec<f64>]) -> f64 {
+    /// The responsibilities of the `k` + 1 populations under this model,
+    /// summed into `sums` for the next M-step, and the log-likelihood.
+    fn e_step(
+        &self,
+        (evidence, counts): (&[Evidence], &Counts),
+        y: &[f64],
+        k: usize,
+        sums: &mut Sums,
+    ) -> f64 {
         // Per population: ln(weight) − ln σ − ln √(2π), and 1/(2σ²).
         let constants = |p: &Population| {
             (
@@ -390,10 +468,17 @@ impl LoopModel {
         let inlier = constants(&self.inlier);
         let outliers: Vec<(f64, f64, f64)> = self.outliers.iter().map(constants).collect();
         let mut terms = [0.0; MAX_WRONG_POPULATIONS + 1];
+        let mut r = [0.0; MAX_WRONG_POPULATIONS + 1];
+        // `ln π` and `ln(1 − π)` of each distinct count posterior.
+        let ln_priors: Vec<(f64, f64)> = (counts.distinct.iter())
+            .map(|&c| {
+                let p = self.prior(c);
+                (p.ln(), (1.0 - p).ln())
+            })
+            .collect();
         let mut ll = 0.0;
-        for ((e, &yi), ri) in evidence.iter().zip(y).zip(r.iter_mut()) {
-            let p = self.prior(e.count_posterior);
-            let (ln_in, ln_out) = (p.ln(), (1.0 - p).ln());
+        for ((e, &yi), &c) in evidence.iter().zip(y).zip(&counts.index) {
+            let (ln_in, ln_out) = ln_priors[c as usize];
             let term = |(c, h, m): (f64, f64, f64)| c - (yi - m) * (yi - m) * h;
             terms[0] = ln_in + term(inlier);
             let n = if outliers.is_empty() {
@@ -412,9 +497,10 @@ impl LoopModel {
                 sum += *t;
             }
             ll += max + sum.ln();
-            for (j, t) in terms[..n].iter().enumerate().take(ri.len()) {
-                ri[j] = t / sum;
+            for (rj, t) in r[..=k].iter_mut().zip(&terms[..n]) {
+                *rj = t / sum;
             }
+            sums.add(e, yi, &r[..=k]);
         }
         ll
     }
@@ -582,14 +668,35 @@ mod tests {
         let m = LoopModel::fit(
             &e,
             &vec![true; e.len()],
-            3,
-            Scale::Learned,
+            (3, Scale::Learned),
             &Layers::default(),
+            &Parallelism::sequential(),
         );
         // 20 of the 420 true-like counts are wrong.
         assert!((m.aliasing_rate - 21.0 / 421.8).abs() < 0.01, "{m:?}");
         for (x, t) in e.iter().zip(&truth) {
             assert_eq!(m.posterior(x) >= 0.5, *t, "{x:?} {m:?}");
+        }
+    }
+
+    #[test]
+    fn the_fit_is_the_same_on_any_number_of_threads() {
+        // The fits for each number of populations run side by side on a
+        // pool; the model kept must be the very one a single thread keeps.
+        let (e, _) = population();
+        let fit = |parallelism: &Parallelism| {
+            LoopModel::fit(
+                &e,
+                &vec![true; e.len()],
+                (3, Scale::Learned),
+                &Layers::default(),
+                parallelism,
+            )
+        };
+        let one = fit(&Parallelism::sequential());
+        assert!(!one.outliers.is_empty(), "{one:?}");
+        for threads in [2, 3, 5] {
+            assert_eq!(fit(&Parallelism::new(threads).unwrap()), one);
         }
     }
 
@@ -611,9 +718,9 @@ mod tests {
         let m = LoopModel::fit(
             &e,
             &vec![true; e.len()],
-            3,
-            Scale::Learned,
+            (3, Scale::Learned),
             &Layers::default(),
+            &Parallelism::sequential(),
         );
         assert!(e[..400].iter().all(|x| m.posterior(x) >= 0.5), "{m:?}");
         assert!(e[400..].iter().all(|x| m.posterior(x) < 0.5), "{m:?}");
@@ -626,9 +733,9 @@ mod tests {
         let m = LoopModel::fit(
             &e,
             &vec![true; e.len()],
-            3,
-            Scale::Learned,
+            (3, Scale::Learned),
             &Layers::default(),
+            &Parallelism::sequential(),
         );
         let mut last = f64::INFINITY;
         for k in -400..600 {
@@ -642,7 +749,13 @@ mod tests {
     #[test]
     fn without_wrong_loops_every_consistent_candidate_is_kept() {
         let e = gaussian_loops(100, 2.0, None);
-        let m = LoopModel::fit(&e, &[true; 100], 3, Scale::Learned, &Layers::default());
+        let m = LoopModel::fit(
+            &e,
+            &[true; 100],
+            (3, Scale::Learned),
+            &Layers::default(),
+            &Parallelism::sequential(),
+        );
         assert!(m.outliers.is_empty(), "{m:?}");
         assert!(e.iter().all(|x| m.posterior(x) >= 0.5));
         // A candidate far beyond them is not.

@@ -26,6 +26,7 @@ use super::model::{Evidence, LoopModel, Scale};
 use super::{Candidate, Layers};
 use crate::geometry::Pose;
 use crate::graph::PoseGraph;
+use crate::linear::Parallelism;
 use crate::solve::init::ChordalInit;
 use crate::solve::{Session, SolveError};
 use std::time::Instant;
@@ -426,16 +427,22 @@ fn judge_exactly<P: Pose<D>, const D: usize>(
     layers: &Layers,
 ) -> (LoopModel, Vec<bool>) {
     loop {
-        let (model, next) = judge(candidates, innov, accepted, (D, scale), layers);
+        let parallelism = eval.parallelism().clone();
+        let (model, next) = judge(
+            candidates,
+            innov,
+            accepted,
+            (D, scale),
+            layers,
+            &parallelism,
+        );
         let open: Vec<usize> = (0..candidates.len())
             .filter(|&k| next[k] && !innov.exact[k])
             .collect();
         if open.is_empty() {
             return (model, next);
         }
-        for k in open {
-            eval.refine(edges, k, innov);
-        }
+        eval.refine(edges, &open, innov);
     }
 }
 
@@ -448,6 +455,7 @@ fn judge(
     accepted: &[bool],
     (dimension, scale): (usize, Scale),
     layers: &Layers,
+    parallelism: &Parallelism,
 ) -> (LoopModel, Vec<bool>) {
     let all: Vec<Option<Evidence>> = (0..candidates.len())
         .map(|k| evidence(candidates, innov, k))
@@ -462,7 +470,7 @@ fn judge(
                 .map(|e| (e, a))
         })
         .unzip();
-    let model = LoopModel::fit(&fitted, &start, dimension, scale, layers);
+    let model = LoopModel::fit(&fitted, &start, (dimension, scale), layers, parallelism);
     let next = all
         .iter()
         .zip(candidates)

@@ -453,6 +453,7 @@ impl ChordalInit<6> for Se3 {
         weights: Option<&[f64]>,
         reuse: &mut ChordalReuse<3>,
     ) -> Result<(), SolveError> {
+        let parallelism = reuse.parallelism.clone();
         let (lp, precision) = reuse.problem(graph, weights, 3..6)?;
         let n = graph.num_vertices();
         // Rotations, one row at a time: row_k(R_j) = row_k(R_i)·R_ij, i.e.
@@ -503,10 +504,10 @@ impl ChordalInit<6> for Se3 {
                 }
             }
         }
-        for (v, m) in rows.iter().enumerate() {
-            if lp.variable[v].is_some() {
-                graph.poses[v].rotation = nearest_rotation(m);
-            }
+        let free: Vec<usize> = (0..n).filter(|&v| lp.variable[v].is_some()).collect();
+        let rotations = parallelism.map(&free, |&v| nearest_rotation(&rows[v]));
+        for (&v, q) in free.iter().zip(rotations) {
+            graph.poses[v].rotation = q;
         }
         // Translations: R_iᵀ(t_j − t_i) − t_ij = 0.
         lp.system.clear();

@@ -453,6 +453,40 @@ fn aliasing_at_revisits_is_rejected_and_the_map_is_the_clean_one() {
 }
 
 #[test]
+fn two_threads_decide_and_solve_exactly_as_one() {
+    // EM's evaluations share the solver's threads (the loop model's fits
+    // side by side, the exact innovations candidate by candidate): the
+    // decisions, the weights and every bit of the map stay those of one
+    // thread.
+    let dir = temp_dir("robust-threads");
+    let c = case(
+        &dir,
+        "aliased",
+        SimulationOptions {
+            group_size: 5,
+            true_like_share: 0.5,
+            ..options(OutlierPolicy::Aliased, 80, 5)
+        },
+    );
+    let run_on = |threads: usize| {
+        let out = dir.join(format!("out-{threads}.g2o"));
+        let mut config = OptimizeConfig {
+            output: Some(out.clone()),
+            ..OptimizeConfig::new(&c.noisy)
+        };
+        config.solver.threads = threads;
+        let r = run_config(config);
+        (r, std::fs::read(out).expect("output"))
+    };
+    let (one, map_one) = run_on(1);
+    let (two, map_two) = run_on(2);
+    let weights = |r: &Report| r.loops.iter().map(|l| l.weight).collect::<Vec<_>>();
+    assert!(one.robust.decisions > 0, "{:?}", one.robust);
+    assert_eq!(weights(&one), weights(&two));
+    assert_eq!(map_one, map_two);
+}
+
+#[test]
 fn each_layer_can_be_switched_off_and_the_report_says_which() {
     let dir = temp_dir("robust-layers");
     let c = case(&dir, "random", options(OutlierPolicy::Random, 30, 3));
