@@ -226,6 +226,11 @@ impl<const D: usize> BlockSystem<D> {
         })
     }
 
+    /// Where assembly and factorisation run.
+    pub fn parallelism(&self) -> &Parallelism {
+        &self.parallelism
+    }
+
     /// Where assembly and factorisation run from now on.
     pub fn set_parallelism(&mut self, parallelism: Parallelism) {
         self.parallelism = parallelism;

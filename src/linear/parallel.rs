@@ -62,11 +62,26 @@ impl Parallelism {
         }
     }
 
-    /// `f` of every item, in order: on the pool's threads, or one after the
-    /// other in the calling thread.
+    /// `f` of every item, in order: on the pool's threads, each item a task
+    /// of its own (for items of a millisecond or more, however few), or one
+    /// after the other in the calling thread.
     pub fn map<T: Sync, R: Send>(&self, items: &[T], f: impl Fn(&T) -> R + Sync + Send) -> Vec<R> {
         match &self.pool {
             Some(pool) => pool.install(|| items.par_iter().with_max_len(1).map(f).collect()),
+            None => items.iter().map(f).collect(),
+        }
+    }
+
+    /// [`Self::map`] for many small items: on the pool, tasks of at least
+    /// `run` items.
+    pub fn map_runs<T: Sync, R: Send>(
+        &self,
+        items: &[T],
+        run: usize,
+        f: impl Fn(&T) -> R + Sync + Send,
+    ) -> Vec<R> {
+        match &self.pool {
+            Some(pool) => pool.install(|| items.par_iter().with_min_len(run).map(f).collect()),
             None => items.iter().map(f).collect(),
         }
     }
@@ -92,6 +107,8 @@ mod tests {
         );
         let pool = Parallelism::new(2).unwrap();
         assert_eq!(pool.map(&items, square), want);
+        assert_eq!(pool.map_runs(&items, 64, square), want);
+        assert_eq!(sequential.map_runs(&items, 64, square), want);
         let names = pool.map(&items, |_| std::thread::current().name().map(str::to_owned));
         assert!(
             names

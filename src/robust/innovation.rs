@@ -91,13 +91,18 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             exact: vec![true; edges.len()],
             joint: Vec::with_capacity(clusters.len()),
         };
-        for cluster in clusters {
-            // In the map first, then the others.
-            let mut members: Vec<usize> =
-                cluster.iter().copied().filter(|&k| accepted[k]).collect();
-            let a = members.len();
-            members.extend(cluster.iter().copied().filter(|&k| !accepted[k]));
-            let (nu2, joint, exact) = self.cluster(edges, &members, a, members.len() > 1);
+        // In the map first, then the others.
+        let groups: Vec<(Vec<usize>, usize)> = (clusters.iter())
+            .map(|cluster| {
+                let mut members: Vec<usize> =
+                    cluster.iter().copied().filter(|&k| accepted[k]).collect();
+                let a = members.len();
+                members.extend(cluster.iter().copied().filter(|&k| !accepted[k]));
+                (members, a)
+            })
+            .collect();
+        let judged = self.judge_all(edges, &groups, false);
+        for ((members, _), (nu2, joint, exact)) in groups.iter().zip(judged) {
             for (&k, v) in members.iter().zip(nu2) {
                 out.nu2[k] = v;
                 out.exact[k] = exact;
@@ -113,30 +118,44 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     }
 
     /// Makes the innovations of candidates `open` exact (lone candidates
-    /// outside the map). Their blocks of `H⁻¹` come from the selected
-    /// inverse's recurrence, which only reads the factor, so the candidates
-    /// share the solver's threads; those whose recurrence runs over its
-    /// budget fall back to the sparse solve, one after the other. The
-    /// values are those of one candidate at a time, whatever the threads.
+    /// outside the map).
     pub fn refine(&mut self, edges: &[usize], open: &[usize], innov: &mut Innovations) {
-        let open: Vec<usize> = open.iter().copied().filter(|&k| !innov.exact[k]).collect();
-        let this = &*self;
-        let selected = this.optimizer.parallelism().map(&open, |&k| {
-            let lin = this.linearise(edges, &[k]);
-            let system = this.optimizer.system();
-            let budget = this.budget_per_candidate as usize;
-            system
-                .propagate_group_selected(&this.inverse, &lin.jacobians, budget)
-                .map(|gram| judge_cluster(&lin.errors, &lin.covariances, &gram, 0).0[0])
-        });
-        for (&k, nu2) in open.iter().zip(selected) {
-            innov.nu2[k] = nu2.unwrap_or_else(|| {
-                let lin = self.linearise(edges, &[k]);
-                let gram = self.optimizer.system_mut().propagate_group(&lin.jacobians);
-                judge_cluster(&lin.errors, &lin.covariances, &gram, 0).0[0]
-            });
-            innov.exact[k] = true;
+        let groups: Vec<(Vec<usize>, usize)> = (open.iter())
+            .filter(|&&k| !innov.exact[k])
+            .map(|&k| (vec![k], 0))
+            .collect();
+        let judged = self.judge_all(edges, &groups, true);
+        for ((members, _), (nu2, _, _)) in groups.iter().zip(judged) {
+            innov.nu2[members[0]] = nu2[0];
+            innov.exact[members[0]] = true;
         }
+    }
+
+    /// [`Self::cluster_read_only`] of each `(members, a)` of `groups`. What only
+    /// reads the factor and the selected inverse — the recurrence for
+    /// blocks of `H⁻¹` off the pattern, the bound — runs on the solver's
+    /// threads; the clusters whose recurrence runs over its budget get the
+    /// sparse solve after, one after the other. The values are those of one
+    /// cluster at a time, whatever the threads.
+    fn judge_all(
+        &mut self,
+        edges: &[usize],
+        groups: &[(Vec<usize>, usize)],
+        exact: bool,
+    ) -> Vec<Judged> {
+        let this = &*self;
+        let first = this.optimizer.parallelism().map(groups, |(members, a)| {
+            this.cluster_read_only(edges, members, *a, exact || members.len() > 1)
+        });
+        (first.into_iter().zip(groups))
+            .map(|(judged, (_, a))| {
+                judged.unwrap_or_else(|lin| {
+                    let gram = self.optimizer.system_mut().propagate_group(&lin.jacobians);
+                    let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, *a);
+                    (nu2, joint, true)
+                })
+            })
+            .collect()
     }
 
     /// The errors, Jacobians and covariances of candidates `members` at the
@@ -161,18 +180,19 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     }
 
     /// One cluster's members (the first `a` in the map): their `ν²`, the
-    /// joint statistic, and whether they are exact. A lone candidate
+    /// joint statistic, and whether they are exact — or, where that needs
+    /// the sparse solve, the cluster linearised for it. A lone candidate
     /// outside the map off the factor's pattern gets a lower bound unless
-    /// `exact` asks for the solves.
-    fn cluster(
-        &mut self,
+    /// `exact` asks for more.
+    fn cluster_read_only(
+        &self,
         edges: &[usize],
         members: &[usize],
         a: usize,
         exact: bool,
-    ) -> (Vec<Option<f64>>, Option<f64>, bool) {
+    ) -> Result<Judged, Linearised<D>> {
         let lin = self.linearise(edges, members);
-        let system = self.optimizer.system_mut();
+        let system = self.optimizer.system();
         // A lone candidate outside the map gets its bound unless asked for
         // more; else blocks of H⁻¹ off the pattern are worth their
         // recurrence while it costs less than the solve.
@@ -184,20 +204,22 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         };
         if let Some(gram) = system.propagate_group_selected(&self.inverse, &lin.jacobians, budget) {
             let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
-            return (nu2, joint, true);
+            return Ok((nu2, joint, true));
         }
         if bound_will_do {
             let bound = system.propagate_bound(&self.inverse, &lin.jacobians[0]);
             let nu2 = lin.covariances[0]
                 .and_then(|c| (c + bound).cholesky())
                 .map(|c| lin.errors[0].dot(&c.solve(&lin.errors[0])));
-            return (vec![nu2], Some(0.0), false);
+            return Ok((vec![nu2], Some(0.0), false));
         }
-        let gram = system.propagate_group(&lin.jacobians);
-        let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
-        (nu2, joint, true)
+        Err(lin)
     }
 }
+
+/// A cluster's members' `ν²`, its joint statistic, and whether the `ν²`
+/// are exact ([`Innovations`]).
+type Judged = (Vec<Option<f64>>, Option<f64>, bool);
 
 /// Candidates linearised at the map: what their innovations are made of.
 struct Linearised<const D: usize> {
