@@ -372,17 +372,42 @@ fn weighted_e_step(
     mixture: &NormalMixture,
     responsibilities: &mut [f64],
 ) -> f64 {
+    // Per component, once: ln π − ln σ − ln √(2π), 1/σ and μ.
+    let constants: Vec<(f64, f64, f64)> = (mixture.components.iter())
+        .map(|c| {
+            (
+                c.weight.ln() - c.sigma.ln() - LN_SQRT_2PI,
+                1.0 / c.sigma,
+                c.mean,
+            )
+        })
+        .collect();
     let mut log_likelihood = 0.0;
     for ((&v, &t), r) in y
         .iter()
         .zip(times)
         .zip(responsibilities.chunks_exact_mut(mixture.len()))
     {
-        let log_p = mixture.log_terms(v, r);
-        for x in r.iter_mut() {
-            *x = (*x - log_p).exp();
+        for (x, &(c, inv_sigma, mean)) in r.iter_mut().zip(&constants) {
+            let z = (v - mean) * inv_sigma;
+            *x = c - 0.5 * z * z;
         }
-        log_likelihood += t * log_p;
+        let top = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if top == f64::NEG_INFINITY {
+            r.fill(0.0);
+            log_likelihood += t * top;
+            continue;
+        }
+        let mut sum = 0.0;
+        for x in r.iter_mut() {
+            // exp(0) = 1 exactly: the largest term needs no exp.
+            *x = if *x == top { 1.0 } else { (*x - top).exp() };
+            sum += *x;
+        }
+        for x in r.iter_mut() {
+            *x /= sum;
+        }
+        log_likelihood += t * (top + sum.ln());
     }
     log_likelihood
 }
