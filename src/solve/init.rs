@@ -481,56 +481,11 @@ impl ChordalInit<6> for Se3 {
     ) -> Result<(), SolveError> {
         let parallelism = reuse.parallelism.clone();
         let (lp, precision) = reuse.problem(graph, weights, 3..6)?;
-        let n = graph.num_vertices();
-        // Rotations, one row at a time: row_k(R_j) = row_k(R_i)·R_ij, i.e.
-        // ρ_j − R_ijᵀ ρ_i = 0 for the row vectors ρ.
-        // The matrix is the same for the three rows: factorise once, solve
-        // the three right-hand sides together.
-        let len = lp.n_free * 3;
-        let mut x = vec![0.0; 3 * len];
-        let poses = &graph.poses;
-        let term = |row: usize, k: usize, variable: &[Option<usize>]| {
-            let e = &graph.edges[k];
-            // Rotational error in g2o's coordinates is ≈ θ/2, hence the 4.
-            let w = weight(weights, k) * precision[k] / 4.0;
-            if w == 0.0 {
-                return None;
-            }
-            let m = e.measurement.rotation_matrix().transpose();
-            let fixed = |v: usize| poses[v].rotation_matrix().row(row).transpose();
-            let mut c0 = Vector3::zeros();
-            if variable[e.to].is_none() {
-                c0 += fixed(e.to);
-            }
-            if variable[e.from].is_none() {
-                c0 -= m * fixed(e.from);
-            }
-            Some(Term(-m, Matrix3::identity(), c0, Matrix3::identity() * w))
-        };
-        lp.system.clear();
-        lp.add_all(graph.edges.len(), |k, variable| term(0, k, variable));
-        lp.factorize(graph)?;
-        lp.system.gradient_into(&mut x[..len]);
-        for row in 1..3 {
-            lp.system.clear_gradient();
-            for k in 0..graph.edges.len() {
-                if let Some(Term(a_i, a_j, c0, w)) = term(row, k, &lp.variable) {
-                    lp.add_rhs(k, &a_i, &a_j, &c0, &w);
-                }
-            }
-            lp.system.gradient_into(&mut x[row * len..(row + 1) * len]);
-        }
-        lp.system.solve_many(&mut x, 3);
-        let mut rows = vec![Matrix3::<f64>::zeros(); n];
-        for (row, x) in x.chunks_exact(len.max(1)).enumerate() {
-            for (v, r) in rows.iter_mut().enumerate() {
-                if let Some(value) = lp.value(x, v) {
-                    r.set_row(row, &value.transpose());
-                }
-            }
-        }
-        let free: Vec<usize> = (0..n).filter(|&v| lp.variable[v].is_some()).collect();
-        let rotations = parallelism.map(&free, |&v| nearest_rotation(&rows[v]));
+        let rows = spatial_rotation_rows(graph, weights, lp, precision)?;
+        let free: Vec<usize> = (0..graph.num_vertices())
+            .filter(|&v| lp.variable[v].is_some())
+            .collect();
+        let rotations = parallelism.map_runs(&free, 1 << 10, |&v| nearest_rotation(&rows[v]));
         for (&v, q) in free.iter().zip(rotations) {
             graph.poses[v].rotation = q;
         }
@@ -555,13 +510,70 @@ impl ChordalInit<6> for Se3 {
             Some(Term(-rt, rt, c0, omega))
         });
         let x = lp.solve(graph)?;
-        for v in 0..n {
+        for v in 0..graph.num_vertices() {
             if let Some(t) = lp.value(&x, v) {
                 graph.poses[v].translation = t;
             }
         }
         Ok(())
     }
+}
+
+/// The relaxed rotation matrices of a 3D graph (each vertex's; zero for
+/// fixed ones), not yet rotations: one row at a time,
+/// `row_k(R_j) = row_k(R_i)·R_ij`, i.e. `ρ_j − R_ijᵀ ρ_i = 0` for the row
+/// vectors `ρ`. The matrix is the same for the three rows: factorised once,
+/// the three right-hand sides solved together.
+fn spatial_rotation_rows(
+    graph: &PoseGraph<Se3, 6>,
+    weights: Option<&[f64]>,
+    lp: &mut LinearProblem<3>,
+    precision: &[f64],
+) -> Result<Vec<Matrix3<f64>>, SolveError> {
+    let len = lp.n_free * 3;
+    let mut x = vec![0.0; 3 * len];
+    let poses = &graph.poses;
+    let term = |row: usize, k: usize, variable: &[Option<usize>]| {
+        let e = &graph.edges[k];
+        // Rotational error in g2o's coordinates is ≈ θ/2, hence the 4.
+        let w = weight(weights, k) * precision[k] / 4.0;
+        if w == 0.0 {
+            return None;
+        }
+        let m = e.measurement.rotation_matrix().transpose();
+        let fixed = |v: usize| poses[v].rotation_matrix().row(row).transpose();
+        let mut c0 = Vector3::zeros();
+        if variable[e.to].is_none() {
+            c0 += fixed(e.to);
+        }
+        if variable[e.from].is_none() {
+            c0 -= m * fixed(e.from);
+        }
+        Some(Term(-m, Matrix3::identity(), c0, Matrix3::identity() * w))
+    };
+    lp.system.clear();
+    lp.add_all(graph.edges.len(), |k, variable| term(0, k, variable));
+    lp.factorize(graph)?;
+    lp.system.gradient_into(&mut x[..len]);
+    for row in 1..3 {
+        lp.system.clear_gradient();
+        for k in 0..graph.edges.len() {
+            if let Some(Term(a_i, a_j, c0, w)) = term(row, k, &lp.variable) {
+                lp.add_rhs(k, &a_i, &a_j, &c0, &w);
+            }
+        }
+        lp.system.gradient_into(&mut x[row * len..(row + 1) * len]);
+    }
+    lp.system.solve_many(&mut x, 3);
+    let mut rows = vec![Matrix3::<f64>::zeros(); graph.num_vertices()];
+    for (row, x) in x.chunks_exact(len.max(1)).enumerate() {
+        for (v, r) in rows.iter_mut().enumerate() {
+            if let Some(value) = lp.value(x, v) {
+                r.set_row(row, &value.transpose());
+            }
+        }
+    }
+    Ok(rows)
 }
 
 /// The rotation nearest to `m` in the Frobenius norm (`U·Vᵀ` of its SVD,
