@@ -32,7 +32,7 @@
 
 use super::Layers;
 use crate::linear::Parallelism;
-use crate::stats::mixture::NormalComponent;
+use crate::stats::mixture::{NormalComponent, normalize_log_terms};
 use serde::Serialize;
 
 /// One normal population of `y = ln ν²`: its share (among wrong loops; 1
@@ -497,7 +497,6 @@ impl LoopModel {
         let inlier = constants(&self.inlier);
         let outliers: Vec<(f64, f64, f64)> = self.outliers.iter().map(constants).collect();
         let mut terms = [0.0; MAX_WRONG_POPULATIONS + 1];
-        let mut r = [0.0; MAX_WRONG_POPULATIONS + 1];
         // `ln π` and `ln(1 − π)` of each distinct count posterior.
         let ln_priors: Vec<(f64, f64)> = (counts.distinct.iter())
             .map(|&c| {
@@ -520,20 +519,11 @@ impl LoopModel {
                 }
                 1 + outliers.len()
             };
-            let max = terms[..n].iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            let mut sum = 0.0;
-            for t in &mut terms[..n] {
-                // exp(0) = 1 exactly: the largest term needs no exp.
-                *t = if *t == max { 1.0 } else { (*t - max).exp() };
-                sum += *t;
-            }
-            // ln p(y) = max + ln(sum), the logarithms taken of products.
-            ll += max;
+            // ln p(y) = top + ln(sum), the logarithms taken of products.
+            let (top, sum) = normalize_log_terms(&mut terms[..n]);
+            ll += top;
             sums_product.push(sum);
-            for (rj, t) in r[..=k].iter_mut().zip(&terms[..n]) {
-                *rj = t / sum;
-            }
-            sums.add(e, yi, &r[..=k]);
+            sums.add(e, yi, &terms[..=k]);
         }
         ll + sums_product.ln()
     }

@@ -426,8 +426,8 @@ fn judge_exactly<P: Pose<D>, const D: usize>(
     scale: Scale,
     layers: &Layers,
 ) -> (LoopModel, Vec<bool>) {
+    let parallelism = eval.parallelism().clone();
     loop {
-        let parallelism = eval.parallelism().clone();
         let (model, next) = judge(
             candidates,
             innov,

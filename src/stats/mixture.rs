@@ -242,6 +242,28 @@ fn log_sum_exp(terms: &[f64]) -> f64 {
     top + terms.iter().map(|t| (t - top).exp()).sum::<f64>().ln()
 }
 
+/// Turns log-weights `terms` into the weights' shares in place,
+/// `exp(tₖ − top) / sum`, and returns `(top, sum)`, the largest term and
+/// `Σ exp(tₖ − top)`, so that `ln Σ eᵗ = top + ln sum`. The largest term
+/// needs no exponential (`exp(0) = 1` exactly). When every term is −∞ the
+/// shares are 0 and `(−∞, 1)` is returned.
+pub(crate) fn normalize_log_terms(terms: &mut [f64]) -> (f64, f64) {
+    let top = terms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if top == f64::NEG_INFINITY {
+        terms.fill(0.0);
+        return (top, 1.0);
+    }
+    let mut sum = 0.0;
+    for t in terms.iter_mut() {
+        *t = if *t == top { 1.0 } else { (*t - top).exp() };
+        sum += *t;
+    }
+    for t in terms.iter_mut() {
+        *t /= sum;
+    }
+    (top, sum)
+}
+
 /// The Bayesian information criterion `k ln n − 2 ln L` of a mixture of
 /// `components` normals (`k = 3K − 1` free parameters: K means, K σ and
 /// K − 1 weights) with log-likelihood `log_likelihood` on `n` values.
@@ -392,21 +414,7 @@ fn weighted_e_step(
             let z = (v - mean) * inv_sigma;
             *x = c - 0.5 * z * z;
         }
-        let top = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        if top == f64::NEG_INFINITY {
-            r.fill(0.0);
-            log_likelihood += t * top;
-            continue;
-        }
-        let mut sum = 0.0;
-        for x in r.iter_mut() {
-            // exp(0) = 1 exactly: the largest term needs no exp.
-            *x = if *x == top { 1.0 } else { (*x - top).exp() };
-            sum += *x;
-        }
-        for x in r.iter_mut() {
-            *x /= sum;
-        }
+        let (top, sum) = normalize_log_terms(r);
         log_likelihood += t * (top + sum.ln());
     }
     log_likelihood

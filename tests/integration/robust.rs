@@ -427,21 +427,22 @@ fn em_learns_the_scale_of_under_confident_information() {
     assert!(r.chi2_test.as_ref().expect("χ² test").passed);
 }
 
+/// Repeated structure where the map revisits a place: groups of five
+/// consecutive candidates correct for a pose 5–40 steps off, half of them
+/// with true-loop-like counts.
+fn aliased_case(dir: &Path) -> Case {
+    let aliasing = SimulationOptions {
+        group_size: 5,
+        true_like_share: 0.5,
+        ..options(OutlierPolicy::Aliased, 80, 5)
+    };
+    case(dir, "aliased", aliasing)
+}
+
 #[test]
 fn aliasing_at_revisits_is_rejected_and_the_map_is_the_clean_one() {
-    // Repeated structure where the map revisits a place: groups of five
-    // consecutive candidates correct for a pose 5–40 steps off, half of
-    // them with true-loop-like counts.
     let dir = temp_dir("robust-aliasing");
-    let c = case(
-        &dir,
-        "aliased",
-        SimulationOptions {
-            group_size: 5,
-            true_like_share: 0.5,
-            ..options(OutlierPolicy::Aliased, 80, 5)
-        },
-    );
+    let c = aliased_case(&dir);
     let out = dir.join("out.g2o");
     let r = run(&c.noisy, GateMode::Auto, RobustMethod::Em, Some(&out));
     let (tp, fp, _) = counts(&r, &c.wrong);
@@ -459,15 +460,7 @@ fn two_threads_decide_and_solve_exactly_as_one() {
     // decisions, the weights and every bit of the map stay those of one
     // thread.
     let dir = temp_dir("robust-threads");
-    let c = case(
-        &dir,
-        "aliased",
-        SimulationOptions {
-            group_size: 5,
-            true_like_share: 0.5,
-            ..options(OutlierPolicy::Aliased, 80, 5)
-        },
-    );
+    let c = aliased_case(&dir);
     let run_on = |threads: usize| {
         let out = dir.join(format!("out-{threads}.g2o"));
         let mut config = OptimizeConfig {
