@@ -250,34 +250,50 @@ impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
             .fold(0.0, |a, b| a + b)
     }
 
+    /// Each edge's `eᵀΩe`, each pose prepared once (summed in edge order
+    /// from +0, the same bits as [`Self::chi2_where`]).
+    pub fn edge_chi2s(&self) -> Vec<f64> {
+        let prepared: Vec<P::Prepared> = self.poses.iter().map(|p| p.prepare()).collect();
+        (self.edges.iter())
+            .map(|e| {
+                let z = e.measurement.prepare();
+                let r = P::error_prepared(&prepared[e.from], &prepared[e.to], &z);
+                r.dot(&(e.information * r))
+            })
+            .collect()
+    }
+
     /// The vertices that no chain of edges connects to the gauge, by index,
     /// in increasing order. A non-empty result means the problem has no
     /// unique solution. Edges whose weight (one per edge) is zero do not
     /// count.
     pub fn unconstrained_vertices(&self, weights: Option<&[f64]>) -> Vec<usize> {
+        // Union–find over the edges (by index, path halving): one array,
+        // where lists of neighbours would allocate one vector per vertex.
         let n = self.ids.len();
-        let mut adjacency: Vec<Vec<usize>> = vec![Vec::new(); n];
+        let mut parent: Vec<usize> = (0..n).collect();
+        let root = |parent: &mut [usize], mut v: usize| {
+            while parent[v] != v {
+                parent[v] = parent[parent[v]];
+                v = parent[v];
+            }
+            v
+        };
         for (k, e) in self.edges.iter().enumerate() {
             if weights.is_some_and(|w| w[k] == 0.0) {
                 continue;
             }
-            adjacency[e.from].push(e.to);
-            adjacency[e.to].push(e.from);
+            let (a, b) = (root(&mut parent, e.from), root(&mut parent, e.to));
+            parent[a.max(b)] = a.min(b);
         }
-        let mut seen = vec![false; n];
-        let mut queue: Vec<usize> = self.gauge();
-        for &g in &queue {
-            seen[g] = true;
+        let mut anchored = vec![false; n];
+        for g in self.gauge() {
+            let r = root(&mut parent, g);
+            anchored[r] = true;
         }
-        while let Some(v) = queue.pop() {
-            for &w in &adjacency[v] {
-                if !seen[w] {
-                    seen[w] = true;
-                    queue.push(w);
-                }
-            }
-        }
-        (0..n).filter(|&k| !seen[k]).collect()
+        (0..n)
+            .filter(|&k| !anchored[root(&mut parent, k)])
+            .collect()
     }
 }
 
@@ -430,6 +446,28 @@ mod tests {
             .map(|&k| g.id(k))
             .collect();
         assert_eq!(ids, vec![10, 11, 12]);
+    }
+
+    #[test]
+    fn zero_weights_cut_and_every_fixed_vertex_anchors_its_part() {
+        // 0-1-2-3 in a line, 4-5 joined to it by edge 5 (5 → 2) and to
+        // nothing else; 6 alone, fixed.
+        let mut g = line_graph(4);
+        let i = Matrix3::identity();
+        for k in 4..7 {
+            g.add_vertex(k, Se2::identity()).unwrap();
+        }
+        g.add_edge(4, 5, Se2::identity(), i, None).unwrap();
+        g.add_edge(5, 2, Se2::identity(), i, None).unwrap();
+        let mut w = vec![1.0; g.edges.len()];
+        assert_eq!(g.unconstrained_vertices(Some(&w)), vec![6]);
+        w[1] = 0.0; // 1-2 cut: 2, 3, 4 and 5 hang from nothing
+        assert_eq!(g.unconstrained_vertices(Some(&w)), vec![2, 3, 4, 5, 6]);
+        g.fix(6).unwrap(); // the gauge is the fixed vertices only
+        assert_eq!(g.unconstrained_vertices(Some(&w)), vec![0, 1, 2, 3, 4, 5]);
+        g.fix(4).unwrap();
+        assert_eq!(g.unconstrained_vertices(Some(&w)), vec![0, 1]);
+        assert!(g.unconstrained_vertices(None).is_empty());
     }
 
     #[test]

@@ -111,7 +111,10 @@ where
             path: config.input.clone(),
         });
     }
-    match chi2_test(graph, weights, config) {
+    // One pass over the edges at the final map serves the test and the
+    // report.
+    let edge_chi2 = graph.edge_chi2s();
+    match test_of(&edge_chi2, graph, weights, config) {
         Ok(t) => report.chi2_test = Some(t),
         Err(e) => report.warnings.push(format!("no χ² test: {e}")),
     }
@@ -119,7 +122,7 @@ where
         graph,
         optimizer,
         summary,
-        initial_chi2,
+        (initial_chi2, sum(edge_chi2.iter().copied())),
         candidates,
         &outcome,
         kind,
@@ -137,22 +140,35 @@ pub fn chi2_test<P: G2oPose<D>, const D: usize>(
     weights: &[f64],
     config: &OptimizeConfig,
 ) -> Result<Chi2Test, StatsError> {
+    test_of(&graph.edge_chi2s(), graph, weights, config)
+}
+
+/// [`chi2_test`] from each edge's χ² at the map (`edge_chi2`).
+fn test_of<P: G2oPose<D>, const D: usize>(
+    edge_chi2: &[f64],
+    graph: &PoseGraph<P, D>,
+    weights: &[f64],
+    config: &OptimizeConfig,
+) -> Result<Chi2Test, StatsError> {
     let in_map = |k: usize| weights[k] >= 0.5;
     let used = (0..weights.len()).filter(|&k| in_map(k)).count();
-    let d2 = graph.chi2_where(in_map);
+    let d2 = sum((0..weights.len())
+        .filter(|&k| in_map(k))
+        .map(|k| edge_chi2[k]));
     let free = graph.num_vertices() - graph.gauge().len();
     let dof_residual = (used * D) as i64 - (free * D) as i64;
     Chi2Test::new(d2, used as u64, dof_residual, config.dof, config.alpha)
 }
 
 /// Fills the optimiser's, the robust back end's and every loop's part of
-/// the report.
+/// the report (`(initial_chi2, final_chi2)`: the χ² of every edge at the
+/// start and at the map).
 #[allow(clippy::too_many_arguments)]
 pub fn report<P: G2oPose<D>, const D: usize>(
     graph: &PoseGraph<P, D>,
     optimizer: &Optimizer<P, D>,
     summary: Option<Summary>,
-    initial_chi2: f64,
+    (initial_chi2, final_chi2): (f64, f64),
     candidates: &[Candidate],
     outcome: &Outcome,
     method: RobustMethod,
@@ -164,7 +180,7 @@ pub fn report<P: G2oPose<D>, const D: usize>(
         report.optimizer = OptimizerReport::new(
             summary,
             initial_chi2,
-            graph.chi2(),
+            final_chi2,
             optimizer.system(),
             optimizer.max_nnz_factor(),
         );
@@ -172,7 +188,7 @@ pub fn report<P: G2oPose<D>, const D: usize>(
         // No solver run (a budget spent before the first): the map is the
         // one it started from.
         report.optimizer.initial_chi2 = initial_chi2;
-        report.optimizer.final_chi2 = graph.chi2();
+        report.optimizer.final_chi2 = final_chi2;
     }
     let accepted = outcome.accepted.iter().filter(|&&a| a).count();
     report.robust = RobustReport {
@@ -277,4 +293,9 @@ pub fn plot<P: G2oPose<D>, const D: usize>(
     )?;
     report.plots.push(path.display().to_string());
     Ok(())
+}
+
+/// A sum in the order given, from +0 ([`PoseGraph::chi2_where`]'s bits).
+fn sum(values: impl Iterator<Item = f64>) -> f64 {
+    values.fold(0.0, |a, b| a + b)
 }
