@@ -9,16 +9,6 @@ mod convert;
 mod graph;
 mod solution;
 
-/// mimalloc serves the module's Rust allocations (Python's own keep
-/// pymalloc). An update builds the solver's buffers afresh, a factor's worth
-/// of memory each time; the system allocator hands large blocks back to
-/// the kernel and faults them in again on the next update, where mimalloc
-/// keeps them. The same maps, bit for bit; a replay of manhattanOlson3500
-/// in steps of 10 poses took 12 % less time (`examples/replay` with either
-/// allocator, best of four runs).
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 use graph::PoseGraph;
 use pyo3::prelude::*;
 use solution::Solution;
