@@ -237,30 +237,28 @@ impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
     /// once (the same sum, bit for bit, as adding [`Self::edge_chi2`] in
     /// edge order).
     pub fn chi2_where(&self, keep: impl Fn(usize) -> bool) -> f64 {
-        let prepared: Vec<P::Prepared> = self.poses.iter().map(|p| p.prepare()).collect();
         // Folded from +0 (`sum` starts from -0, which an edgeless graph
         // would report as "-0").
-        (self.edges.iter().enumerate())
-            .filter(|&(k, _)| keep(k))
-            .map(|(_, e)| {
-                let z = e.measurement.prepare();
-                let r = P::error_prepared(&prepared[e.from], &prepared[e.to], &z);
-                r.dot(&(e.information * r))
-            })
-            .fold(0.0, |a, b| a + b)
+        self.chi2s(keep).fold(0.0, |a, b| a + b)
     }
 
     /// Each edge's `eᵀΩe`, each pose prepared once (summed in edge order
     /// from +0, the same bits as [`Self::chi2_where`]).
     pub fn edge_chi2s(&self) -> Vec<f64> {
+        self.chi2s(|_| true).collect()
+    }
+
+    /// `eᵀΩe` of the edges `k` for which `keep(k)`, in edge order, each pose
+    /// prepared once.
+    fn chi2s(&self, keep: impl Fn(usize) -> bool) -> impl Iterator<Item = f64> {
         let prepared: Vec<P::Prepared> = self.poses.iter().map(|p| p.prepare()).collect();
-        (self.edges.iter())
-            .map(|e| {
+        (self.edges.iter().enumerate())
+            .filter(move |&(k, _)| keep(k))
+            .map(move |(_, e)| {
                 let z = e.measurement.prepare();
                 let r = P::error_prepared(&prepared[e.from], &prepared[e.to], &z);
                 r.dot(&(e.information * r))
             })
-            .collect()
     }
 
     /// The vertices that no chain of edges connects to the gauge, by index,

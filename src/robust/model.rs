@@ -32,7 +32,7 @@
 
 use super::Layers;
 use crate::linear::Parallelism;
-use crate::stats::mixture::{NormalComponent, normalize_log_terms};
+use crate::stats::mixture::{NormalComponent, log_sum_exp, normalize_log_terms};
 use serde::Serialize;
 
 /// One normal population of `y = ln ν²`: its share (among wrong loops; 1
@@ -165,15 +165,6 @@ fn trigamma(mut x: f64) -> f64 {
     acc + 1.0 / x
         + x2 / 2.0
         + (1.0 / x) * x2 * (1.0 / 6.0 - x2 * (1.0 / 30.0 - x2 * (1.0 / 42.0 - x2 / 30.0)))
-}
-
-/// `ln Σ exp(x)`.
-fn ln_sum_exp(x: impl Iterator<Item = f64> + Clone) -> f64 {
-    let m = x.clone().fold(f64::NEG_INFINITY, f64::max);
-    if m == f64::NEG_INFINITY {
-        return m;
-    }
-    m + x.map(|v| (v - m).exp()).sum::<f64>().ln()
 }
 
 /// `ln Π xᵢ` of factors `xᵢ ≥ 1` (each term's share of a log-sum-exp):
@@ -533,7 +524,7 @@ impl LoopModel {
         if self.outliers.is_empty() {
             return -self.span.ln();
         }
-        ln_sum_exp(self.outliers.iter().map(|o| o.log_weighted_density(y)))
+        log_sum_exp(self.outliers.iter().map(|o| o.log_weighted_density(y)))
     }
 
     /// `ln f_in(y) − ln f_out(y)`.

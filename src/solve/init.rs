@@ -295,18 +295,11 @@ impl<const D: usize> LinearProblem<D> {
         }
     }
 
-    /// Adds only the right-hand side of edge `k` (the matrix is unchanged).
-    fn add_rhs(
-        &mut self,
-        k: usize,
-        a_i: &SMatrix<f64, D, D>,
-        a_j: &SMatrix<f64, D, D>,
-        c: &SVector<f64, D>,
-        w: &SMatrix<f64, D, D>,
-    ) {
-        let wc = w * c;
-        self.system
-            .add_edge_gradient(k, &(a_i.transpose() * wc), &(a_j.transpose() * wc));
+    /// Adds only the right-hand side of edge `k`'s `term` (the matrix is
+    /// unchanged).
+    fn add_rhs(&mut self, k: usize, term: &Term<D>) {
+        let (b_i, b_j) = term.gradient();
+        self.system.add_edge_gradient(k, &b_i, &b_j);
     }
 
     /// Factorises the assembled matrix.
@@ -356,20 +349,45 @@ struct Term<const D: usize>(
 );
 
 impl<const D: usize> Term<D> {
+    /// This term of the edge `i → j`, with each end that has no variable
+    /// block (`variable`) folded into `c` at its value `x(v)`.
+    fn fixing_ends(
+        mut self,
+        (i, j): (usize, usize),
+        variable: &[Option<usize>],
+        x: impl Fn(usize) -> SVector<f64, D>,
+    ) -> Self {
+        let Self(a_i, a_j, c, _) = &mut self;
+        if variable[j].is_none() {
+            *c += *a_j * x(j);
+        }
+        if variable[i].is_none() {
+            *c += *a_i * x(i);
+        }
+        self
+    }
+
     /// Its blocks of the normal equations.
     fn blocks(&self) -> NormalBlocks<D> {
-        let Self(a_i, a_j, c, w) = self;
+        let Self(a_i, a_j, _, w) = self;
         let wa_i = w * a_i;
         let wa_j = w * a_j;
-        let wc = w * c;
+        let (b_i, b_j) = self.gradient();
         NormalBlocks {
             h_ii: a_i.transpose() * wa_i,
             h_ij: a_i.transpose() * wa_j,
             h_jj: a_j.transpose() * wa_j,
-            b_i: a_i.transpose() * wc,
-            b_j: a_j.transpose() * wc,
+            b_i,
+            b_j,
             chi2: 0.0,
         }
+    }
+
+    /// Its blocks of the right-hand side, `AᵢᵀWc` and `AⱼᵀWc`.
+    fn gradient(&self) -> (SVector<f64, D>, SVector<f64, D>) {
+        let Self(a_i, a_j, c, w) = self;
+        let wc = w * c;
+        (a_i.transpose() * wc, a_j.transpose() * wc)
     }
 }
 
@@ -420,18 +438,18 @@ impl ChordalInit<3> for Se2 {
             }
             let (s, c) = e.measurement.theta.sin_cos();
             let m = Matrix2::new(c, -s, s, c);
-            let fixed = |v: usize| {
-                let (s, c) = graph.poses[v].theta.sin_cos();
-                Vector2::new(c, s)
-            };
-            let mut c0 = Vector2::zeros();
-            if variable[e.to].is_none() {
-                c0 += fixed(e.to);
-            }
-            if variable[e.from].is_none() {
-                c0 -= m * fixed(e.from);
-            }
-            Some(Term(-m, Matrix2::identity(), c0, Matrix2::identity() * w))
+            Some(
+                Term(
+                    -m,
+                    Matrix2::identity(),
+                    Vector2::zeros(),
+                    Matrix2::identity() * w,
+                )
+                .fixing_ends((e.from, e.to), variable, |v| {
+                    let (s, c) = graph.poses[v].theta.sin_cos();
+                    Vector2::new(c, s)
+                }),
+            )
         });
         let x = lp.solve(graph)?;
         for v in 0..graph.num_vertices() {
@@ -451,14 +469,13 @@ impl ChordalInit<3> for Se2 {
             let omega = e.information.fixed_view::<2, 2>(0, 0).clone_owned() * w;
             let (s, c) = poses[e.from].theta.sin_cos();
             let rt = Matrix2::new(c, s, -s, c);
-            let mut c0 = -e.measurement.translation();
-            if variable[e.to].is_none() {
-                c0 += rt * poses[e.to].translation();
-            }
-            if variable[e.from].is_none() {
-                c0 -= rt * poses[e.from].translation();
-            }
-            Some(Term(-rt, rt, c0, omega))
+            Some(
+                Term(-rt, rt, -e.measurement.translation(), omega).fixing_ends(
+                    (e.from, e.to),
+                    variable,
+                    |v| poses[v].translation(),
+                ),
+            )
         });
         let x = lp.solve(graph)?;
         for v in 0..graph.num_vertices() {
@@ -500,14 +517,13 @@ impl ChordalInit<6> for Se3 {
             }
             let omega = e.information.fixed_view::<3, 3>(0, 0).clone_owned() * w;
             let rt = poses[e.from].rotation_matrix().transpose();
-            let mut c0 = -e.measurement.translation;
-            if variable[e.to].is_none() {
-                c0 += rt * poses[e.to].translation;
-            }
-            if variable[e.from].is_none() {
-                c0 -= rt * poses[e.from].translation;
-            }
-            Some(Term(-rt, rt, c0, omega))
+            Some(
+                Term(-rt, rt, -e.measurement.translation, omega).fixing_ends(
+                    (e.from, e.to),
+                    variable,
+                    |v| poses[v].translation,
+                ),
+            )
         });
         let x = lp.solve(graph)?;
         for v in 0..graph.num_vertices() {
@@ -541,15 +557,17 @@ fn spatial_rotation_rows(
             return None;
         }
         let m = e.measurement.rotation_matrix().transpose();
-        let fixed = |v: usize| poses[v].rotation_matrix().row(row).transpose();
-        let mut c0 = Vector3::zeros();
-        if variable[e.to].is_none() {
-            c0 += fixed(e.to);
-        }
-        if variable[e.from].is_none() {
-            c0 -= m * fixed(e.from);
-        }
-        Some(Term(-m, Matrix3::identity(), c0, Matrix3::identity() * w))
+        Some(
+            Term(
+                -m,
+                Matrix3::identity(),
+                Vector3::zeros(),
+                Matrix3::identity() * w,
+            )
+            .fixing_ends((e.from, e.to), variable, |v| {
+                poses[v].rotation_matrix().row(row).transpose()
+            }),
+        )
     };
     lp.system.clear();
     lp.add_all(graph.edges.len(), |k, variable| term(0, k, variable));
@@ -558,8 +576,8 @@ fn spatial_rotation_rows(
     for row in 1..3 {
         lp.system.clear_gradient();
         for k in 0..graph.edges.len() {
-            if let Some(Term(a_i, a_j, c0, w)) = term(row, k, &lp.variable) {
-                lp.add_rhs(k, &a_i, &a_j, &c0, &w);
+            if let Some(t) = term(row, k, &lp.variable) {
+                lp.add_rhs(k, &t);
             }
         }
         lp.system.gradient_into(&mut x[row * len..(row + 1) * len]);

@@ -217,7 +217,7 @@ impl NormalMixture {
         for (t, c) in terms.iter_mut().zip(&self.components) {
             *t = c.log_weighted_density(y);
         }
-        log_sum_exp(terms)
+        log_sum_exp(terms.iter().copied())
     }
 
     fn max_abs_change(&self, other: &NormalMixture) -> f64 {
@@ -229,17 +229,14 @@ impl NormalMixture {
     }
 }
 
-/// `ln Σ eᵗ` of non-empty `terms`, shifted by the largest so that nothing
-/// overflows or underflows; −∞ when every term is.
-fn log_sum_exp(terms: &[f64]) -> f64 {
-    let Some((&first, rest)) = terms.split_first() else {
-        return f64::NEG_INFINITY;
-    };
-    let top = rest.iter().copied().fold(first, f64::max);
+/// `ln Σ eᵗ` of `terms`, shifted by the largest so that nothing overflows
+/// or underflows; −∞ when there are none or every term is.
+pub(crate) fn log_sum_exp(terms: impl Iterator<Item = f64> + Clone) -> f64 {
+    let top = terms.clone().fold(f64::NEG_INFINITY, f64::max);
     if top == f64::NEG_INFINITY {
         return top;
     }
-    top + terms.iter().map(|t| (t - top).exp()).sum::<f64>().ln()
+    top + terms.map(|t| (t - top).exp()).sum::<f64>().ln()
 }
 
 /// Turns log-weights `terms` into the weights' shares in place,
