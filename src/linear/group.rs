@@ -102,7 +102,7 @@ impl<const D: usize> BlockSystem<D> {
         budget: usize,
     ) -> Option<DMatrix<f64>> {
         let m = edges.len();
-        let mut memo = OffPatternBlocks::new();
+        let mut memo = OffPatternBlocks::default();
         let mut budget = budget;
         let mut inverse_block = |p: usize, q: usize| {
             self.symbolic.inverse_block_anywhere(

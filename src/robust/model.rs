@@ -33,6 +33,7 @@
 use super::Layers;
 use crate::linear::Parallelism;
 use crate::stats::mixture::{NormalComponent, log_sum_exp, normalize_log_terms};
+use crate::stats::squarem;
 use serde::Serialize;
 
 /// One normal population of `y = ln ν²`: its share (among wrong loops; 1
@@ -412,22 +413,86 @@ impl LoopModel {
             r[c] = 1.0;
             sums.add(e, yi, &r[..=k]);
         }
-        let mut model = Self::empty(y, floor);
-        let mut last = f64::NEG_INFINITY;
-        for _ in 0..MAX_ITERATIONS {
-            model = Self::m_step(&sums, k, floor, model.span);
+        let span = Self::empty(y, floor).span;
+        // One EM iteration: the M-step from a model's sums, then the E-step
+        // of the model it gives (its log-likelihood, and its sums).
+        let e_step = |mut model: Self| {
+            let mut sums = Sums::new(pinned);
+            model.ln_likelihood = model.e_step((evidence, counts), y, k, &mut sums);
+            (model, sums)
+        };
+        let iterate = |sums: &Sums| {
+            let mut model = Self::m_step(sums, k, floor, span);
             if !aliasing {
                 model.aliasing_rate = 0.0;
             }
-            sums = Sums::new(pinned);
-            let ll = model.e_step((evidence, counts), y, k, &mut sums);
-            model.ln_likelihood = ll;
-            if (ll - last).abs() < TOLERANCE {
-                break;
+            e_step(model)
+        };
+        let settled = |a: &Self, b: &Self| (b.ln_likelihood - a.ln_likelihood).abs() < TOLERANCE;
+        let mut at = iterate(&sums);
+        let mut iterations = 1;
+        // Cycles of two EM iterations and a SQUAREM jump along them, kept
+        // if no less likely than the second ([`crate::stats::squarem`]).
+        while iterations + 2 <= MAX_ITERATIONS {
+            let first = iterate(&at.1);
+            if settled(&at.0, &first.0) {
+                return Some(first.0);
             }
-            last = ll;
+            let second = iterate(&first.1);
+            iterations += 2;
+            if settled(&first.0, &second.0) {
+                return Some(second.0);
+            }
+            let path = [&at.0, &first.0, &second.0].map(|m| m.parameters());
+            at = squarem::jumps(&path[0], &path[1], &path[2])
+                .filter_map(|theta| second.0.with_parameters(&theta, floor, aliasing))
+                .map(e_step)
+                .find(|jump| jump.0.ln_likelihood >= second.0.ln_likelihood)
+                .unwrap_or(second);
         }
-        Some(model)
+        Some(at.0)
+    }
+
+    /// The fitted parameters in one vector: the true loops' mean and
+    /// spread, each wrong population's share, mean and spread, and the two
+    /// rates.
+    fn parameters(&self) -> Vec<f64> {
+        let mut theta = vec![self.inlier.mean, self.inlier.sigma];
+        for o in &self.outliers {
+            theta.extend([o.weight, o.mean, o.sigma]);
+        }
+        theta.extend([self.aliasing_rate, self.inlier_share]);
+        theta
+    }
+
+    /// This model with the parameters `theta` ([`LoopModel::parameters`]),
+    /// if they make one: shares in (0, 1], rates in (0, 1) (the aliasing
+    /// rate 0 when `aliasing` is off), spreads at least `floor`, everything
+    /// finite.
+    fn with_parameters(&self, theta: &[f64], floor: f64, aliasing: bool) -> Option<Self> {
+        let (&[mean, sigma], rest) = theta.split_first_chunk::<2>()?;
+        let (populations, &[aliasing_rate, inlier_share]) = rest.split_last_chunk::<2>()?;
+        let population = |weight, mean, sigma| Population {
+            weight,
+            mean,
+            sigma,
+        };
+        let model = Self {
+            inlier: population(1.0, mean, sigma),
+            outliers: (populations.chunks_exact(3))
+                .map(|p| population(p[0], p[1], p[2]))
+                .collect(),
+            aliasing_rate,
+            inlier_share,
+            ..self.clone()
+        };
+        let spread = |p: &Population| p.mean.is_finite() && p.sigma >= floor && p.sigma.is_finite();
+        let share = |x: f64| x > 0.0 && x < 1.0;
+        let valid = spread(&model.inlier)
+            && (model.outliers.iter()).all(|p| spread(p) && p.weight > 0.0 && p.weight <= 1.0)
+            && (share(aliasing_rate) || aliasing_rate == 0.0 && !aliasing)
+            && share(inlier_share);
+        valid.then_some(model)
     }
 
     /// The parameters that maximise the expected log-likelihood under the

@@ -4,10 +4,9 @@
 use crate::geometry::{Pose, Se2, Se3};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use rand::Rng;
+use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
 use std::f64::consts::{FRAC_PI_2, PI};
-use std::hash::{BuildHasherDefault, Hasher};
 
 /// the overlap of consecutive poses is not mistaken for a loop.
 pub const MIN_LOOP_SEPARATION: usize = 10;
@@ -198,41 +197,14 @@ pub(super) struct SpatialHash {
     /// Point indices sorted by (cell, index).
     order: Vec<usize>,
     /// Each occupied cell's range in `order`.
-    ranges: HashMap<Cell, (usize, usize), BuildHasherDefault<CellHasher>>,
+    /// (Fx hashing: the loop search makes up to 27 look-ups per pose, and
+    /// SipHash's resistance to crafted keys is not needed for coordinates
+    /// computed here.)
+    ranges: FxHashMap<Cell, (usize, usize)>,
 }
 
 /// Integer coordinates of a cell of a [`SpatialHash`].
 type Cell = (i64, i64, i64);
-
-/// A multiplicative (Fx-style) hash of cell coordinates: the loop search
-/// makes up to 27 look-ups per pose, and SipHash's resistance to crafted
-/// keys is not needed for coordinates computed here.
-#[derive(Default)]
-struct CellHasher(u64);
-
-impl CellHasher {
-    const SEED: u64 = 0x51_7c_c1_b7_27_22_0a_95;
-
-    fn add(&mut self, word: u64) {
-        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(Self::SEED);
-    }
-}
-
-impl Hasher for CellHasher {
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.add(u64::from(b));
-        }
-    }
-
-    fn write_i64(&mut self, value: i64) {
-        self.add(value as u64);
-    }
-
-    fn finish(&self) -> u64 {
-        self.0
-    }
-}
 
 impl SpatialHash {
     pub(super) fn new(points: &[Vector3<f64>], cell: f64) -> Self {
@@ -243,7 +215,7 @@ impl SpatialHash {
             .map(|(k, p)| (Self::key(cell, p), k))
             .collect();
         keyed.sort_unstable();
-        let mut ranges = HashMap::default();
+        let mut ranges = FxHashMap::default();
         let mut start = 0;
         for k in 1..=keyed.len() {
             if k == keyed.len() || keyed[k].0 != keyed[start].0 {

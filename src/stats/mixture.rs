@@ -13,6 +13,7 @@
 //!   and the best fit that did not collapse wins ([`best_fit`]).
 //! * [`bic`] compares fits with different numbers of components.
 
+use super::squarem;
 use serde::Serialize;
 
 /// `ln √(2π)`, the constant of the normal log-density.
@@ -301,14 +302,21 @@ pub struct EmFit {
     pub log_likelihood: f64,
 }
 
-/// EM on `y` from `start` until no parameter changes by more than the
-/// tolerance or the iteration limit is hit. Each iteration is an E-step
-/// (the posteriors of the components) and an M-step (each component's
-/// weight, mean, and variance around that new mean, floored).
+/// EM on `y` from `start` until an iteration changes no parameter by more
+/// than the tolerance, or the iteration limit is hit. Each iteration is an
+/// E-step (the posteriors of the components) and an M-step (each
+/// component's weight, mean, and variance around that new mean, floored).
+///
+/// The iterations are accelerated by SQUAREM ([`squarem`]): every third
+/// starts from a jump along the path of the two before, kept if it is a
+/// valid mixture no less likely than the first of them; the fixed points
+/// are EM's own, reached in a fraction of the iterations where the
+/// components overlap.
 ///
 /// `None` when an M-step finds a component with no weight or a non-finite
-/// parameter. `observe` sees the log-likelihood before every M-step, then
-/// that of the final mixture; EM never lets it decrease (up to rounding).
+/// parameter. `observe` sees the log-likelihood at the start of every
+/// cycle of three EM iterations (`θ`), then that of the final mixture; it
+/// never decreases (up to rounding).
 ///
 /// ```ignore
 /// use pgo::stats::mixture::{em, quantile_start, EmOptions};
@@ -324,28 +332,41 @@ pub fn em(
     options: &EmOptions,
     mut observe: impl FnMut(f64),
 ) -> Option<EmFit> {
-    let floor = options.floor();
-    let k = start.len();
-    let mut mixture = start;
     // Inlier counts repeat: EM over the distinct values, each weighed by
     // how often it occurs, is EM over `y` at a fraction of the cost.
     let (values, times) = tally(y);
-    let mut responsibilities = vec![0.0; values.len() * k];
+    let mut run = EmRun {
+        values: &values,
+        times: &times,
+        responsibilities: vec![0.0; values.len() * start.len()],
+        floor: options.floor(),
+        tolerance: options.tolerance,
+        iterations: 0,
+    };
+    let mut mixture = start;
     let mut converged = false;
-    let mut iterations = 0;
-    while iterations < options.max_iterations {
-        iterations += 1;
-        observe(weighted_e_step(
-            &values,
-            &times,
-            &mixture,
-            &mut responsibilities,
-        ));
-        let next = weighted_m_step(&values, &times, &responsibilities, k, floor)?;
-        let change = mixture.max_abs_change(&next);
+    'cycles: while run.iterations < options.max_iterations {
+        // Two EM iterations, each of which may end the fit.
+        let mut path = [mixture.clone(), mixture.clone(), mixture.clone()];
+        let mut ll0 = f64::NEG_INFINITY;
+        for i in 0..2 {
+            let (ll, next, done) = run.step(&path[i])?;
+            if i == 0 {
+                observe(ll);
+                ll0 = ll;
+            }
+            path[i + 1] = next;
+            converged = done;
+            if done || run.iterations >= options.max_iterations {
+                mixture = path[i + 1].clone();
+                break 'cycles;
+            }
+        }
+        // The extrapolation, then the EM iteration from it.
+        let (next, done) = run.extrapolated_step(&path, ll0)?;
         mixture = next;
-        if change < options.tolerance {
-            converged = true;
+        converged = done;
+        if done {
             break;
         }
     }
@@ -353,10 +374,97 @@ pub fn em(
     observe(log_likelihood);
     Some(EmFit {
         mixture,
-        iterations,
+        iterations: run.iterations,
         converged,
         log_likelihood,
     })
+}
+
+/// The data and workspace of an [`em`] run.
+struct EmRun<'a> {
+    values: &'a [f64],
+    times: &'a [f64],
+    responsibilities: Vec<f64>,
+    floor: f64,
+    tolerance: f64,
+    iterations: usize,
+}
+
+impl EmRun<'_> {
+    /// The log-likelihood of `mixture` (its E-step).
+    fn e_step(&mut self, mixture: &NormalMixture) -> f64 {
+        weighted_e_step(self.values, self.times, mixture, &mut self.responsibilities)
+    }
+
+    /// The M-step after the last E-step, from `from`: the next mixture and
+    /// whether it moved no parameter by more than the tolerance.
+    fn m_step(&mut self, from: &NormalMixture) -> Option<(NormalMixture, bool)> {
+        self.iterations += 1;
+        let k = from.len();
+        let next = weighted_m_step(
+            self.values,
+            self.times,
+            &self.responsibilities,
+            k,
+            self.floor,
+        )?;
+        let done = from.max_abs_change(&next) < self.tolerance;
+        Some((next, done))
+    }
+
+    /// One EM iteration from `mixture`: its log-likelihood, the next
+    /// mixture, and whether the iteration converged.
+    fn step(&mut self, mixture: &NormalMixture) -> Option<(f64, NormalMixture, bool)> {
+        let ll = self.e_step(mixture);
+        let (next, done) = self.m_step(mixture)?;
+        Some((ll, next, done))
+    }
+
+    /// The EM iteration from SQUAREM's jump after `θ → θ₁ → θ₂` (`path`,
+    /// [`squarem::jumps`]), the first that is a valid mixture at least as
+    /// likely as `θ` (log-likelihood `ll0`), else from `θ₂`: the next
+    /// mixture, and whether the iteration converged.
+    fn extrapolated_step(
+        &mut self,
+        path: &[NormalMixture; 3],
+        ll0: f64,
+    ) -> Option<(NormalMixture, bool)> {
+        let [t0, t1, t2] = path.each_ref().map(parameters);
+        for theta in squarem::jumps(&t0, &t1, &t2) {
+            if let Some(jump) = from_parameters(&theta, self.floor)
+                && self.e_step(&jump) >= ll0
+            {
+                return self.m_step(&jump);
+            }
+        }
+        let (_, next, done) = self.step(&path[2])?;
+        Some((next, done))
+    }
+}
+
+/// A mixture's parameters in one vector: π, μ, σ of each component.
+fn parameters(mixture: &NormalMixture) -> Vec<f64> {
+    (mixture.components.iter())
+        .flat_map(|c| [c.weight, c.mean, c.sigma])
+        .collect()
+}
+
+/// The mixture of the parameters `theta` ([`parameters`]), if every weight
+/// is positive, every σ at least `√floor` and everything finite.
+fn from_parameters(theta: &[f64], floor: f64) -> Option<NormalMixture> {
+    let components: Vec<NormalComponent> = theta
+        .chunks_exact(3)
+        .map(|c| NormalComponent {
+            weight: c[0],
+            mean: c[1],
+            sigma: c[2],
+        })
+        .collect();
+    let valid = |c: &NormalComponent| c.is_valid() && c.sigma * c.sigma >= floor;
+    components
+        .iter()
+        .all(valid)
+        .then_some(NormalMixture { components })
 }
 
 /// The distinct values of `y`, sorted, and how often each occurs.

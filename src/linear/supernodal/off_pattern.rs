@@ -19,12 +19,12 @@
 
 use super::Symbolic;
 use nalgebra::SMatrix;
-use std::collections::HashMap;
+use rustc_hash::FxHashMap;
 
 /// Blocks of `Z` computed off the pattern, by `(row, column)` in
 /// elimination positions (row after column).
 pub(in crate::linear) type OffPatternBlocks<const D: usize> =
-    HashMap<(u32, u32), SMatrix<f64, D, D>>;
+    FxHashMap<(u32, u32), SMatrix<f64, D, D>>;
 
 impl<const D: usize> Symbolic<D> {
     /// Block `(row, col)` of `Z = H⁻¹` (elimination positions) from the

@@ -313,8 +313,11 @@ fn collapsed_fits_lose_even_with_a_higher_likelihood() {
     let normal = Normal::new(-2.0, 0.3).unwrap();
     let mut y: Vec<f64> = (0..50).map(|_| normal.sample(&mut rng)).collect();
     y.push(-1.0);
+    // Cut short, the broad start below is still two broad components;
+    // left to run, EM walks it onto the spike too.
     let options = EmOptions {
         variance_floor: 1e-6,
+        max_iterations: 30,
         ..OPTIONS
     };
     // A start with a spike on the lone top value stays there: a likelihood
@@ -371,7 +374,7 @@ fn bic_counts_three_parameters_per_component_less_one() {
 }
 
 #[test]
-fn em_over_distinct_counts_is_em_over_every_count() {
+fn accelerated_em_over_distinct_counts_reaches_plain_em_over_every_count() {
     // Log counts tie often; EM runs over the distinct values, weighed.
     let mut rng = StdRng::seed_from_u64(3);
     let y: Vec<f64> = (0..400)
@@ -384,21 +387,35 @@ fn em_over_distinct_counts_is_em_over_every_count() {
         .collect();
     let start = mixture(&[(0.5, -3.0, 1.0), (0.5, -1.0, 1.0)]);
     let options = EmOptions {
-        tolerance: 0.0,
-        max_iterations: 30,
+        tolerance: 1e-11,
+        max_iterations: 10_000,
         variance_floor: 1e-6,
     };
     let fit = em(&y, start.clone(), &options, |_| {}).unwrap();
-    // The textbook iteration over every value, once each.
+    assert!(fit.converged, "{fit:?}");
+    // The textbook iteration over every value, once each, unaccelerated,
+    // to the same tolerance: the same fixed point, in more iterations.
     let mut naive = start;
     let mut r = vec![0.0; y.len() * 2];
-    for _ in 0..30 {
+    let mut iterations = 0;
+    loop {
+        iterations += 1;
         e_step(&y, &naive, &mut r);
-        naive = m_step(&y, &r, 2, 1e-6).unwrap();
+        let next = m_step(&y, &r, 2, 1e-6).unwrap();
+        let change = naive.max_abs_change(&next);
+        naive = next;
+        if change < 1e-11 {
+            break;
+        }
     }
     for (a, b) in fit.mixture.components().iter().zip(naive.components()) {
-        assert!((a.weight - b.weight).abs() < 1e-12, "{a:?} {b:?}");
-        assert!((a.mean - b.mean).abs() < 1e-12 && (a.sigma - b.sigma).abs() < 1e-12);
+        assert!((a.weight - b.weight).abs() < 1e-8, "{a:?} {b:?}");
+        assert!((a.mean - b.mean).abs() < 1e-8 && (a.sigma - b.sigma).abs() < 1e-8);
     }
+    assert!(
+        3 * fit.iterations < iterations,
+        "{} iterations accelerated, {iterations} plain",
+        fit.iterations
+    );
     assert!((fit.log_likelihood - naive.log_likelihood(&y)).abs() < 1e-9);
 }
