@@ -127,8 +127,9 @@ METRICS = [
     ("f1", "F1 (precision / recall); a loop is accepted at weight ≥ ½"),
     ("error", "map error: ATE, the RMSE of the positions after rigid alignment onto the clean "
               "graph's optimum, as % of the trajectory's extent"),
-    ("time", "time in seconds (pgo: initialisation + optimisation from its report, factorisations "
-             "in parentheses where recorded; peers: their optimize call)"),
+    ("time", "time in seconds (pgo: initialisation + the whole robust solve from its report — "
+             "optimiser, EM's relaxations and evaluations — factorisations in parentheses where "
+             "recorded; peers: their optimize call)"),
 ]
 
 

@@ -8,13 +8,16 @@
 //!    to a new keyframe): composing them gives the optimum exactly, since
 //!    each new edge can be met with zero error and leaves the rest of the
 //!    map's optimality conditions untouched.
-//! 3. Otherwise the gate is learned again from every count (a 1-D EM,
-//!    cheap beside a factorisation, and what a batch job would find), and
-//!    EM decides every candidate by its innovation starting from the last
+//! 3. Otherwise the gate is learned again from every count (a 1-D EM over
+//!    the distinct counts, and what a batch job would find), and EM
+//!    decides every candidate by its innovation starting from the last
 //!    accepted set and the last map ([`robust::resume`]): the decisions
 //!    the new evidence does not touch come back as they were after one
 //!    solve and one evaluation; the χ² search acts on a failed test as in
-//!    the batch job.
+//!    the batch job. Where the new trusted edges only hang new poses on
+//!    the map, EM starts with the new candidates the last loop model
+//!    accepts against it ([`robust::Proposal`]), which saves the round
+//!    that would find them.
 
 use super::{OptimizeConfig, PipelineError, candidates, finish};
 use crate::graph::PoseGraph;
@@ -132,7 +135,14 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         report.incremental = Some(step);
         return Ok(Warm::after(graph, report, warm.ordering.clone()));
     }
-    let (full, previous, ordering) = resolve(graph, warm, config, report, observer, start)?;
+    let (full, previous, ordering) = resolve(
+        graph,
+        (warm, added.trusted_by_tree),
+        config,
+        report,
+        observer,
+        start,
+    )?;
     step.solve = if full {
         UpdateSolve::Full
     } else {
@@ -168,6 +178,10 @@ struct Placed {
     /// Whether every new edge is trusted and placed a new pose (so that
     /// the map stays optimal without a solve).
     all_by_tree: bool,
+    /// Whether every new trusted edge placed a new pose (so that the map
+    /// is the optimum of the last accepted set, the new candidates left
+    /// out).
+    trusted_by_tree: bool,
 }
 
 /// Puts the last solution's poses back and composes every new pose along
@@ -184,10 +198,10 @@ fn place<P: G2oPose<D>, const D: usize>(graph: &mut PoseGraph<P, D>, warm: &Warm
     let mut known: Vec<bool> = (0..graph.num_vertices()).map(|k| k < old).collect();
     grow_tree(graph, &mut known, &trusted);
     let new_edges = &graph.edges[warm.edges..];
+    let trusted_by_tree = known.iter().all(|&k| k) && trusted.len() == graph.num_vertices() - old;
     Placed {
-        all_by_tree: known.iter().all(|&k| k)
-            && new_edges.len() == graph.num_vertices() - old
-            && new_edges.iter().all(|e| !e.is_candidate()),
+        all_by_tree: trusted_by_tree && new_edges.len() == trusted.len(),
+        trusted_by_tree,
     }
 }
 
@@ -248,12 +262,14 @@ fn extended<P: G2oPose<D>, const D: usize>(
     }
 }
 
-/// The gate, and the robust solve from the last decisions. Returns whether
+/// The gate, and the robust solve from the last decisions (and, where the
+/// placed map is the last accepted set's optimum, `optimal`, the new
+/// candidates the last loop model accepts against it). Returns whether
 /// every candidate was weighed again, each edge's earlier decision, and the
 /// elimination order used.
 fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     graph: &mut PoseGraph<P, D>,
-    warm: &Warm<P>,
+    (warm, optimal): (&Warm<P>, bool),
     config: &OptimizeConfig,
     report: &mut Report,
     observer: &mut dyn Observer,
@@ -296,6 +312,14 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         time_s: start.elapsed().as_secs_f64(),
         vertices_without_line: 0,
     };
+    let proposal = (warm.report.robust.model.as_ref())
+        .filter(|_| optimal)
+        .map(|model| robust::Proposal {
+            model,
+            new: (0..candidates.len())
+                .filter(|&k| candidates[k].edge >= warm.edges)
+                .collect(),
+        });
     let mut full = false;
     let weigh =
         |session: &mut Session<'_, P, D>, weights: &mut [f64], c: f64, test: &Test<'_, P, D>| {
@@ -307,6 +331,7 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 c,
                 &config.layers,
                 test,
+                proposal.as_ref(),
             )?;
             full = all;
             Ok(outcome)

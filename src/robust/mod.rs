@@ -27,7 +27,7 @@ mod search;
 pub use clusters::{MAX_CLUSTER, NEIGHBOURHOOD};
 pub use kernels::{cauchy_weight, dcs_weight, gnc_tls_weight, huber_weight};
 pub use model::{Evidence, LoopModel, Scale, ln_chi2_mean, ln_chi2_sigma};
-pub use schedule::{ANNEAL_STEP, MAX_ANNEAL_STEPS, MAX_DECISIONS, SETTLE_STEPS};
+pub use schedule::{ANNEAL_STEP, MAX_ANNEAL_STEPS, MAX_DECISIONS, Proposal, SETTLE_STEPS};
 pub use search::{MAX_REMOVALS, SUSPECTS, Search, Suspect, Test};
 
 use crate::geometry::Pose;
@@ -386,7 +386,9 @@ fn em<P: ChordalInit<D>, const D: usize>(
 /// `weights` (1 accepted, 0 not) and the map in the session's graph —
 /// instead of the annealing, whose work the earlier decisions did. With a
 /// method other than EM, or too few candidates for EM's model, every
-/// candidate is weighed again by [`solve`] from the map as it is.
+/// candidate is weighed again by [`solve`] from the map as it is. With a
+/// `proposal`, EM first accepts the new candidates the last model accepts
+/// against the map as it is ([`schedule::propose`]).
 /// Returns the outcome and whether it was that full re-weighing.
 #[allow(clippy::too_many_arguments)]
 pub fn resume<P: ChordalInit<D>, const D: usize>(
@@ -397,6 +399,7 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
     c: f64,
     layers: &Layers,
     test: &Test<'_, P, D>,
+    proposal: Option<&Proposal<'_>>,
 ) -> Result<(Outcome, bool), SolveError> {
     if method != RobustMethod::Em || candidates.len() < MIN_CANDIDATES {
         let out = solve(session, false, weights, candidates, method, c, layers, test)?;
@@ -407,6 +410,9 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
         session.run(weights, 0)?;
         out.cut_short = true;
     } else {
+        if let Some(proposal) = proposal {
+            schedule::propose(session, weights, candidates, proposal, layers)?;
+        }
         settle(session, false, weights, candidates, layers, test, &mut out)?;
     }
     for (k, cand) in candidates.iter().enumerate() {

@@ -376,6 +376,67 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
     Ok(out)
 }
 
+/// What an update knows before it solves ([`propose`]).
+pub struct Proposal<'a> {
+    /// The loop model of the last update's last evaluation.
+    pub model: &'a LoopModel,
+    /// The candidates added since (indices into the candidates).
+    pub new: Vec<usize>,
+}
+
+/// Accepts (weight 1 in `weights`) the new candidates of `proposal` that
+/// the last loop model accepts by their innovation against the map in the
+/// session's graph, which must be the least-squares map of the accepted
+/// set in `weights` (as after an update whose new trusted edges only hang
+/// new poses on the last map). Returns how many it accepted.
+///
+/// A guess for [`decide`] to start from: when a new loop is consistent,
+/// decisions started without it solve and judge every candidate twice,
+/// once to find it and once to confirm the set with it; started with it,
+/// once. The decisions judge every candidate again whatever the guess, so
+/// a wrong one costs a round and changes nothing else.
+pub fn propose<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    candidates: &[Candidate],
+    proposal: &Proposal<'_>,
+    layers: &Layers,
+) -> Result<usize, SolveError> {
+    if proposal.new.is_empty() {
+        return Ok(0);
+    }
+    let start = Instant::now();
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    let decided = Decided::start(session.graph, &edges, weights, layers);
+    let mut new = vec![false; candidates.len()];
+    for &k in &proposal.new {
+        new[k] = true;
+    }
+    let touched: Vec<Vec<usize>> = (decided.clusters.iter())
+        .filter(|cluster| cluster.iter().any(|&k| new[k]))
+        .cloned()
+        .collect();
+    let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?;
+    let mut innov = eval.innovations(&edges, &decided.accepted, &touched);
+    let accepts = |innov: &Innovations, k: usize| match evidence(candidates, innov, k) {
+        Some(e) => proposal.model.posterior(&e) >= 0.5,
+        None => proposal.model.prior(candidates[k].count_posterior) >= 0.5,
+    };
+    // Lower bounds the model would accept, made exact.
+    let open: Vec<usize> = (proposal.new.iter().copied())
+        .filter(|&k| !innov.exact[k] && accepts(&innov, k))
+        .collect();
+    eval.refine(&edges, &open, &mut innov);
+    let joined: Vec<usize> = (proposal.new.iter().copied())
+        .filter(|&k| accepts(&innov, k))
+        .collect();
+    for &k in &joined {
+        weights[edges[k]] = 1.0;
+    }
+    session.evaluated_since(start);
+    Ok(joined.len())
+}
+
 /// Starts the solve of an accepted set (`weights` 1 or 0) from its chordal
 /// relaxation when that fits it better (lower `Σ eᵀΩe` over its edges) than
 /// the map before; returns whether it did, else leaves the map as it was.

@@ -51,16 +51,7 @@ impl<const D: usize> Symbolic<D> {
                 stack.pop();
                 continue;
             }
-            let mut ready = true;
-            for k in self.column_structure(b) {
-                if self.known_block(z, memo, r, k).is_none() {
-                    *budget = budget.checked_sub(1)?;
-                    stack.push((r.max(k), r.min(k)));
-                    ready = false;
-                }
-            }
-            if ready {
-                let block = self.recurrence(l, z, memo, r, b, budget)?;
+            if let Some(block) = self.recurrence(l, z, memo, r, b, &mut stack, budget)? {
                 memo.insert((r as u32, b as u32), block);
                 stack.pop();
             }
@@ -68,7 +59,11 @@ impl<const D: usize> Symbolic<D> {
         self.known_block(z, memo, row, col)
     }
 
-    /// `Z_rb = −(Σ_{k ∈ s(b)} Z_rk·L_kb)·L_bb⁻¹`, every `Z_rk` known.
+    /// `Z_rb = −(Σ_{k ∈ s(b)} Z_rk·L_kb)·L_bb⁻¹` if every `Z_rk` is known;
+    /// otherwise `Some(None)`, with the unknown ones pushed on `stack`. The
+    /// budget pays one product per unknown block pushed, then one per
+    /// block of the sum; `None` when it runs out.
+    #[allow(clippy::too_many_arguments)]
     fn recurrence(
         &self,
         l: &[f64],
@@ -76,19 +71,37 @@ impl<const D: usize> Symbolic<D> {
         memo: &OffPatternBlocks<D>,
         r: usize,
         b: usize,
+        stack: &mut Vec<(usize, usize)>,
         budget: &mut usize,
-    ) -> Option<SMatrix<f64, D, D>> {
+    ) -> Option<Option<SMatrix<f64, D, D>>> {
         let mut sum = SMatrix::<f64, D, D>::zeros();
-        for k in self.column_structure(b) {
-            *budget = budget.checked_sub(1)?;
-            sum += self.known_block(z, memo, r, k)? * self.factor_block(l, k, b)?;
+        let mut ready = true;
+        let mut terms = 0;
+        for (k, local) in self.column_structure(b) {
+            match self.known_block(z, memo, r, k) {
+                Some(z_rk) if ready => {
+                    let (off, ld) = self.offset(b, local);
+                    sum += z_rk * SMatrix::<f64, D, D>::from_fn(|a, c| l[off + c * ld + a]);
+                    terms += 1;
+                }
+                Some(_) => {}
+                None => {
+                    *budget = budget.checked_sub(1)?;
+                    stack.push((r.max(k), r.min(k)));
+                    ready = false;
+                }
+            }
         }
+        if !ready {
+            return Some(None);
+        }
+        *budget = budget.checked_sub(terms)?;
         let l_bb = self.factor_block(l, b, b)?.lower_triangle();
         // X·L_bb = −sum, as L_bbᵀ·Xᵀ = −sumᵀ.
         let xt = l_bb
             .transpose()
             .solve_upper_triangular(&(-sum.transpose()))?;
-        Some(xt.transpose())
+        Some(Some(xt.transpose()))
     }
 
     /// Block `(r, c)` of `Z` if it is on the pattern or in `memo`.
@@ -116,12 +129,15 @@ impl<const D: usize> Symbolic<D> {
         Some(SMatrix::from_fn(|a, c| l[off + c * ld + a]))
     }
 
-    /// The block rows of column `b` below its diagonal block, `s(b)`: the
-    /// later columns of its supernode, then the rows below the supernode.
-    fn column_structure(&self, b: usize) -> impl Iterator<Item = usize> + '_ {
+    /// The block rows of column `b` below its diagonal block, `s(b)` — the
+    /// later columns of its supernode, then the rows below the supernode —
+    /// each with its scalar row in the supernode's panel.
+    fn column_structure(&self, b: usize) -> impl Iterator<Item = (usize, usize)> + '_ {
         let s = self.supernode_of[b] as usize;
-        let end = self.begin[s + 1];
+        let (b0, end) = (self.begin[s], self.begin[s + 1]);
         let below = &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]];
-        (b + 1..end).chain(below.iter().map(|&r| r as usize))
+        (b + 1..end)
+            .map(move |k| (k, D * (k - b0)))
+            .chain((below.iter().enumerate()).map(move |(i, &r)| (r as usize, D * (end - b0 + i))))
     }
 }
