@@ -77,8 +77,23 @@ impl<const D: usize> Symbolic<D> {
         let mut sum = SMatrix::<f64, D, D>::zeros();
         let mut ready = true;
         let mut terms = 0;
+        // The rows after `r` of column `r`, walked alongside `s(b)` (both
+        // increase): where `Z_kr` lies for the `k > r` on the pattern.
+        let mut after_r = self.column_structure(r).peekable();
         for (k, local) in self.column_structure(b) {
-            match self.known_block(z, memo, r, k) {
+            let z_rk = if k > r {
+                while after_r.next_if(|&(row, _)| row < k).is_some() {}
+                match after_r.peek() {
+                    Some(&(row, at)) if row == k => {
+                        let (off, ld) = self.offset(r, at);
+                        Some(SMatrix::<f64, D, D>::from_fn(|a, c| z[off + c * ld + a]).transpose())
+                    }
+                    _ => memo.get(&(k as u32, r as u32)).map(|m| m.transpose()),
+                }
+            } else {
+                self.known_block(z, memo, r, k)
+            };
+            match z_rk {
                 Some(z_rk) if ready => {
                     let (off, ld) = self.offset(b, local);
                     sum += z_rk * SMatrix::<f64, D, D>::from_fn(|a, c| l[off + c * ld + a]);
