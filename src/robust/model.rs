@@ -432,7 +432,9 @@ impl LoopModel {
         let mut at = iterate(&sums);
         let mut iterations = 1;
         // Cycles of two EM iterations and a SQUAREM jump along them, kept
-        // if no less likely than the second ([`crate::stats::squarem`]).
+        // if no less likely than the second ([`crate::stats::squarem`]; the
+        // gate's EM compares with the first, whose likelihood is the one its
+        // E-step has at hand, as this one has the second's).
         while iterations + 2 <= MAX_ITERATIONS {
             let first = iterate(&at.1);
             if settled(&at.0, &first.0) {

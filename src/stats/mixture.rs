@@ -343,30 +343,24 @@ pub fn em(
         tolerance: options.tolerance,
         iterations: 0,
     };
-    let mut mixture = start;
-    let mut converged = false;
-    'cycles: while run.iterations < options.max_iterations {
-        // Two EM iterations, each of which may end the fit.
-        let mut path = [mixture.clone(), mixture.clone(), mixture.clone()];
-        let mut ll0 = f64::NEG_INFINITY;
-        for i in 0..2 {
-            let (ll, next, done) = run.step(&path[i])?;
-            if i == 0 {
-                observe(ll);
-                ll0 = ll;
-            }
-            path[i + 1] = next;
-            converged = done;
-            if done || run.iterations >= options.max_iterations {
-                mixture = path[i + 1].clone();
-                break 'cycles;
-            }
+    let (mut mixture, mut converged) = (start, false);
+    let limit = options.max_iterations;
+    // Cycles of two EM iterations, each of which may end the fit, and the
+    // iteration from a jump along them.
+    while run.iterations < limit {
+        let (ll0, first, done) = run.step(&mixture)?;
+        observe(ll0);
+        if done || run.iterations >= limit {
+            (mixture, converged) = (first, done);
+            break;
         }
-        // The extrapolation, then the EM iteration from it.
-        let (next, done) = run.extrapolated_step(&path, ll0)?;
-        mixture = next;
-        converged = done;
-        if done {
+        let (_, second, done) = run.step(&first)?;
+        if done || run.iterations >= limit {
+            (mixture, converged) = (second, done);
+            break;
+        }
+        (mixture, converged) = run.extrapolated_step(&[mixture, first, second], ll0)?;
+        if converged {
             break;
         }
     }
