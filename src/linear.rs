@@ -37,7 +37,7 @@ use crate::geometry::NormalBlocks;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::SymbolicSparseColMatRef;
 use faer::sparse::linalg::amd;
-pub use group::EdgeJacobian;
+pub use group::{EdgeJacobian, GroupScratch};
 use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
 use supernodal::Symbolic;
@@ -130,14 +130,8 @@ pub struct BlockSystem<const D: usize> {
     /// scratch.
     rhs: Vec<f64>,
     solve_work: Vec<f64>,
-    /// Scratch of [`BlockSystem::propagate_group`]: its packed right-hand
-    /// sides, the supernodes they reach, and a flag per supernode.
-    cov_rhs: Vec<f64>,
-    cov_reach: Vec<u32>,
-    cov_mark: Vec<bool>,
-    /// Scratch of [`BlockSystem::propagate_group`]: each block column's
-    /// block row in its packed solution.
-    cov_slot: Vec<u32>,
+    /// Scratch of [`BlockSystem::propagate_group`].
+    group_scratch: GroupScratch,
     lambda: f64,
     symbolic: Symbolic<D>,
     /// The factor's panels, allocated by the first factorisation (so that a
@@ -215,10 +209,7 @@ impl<const D: usize> BlockSystem<D> {
             gradient: vec![0.0; n],
             rhs: vec![0.0; n],
             solve_work: Vec::new(),
-            cov_rhs: Vec::new(),
-            cov_reach: Vec::new(),
-            cov_mark: Vec::new(),
-            cov_slot: Vec::new(),
+            group_scratch: GroupScratch::default(),
             lambda: 0.0,
             symbolic,
             factor: Vec::new(),

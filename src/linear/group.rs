@@ -12,6 +12,32 @@ use nalgebra::{DMatrix, SMatrix};
 /// `None` for a vertex held fixed) and their `D×D` derivatives.
 pub type EdgeJacobian<const D: usize> = [(Option<usize>, SMatrix<f64, D, D>); 2];
 
+/// Scratch of the sparse solve for a group's Gram matrix: its packed
+/// right-hand sides, the supernodes they reach, a flag per supernode, each
+/// block column's block row in the packed solution, and the solve's work
+/// space. One per thread that propagates groups at the same time
+/// ([`BlockSystem::propagate_group_cheaper`]).
+#[derive(Clone, Debug, Default)]
+pub struct GroupScratch {
+    rhs: Vec<f64>,
+    reach: Vec<u32>,
+    mark: Vec<bool>,
+    slot: Vec<u32>,
+    work: Vec<f64>,
+}
+
+/// What one `D×D` product of the recurrence for blocks of `H⁻¹` off the
+/// factor's pattern costs, in multiply–adds of the sparse solve's dense
+/// kernels: with its hash lookups and unvectorised small products, one
+/// product took 35–80 ns for `D = 3` and 110–170 ns for `D = 6`, against
+/// 0.05–0.14 ns per multiply–add of the solve — ratios of about 700 and
+/// 2800 (both ways timed on each cluster of the aliasing benchmark's
+/// intel, manhattan, city10000, sphere2500 and parking-garage files, one
+/// thread), which `400 + 11·D³` fits.
+const fn recurrence_product_cost(d: usize) -> usize {
+    400 + 11 * d * d * d
+}
+
 impl<const D: usize> BlockSystem<D> {
     /// The Gram matrix `A·H⁻¹·Aᵀ` of the stacked Jacobians `A` of `edges`
     /// (`D·m × D·m` for `m` edges, edge `e`'s rows at `D·e..D·e + D`): one
@@ -24,41 +50,91 @@ impl<const D: usize> BlockSystem<D> {
     /// If no factorisation succeeded before, or a block index is out of
     /// range.
     pub fn propagate_group(&mut self, edges: &[EdgeJacobian<D>]) -> DMatrix<f64> {
+        let mut scratch = std::mem::take(&mut self.group_scratch);
+        let gram = match self.reach_group(edges, &mut scratch) {
+            Some(_) => self.solve_group(edges, &mut scratch),
+            None => DMatrix::zeros(D * edges.len(), D * edges.len()),
+        };
+        self.group_scratch = scratch;
+        gram
+    }
+
+    /// [`BlockSystem::propagate_group`] by whichever of two ways costs
+    /// less: the recurrence from the selected inverse `z` while its blocks
+    /// off the factor's pattern cost less than the sparse solve would
+    /// ([`BlockSystem::propagate_group_selected`]), else the solve. The
+    /// recurrence gives up at the solve's cost, so a group never costs
+    /// more than twice the cheaper way. Reads the system only: threads
+    /// may share it, each with its own `scratch`.
+    ///
+    /// # Panics
+    /// If no factorisation succeeded before, or a block index is out of
+    /// range.
+    pub fn propagate_group_cheaper(
+        &self,
+        z: &SelectedInverse,
+        edges: &[EdgeJacobian<D>],
+        scratch: &mut GroupScratch,
+    ) -> DMatrix<f64> {
+        let Some(solve_cost) = self.reach_group(edges, scratch) else {
+            return DMatrix::zeros(D * edges.len(), D * edges.len());
+        };
+        let budget = solve_cost / recurrence_product_cost(D);
+        (self.propagate_group_selected(z, edges, budget))
+            .unwrap_or_else(|| self.solve_group(edges, scratch))
+    }
+
+    /// The supernodes the sparse solve for `edges` reaches, into
+    /// `scratch` with each block column's packed slot; the solve's cost in
+    /// multiply–adds (the panels it reads times its right-hand sides, then
+    /// the Gram). `None` when the edges touch no variable block.
+    fn reach_group(&self, edges: &[EdgeJacobian<D>], scratch: &mut GroupScratch) -> Option<usize> {
         let k = D * edges.len();
         let positions: Vec<usize> = edges
             .iter()
             .flat_map(|e| e.iter().filter_map(|(b, _)| b.map(|b| self.position[b])))
             .collect();
         if positions.is_empty() || self.n_blocks == 0 {
-            return DMatrix::zeros(k, k);
+            return None;
         }
         assert!(
             !self.factor.is_empty(),
             "BlockSystem::propagate_group needs a factorisation first"
         );
-        self.symbolic
-            .reach(&positions, &mut self.cov_mark, &mut self.cov_reach);
+        (self.symbolic).reach(&positions, &mut scratch.mark, &mut scratch.reach);
         // Y holds only the rows of the supernodes the solve reaches, packed
-        // in their order; `cov_slot` maps a block column to its packed block.
-        if self.cov_slot.len() < self.n_blocks {
-            self.cov_slot.resize(self.n_blocks, 0);
+        // in their order; `slot` maps a block column to its packed block.
+        if scratch.slot.len() < self.n_blocks {
+            scratch.slot.resize(self.n_blocks, 0);
         }
-        let mut packed = 0;
-        for &s in &self.cov_reach {
+        let (mut packed, mut values) = (0, 0);
+        for &s in &scratch.reach {
             for b in self.symbolic.supernode_range(s as usize).0 {
-                self.cov_slot[b] = packed;
+                scratch.slot[b] = packed;
                 packed += 1;
             }
+            values += self.symbolic.panel_values(s as usize);
         }
-        let packed = D * packed as usize;
-        let y = &mut self.cov_rhs;
+        Some(k * values + k * k * D * packed as usize)
+    }
+
+    /// The sparse solve of [`BlockSystem::propagate_group`] over the reach
+    /// [`Self::reach_group`] left in `scratch`.
+    fn solve_group(&self, edges: &[EdgeJacobian<D>], scratch: &mut GroupScratch) -> DMatrix<f64> {
+        let k = D * edges.len();
+        let slot = &scratch.slot;
+        let packed: usize = (scratch.reach.iter())
+            .map(|&s| self.symbolic.supernode_range(s as usize).0.len())
+            .sum();
+        let packed = D * packed;
+        let y = &mut scratch.rhs;
         y.clear();
         y.resize(packed * k, 0.0);
         // Column D·e + a of Aᵀ: row a of each of edge e's blocks.
         for (e, edge) in edges.iter().enumerate() {
             for (b, block) in edge {
                 let Some(b) = b else { continue };
-                let row = D * self.cov_slot[self.position[*b]] as usize;
+                let row = D * slot[self.position[*b]] as usize;
                 for a in 0..D {
                     let column = &mut y[(D * e + a) * packed + row..][..D];
                     for (r, v) in column.iter_mut().enumerate() {
@@ -67,14 +143,7 @@ impl<const D: usize> BlockSystem<D> {
                 }
             }
         }
-        self.symbolic.forward_packed(
-            &self.factor,
-            &self.cov_reach,
-            &self.cov_slot,
-            y,
-            k,
-            &mut self.solve_work,
-        );
+        (self.symbolic).forward_packed(&self.factor, &scratch.reach, slot, y, k, &mut scratch.work);
         let y = MatRef::from_column_major_slice(y, packed, k);
         let mut gram = faer::Mat::<f64>::zeros(k, k);
         matmul(
@@ -277,6 +346,51 @@ mod tests {
         }
         sys.factorize(0.0).unwrap();
         (sys, dense.try_inverse().unwrap())
+    }
+
+    #[test]
+    fn the_cheaper_way_is_the_dense_gram_whichever_it_takes() {
+        let n = 40;
+        let (sys, hinv) = ring(n);
+        let z = sys.selected_inverse();
+        let one = nalgebra::Matrix2::identity();
+        let edge = |i: usize, j: usize| [(Some(i), -one), (Some(j), one)];
+        // One scratch for every group: what one group leaves in it does not
+        // leak into the next.
+        let mut scratch = GroupScratch::default();
+        let (mut by_recurrence, mut by_solve) = (0, 0);
+        for start in 0..n {
+            for size in [1, 3, 8] {
+                let edges: Vec<_> = (0..size)
+                    .map(|k| edge((start + 5 * k) % n, (start + 11 * k + 1) % n))
+                    .collect();
+                let gram = sys.propagate_group_cheaper(&z, &edges, &mut scratch);
+                for (e, ea) in edges.iter().enumerate() {
+                    for (f, fa) in edges.iter().enumerate() {
+                        let mut want = nalgebra::Matrix2::zeros();
+                        for (p, a) in ea {
+                            for (q, b) in fa {
+                                let h = hinv.fixed_view::<2, 2>(2 * p.unwrap(), 2 * q.unwrap());
+                                want += a * h * b.transpose();
+                            }
+                        }
+                        let got = gram.fixed_view::<2, 2>(2 * e, 2 * f);
+                        assert!((got - want).abs().max() < 1e-9, "{start} {size} {e} {f}");
+                    }
+                }
+                let budget =
+                    sys.reach_group(&edges, &mut scratch).unwrap() / recurrence_product_cost(2);
+                match sys.propagate_group_selected(&z, &edges, budget) {
+                    Some(_) => by_recurrence += 1,
+                    None => by_solve += 1,
+                }
+            }
+        }
+        // Both ways were taken.
+        assert!(
+            by_recurrence > 0 && by_solve > 0,
+            "{by_recurrence} {by_solve}"
+        );
     }
 
     #[test]

@@ -458,6 +458,11 @@ impl<const D: usize> Symbolic<D> {
         (self.val_ptr[s] + D * (b - g.b0) * ld + local, ld)
     }
 
+    /// Values stored for supernode `s`'s panel.
+    pub(super) fn panel_values(&self, s: usize) -> usize {
+        self.val_ptr[s + 1] - self.val_ptr[s]
+    }
+
     /// The block columns of supernode `s`, where its panel starts and its
     /// leading dimension.
     pub(super) fn supernode_range(&self, s: usize) -> (std::ops::Range<usize>, usize, usize) {

@@ -23,9 +23,10 @@
 
 use crate::geometry::Pose;
 use crate::graph::PoseGraph;
-use crate::linear::{EdgeJacobian, Parallelism, SelectedInverse};
+use crate::linear::{EdgeJacobian, GroupScratch, Parallelism, SelectedInverse};
 use crate::solve::{Optimizer, SolveError};
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
+use std::sync::Mutex;
 
 /// What the innovations of one evaluation found.
 #[derive(Clone, Debug, Default)]
@@ -49,12 +50,8 @@ pub struct Evaluation<'a, P: Pose<D>, const D: usize> {
     graph: &'a PoseGraph<P, D>,
     block: Vec<Option<usize>>,
     inverse: SelectedInverse,
-    /// `D×D` products of the recurrence for blocks of `H⁻¹` off the
-    /// pattern worth spending per candidate of a cluster: what the sparse
-    /// solve that would replace them costs, about the values on one path
-    /// to the root for each of a candidate's `D` columns, at `D³`
-    /// multiply–adds a product.
-    budget_per_candidate: f64,
+    /// Scratch of the sparse solves, one per thread at work.
+    scratch: Mutex<Vec<GroupScratch>>,
 }
 
 impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
@@ -68,13 +65,12 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     ) -> Result<Self, SolveError> {
         let block = optimizer.factor_at(graph, weights)?;
         let inverse = optimizer.system().selected_inverse();
-        let budget_per_candidate = optimizer.system().mean_path_values() / (D * D) as f64;
         Ok(Self {
             optimizer,
             graph,
             block,
             inverse,
-            budget_per_candidate,
+            scratch: Mutex::default(),
         })
     }
 
@@ -131,31 +127,28 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         }
     }
 
-    /// [`Self::cluster_read_only`] of each `(members, a)` of `groups`. What only
-    /// reads the factor and the selected inverse — the recurrence for
-    /// blocks of `H⁻¹` off the pattern, the bound — runs on the solver's
-    /// threads; the clusters whose recurrence runs over its budget get the
-    /// sparse solve after, one after the other. The values are those of one
-    /// cluster at a time, whatever the threads.
+    /// [`Self::cluster`] of each `(members, a)` of `groups`, on the
+    /// solver's threads. The values are those of one cluster at a time,
+    /// whatever the threads.
     fn judge_all(
-        &mut self,
+        &self,
         edges: &[usize],
         groups: &[(Vec<usize>, usize)],
         exact: bool,
     ) -> Vec<Judged> {
-        let this = &*self;
-        let first = this.optimizer.parallelism().map(groups, |(members, a)| {
-            this.cluster_read_only(edges, members, *a, exact || members.len() > 1)
-        });
-        (first.into_iter().zip(groups))
-            .map(|(judged, (_, a))| {
-                judged.unwrap_or_else(|lin| {
-                    let gram = self.optimizer.system_mut().propagate_group(&lin.jacobians);
-                    let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, *a);
-                    (nu2, joint, true)
-                })
-            })
-            .collect()
+        (self.optimizer.parallelism()).map(groups, |(members, a)| {
+            let mut scratch = self
+                .scratch
+                .lock()
+                .ok()
+                .and_then(|mut s| s.pop())
+                .unwrap_or_default();
+            let judged = self.cluster(edges, members, *a, exact || members.len() > 1, &mut scratch);
+            if let Ok(mut pool) = self.scratch.lock() {
+                pool.push(scratch);
+            }
+            judged
+        })
     }
 
     /// The errors, Jacobians and covariances of candidates `members` at the
@@ -180,40 +173,35 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     }
 
     /// One cluster's members (the first `a` in the map): their `ν²`, the
-    /// joint statistic, and whether they are exact — or, where that needs
-    /// the sparse solve, the cluster linearised for it. A lone candidate
+    /// joint statistic, and whether they are exact. A lone candidate
     /// outside the map off the factor's pattern gets a lower bound unless
     /// `exact` asks for more.
-    fn cluster_read_only(
+    fn cluster(
         &self,
         edges: &[usize],
         members: &[usize],
         a: usize,
         exact: bool,
-    ) -> Result<Judged, Linearised<D>> {
+        scratch: &mut GroupScratch,
+    ) -> Judged {
         let lin = self.linearise(edges, members);
         let system = self.optimizer.system();
-        // A lone candidate outside the map gets its bound unless asked for
-        // more; else blocks of H⁻¹ off the pattern are worth their
-        // recurrence while it costs less than the solve.
-        let bound_will_do = a == 0 && members.len() == 1 && !exact;
-        let budget = if bound_will_do {
-            0
-        } else {
-            (self.budget_per_candidate * members.len() as f64) as usize
-        };
-        if let Some(gram) = system.propagate_group_selected(&self.inverse, &lin.jacobians, budget) {
+        if a == 0 && members.len() == 1 && !exact {
+            // Its bound unless its blocks of H⁻¹ are on the pattern.
+            let Some(gram) = system.propagate_group_selected(&self.inverse, &lin.jacobians, 0)
+            else {
+                let bound = system.propagate_bound(&self.inverse, &lin.jacobians[0]);
+                let nu2 = lin.covariances[0]
+                    .and_then(|c| (c + bound).cholesky())
+                    .map(|c| lin.errors[0].dot(&c.solve(&lin.errors[0])));
+                return (vec![nu2], Some(0.0), false);
+            };
             let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
-            return Ok((nu2, joint, true));
+            return (nu2, joint, true);
         }
-        if bound_will_do {
-            let bound = system.propagate_bound(&self.inverse, &lin.jacobians[0]);
-            let nu2 = lin.covariances[0]
-                .and_then(|c| (c + bound).cholesky())
-                .map(|c| lin.errors[0].dot(&c.solve(&lin.errors[0])));
-            return Ok((vec![nu2], Some(0.0), false));
-        }
-        Err(lin)
+        let gram = system.propagate_group_cheaper(&self.inverse, &lin.jacobians, scratch);
+        let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
+        (nu2, joint, true)
     }
 }
 
