@@ -432,7 +432,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// to `observer`, which can also stop the job: a [`crate::Cancel`] token (set
     /// from another thread) or a [`crate::Cancellable`] progress callback. A
     /// stopped job returns the best map so far, its report's stop reason
-    /// `cancelled`.
+    /// `cancelled` ([`Solution::cancelled`]).
     ///
     /// ```
     /// use pgo::{Cancel, Options, PoseGraph2, Se2};
@@ -449,6 +449,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// cancel.cancel(); // e.g. from a Ctrl-C handler
     /// let solution = graph.optimize_with(&Options::default(), &mut cancel.clone())?;
     /// assert_eq!(solution.report().optimizer.iterations, 0);
+    /// assert!(solution.cancelled());
     /// # Ok::<(), pgo::Error>(())
     /// ```
     pub fn optimize_with(

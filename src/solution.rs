@@ -6,6 +6,7 @@ use crate::graph::{self, VertexId};
 use crate::pose_graph::sealed::Sealed;
 use crate::report::{IncrementalReport, Report};
 pub use crate::robust::Reason;
+use crate::solve::StopReason;
 use crate::stats::Chi2Test;
 use std::collections::HashMap;
 
@@ -127,6 +128,13 @@ impl<P> Solution<P> {
         self.chi2_test().map(|t| t.passed)
     }
 
+    /// Whether a [`crate::Cancel`] token (or another [`crate::Observer`])
+    /// stopped the job: the poses are the best found until then, and an
+    /// update kept the graph's earlier state.
+    pub fn cancelled(&self) -> bool {
+        self.report.optimizer.stop_reason == StopReason::Cancelled
+    }
+
     /// The report `pgo optimize --json` prints.
     pub fn report(&self) -> &Report {
         &self.report
@@ -187,6 +195,11 @@ impl AnySolution {
     /// See [`Solution::passed`].
     pub fn passed(&self) -> Option<bool> {
         either!(self, |s| s.passed())
+    }
+
+    /// See [`Solution::cancelled`].
+    pub fn cancelled(&self) -> bool {
+        either!(self, |s| s.cancelled())
     }
 
     /// See [`Solution::report`].

@@ -263,10 +263,12 @@ fn a_cancelled_update_keeps_the_earlier_state() {
     cancel.cancel();
     let s = g.update_with(&options, &mut cancel.clone()).unwrap();
     assert_eq!(s.report().optimizer.stop_reason, StopReason::Cancelled);
+    assert!(s.cancelled());
     // The next update starts from the state before the cancelled one.
     let s = g.update(&options).unwrap();
     let inc = s.incremental().unwrap();
     assert_eq!((inc.solve, inc.new_edges), (UpdateSolve::Warm, 1));
+    assert!(!s.cancelled());
     let batch = g.optimize(&options).unwrap();
     assert!((s.chi2() / batch.chi2() - 1.0).abs() < 1e-6);
 }

@@ -5,8 +5,10 @@
  * closure to the same corner one lap before (many inliers: right), and
  * now and then one to the opposite corner claimed to be the same place
  * (few inliers: wrong). The front end asks for the map every two poses
- * with pgo_graph_update, which solves only what the additions need, and
- * prints how each update solved and which earlier decisions it changed.
+ * with pgo_graph_update_with, which solves only what the additions need,
+ * and prints how each update solved and which earlier decisions it
+ * changed. Each update holds a PgoCancel token a watchdog thread could
+ * request to stop a step that runs too long.
  *
  * Checks its own expectations — the first update a batch job, the first
  * laps' odometry composed without a solve, an update with nothing added
@@ -21,6 +23,7 @@
  *      target/release/libpgo_c.a -lm -ldl -lpthread -o incremental
  */
 #include <math.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -166,14 +169,21 @@ static int compare_with_batch(const PgoResult *last, const PgoResult *batch) {
 int main(void) {
     PgoGraph *graph = NULL;
     PgoResult *last = NULL, *result = NULL;
+    PgoCancel *cancel = NULL;
     check(pgo_graph_new(2, &graph), "pgo_graph_new");
+    check(pgo_cancel_new(&cancel), "pgo_cancel_new");
     double guess[3] = {0, 0, 0};
     check(pgo_graph_add_pose(graph, 0, guess, 3), "pgo_graph_add_pose");
     int failures = 0, candidates = 0, first = 1;
     for (uint64_t k = 1; k < POSES; k++) {
         candidates += add_step(graph, k, guess);
         if (k % EVERY != 0 && k + 1 != POSES) continue;
-        check(pgo_graph_update(graph, NULL, &result), "pgo_graph_update");
+        /* pgo_cancel_request(cancel) from another thread would stop this
+         * step with the best map so far, the graph's state kept. */
+        check(pgo_graph_update_with(graph, NULL, cancel, &result), "pgo_graph_update_with");
+        bool stopped = true;
+        check(pgo_result_cancelled(result, &stopped), "pgo_result_cancelled");
+        failures += stopped;
         failures += show_update(result, (size_t)k + 1, candidates, first);
         pgo_result_free(last);
         last = result;
@@ -195,6 +205,7 @@ int main(void) {
     failures += compare_with_batch(last, batch);
     pgo_result_free(batch);
     pgo_result_free(last);
+    pgo_cancel_free(cancel);
     pgo_graph_free(graph);
     if (failures > 0) {
         fprintf(stderr, "%d expectation(s) failed\n", failures);

@@ -141,6 +141,21 @@ typedef enum PgoUpdateSolve {
 } PgoUpdateSolve;
 
 /**
+ * A cancellation token (opaque): pass it to `pgo_graph_optimize_with` or
+ * `pgo_graph_update_with`, and call `pgo_cancel_request` from any thread
+ * (a watchdog, a ROS 2 callback, a signal-handling thread) to stop that
+ * job at its next iteration. The stopped job returns the best map so
+ * far, and `pgo_result_cancelled` says so; a stopped update leaves the
+ * graph's kept state as it was. Once requested, a token stays
+ * cancelled: make a new one for the next job.
+ *
+ * Made by `pgo_cancel_new`, owned by the caller, freed by
+ * `pgo_cancel_free` once no job uses it. Several threads may use it at
+ * once.
+ */
+typedef struct PgoCancel PgoCancel;
+
+/**
  * A pose graph (opaque): SE(2) or SE(3) poses with ids, trusted edges,
  * loop-closure candidates with their inlier counts, and the poses held
  * fixed. Poses and measurements are their g2o numbers — `x y θ` in 2D,
@@ -293,6 +308,48 @@ const char *pgo_last_error(void);
  * The version of this library, e.g. "0.1.0" (static; never free it).
  */
 const char *pgo_version(void);
+
+/**
+ * Makes a token not cancelled yet and stores it at `*out`; free it with
+ * `pgo_cancel_free`.
+ *
+ * Errors: `PGO_ERR_INVALID_ARGUMENT` for a NULL `out`.
+ *
+ * # Safety
+ * `out` is NULL or points to writable storage for a pointer.
+ */
+enum PgoStatus pgo_cancel_new(struct PgoCancel **out);
+
+/**
+ * Cancels the token: every job that holds it stops at its next
+ * iteration. Safe to call from any thread, any number of times.
+ *
+ * Errors: `PGO_ERR_INVALID_ARGUMENT` for a NULL `cancel`.
+ *
+ * # Safety
+ * `cancel` is NULL or a live token.
+ */
+enum PgoStatus pgo_cancel_request(const struct PgoCancel *cancel);
+
+/**
+ * Stores at `*out` whether the token was cancelled.
+ *
+ * Errors: `PGO_ERR_INVALID_ARGUMENT`.
+ *
+ * # Safety
+ * `cancel` is NULL or a live token; `out` is NULL or writable.
+ */
+enum PgoStatus pgo_cancel_requested(const struct PgoCancel *cancel, bool *out);
+
+/**
+ * Frees a token made by `pgo_cancel_new`. NULL is allowed and does
+ * nothing.
+ *
+ * # Safety
+ * `cancel` is NULL or a token from this API not yet freed, which no job
+ * or thread uses any more.
+ */
+void pgo_cancel_free(struct PgoCancel *cancel);
 
 /**
  * Makes an empty graph of poses in `dim` dimensions (2 or 3) and stores
@@ -529,6 +586,22 @@ enum PgoStatus pgo_graph_optimize(const struct PgoGraph *graph,
                                   struct PgoResult **out);
 
 /**
+ * `pgo_graph_optimize`, stopped at its next iteration once `cancel`
+ * (NULL: none) is cancelled by `pgo_cancel_request` from another thread:
+ * the result then holds the best map so far and `pgo_result_cancelled`
+ * says so.
+ *
+ * Errors: those of `pgo_graph_optimize`.
+ *
+ * # Safety
+ * As `pgo_graph_optimize`'s; `cancel` is NULL or a live token.
+ */
+enum PgoStatus pgo_graph_optimize_with(const struct PgoGraph *graph,
+                                       const struct PgoOptions *options,
+                                       const struct PgoCancel *cancel,
+                                       struct PgoResult **out);
+
+/**
  * The job again after poses, edges or loop candidates were added, for a
  * mapping front end that asks for the map every keyframe: the map and
  * decisions `pgo_graph_optimize` would give the graph as it now is, with
@@ -551,6 +624,23 @@ enum PgoStatus pgo_graph_optimize(const struct PgoGraph *graph,
 enum PgoStatus pgo_graph_update(struct PgoGraph *graph,
                                 const struct PgoOptions *options,
                                 struct PgoResult **out);
+
+/**
+ * `pgo_graph_update`, stopped at its next iteration once `cancel` (NULL:
+ * none) is cancelled by `pgo_cancel_request` from another thread: the
+ * result then holds the best map so far, `pgo_result_cancelled` says so,
+ * and the graph keeps its state from before the call (the next update
+ * starts from there).
+ *
+ * Errors: those of `pgo_graph_optimize`.
+ *
+ * # Safety
+ * As `pgo_graph_update`'s; `cancel` is NULL or a live token.
+ */
+enum PgoStatus pgo_graph_update_with(struct PgoGraph *graph,
+                                     const struct PgoOptions *options,
+                                     const struct PgoCancel *cancel,
+                                     struct PgoResult **out);
 
 /**
  * Stores what the update that made `result` did at `*out`: how it
@@ -687,6 +777,17 @@ enum PgoStatus pgo_result_d2(const struct PgoResult *result, double *out);
  * `result` is NULL or a live result; `out` is NULL or writable.
  */
 enum PgoStatus pgo_result_verdict(const struct PgoResult *result, int32_t *out);
+
+/**
+ * Stores at `*out` whether a `PgoCancel` token stopped the job (the
+ * poses are then the best found until it did).
+ *
+ * Errors: `PGO_ERR_INVALID_ARGUMENT`.
+ *
+ * # Safety
+ * `result` is NULL or a live result; `out` is NULL or writable.
+ */
+enum PgoStatus pgo_result_cancelled(const struct PgoResult *result, bool *out);
 
 /**
  * The report `pgo optimize --json` prints, as a NUL-terminated JSON

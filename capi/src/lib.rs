@@ -6,16 +6,19 @@
 //!
 //! Every function returns a `PgoStatus` (or, for a string, NULL on
 //! failure) and records a message for `pgo_last_error`; no panic crosses
-//! the boundary. Handles (`PgoGraph`, `PgoOptions`, `PgoResult`) are
+//! the boundary. Handles (`PgoGraph`, `PgoOptions`, `PgoResult`,
+//! `PgoCancel`) are
 //! opaque, made by a `_new` (or `pgo_graph_read_g2o`, `pgo_graph_optimize`,
 //! `pgo_graph_update`) and freed by their `_free`; strings handed out are
 //! owned by the API.
 
+mod cancel;
 mod graph;
 mod options;
 mod result;
 mod status;
 
+pub use cancel::*;
 pub use graph::*;
 pub use options::*;
 pub use result::*;

@@ -3,6 +3,7 @@
 //! `PgoLoopDecision` per loop candidate and, for an update, a `PgoUpdate`
 //! and one `PgoDecisionChange` per earlier decision it changed.
 
+use crate::cancel::PgoCancel;
 use crate::graph::PgoGraph;
 use crate::options::PgoOptions;
 use crate::status::{Failure, PgoStatus, borrow, borrow_mut, out_ptr, status, value};
@@ -106,11 +107,42 @@ pub unsafe extern "C" fn pgo_graph_optimize(
     out: *mut *mut PgoResult,
 ) -> PgoStatus {
     // SAFETY: the caller's contract, for `graph`, `options` and `out`.
+    unsafe { pgo_graph_optimize_with(graph, options, ptr::null(), out) }
+}
+
+/// `pgo_graph_optimize`, stopped at its next iteration once `cancel`
+/// (NULL: none) is cancelled by `pgo_cancel_request` from another thread:
+/// the result then holds the best map so far and `pgo_result_cancelled`
+/// says so.
+///
+/// Errors: those of `pgo_graph_optimize`.
+///
+/// # Safety
+/// As `pgo_graph_optimize`'s; `cancel` is NULL or a live token.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_graph_optimize_with(
+    graph: *const PgoGraph,
+    options: *const PgoOptions,
+    cancel: *const PgoCancel,
+    out: *mut *mut PgoResult,
+) -> PgoStatus {
+    // SAFETY: the caller's contract, for `graph`, `options`, `cancel` and
+    // `out`.
     unsafe {
         run_job(options, out, |o| {
-            Ok(borrow(graph, "graph")?.graph.optimize(o)?)
+            let graph = &borrow(graph, "graph")?.graph;
+            Ok(graph.optimize_with(o, &mut token(cancel))?)
         })
     }
+}
+
+/// The token of `cancel`, or one nothing cancels for NULL.
+///
+/// # Safety
+/// `cancel` is NULL or a live token.
+unsafe fn token(cancel: *const PgoCancel) -> pgo::Cancel {
+    // SAFETY: the caller's contract.
+    unsafe { cancel.as_ref() }.map_or_else(pgo::Cancel::new, |c| c.token.clone())
 }
 
 /// Runs `job` with `options` (NULL: the defaults) and stores its result at
@@ -162,9 +194,32 @@ pub unsafe extern "C" fn pgo_graph_update(
     out: *mut *mut PgoResult,
 ) -> PgoStatus {
     // SAFETY: the caller's contract, for `graph`, `options` and `out`.
+    unsafe { pgo_graph_update_with(graph, options, ptr::null(), out) }
+}
+
+/// `pgo_graph_update`, stopped at its next iteration once `cancel` (NULL:
+/// none) is cancelled by `pgo_cancel_request` from another thread: the
+/// result then holds the best map so far, `pgo_result_cancelled` says so,
+/// and the graph keeps its state from before the call (the next update
+/// starts from there).
+///
+/// Errors: those of `pgo_graph_optimize`.
+///
+/// # Safety
+/// As `pgo_graph_update`'s; `cancel` is NULL or a live token.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_graph_update_with(
+    graph: *mut PgoGraph,
+    options: *const PgoOptions,
+    cancel: *const PgoCancel,
+    out: *mut *mut PgoResult,
+) -> PgoStatus {
+    // SAFETY: the caller's contract, for `graph`, `options`, `cancel` and
+    // `out`.
     unsafe {
         run_job(options, out, |o| {
-            Ok(borrow_mut(graph, "graph")?.graph.update(o)?)
+            let graph = &mut borrow_mut(graph, "graph")?.graph;
+            Ok(graph.update_with(o, &mut token(cancel))?)
         })
     }
 }
@@ -555,6 +610,22 @@ pub unsafe extern "C" fn pgo_result_d2(result: *const PgoResult, out: *mut f64) 
 pub unsafe extern "C" fn pgo_result_verdict(result: *const PgoResult, out: *mut i32) -> PgoStatus {
     // SAFETY: the caller's contract.
     unsafe { get(result, out, |s| s.passed().map_or(-1, i32::from)) }
+}
+
+/// Stores at `*out` whether a `PgoCancel` token stopped the job (the
+/// poses are then the best found until it did).
+///
+/// Errors: `PGO_ERR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `result` is NULL or a live result; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_cancelled(
+    result: *const PgoResult,
+    out: *mut bool,
+) -> PgoStatus {
+    // SAFETY: the caller's contract.
+    unsafe { get(result, out, |s| s.cancelled()) }
 }
 
 /// The report `pgo optimize --json` prints, as a NUL-terminated JSON

@@ -1155,3 +1155,76 @@ fn a_replay_through_c_is_the_librarys_and_ends_with_the_batch_job() {
         pgo_graph_free(g);
     }
 }
+
+/// Whether a result says a token stopped its job.
+fn cancelled(r: *const PgoResult) -> bool {
+    let mut c = false;
+    ok(unsafe { pgo_result_cancelled(r, &mut c) });
+    c
+}
+
+#[test]
+fn a_cancelled_token_stops_jobs_and_an_update_keeps_the_earlier_state() {
+    unsafe {
+        let mut cancel = ptr::null_mut();
+        ok(pgo_cancel_new(&mut cancel));
+        let mut requested = true;
+        ok(pgo_cancel_requested(cancel, &mut requested));
+        assert!(!requested);
+        assert_fails(
+            pgo_cancel_request(ptr::null()),
+            PgoStatus::PgoErrInvalidArgument,
+            "cancel is NULL",
+        );
+        assert_fails(
+            pgo_result_cancelled(ptr::null(), &mut requested),
+            PgoStatus::PgoErrInvalidArgument,
+            "result is NULL",
+        );
+
+        // A token nothing cancelled, or none: the whole job.
+        let g = chain();
+        let mut r = ptr::null_mut();
+        ok(pgo_graph_optimize_with(g, ptr::null(), cancel, &mut r));
+        assert!(!cancelled(r));
+        pgo_result_free(r);
+        let first = update(g, ptr::null());
+        assert!(!cancelled(first));
+        pgo_result_free(first);
+
+        // Cancelled (from any thread): the next job stops at once.
+        let shared = cancel as usize;
+        std::thread::spawn(move || ok(pgo_cancel_request(shared as *const PgoCancel)))
+            .join()
+            .unwrap();
+        ok(pgo_cancel_requested(cancel, &mut requested));
+        assert!(requested);
+        let z = [2.0, 0.0, 0.0];
+        ok(pgo_graph_add_edge(
+            g,
+            0,
+            2,
+            z.as_ptr(),
+            3,
+            IDENTITY3.as_ptr(),
+            9,
+        ));
+        ok(pgo_graph_optimize_with(g, ptr::null(), cancel, &mut r));
+        assert!(cancelled(r));
+        pgo_result_free(r);
+        ok(pgo_graph_update_with(g, ptr::null(), cancel, &mut r));
+        assert!(cancelled(r));
+        pgo_result_free(r);
+
+        // The update after the cancelled one starts from the state before
+        // it: the new edge is still new.
+        let r = update(g, ptr::null());
+        assert!(!cancelled(r));
+        let u = update_of(r);
+        assert_eq!((u.solve, u.new_edges), (PgoUpdateSolve::PgoUpdateWarm, 1));
+        pgo_result_free(r);
+        pgo_cancel_free(cancel);
+        pgo_cancel_free(ptr::null_mut());
+        pgo_graph_free(g);
+    }
+}

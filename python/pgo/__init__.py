@@ -8,10 +8,11 @@ returning a :class:`Result` with the optimised poses, one decision per loop
 candidate and the report ``pgo optimize --json`` prints. A mapping front
 end that wants the map as the graph grows calls :meth:`PoseGraph.update`
 instead: the same map, reached from the last update's, solving only what
-the additions need (:attr:`Result.incremental` says how). Bad input raises
+the additions need (:attr:`Result.incremental` says how). A :class:`Cancel`
+token, or Ctrl-C, stops a running job. Bad input raises
 :class:`Error` (a ``ValueError``) with the library's message.
 """
 
-from ._pgo import Error, PoseGraph, Result, __version__, option_names, read_g2o
+from ._pgo import Cancel, Error, PoseGraph, Result, __version__, option_names, read_g2o
 
-__all__ = ["Error", "PoseGraph", "Result", "__version__", "option_names", "read_g2o"]
+__all__ = ["Cancel", "Error", "PoseGraph", "Result", "__version__", "option_names", "read_g2o"]

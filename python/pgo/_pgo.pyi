@@ -22,6 +22,17 @@ OptionValue = Union[bool, int, float, str, None]
 class Error(ValueError):
     """Bad input to pgo or a failed optimisation, with the library's message."""
 
+class Cancel:
+    """A token another thread cancels to stop a running optimize or update."""
+
+    def __init__(self) -> None: ...
+    def cancel(self) -> None:
+        """Stops every job that holds this token, at its next iteration."""
+    @property
+    def cancelled(self) -> bool:
+        """Whether cancel() was called."""
+    def __repr__(self) -> str: ...
+
 class PoseGraph:
     """A pose graph in 2D (SE(2)) or 3D (SE(3)).
 
@@ -69,10 +80,10 @@ class PoseGraph:
         """The pose as given; None for a vertex a file named only in edges."""
     def write_g2o(self, path: Union[str, os.PathLike[str]]) -> None:
         """Writes the graph as a g2o file, atomically."""
-    def optimize(self, **options: OptionValue) -> Result:
-        """Runs the job of ``pgo optimize``; options are its flags, ``_`` for ``-``."""
-    def update(self, **options: OptionValue) -> Result:
-        """The job again after additions, from the last update's map; options as optimize's."""
+    def optimize(self, *, cancel: Optional[Cancel] = None, **options: OptionValue) -> Result:
+        """Runs the job of ``pgo optimize``; options are its flags, ``_`` for ``-``; ``cancel`` stops it."""
+    def update(self, *, cancel: Optional[Cancel] = None, **options: OptionValue) -> Result:
+        """The job again after additions, from the last update's map; options and cancel as optimize's."""
     def forget(self) -> None:
         """Drops what update keeps: the next update runs the whole job."""
     def __repr__(self) -> str: ...
@@ -126,6 +137,9 @@ class Result:
     @property
     def verdict(self) -> Optional[str]:
         """"passed", "failed", or None when there is no test."""
+    @property
+    def cancelled(self) -> bool:
+        """Whether a Cancel token stopped the job (the best map so far)."""
     def __repr__(self) -> str: ...
 
 def read_g2o(

@@ -4,6 +4,7 @@
 //! job or incrementally (`update`).
 
 use crate::Error;
+use crate::cancel::{Cancel, Stop};
 use crate::convert::{self, error};
 use crate::solution::Solution;
 use pgo::{AnyPoseGraph, AnySolution, Options};
@@ -183,12 +184,20 @@ impl PoseGraph {
     /// loops, the χ² test. Options are `pgo optimize`'s flags with `_` for
     /// `-` (`gate="off"`, `robust="none"`, `max_iters=50`, `alpha=0.01`,
     /// `no_rescue=True`; see `pgo.option_names()`); `None` leaves one at
-    /// its default. The GIL is released while it runs.
-    #[pyo3(signature = (**options))]
-    fn optimize(&self, py: Python<'_>, options: Option<&Bound<'_, PyDict>>) -> PyResult<Solution> {
+    /// its default. The GIL is released while it runs. `cancel`, a
+    /// `pgo.Cancel`, stops it from another thread; Ctrl-C stops it too and
+    /// raises `KeyboardInterrupt`.
+    #[pyo3(signature = (*, cancel = None, **options))]
+    fn optimize(
+        &self,
+        py: Python<'_>,
+        cancel: Option<&Bound<'_, Cancel>>,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Solution> {
         let options = parse_options(options)?;
         let graph = &self.graph;
-        let solution = detached(py, || graph.optimize(&options))?;
+        let mut stop = Stop::new(cancel);
+        let solution = detached(py, &mut stop, |stop| graph.optimize_with(&options, stop))?;
         Ok(Solution::new(
             graph.ids().to_vec(),
             graph.dimension(),
@@ -205,18 +214,21 @@ impl PoseGraph {
     /// only odometry was). `Result.incremental` says how and which
     /// earlier decisions changed. The first update, one with other options
     /// than the last, and one after `fix` or `forget` run the whole job
-    /// ("batch"); a failed one leaves the kept state as it was. Options as
-    /// `optimize`'s. The GIL is released while it runs; meanwhile another
-    /// thread's use of the graph raises `RuntimeError`.
-    #[pyo3(signature = (**options))]
+    /// ("batch"); a failed or cancelled one leaves the kept state as it
+    /// was. Options, `cancel` and Ctrl-C as `optimize`'s. The GIL is
+    /// released while it runs; meanwhile another thread's use of the graph
+    /// raises `RuntimeError`.
+    #[pyo3(signature = (*, cancel = None, **options))]
     fn update(
         &mut self,
         py: Python<'_>,
+        cancel: Option<&Bound<'_, Cancel>>,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Solution> {
         let options = parse_options(options)?;
         let graph = &mut self.graph;
-        let solution = detached(py, || graph.update(&options))?;
+        let mut stop = Stop::new(cancel);
+        let solution = detached(py, &mut stop, |stop| graph.update_with(&options, stop))?;
         Ok(Solution::new(
             graph.ids().to_vec(),
             graph.dimension(),
@@ -257,15 +269,22 @@ fn parse_options(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
     Ok(options)
 }
 
-/// Runs a job of the library with the GIL released; its error, or a
-/// panic (a bug), as a `pgo.Error`.
+/// Runs a job of the library with the GIL released, stopped by `stop`;
+/// its error, or a panic (a bug), as a `pgo.Error`, and the signal's error
+/// (`KeyboardInterrupt`) if one stopped it.
 fn detached(
     py: Python<'_>,
-    job: impl Send + FnOnce() -> Result<AnySolution, pgo::Error>,
+    stop: &mut Stop,
+    job: impl Send + FnOnce(&mut Stop) -> Result<AnySolution, pgo::Error>,
 ) -> PyResult<AnySolution> {
-    py.detach(|| panic::catch_unwind(AssertUnwindSafe(job)))
+    let solution = py
+        .detach(|| panic::catch_unwind(AssertUnwindSafe(|| job(&mut *stop))))
         .map_err(|panic| Error::new_err(format!("internal failure: {}", panic_text(&panic))))?
-        .map_err(error)
+        .map_err(error)?;
+    match stop.interrupted.take() {
+        Some(signal) => Err(signal),
+        None => Ok(solution),
+    }
 }
 
 /// A panic's message.

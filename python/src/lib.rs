@@ -5,6 +5,7 @@
 //! Every error of the library is a `pgo.Error` (a `ValueError`) carrying
 //! its message.
 
+mod cancel;
 mod convert;
 mod graph;
 mod solution;
@@ -48,6 +49,7 @@ fn option_names() -> Vec<&'static str> {
 /// The module: the classes, the functions and `Error`.
 #[pymodule]
 fn _pgo(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<cancel::Cancel>()?;
     m.add_class::<PoseGraph>()?;
     m.add_class::<Solution>()?;
     m.add_function(wrap_pyfunction!(read_g2o, m)?)?;

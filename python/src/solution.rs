@@ -169,6 +169,14 @@ impl Solution {
             .map(|p| if p { "passed" } else { "failed" })
     }
 
+    /// Whether a `pgo.Cancel` token stopped the job: the poses are the
+    /// best found until then, and an update left the graph's kept state as
+    /// it was.
+    #[getter]
+    fn cancelled(&self) -> bool {
+        self.solution.cancelled()
+    }
+
     /// `Result(poses=…, loops=…, accepted=…, chi2=…, verdict=…)`.
     fn __repr__(&self) -> String {
         let loops = self.solution.loops();
