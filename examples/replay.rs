@@ -141,15 +141,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         *kinds.entry(name).or_default() += 1;
         changed += solution.incremental().map_or(0, |i| i.changed.len());
         if verbose {
-            let o = &solution.report().optimizer;
+            let r = solution.report();
+            let o = &r.optimizer;
             writeln!(
                 out,
-                "{:>7} poses  {name:<8} {ms:8.2} ms  {} iterations, {} factorisations ({:.2} ms), optimiser {:.2} ms",
+                "{:>7} poses  {name:<8} {ms:8.2} ms  {} iterations, {} factorisations ({:.2} ms), optimiser {:.2} ms; {} EM decisions ({:.2} ms judging), {} earlier decisions changed",
                 k + 1,
                 o.iterations,
                 o.factorizations,
                 o.timing.factorize_s * 1e3,
-                o.time_s * 1e3
+                o.time_s * 1e3,
+                r.robust.decisions,
+                r.time.evaluation_s * 1e3,
+                solution.incremental().map_or(0, |i| i.changed.len()),
             )?;
         }
         last = Some(solution);

@@ -25,6 +25,14 @@ use crate::geometry::Pose;
 use crate::graph::PoseGraph;
 use crate::linear::{EdgeJacobian, GroupScratch, Parallelism, SelectedInverse};
 use crate::solve::{Optimizer, SolveError};
+use faer::Par;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{
+    LltRegularization, cholesky_in_place, cholesky_in_place_scratch,
+};
+use faer::linalg::triangular_solve::{
+    solve_lower_triangular_in_place, solve_upper_triangular_in_place,
+};
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 use std::sync::Mutex;
 
@@ -223,43 +231,51 @@ fn judge_cluster<const D: usize>(
     a: usize,
 ) -> (Vec<Option<f64>>, Option<f64>) {
     let m = errors.len();
-    let mut sigma = DMatrix::zeros(D * m, D * m);
-    let mut e = DVector::zeros(D * m);
-    for (k, (err, cov)) in errors.iter().zip(covariances).enumerate() {
-        let Some(cov) = cov else {
-            return (vec![None; m], None);
-        };
-        sigma.view_mut((D * k, D * k), (D, D)).copy_from(cov);
-        e.rows_mut(D * k, D).copy_from(err);
-    }
-    let (na, nr) = (D * a, D * (m - a));
-    let s = sigma.view((0, 0), (na, na)) - gram.view((0, 0), (na, na));
-    let Some(s_inv) = symmetric_inverse(&s.into_owned()) else {
+    let Some(sigma) = covariances.iter().copied().collect::<Option<Vec<_>>>() else {
         return (vec![None; m], None);
     };
-    let e_a = e.rows(0, na).into_owned();
-    let s_inv_e = &s_inv * &e_a;
-    let joint = e_a.dot(&s_inv_e);
-    let sigma_a = sigma.view((0, 0), (na, na)).into_owned();
-    let e_tilde_a = &sigma_a * &s_inv_e;
-    let cov_a = &sigma_a * &s_inv * &sigma_a;
-    let m_ra = gram.view((na, 0), (nr, na)).into_owned();
-    let e_tilde_r = e.rows(na, nr) + &m_ra * &s_inv_e;
-    let cov_r = sigma.view((na, na), (nr, nr))
-        + gram.view((na, na), (nr, nr))
-        + &m_ra * &s_inv * m_ra.transpose();
+    let (na, nr) = (D * a, D * (m - a));
+    let e_a = DVector::from_iterator(na, errors[..a].iter().flat_map(|e| e.iter().copied()));
+    // S = Σ_A − M_AA = L·Lᵀ; y = L⁻¹·e_A, so e_Aᵀ·S⁻¹·e_A = |y|².
+    let Some(l) = cholesky_of_s(&sigma[..a], gram, na) else {
+        return (vec![None; m], None);
+    };
+    let mut y = faer::Mat::from_fn(na, 1, |r, _| e_a[r]);
+    solve_lower_triangular_in_place(l.as_ref(), y.as_mut(), Par::Seq);
+    let joint = y.col(0).iter().map(|v| v * v).sum::<f64>();
+    let mut s_inv_e = y.clone();
+    solve_upper_triangular_in_place(l.transpose(), s_inv_e.as_mut(), Par::Seq);
+    let s_inv_e = DVector::from_fn(na, |r, _| s_inv_e[(r, 0)]);
+    // The diagonal blocks of S⁻¹ = WᵀW with W = L⁻¹, for the members of A;
+    // X = L⁻¹·M_AR, for those of R: M_RA·S⁻¹·M_AR = XᵀX.
+    let mut w = faer::Mat::<f64>::identity(na, na);
+    solve_lower_triangular_in_place(l.as_ref(), w.as_mut(), Par::Seq);
+    let mut x = faer::Mat::from_fn(na, nr, |r, c| gram[(r, na + c)]);
+    solve_lower_triangular_in_place(l.as_ref(), x.as_mut(), Par::Seq);
+    // Block k of ZᵀZ, from the rows of Z at and after `from`.
+    let gram_block = |z: faer::MatRef<'_, f64>, k: usize, from: usize| {
+        SMatrix::<f64, D, D>::from_fn(|r, c| {
+            (from..na)
+                .map(|i| z[(i, D * k + r)] * z[(i, D * k + c)])
+                .sum()
+        })
+    };
     let mut nu2 = Vec::with_capacity(m);
     for k in 0..m {
         let (ek, ck) = if k < a {
-            (
-                e_tilde_a.rows(D * k, D).into_owned(),
-                cov_a.view((D * k, D * k), (D, D)).into_owned(),
-            )
+            let s_k = sigma[k];
+            let e = s_k * s_inv_e.fixed_rows::<D>(D * k);
+            // W is lower triangular: its rows above block k are zero there.
+            (e, s_k * gram_block(w.as_ref(), k, D * k) * s_k)
         } else {
             let r = k - a;
+            let m_ra = gram.view((na + D * r, 0), (D, na));
+            let e = errors[k] + m_ra * &s_inv_e;
+            let m_rr = gram.fixed_view::<D, D>(na + D * r, na + D * r);
+            let propagated = gram_block(x.as_ref(), r, 0);
             (
-                e_tilde_r.rows(D * r, D).into_owned(),
-                cov_r.view((D * r, D * r), (D, D)).into_owned(),
+                SVector::<f64, D>::from_column_slice(e.as_slice()),
+                sigma[k] + m_rr + propagated,
             )
         };
         nu2.push(ck.cholesky().map(|c| ek.dot(&c.solve(&ek))));
@@ -267,21 +283,50 @@ fn judge_cluster<const D: usize>(
     (nu2, Some(joint).filter(|j| j.is_finite()))
 }
 
-/// The inverse of a symmetric matrix that should be positive definite,
-/// `None` when it is not (to the precision of its largest entry): an
-/// empty matrix inverts to an empty one.
-fn symmetric_inverse(s: &DMatrix<f64>) -> Option<DMatrix<f64>> {
-    if s.nrows() == 0 {
-        return Some(s.clone());
+/// The lower Cholesky factor of `S = Σ_A − M_AA` (`na × na`; `sigma`: the
+/// members' covariances, `M_AA` the top-left block of `gram`), `None` when
+/// `S` is not positive definite to the precision of its largest entry
+/// (its smallest pivot squared at most 10⁻¹² of it); empty for `na = 0`.
+fn cholesky_of_s<const D: usize>(
+    sigma: &[SMatrix<f64, D, D>],
+    gram: &DMatrix<f64>,
+    na: usize,
+) -> Option<faer::Mat<f64>> {
+    let mut l = faer::Mat::from_fn(na, na, |r, c| {
+        let within = r / D == c / D;
+        let s = if within {
+            sigma[r / D][(r % D, c % D)]
+        } else {
+            0.0
+        };
+        s - gram[(r, c)]
+    });
+    if na == 0 {
+        return Some(l);
     }
-    let scale = s.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let chol = s.clone().cholesky()?;
-    let min_pivot = chol
-        .l()
-        .diagonal()
-        .iter()
-        .fold(f64::INFINITY, |m, v| m.min(*v));
-    (min_pivot * min_pivot > 1e-12 * scale).then(|| chol.inverse())
+    let scale = (0..na)
+        .flat_map(|c| (0..na).map(move |r| (r, c)))
+        .fold(0.0f64, |m, (r, c)| m.max(l[(r, c)].abs()));
+    let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(
+        na,
+        Par::Seq,
+        Default::default(),
+    ));
+    cholesky_in_place(
+        l.as_mut(),
+        LltRegularization::default(),
+        Par::Seq,
+        MemStack::new(&mut mem),
+        Default::default(),
+    )
+    .ok()?;
+    for c in 0..na {
+        for r in 0..c {
+            l[(r, c)] = 0.0;
+        }
+    }
+    let min_pivot = (0..na).fold(f64::INFINITY, |m, k| m.min(l[(k, k)]));
+    (min_pivot * min_pivot > 1e-12 * scale).then_some(l)
 }
 
 #[cfg(test)]
