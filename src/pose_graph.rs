@@ -480,9 +480,11 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// EM's decisions from the last ones ([`UpdateSolve`]). The report's
     /// `incremental` part says which, and which earlier decisions changed.
     ///
-    /// The first update, one with other options than the last, and one
-    /// after [`PoseGraph::fix`] or [`PoseGraph::forget`] run the whole job
-    /// ([`UpdateSolve::Batch`]). A cancelled update keeps the earlier state;
+    /// The first update, one with other options than the last, one
+    /// after [`PoseGraph::fix`] or [`PoseGraph::forget`], and one whose EM
+    /// decisions swing from the last ones (the new evidence overturned
+    /// them, `docs/method.md` §7b) run the whole job
+    /// ([`UpdateSolve::Batch`], the reason saying which). A cancelled update keeps the earlier state;
     /// one cut short by `options.solver.time_limit` (a bound on an update's
     /// latency) leaves its map as the start of the next.
     /// Errors: those of [`PoseGraph::optimize`].
@@ -521,8 +523,26 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         let mut graph = self.graph.clone();
         let warm = match self.state.as_deref() {
             Some((last, warm)) if last == options => {
-                pipeline::update_graph(&mut graph, warm, &config, &mut report, observer)
+                match pipeline::update_graph(&mut graph, warm, &config, &mut report, observer)
                     .map_err(from_pipeline)?
+                {
+                    Some(next) => next,
+                    None => {
+                        // EM's decisions swung: the whole job instead.
+                        graph = self.graph.clone();
+                        report = self.start(options)?.0;
+                        pipeline::optimize_graph(
+                            &mut graph,
+                            &self.missing,
+                            &config,
+                            &mut report,
+                            observer,
+                        )
+                        .map_err(from_pipeline)?;
+                        report.incremental = Some(pipeline::after_swing(&graph, warm, &report));
+                        Warm::after(&graph, &report, Default::default())
+                    }
+                }
             }
             last => {
                 pipeline::optimize_graph(&mut graph, &self.missing, &config, &mut report, observer)

@@ -99,14 +99,15 @@ impl<P: Clone> Warm<P> {
 
 /// Solves `graph` again from the state `warm` of its last solution (see
 /// the module doc), leaving the map in `graph` and filling `report`.
-/// Returns the state to keep.
+/// Returns the state to keep, or `None` when EM's decisions swung
+/// ([`robust::Outcome::swung`]): the caller then runs the whole job.
 pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     graph: &mut PoseGraph<P, D>,
     warm: &Warm<P>,
     config: &OptimizeConfig,
     report: &mut Report,
     observer: &mut dyn Observer,
-) -> Result<Warm<P>, PipelineError> {
+) -> Result<Option<Warm<P>>, PipelineError> {
     let start = Instant::now();
     let added = place(graph, warm);
     candidates::mark(graph, config.candidates);
@@ -126,23 +127,26 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         step.solve = UpdateSolve::None;
         step.reason = "nothing added".into();
         report.incremental = Some(step);
-        return Ok(warm.clone());
+        return Ok(Some(warm.clone()));
     }
     if new_candidates == 0 && added.all_by_tree {
         extended(graph, warm, config, report, start);
         step.solve = UpdateSolve::Extended;
         step.reason = "only poses hung on the map by one trusted edge each".into();
         report.incremental = Some(step);
-        return Ok(Warm::after(graph, report, warm.ordering.clone()));
+        return Ok(Some(Warm::after(graph, report, warm.ordering.clone())));
     }
-    let (full, previous, ordering) = resolve(
+    let Some((full, previous, ordering)) = resolve(
         graph,
         (warm, added.trusted_by_tree),
         config,
         report,
         observer,
         start,
-    )?;
+    )?
+    else {
+        return Ok(None);
+    };
     step.solve = if full {
         UpdateSolve::Full
     } else {
@@ -157,20 +161,55 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         ),
         (true, m) => format!("every candidate weighed again by {}", m.name()),
     };
-    let candidate_edges = (0..graph.edges.len()).filter(|&k| graph.edges[k].is_candidate());
-    for (k, l) in candidate_edges.zip(&report.loops) {
-        if previous[k].is_some_and(|a| a != l.accepted) {
-            step.changed.push(DecisionChange {
-                index: k,
-                from: l.from,
-                to: l.to,
-                accepted: l.accepted,
-                reason: l.reason,
-            });
-        }
-    }
+    step.changed = changes(graph, &previous, report);
     report.incremental = Some(step);
-    Ok(Warm::after(graph, report, ordering))
+    Ok(Some(Warm::after(graph, report, ordering)))
+}
+
+/// The earlier decisions (`previous`, by edge) that `report`'s differ from.
+fn changes<P: G2oPose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    previous: &[Option<bool>],
+    report: &Report,
+) -> Vec<DecisionChange> {
+    let candidate_edges = (0..graph.edges.len()).filter(|&k| graph.edges[k].is_candidate());
+    (candidate_edges.zip(&report.loops))
+        .filter(|&(k, l)| {
+            previous
+                .get(k)
+                .copied()
+                .flatten()
+                .is_some_and(|a| a != l.accepted)
+        })
+        .map(|(k, l)| DecisionChange {
+            index: k,
+            from: l.from,
+            to: l.to,
+            accepted: l.accepted,
+            reason: l.reason,
+        })
+        .collect()
+}
+
+/// The account of an update that ran the whole job on `graph` (its
+/// outcome in `report`) because EM's decisions from the last ones, in
+/// `warm`, swung: what was added since and which earlier decisions the job
+/// changed.
+pub(crate) fn after_swing<P: G2oPose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    warm: &Warm<P>,
+    report: &Report,
+) -> IncrementalReport {
+    IncrementalReport {
+        solve: UpdateSolve::Batch,
+        reason: "EM's decisions from the last ones swung: the whole job".into(),
+        new_poses: graph.num_vertices() - warm.poses.len(),
+        new_edges: graph.edges.len() - warm.edges,
+        new_candidates: (warm.edges..graph.edges.len())
+            .filter(|&k| graph.edges[k].is_candidate())
+            .count(),
+        changed: changes(graph, &warm.accepted, report),
+    }
 }
 
 /// How the new poses were placed.
@@ -262,11 +301,15 @@ fn extended<P: G2oPose<D>, const D: usize>(
     }
 }
 
+/// What [`resolve`] returns: whether every candidate was weighed again,
+/// each edge's earlier decision, and the elimination order used.
+type Resolved = (bool, Vec<Option<bool>>, Ordering);
+
 /// The gate, and the robust solve from the last decisions (and, where the
 /// placed map is the last accepted set's optimum, `optimal`, the new
 /// candidates the last loop model accepts against it). Returns whether
 /// every candidate was weighed again, each edge's earlier decision, and the
-/// elimination order used.
+/// elimination order used; `None` when EM's decisions swung.
 fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     graph: &mut PoseGraph<P, D>,
     (warm, optimal): (&Warm<P>, bool),
@@ -274,7 +317,7 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     report: &mut Report,
     observer: &mut dyn Observer,
     start: Instant,
-) -> Result<(bool, Vec<Option<bool>>, Ordering), PipelineError> {
+) -> Result<Option<Resolved>, PipelineError> {
     let solve_error = |source| PipelineError::Solve {
         path: config.input.clone(),
         source,
@@ -320,7 +363,7 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 .filter(|&k| candidates[k].edge >= warm.edges)
                 .collect(),
         });
-    let mut full = false;
+    let (mut full, mut swung) = (false, false);
     let weigh =
         |session: &mut Session<'_, P, D>, weights: &mut [f64], c: f64, test: &Test<'_, P, D>| {
             let (outcome, all) = robust::resume(
@@ -334,6 +377,7 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 proposal.as_ref(),
             )?;
             full = all;
+            swung = outcome.swung;
             Ok(outcome)
         };
     finish::solve_and_test(
@@ -348,6 +392,9 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         report,
         observer,
     )?;
+    if swung {
+        return Ok(None);
+    }
     let ordering = optimizer.ordering().cloned().unwrap_or_default();
-    Ok((full, previous, ordering))
+    Ok(Some((full, previous, ordering)))
 }

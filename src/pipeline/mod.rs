@@ -6,7 +6,7 @@ mod candidates;
 mod finish;
 mod incremental;
 
-pub(crate) use incremental::{Warm, update_graph};
+pub(crate) use incremental::{Warm, after_swing, update_graph};
 
 use crate::gate::{DegeneratePolicy, GateMode, MixtureOptions};
 use crate::graph::{AnyPoseGraph, PoseGraph};

@@ -27,7 +27,7 @@ mod search;
 pub use clusters::{MAX_CLUSTER, NEIGHBOURHOOD};
 pub use kernels::{cauchy_weight, dcs_weight, gnc_tls_weight, huber_weight};
 pub use model::{Evidence, LoopModel, Scale, ln_chi2_mean, ln_chi2_sigma};
-pub use schedule::{ANNEAL_STEP, MAX_ANNEAL_STEPS, MAX_DECISIONS, Proposal, SETTLE_STEPS};
+pub use schedule::{ANNEAL_STEP, MAX_ANNEAL_STEPS, MAX_DECISIONS, Proposal, SETTLE_STEPS, Swing};
 pub use search::{MAX_REMOVALS, SUSPECTS, Search, Suspect, Test};
 
 use crate::geometry::Pose;
@@ -241,6 +241,10 @@ pub struct Outcome {
     pub search: Option<Search>,
     /// Whether the iteration or time budget cut the method short.
     pub cut_short: bool,
+    /// EM from an update's start ([`resume`]): whether its decisions swung
+    /// ([`schedule::Swing`]) and it gave up, the map and decisions left
+    /// unfinished: the caller runs the whole job instead.
+    pub swung: bool,
 }
 
 impl Outcome {
@@ -260,6 +264,7 @@ impl Outcome {
             clusters: 0,
             search: None,
             cut_short: false,
+            swung: false,
         }
     }
 }
@@ -378,7 +383,16 @@ fn em<P: ChordalInit<D>, const D: usize>(
         out.cut_short = true;
         return Ok(());
     }
-    settle(session, chordal, weights, candidates, layers, test, out)
+    settle(
+        session,
+        chordal,
+        Swing::Continue,
+        weights,
+        candidates,
+        layers,
+        test,
+        out,
+    )
 }
 
 /// Re-decides every candidate from an earlier solution: the decisions by
@@ -388,7 +402,8 @@ fn em<P: ChordalInit<D>, const D: usize>(
 /// method other than EM, or too few candidates for EM's model, every
 /// candidate is weighed again by [`solve`] from the map as it is. With a
 /// `proposal`, EM first accepts the new candidates the last model accepts
-/// against the map as it is ([`schedule::propose`]).
+/// against the map as it is ([`schedule::propose`]). EM gives up when its
+/// decisions swing ([`schedule::Swing`], [`Outcome::swung`]).
 /// Returns the outcome and whether it was that full re-weighing.
 #[allow(clippy::too_many_arguments)]
 pub fn resume<P: ChordalInit<D>, const D: usize>(
@@ -413,7 +428,19 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
         if let Some(proposal) = proposal {
             schedule::propose(session, weights, candidates, proposal, layers)?;
         }
-        settle(session, false, weights, candidates, layers, test, &mut out)?;
+        settle(
+            session,
+            false,
+            Swing::GiveUp,
+            weights,
+            candidates,
+            layers,
+            test,
+            &mut out,
+        )?;
+        if out.swung {
+            return Ok((out, false));
+        }
     }
     for (k, cand) in candidates.iter().enumerate() {
         out.weights[k] = weights[cand.edge];
@@ -422,11 +449,14 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
     Ok((out, false))
 }
 
-/// EM from an accepted set: decisions by innovation until the set repeats,
-/// the χ² search, and each candidate's posterior and reason.
+/// EM from an accepted set: decisions by innovation until the set repeats
+/// (or, as `swing` says, swings), the χ² search, and each candidate's
+/// posterior and reason.
+#[allow(clippy::too_many_arguments)]
 fn settle<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     chordal: bool,
+    swing: Swing,
     weights: &mut [f64],
     candidates: &[Candidate],
     layers: &Layers,
@@ -440,7 +470,13 @@ fn settle<P: ChordalInit<D>, const D: usize>(
         Scale::Learned,
         layers,
         chordal,
+        swing,
     )?;
+    if decided.swung {
+        out.swung = true;
+        out.decisions = decided.decisions;
+        return Ok(());
+    }
     let mut search = explain(session, weights, candidates, &mut decided, layers, test)?;
     // A failed test no cluster explains: decide again from the trusted
     // edges' map, with the scale learned and with the file's.
@@ -457,7 +493,8 @@ fn settle<P: ChordalInit<D>, const D: usize>(
             &mut decided,
             test,
             |session, weights| {
-                schedule::decide(session, weights, candidates, scale, layers, chordal)
+                let swing = Swing::Continue;
+                schedule::decide(session, weights, candidates, scale, layers, chordal, swing)
             },
         )?;
         if restarted {

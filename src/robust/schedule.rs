@@ -245,6 +245,26 @@ pub struct Decided {
     pub relaxed_starts: usize,
     /// Whether the budget cut them short.
     pub cut_short: bool,
+    /// Whether they gave up swinging ([`Swing::GiveUp`]).
+    pub swung: bool,
+}
+
+/// What [`decide`] does when its set swings: a round flips back decisions
+/// the round before flipped (a wrong group in: the map bends, whole
+/// regions look inconsistent and go out; without them everything fits and
+/// comes back in). Once is common and settles at the next round (a
+/// candidate near the threshold, or a 2-cycle [`decide`] ends). From the
+/// annealing's start the set settles within [`MAX_DECISIONS`]; from an
+/// update's start, the last update's set, a second swing is the sign that
+/// the new evidence overturned the old decisions, which the annealing of
+/// the whole job sorts out in fewer evaluations (a replay of sphere2500
+/// with 100 aliased candidates swung for 8 and 10 rounds at two updates).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Swing {
+    /// Go on until the set repeats.
+    Continue,
+    /// Stop at the second swing, [`Decided::swung`] set.
+    GiveUp,
 }
 
 impl Decided {
@@ -276,6 +296,7 @@ impl Decided {
             relaxations: 0,
             relaxed_starts: 0,
             cut_short: false,
+            swung: false,
         }
     }
 
@@ -297,7 +318,9 @@ fn evidence(candidates: &[Candidate], innov: &Innovations, k: usize) -> Option<E
 /// accepted, 0 not) in `weights` and the least-squares map of the accepted
 /// set in the session's graph. With `relax` (a job on the chordal guess and
 /// the layer on), each accepted set is solved from the better fitting of
-/// the map before and its chordal relaxation ([`relaxed_start`]).
+/// the map before and its chordal relaxation ([`relaxed_start`]). `swing`:
+/// whether to stop at the first swing ([`Swing`]).
+#[allow(clippy::too_many_arguments)]
 pub fn decide<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -305,10 +328,15 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
     scale: Scale,
     layers: &Layers,
     relax: bool,
+    swing: Swing,
 ) -> Result<Decided, SolveError> {
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     let mut out = Decided::start(session.graph, &edges, weights, layers);
     let mut seen: Vec<Vec<bool>> = Vec::new();
+    // The candidates the last round flipped, and how many rounds flipped
+    // back some the round before had flipped.
+    let mut flipped = vec![false; edges.len()];
+    let mut swings = 0;
     // Whether the map in the graph met the job's own tolerance, and whether
     // the set repeats on a map that did not (it is then solved again).
     let (mut converged, mut again) = (false, false);
@@ -357,6 +385,17 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             again = true;
             continue;
         }
+        let flips: Vec<bool> = next
+            .iter()
+            .zip(&out.accepted)
+            .map(|(n, a)| n != a)
+            .collect();
+        swings += usize::from(flips.iter().zip(&flipped).any(|(&now, &then)| now && then));
+        if swing == Swing::GiveUp && swings >= 2 {
+            out.swung = true;
+            break;
+        }
+        flipped = flips;
         seen.push(std::mem::replace(&mut out.accepted, next));
         if seen.contains(&out.accepted) {
             // Settled, or cycling: keep the set the map was solved with.
@@ -370,7 +409,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
     for (a, &k) in out.accepted.iter_mut().zip(&edges) {
         *a = weights[k] == 1.0;
     }
-    if !converged && !out.cut_short {
+    if !converged && !out.cut_short && !out.swung {
         session.converge(weights)?;
     }
     Ok(out)

@@ -225,6 +225,7 @@ fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
         Scale::Learned,
         &layers,
         false,
+        Swing::Continue,
     )
     .unwrap();
     let summary = session.finish(false).unwrap();

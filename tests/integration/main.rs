@@ -8,6 +8,7 @@ mod faults;
 mod gating;
 mod hostile;
 mod robust;
+mod swing;
 // SIGKILL, and /proc to tell which leftover temporaries are stale.
 #[cfg(target_os = "linux")]
 mod killed;
