@@ -319,7 +319,7 @@ fn evidence(candidates: &[Candidate], innov: &Innovations, k: usize) -> Option<E
 /// set in the session's graph. With `relax` (a job on the chordal guess and
 /// the layer on), each accepted set is solved from the better fitting of
 /// the map before and its chordal relaxation ([`relaxed_start`]). `swing`:
-/// whether to stop at the first swing ([`Swing`]).
+/// whether to stop at the second swing ([`Swing`]).
 #[allow(clippy::too_many_arguments)]
 pub fn decide<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
@@ -333,10 +333,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     let mut out = Decided::start(session.graph, &edges, weights, layers);
     let mut seen: Vec<Vec<bool>> = Vec::new();
-    // The candidates the last round flipped, and how many rounds flipped
-    // back some the round before had flipped.
-    let mut flipped = vec![false; edges.len()];
-    let mut swings = 0;
+    let mut swings = Swings::new(edges.len());
     // Whether the map in the graph met the job's own tolerance, and whether
     // the set repeats on a map that did not (it is then solved again).
     let (mut converged, mut again) = (false, false);
@@ -360,21 +357,9 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             out.cut_short = true;
             break;
         }
-        let start = Instant::now();
-        let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?;
-        let mut innov = eval.innovations(&edges, &out.accepted, &out.clusters);
-        let (model, next) = judge_exactly(
-            candidates,
-            &edges,
-            &mut eval,
-            &mut innov,
-            &out.accepted,
-            scale,
-            layers,
-        );
-        session.evaluated_since(start);
-        out.innovations = innov;
-        out.model = Some(model);
+        let next = evaluate(
+            session, weights, candidates, &edges, &mut out, scale, layers,
+        )?;
         if !layers.decisions {
             // The innovations are reported; the annealed set stands.
             break;
@@ -385,17 +370,10 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             again = true;
             continue;
         }
-        let flips: Vec<bool> = next
-            .iter()
-            .zip(&out.accepted)
-            .map(|(n, a)| n != a)
-            .collect();
-        swings += usize::from(flips.iter().zip(&flipped).any(|(&now, &then)| now && then));
-        if swing == Swing::GiveUp && swings >= 2 {
+        if swings.record(&out.accepted, &next) >= 2 && swing == Swing::GiveUp {
             out.swung = true;
             break;
         }
-        flipped = flips;
         seen.push(std::mem::replace(&mut out.accepted, next));
         if seen.contains(&out.accepted) {
             // Settled, or cycling: keep the set the map was solved with.
@@ -413,6 +391,66 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
         session.converge(weights)?;
     }
     Ok(out)
+}
+
+/// One evaluation of the map in the session's graph (the least-squares map
+/// of the set in `weights`): the innovations and the loop model, kept in
+/// `out`; returns the set they accept.
+#[allow(clippy::too_many_arguments)]
+fn evaluate<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &[f64],
+    candidates: &[Candidate],
+    edges: &[usize],
+    out: &mut Decided,
+    scale: Scale,
+    layers: &Layers,
+) -> Result<Vec<bool>, SolveError> {
+    let start = Instant::now();
+    let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?;
+    let mut innov = eval.innovations(edges, &out.accepted, &out.clusters);
+    let (model, next) = judge_exactly(
+        candidates,
+        edges,
+        &mut eval,
+        &mut innov,
+        &out.accepted,
+        scale,
+        layers,
+    );
+    session.evaluated_since(start);
+    out.innovations = innov;
+    out.model = Some(model);
+    Ok(next)
+}
+
+/// The swings of [`decide`]'s sets ([`Swing`]).
+struct Swings {
+    /// The candidates the last round flipped.
+    flipped: Vec<bool>,
+    /// Rounds that flipped back some the round before had flipped.
+    count: usize,
+}
+
+impl Swings {
+    fn new(n: usize) -> Self {
+        Self {
+            flipped: vec![false; n],
+            count: 0,
+        }
+    }
+
+    /// Records the round from `accepted` to `next`; the swings so far.
+    fn record(&mut self, accepted: &[bool], next: &[bool]) -> usize {
+        let flips: Vec<bool> = next.iter().zip(accepted).map(|(n, a)| n != a).collect();
+        let back = flips
+            .iter()
+            .zip(&self.flipped)
+            .any(|(&now, &then)| now && then);
+        self.count += usize::from(back);
+        self.flipped = flips;
+        self.count
+    }
 }
 
 /// What an update knows before it solves ([`propose`]).

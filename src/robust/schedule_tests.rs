@@ -233,3 +233,20 @@ fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
     assert!(summary.converged(), "{summary:?}");
     assert!(decided.decisions >= 2);
 }
+
+#[test]
+fn a_swing_is_a_round_that_flips_back_what_the_round_before_flipped() {
+    let mut swings = Swings::new(4);
+    let a = [true, true, false, false];
+    // Out go 0 and 1: nothing flipped before, no swing.
+    let b = [false, false, false, false];
+    assert_eq!(swings.record(&a, &b), 0);
+    // In comes 2 (not flipped last round): no swing.
+    let c = [false, false, true, false];
+    assert_eq!(swings.record(&b, &c), 0);
+    // 2 goes back out and 0 comes in: 2 flipped back, one swing.
+    let d = [true, false, false, false];
+    assert_eq!(swings.record(&c, &d), 1);
+    // 0 flipped back: the second.
+    assert_eq!(swings.record(&d, &b), 2);
+}
