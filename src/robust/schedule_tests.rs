@@ -250,3 +250,27 @@ fn a_swing_is_a_round_that_flips_back_what_the_round_before_flipped() {
     // 0 flipped back: the second.
     assert_eq!(swings.record(&d, &b), 2);
 }
+
+#[test]
+fn a_cancel_is_seen_after_an_evaluation_without_an_iteration() {
+    let (mut g, _) = walk();
+    let weights = vec![1.0; g.edges.len()];
+    let options = SolverOptions::default();
+    let mut optimizer = Optimizer::new(&g, Some(&weights), options.clone()).unwrap();
+    let cancel = Cancel::new();
+    let mut observer = cancel.clone();
+    let mut session = Session::new(
+        &mut optimizer,
+        &mut g,
+        options,
+        Budget::unlimited(),
+        &mut observer,
+    );
+    session.evaluated_since(Instant::now());
+    assert!(!session.exhausted());
+    cancel.cancel();
+    session.relaxed_since(Instant::now());
+    assert!(session.exhausted());
+    let summary = session.finish(true);
+    assert!(summary.is_none_or(|s| s.stop_reason == crate::solve::StopReason::Cancelled));
+}

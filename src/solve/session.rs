@@ -74,13 +74,24 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
     }
 
     /// Adds the time since `start` to the relaxations' time.
+    /// Then asks the observer whether to stop ([`Self::exhausted`]).
     pub fn relaxed_since(&mut self, start: Instant) {
         self.phases.relaxation += start.elapsed();
+        self.poll();
     }
 
-    /// Adds the time since `start` to the evaluations' time.
+    /// Adds the time since `start` to the evaluations' time. Then asks the
+    /// observer whether to stop ([`Self::exhausted`]).
     pub fn evaluated_since(&mut self, start: Instant) {
         self.phases.evaluation += start.elapsed();
+        self.poll();
+    }
+
+    /// Asks the observer whether to stop: between the optimiser's runs too,
+    /// so that a job is cancelled within one evaluation or relaxation, not
+    /// only at its next iteration.
+    fn poll(&mut self) {
+        self.cancelled |= self.observer.should_stop();
     }
 
     /// The time spent so far in each phase outside the optimiser's runs.
