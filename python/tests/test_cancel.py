@@ -79,6 +79,9 @@ def test_a_cancelled_update_keeps_the_earlier_state():
 
 def test_ctrl_c_raises_keyboard_interrupt_and_the_graph_stays_usable(big_graph):
     big_graph.forget()
+    # Python's own Ctrl-C handler, even where the runner started it with
+    # SIGINT ignored (a background job of a shell script).
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.1, lambda: os.kill(os.getpid(), signal.SIGINT))
     timer.start()
     try:
@@ -86,6 +89,7 @@ def test_ctrl_c_raises_keyboard_interrupt_and_the_graph_stays_usable(big_graph):
             big_graph.update()
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     result = big_graph.update()
     assert not result.cancelled
     assert result.incremental["solve"] == "batch"
