@@ -23,6 +23,8 @@ pub struct GroupScratch {
     reach: Vec<u32>,
     mark: Vec<bool>,
     slot: Vec<u32>,
+    /// Block rows of the packed solution (the reach's block columns).
+    packed: usize,
     work: Vec<f64>,
 }
 
@@ -115,7 +117,8 @@ impl<const D: usize> BlockSystem<D> {
             }
             values += self.symbolic.panel_values(s as usize);
         }
-        Some(k * values + k * k * D * packed as usize)
+        scratch.packed = packed as usize;
+        Some(k * values + k * k * D * scratch.packed)
     }
 
     /// The sparse solve of [`BlockSystem::propagate_group`] over the reach
@@ -123,10 +126,7 @@ impl<const D: usize> BlockSystem<D> {
     fn solve_group(&self, edges: &[EdgeJacobian<D>], scratch: &mut GroupScratch) -> DMatrix<f64> {
         let k = D * edges.len();
         let slot = &scratch.slot;
-        let packed: usize = (scratch.reach.iter())
-            .map(|&s| self.symbolic.supernode_range(s as usize).0.len())
-            .sum();
-        let packed = D * packed;
+        let packed = D * scratch.packed;
         let y = &mut scratch.rhs;
         y.clear();
         y.resize(packed * k, 0.0);
