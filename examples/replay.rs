@@ -6,9 +6,11 @@
 //! cargo run --release --example replay -- g2o_samples/grid2d.g2o 10
 //! ```
 //!
-//! Prints one line per update (poses, how it was solved, milliseconds) with
-//! `-v`, and a summary: updates, total and p99 time, how many of each kind,
-//! and the final χ² against the batch one.
+//! Prints one line per update (poses, how it was solved, milliseconds) and
+//! the earlier decisions it changed with `-v`, and a summary: updates,
+//! total and p99 time, how many of each kind, and the final χ² and
+//! decisions against the batch ones (with `-v`, each decision that
+//! differs).
 
 use pgo::{AnyPoseGraph, Options, UpdateSolve};
 use std::collections::HashMap;
@@ -156,6 +158,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 solution.incremental().map_or(0, |i| i.changed.len()),
             )?;
         }
+        if verbose {
+            for c in solution.incremental().map_or(&[][..], |i| &i.changed[..]) {
+                let verb = if c.accepted { "accepted" } else { "rejected" };
+                writeln!(
+                    out,
+                    "          {verb} loop {}–{} ({:?})",
+                    c.from, c.to, c.reason
+                )?;
+            }
+        }
         last = Some(solution);
     }
     let last = last.ok_or("no vertex in the file")?;
@@ -191,5 +203,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "DIFFER"
         }
     )?;
+    if verbose {
+        for (u, b) in last.loops().iter().zip(batch.loops()) {
+            if u.accepted != b.accepted {
+                writeln!(
+                    out,
+                    "  differs: loop {}–{} ({} inliers): update {} ({:?}, posterior {:.3?}, ν² {:.3?}), batch {} ({:?}, posterior {:.3?}, ν² {:.3?})",
+                    u.from,
+                    u.to,
+                    u.inliers.map_or("no".into(), |n| n.to_string()),
+                    if u.accepted { "accepts" } else { "rejects" },
+                    u.reason,
+                    u.posterior,
+                    u.innovation,
+                    if b.accepted { "accepts" } else { "rejects" },
+                    b.reason,
+                    b.posterior,
+                    b.innovation,
+                )?;
+            }
+        }
+    }
     Ok(())
 }

@@ -340,7 +340,6 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let solver = SolverOptions {
         relative_tolerance: UPDATE_TOLERANCE,
         model_tolerance: Some(MODEL_TOLERANCE),
-        reuse_factorization: true,
         ..config.solver.clone()
     };
     let evaluated = method != RobustMethod::None;

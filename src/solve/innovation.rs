@@ -165,15 +165,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         }
         self.match_threads()?;
         self.update_pattern(graph, Some(weights))?;
-        let reuse = self.converged_factor.take().is_some_and(|w| w == weights);
         self.factorized = true;
-        let factorized = if reuse {
-            Ok(())
-        } else {
-            self.linearize(graph, Some(weights));
-            self.system.factorize(0.0)
-        };
-        match factorized {
+        self.linearize(graph, Some(weights));
+        match self.system.factorize(0.0) {
             Ok(()) => {}
             Err(LinearError::NotPositiveDefinite { block }) => {
                 return Err(SolveError::NotPositiveDefinite {

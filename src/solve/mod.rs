@@ -82,12 +82,6 @@ pub struct SolverOptions {
     /// ([`StopReason::Crawling`]); off by default (EM's decisions use it
     /// for accepted sets that have not settled yet).
     pub crawl_tolerance: Option<f64>,
-    /// After a run that converged by a small undamped step, let the
-    /// covariances of the innovations ([`Optimizer::innovation_chi2`])
-    /// use that step's factorisation instead of factorising again at the
-    /// poses one small step away (off by default; incremental updates use
-    /// it to save a factorisation an update).
-    pub reuse_factorization: bool,
     /// Stop when this much time has passed; the best estimate so far is kept.
     pub time_limit: Option<Duration>,
     /// LM damping `λ` (relative to the diagonal of `H`) after the first
@@ -111,7 +105,6 @@ impl Default for SolverOptions {
             step_tolerance: 1e-12,
             model_tolerance: None,
             crawl_tolerance: None,
-            reuse_factorization: false,
             time_limit: None,
             initial_lambda: 1e-6,
             threads: 0,
@@ -371,10 +364,6 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     trial: Vec<P>,
     best: Vec<P>,
     step: Vec<f64>,
-    /// The weights of the last run if it converged by a small undamped step
-    /// ([`SolverOptions::reuse_factorization`]): the factor is then of the
-    /// undamped `H` of those weights at the poses that step started from.
-    converged_factor: Option<Vec<f64>>,
     terms: Vec<EdgeTerms<D>>,
     /// Each edge's weighted χ² at the last trial point.
     edge_chi2: Vec<f64>,
@@ -440,7 +429,6 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             ordering,
             in_pattern,
             step: vec![0.0; vertex_of.len() * D],
-            converged_factor: None,
             vertex_of,
             trial: graph.poses.clone(),
             best: graph.poses.clone(),
@@ -533,10 +521,6 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let mut best_objective = objective;
         // Every run starts undamped (see `Damping`).
         let mut damping = Damping::undamped();
-        // Whether the last step was undamped and lowered the objective by
-        // less than the relative tolerance (see `converged_factor`).
-        let mut small_last_step = false;
-        self.converged_factor = None;
         let stop = loop {
             if let Some(reason) = self.stop_before_step(objective, &progress, observer) {
                 break reason;
@@ -573,7 +557,6 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             observer.iteration(&record);
             let decrease = ((previous - objective) / previous).abs();
             let small = decrease < self.options.relative_tolerance;
-            small_last_step = small && step.lambda == 0.0;
             if !small
                 && step.lambda > 0.0
                 && self.options.crawl_tolerance.is_some_and(|t| decrease < t)
@@ -590,42 +573,12 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             self.linearize(graph, weights);
             progress.lap(|t| &mut t.linearize_s);
         };
-        let objective = self.end_run(
-            graph,
-            weights,
-            stop,
-            objective,
-            best_objective,
-            small_last_step,
-        );
-        Ok(progress.finish(stop, objective))
-    }
-
-    /// After a run stopped for `stop` at `objective`: the best poses back
-    /// if they beat the last (returns the objective of the poses left), else
-    /// the factorisation kept for the innovations if the run converged by a
-    /// small undamped step ([`SolverOptions::reuse_factorization`]).
-    fn end_run(
-        &mut self,
-        graph: &mut PoseGraph<P, D>,
-        weights: Option<&[f64]>,
-        stop: StopReason,
-        objective: f64,
-        best_objective: f64,
-        small_last_step: bool,
-    ) -> f64 {
+        // The best poses back if they beat the last.
         if objective > best_objective {
             graph.poses.clone_from(&self.best);
-            return best_objective;
+            objective = best_objective;
         }
-        if self.options.reuse_factorization
-            && (stop == StopReason::RelativeDecrease && small_last_step
-                || stop == StopReason::SmallStep && self.system.damping() == 0.0)
-        {
-            self.converged_factor =
-                Some(weights.map_or_else(|| vec![1.0; graph.edges.len()], <[f64]>::to_vec));
-        }
-        objective
+        Ok(progress.finish(stop, objective))
     }
 
     /// Fails unless `weights` (if any) and the pattern have one entry per

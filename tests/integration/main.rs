@@ -7,6 +7,7 @@ mod datasets;
 mod faults;
 mod gating;
 mod hostile;
+mod replay;
 mod robust;
 mod swing;
 // SIGKILL, and /proc to tell which leftover temporaries are stale.
