@@ -472,7 +472,8 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// a mapping front end that asks for the map every keyframe: the same
     /// map and decisions as [`PoseGraph::optimize`] of the graph as it now
     /// is, reached from the last update's. The graph keeps that update's
-    /// poses, decisions, report and elimination order (its memory: the
+    /// poses, decisions, report (with the gate's fit, the start of the
+    /// next one) and elimination order (its memory: the
     /// poses, a byte per edge, 4 bytes per pose, about 100 bytes per loop
     /// candidate); a new pose is composed along trusted edges from them. Only as much is solved as the additions
     /// need: nothing when nothing was added, no factorisation when the new

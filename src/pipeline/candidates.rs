@@ -2,7 +2,7 @@
 //! edges the initial guess trusts.
 
 use super::{CandidateRule, OptimizeConfig, PipelineError};
-use crate::gate::{self, DegeneratePolicy, GateMode};
+use crate::gate::{self, DegeneratePolicy, GateMode, ThresholdFit};
 use crate::geometry::Pose;
 use crate::graph::{LoopCandidate, PoseGraph};
 use crate::io::inliers;
@@ -44,11 +44,13 @@ pub fn mark<P: Pose<D>, const D: usize>(graph: &mut PoseGraph<P, D>, rule: Candi
 /// The gate: learns `T_GV` from the candidates' counts, reports it, and
 /// returns every candidate with whether it passed and the posterior of the
 /// true-loop count component (when the counts were fitted and the mode
-/// uses them).
+/// uses them). `previous`: the fit of the last update of the same growing
+/// graph, if any ([`gate::learn_threshold_from`]).
 pub fn gate<P: Pose<D>, const D: usize>(
     graph: &PoseGraph<P, D>,
     config: &OptimizeConfig,
     report: &mut Report,
+    previous: Option<&ThresholdFit>,
 ) -> Vec<Candidate> {
     let edges: Vec<usize> = (0..graph.edges.len())
         .filter(|&k| graph.edges[k].is_candidate())
@@ -58,7 +60,13 @@ pub fn gate<P: Pose<D>, const D: usize>(
         .map(|&k| graph.edges[k].candidate.and_then(|c| c.inliers))
         .collect();
     report.loop_candidates = edges.len();
-    let decision = gate::gate(&counts, config.gate, config.degenerate, &config.mixture);
+    let decision = gate::gate_from(
+        &counts,
+        config.gate,
+        config.degenerate,
+        &config.mixture,
+        previous,
+    );
     report.gate = GateReport::new(&decision, &counts);
     if decision.degenerate && report.gate.counted > 0 {
         if let Some(reason) = &decision.reason {

@@ -322,7 +322,7 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         path: config.input.clone(),
         source,
     };
-    let candidates = candidates::gate(graph, config, report);
+    let candidates = candidates::gate(graph, config, report, warm.report.gate.fit.as_ref());
     let method = if candidates.iter().any(|c| c.kept) {
         config.robust
     } else {

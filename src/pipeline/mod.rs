@@ -257,7 +257,7 @@ pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     candidates::apply_inlier_csv(graph, config, report)?;
     candidates::mark(graph, config.candidates);
     let gating = Instant::now();
-    let candidates = candidates::gate(graph, config, report);
+    let candidates = candidates::gate(graph, config, report, None);
     report.time.gate_s = gating.elapsed().as_secs_f64();
     let method = if candidates.iter().any(|c| c.kept) {
         config.robust
