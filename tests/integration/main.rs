@@ -7,9 +7,8 @@ mod datasets;
 mod faults;
 mod gating;
 mod hostile;
-mod replay;
+mod replays;
 mod robust;
-mod swing;
 // SIGKILL, and /proc to tell which leftover temporaries are stale.
 #[cfg(target_os = "linux")]
 mod killed;
