@@ -301,6 +301,26 @@ fn extended<P: G2oPose<D>, const D: usize>(
     }
 }
 
+/// The weights to start the robust solve from — the last accepted set,
+/// and what joins new parts to it — and each edge's earlier decision
+/// (`None` for a trusted or new edge).
+fn start_weights<P: G2oPose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    warm: &Warm<P>,
+    candidates: &[robust::Candidate],
+    method: RobustMethod,
+) -> (Vec<f64>, Vec<Option<bool>>) {
+    let mut previous = warm.accepted.clone();
+    previous.resize(graph.edges.len(), None);
+    let mut weights = candidates::initial_weights(graph, candidates, method == RobustMethod::None);
+    for c in candidates {
+        if previous[c.edge] == Some(true) {
+            weights[c.edge] = 1.0;
+        }
+    }
+    (weights, previous)
+}
+
 /// What [`resolve`] returns: whether every candidate was weighed again,
 /// each edge's earlier decision, and the elimination order used.
 type Resolved = (bool, Vec<Option<bool>>, Ordering);
@@ -328,15 +348,7 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     } else {
         RobustMethod::None
     };
-    let mut previous = warm.accepted.clone();
-    previous.resize(graph.edges.len(), None);
-    // The start: the last accepted set, and what joins new parts to it.
-    let mut weights = candidates::initial_weights(graph, &candidates, method == RobustMethod::None);
-    for c in &candidates {
-        if previous[c.edge] == Some(true) {
-            weights[c.edge] = 1.0;
-        }
-    }
+    let (mut weights, previous) = start_weights(graph, warm, &candidates, method);
     let solver = SolverOptions {
         relative_tolerance: UPDATE_TOLERANCE,
         model_tolerance: Some(MODEL_TOLERANCE),
@@ -346,11 +358,10 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let ordering = Some(warm.ordering.clone().for_innovations(evaluated));
     let mut optimizer = Optimizer::with_ordering(graph, Some(&weights), solver.clone(), ordering)
         .map_err(solve_error)?;
-    let initial_chi2 = graph.chi2();
-    report.input_chi2 = initial_chi2;
+    report.input_chi2 = graph.chi2();
     report.initialization = InitializationReport {
         method: Initialization::Previous,
-        chi2: initial_chi2,
+        chi2: report.input_chi2,
         time_s: start.elapsed().as_secs_f64(),
         vertices_without_line: 0,
     };

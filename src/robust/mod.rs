@@ -504,6 +504,19 @@ fn settle<P: ChordalInit<D>, const D: usize>(
             }
         }
     }
+    record(out, decided, search, candidates);
+    Ok(())
+}
+
+/// Fills `out` with what the decisions `decided` and the χ² search
+/// `search` found: the counts, and each candidate's innovation, posterior
+/// and reason.
+fn record(
+    out: &mut Outcome,
+    decided: schedule::Decided,
+    search: Option<Search>,
+    candidates: &[Candidate],
+) {
     out.decisions = decided.decisions;
     out.relaxations += decided.relaxations;
     out.relaxed_starts = decided.relaxed_starts;
@@ -532,5 +545,4 @@ fn settle<P: ChordalInit<D>, const D: usize>(
     }
     out.model = decided.model;
     out.search = search;
-    Ok(())
 }

@@ -555,20 +555,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             let record = step.record(summary.iterations, progress.watch.elapsed());
             summary.history.push(record);
             observer.iteration(&record);
-            let decrease = ((previous - objective) / previous).abs();
-            let small = decrease < self.options.relative_tolerance;
-            if !small
-                && step.lambda > 0.0
-                && self.options.crawl_tolerance.is_some_and(|t| decrease < t)
-            {
-                break StopReason::Crawling;
-            }
-            if small || self.model_agreed(previous, objective) {
-                break if self.model_trusted(previous, objective) {
-                    StopReason::RelativeDecrease
-                } else {
-                    StopReason::Stalled
-                };
+            if let Some(reason) = self.stop_after_step(previous, objective, step.lambda) {
+                break reason;
             }
             self.linearize(graph, weights);
             progress.lap(|t| &mut t.linearize_s);
@@ -579,6 +567,27 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             objective = best_objective;
         }
         Ok(progress.finish(stop, objective))
+    }
+
+    /// The reason to stop after a step of damping `lambda` that took the
+    /// objective from `previous` to `objective`, if any: LM crawling (a
+    /// damped step below [`SolverOptions::crawl_tolerance`]), or a relative
+    /// decrease below the tolerance or foreseen by the model to within
+    /// [`SolverOptions::model_tolerance`] — convergence where the model is
+    /// trusted, else a stall.
+    fn stop_after_step(&self, previous: f64, objective: f64, lambda: f64) -> Option<StopReason> {
+        let decrease = ((previous - objective) / previous).abs();
+        let small = decrease < self.options.relative_tolerance;
+        if !small && lambda > 0.0 && self.options.crawl_tolerance.is_some_and(|t| decrease < t) {
+            return Some(StopReason::Crawling);
+        }
+        (small || self.model_agreed(previous, objective)).then(|| {
+            if self.model_trusted(previous, objective) {
+                StopReason::RelativeDecrease
+            } else {
+                StopReason::Stalled
+            }
+        })
     }
 
     /// Fails unless `weights` (if any) and the pattern have one entry per
