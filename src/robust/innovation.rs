@@ -36,6 +36,18 @@ use faer::linalg::triangular_solve::{
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 use std::sync::Mutex;
 
+/// The time of the selected inverse in multiply–adds of the sparse group
+/// solves, per multiply–add of a numeric factorisation. Takahashi's
+/// recurrence is one pass over the factor, but in small blocks, where the
+/// solves for a group run panel by panel on all its right-hand sides at
+/// once. Timed both ways for the clusters of the new candidates of each
+/// update, replaying the aliasing benchmark's files every 100 poses
+/// (`examples/replay`): the selected inverse took 0.38 (sphere2500) to 0.62
+/// (parking-garage) ns per multiply–add of a factorisation, the solves
+/// 0.063–0.068 ns per multiply–add, ratios of 6.0 and 9.1 (9.6 and 15 on
+/// manhattan and intel, whose factorisations are smaller); 8 lies between.
+pub const SELECTED_INVERSE_COST: f64 = 8.0;
+
 /// What the innovations of one evaluation found.
 #[derive(Clone, Debug, Default)]
 pub struct Innovations {
@@ -57,7 +69,9 @@ pub struct Evaluation<'a, P: Pose<D>, const D: usize> {
     optimizer: &'a mut Optimizer<P, D>,
     graph: &'a PoseGraph<P, D>,
     block: Vec<Option<usize>>,
-    inverse: SelectedInverse,
+    /// The selected inverse, unless every cluster is solved for
+    /// ([`Evaluation::for_clusters`]).
+    inverse: Option<SelectedInverse>,
     /// Scratch of the sparse solves, one per thread at work.
     scratch: Mutex<Vec<GroupScratch>>,
 }
@@ -72,7 +86,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         weights: &[f64],
     ) -> Result<Self, SolveError> {
         let block = optimizer.factor_at(graph, weights)?;
-        let inverse = optimizer.system().selected_inverse();
+        let inverse = Some(optimizer.system().selected_inverse());
         Ok(Self {
             optimizer,
             graph,
@@ -80,6 +94,38 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             inverse,
             scratch: Mutex::default(),
         })
+    }
+
+    /// [`Evaluation::new`] for the innovations of `clusters` only (of the
+    /// candidates `edges`): without the selected inverse when the sparse
+    /// solves of those clusters cost less than it
+    /// ([`SELECTED_INVERSE_COST`]), as for the few clusters an update's new
+    /// candidates touch.
+    pub fn for_clusters(
+        optimizer: &'a mut Optimizer<P, D>,
+        graph: &'a PoseGraph<P, D>,
+        weights: &[f64],
+        (edges, clusters): (&[usize], &[Vec<usize>]),
+    ) -> Result<Self, SolveError> {
+        let block = optimizer.factor_at(graph, weights)?;
+        let mut eval = Self {
+            optimizer,
+            graph,
+            block,
+            inverse: None,
+            scratch: Mutex::default(),
+        };
+        let system = eval.optimizer.system();
+        let mut scratch = GroupScratch::default();
+        let solves: usize = (clusters.iter())
+            .map(|c| system.group_solve_cost(&eval.linearise(edges, c).jacobians, &mut scratch))
+            .sum();
+        // A factorisation's multiply–adds: half its floating-point operations.
+        let inverse_cost = SELECTED_INVERSE_COST * system.factor_stats().1 / 2.0;
+        if solves as f64 >= inverse_cost {
+            eval.inverse = Some(system.selected_inverse());
+        }
+        Ok(eval)
     }
 
     /// The innovations of candidates `edges` (edge indices; `accepted[k]`:
@@ -114,6 +160,12 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             out.joint.push(joint);
         }
         out
+    }
+
+    /// Whether it took the selected inverse ([`Evaluation::for_clusters`]).
+    #[cfg(test)]
+    pub fn holds_inverse(&self) -> bool {
+        self.inverse.is_some()
     }
 
     /// The threads the solver works on.
@@ -194,11 +246,15 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     ) -> Judged {
         let lin = self.linearise(edges, members);
         let system = self.optimizer.system();
+        let Some(inverse) = &self.inverse else {
+            let gram = system.propagate_group_solved(&lin.jacobians, scratch);
+            let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
+            return (nu2, joint, true);
+        };
         if a == 0 && members.len() == 1 && !exact {
             // Its bound unless its blocks of H⁻¹ are on the pattern.
-            let Some(gram) = system.propagate_group_selected(&self.inverse, &lin.jacobians, 0)
-            else {
-                let bound = system.propagate_bound(&self.inverse, &lin.jacobians[0]);
+            let Some(gram) = system.propagate_group_selected(inverse, &lin.jacobians, 0) else {
+                let bound = system.propagate_bound(inverse, &lin.jacobians[0]);
                 let nu2 = lin.covariances[0]
                     .and_then(|c| (c + bound).cholesky())
                     .map(|c| lin.errors[0].dot(&c.solve(&lin.errors[0])));
@@ -207,7 +263,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
             return (nu2, joint, true);
         }
-        let gram = system.propagate_group_cheaper(&self.inverse, &lin.jacobians, scratch);
+        let gram = system.propagate_group_cheaper(inverse, &lin.jacobians, scratch);
         let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
         (nu2, joint, true)
     }

@@ -493,7 +493,12 @@ pub fn propose<P: Pose<D>, const D: usize>(
         .filter(|cluster| cluster.iter().any(|&k| new[k]))
         .cloned()
         .collect();
-    let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?;
+    let mut eval = Evaluation::for_clusters(
+        session.optimizer,
+        session.graph,
+        weights,
+        (&edges, &touched),
+    )?;
     let mut innov = eval.innovations(&edges, &decided.accepted, &touched);
     let accepts = |innov: &Innovations, k: usize| match evidence(candidates, innov, k) {
         Some(e) => proposal.model.posterior(&e) >= 0.5,
