@@ -141,7 +141,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             UpdateSolve::Full => "full",
         };
         *kinds.entry(name).or_default() += 1;
-        changed += solution.incremental().map_or(0, |i| i.changed.len());
+        let changes = solution.incremental().map_or(&[][..], |i| &i.changed[..]);
+        changed += changes.len();
         if verbose {
             let r = solution.report();
             let o = &r.optimizer;
@@ -155,11 +156,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 o.time_s * 1e3,
                 r.robust.decisions,
                 r.time.evaluation_s * 1e3,
-                solution.incremental().map_or(0, |i| i.changed.len()),
+                changes.len(),
             )?;
-        }
-        if verbose {
-            for c in solution.incremental().map_or(&[][..], |i| &i.changed[..]) {
+            for c in changes {
                 let verb = if c.accepted { "accepted" } else { "rejected" };
                 writeln!(
                     out,

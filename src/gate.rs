@@ -501,7 +501,7 @@ impl ThresholdFit {
     /// the counts have doubled since the last fit from the usual starts.
     fn warm_start(&self, fitted: usize, max: u64, floor: f64) -> Option<NormalMixture> {
         let mixture = self.mixture.as_ref()?;
-        if fitted >= 2 * self.fresh_counts || self.max_count == 0 {
+        if fitted >= 2 * self.fresh_counts {
             return None;
         }
         let shift = (self.max_count as f64).ln() - (max as f64).ln();

@@ -85,13 +85,23 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         graph: &'a PoseGraph<P, D>,
         weights: &[f64],
     ) -> Result<Self, SolveError> {
+        let mut eval = Self::factored(optimizer, graph, weights)?;
+        eval.inverse = Some(eval.optimizer.system().selected_inverse());
+        Ok(eval)
+    }
+
+    /// The factorisation of the map, without the selected inverse.
+    fn factored(
+        optimizer: &'a mut Optimizer<P, D>,
+        graph: &'a PoseGraph<P, D>,
+        weights: &[f64],
+    ) -> Result<Self, SolveError> {
         let block = optimizer.factor_at(graph, weights)?;
-        let inverse = Some(optimizer.system().selected_inverse());
         Ok(Self {
             optimizer,
             graph,
             block,
-            inverse,
+            inverse: None,
             scratch: Mutex::default(),
         })
     }
@@ -107,14 +117,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         weights: &[f64],
         (edges, clusters): (&[usize], &[Vec<usize>]),
     ) -> Result<Self, SolveError> {
-        let block = optimizer.factor_at(graph, weights)?;
-        let mut eval = Self {
-            optimizer,
-            graph,
-            block,
-            inverse: None,
-            scratch: Mutex::default(),
-        };
+        let mut eval = Self::factored(optimizer, graph, weights)?;
         let system = eval.optimizer.system();
         let mut scratch = GroupScratch::default();
         let solves: usize = (clusters.iter())
@@ -246,24 +249,21 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     ) -> Judged {
         let lin = self.linearise(edges, members);
         let system = self.optimizer.system();
-        let Some(inverse) = &self.inverse else {
-            let gram = system.propagate_group_solved(&lin.jacobians, scratch);
-            let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
-            return (nu2, joint, true);
+        let gram = match &self.inverse {
+            None => system.propagate_group_solved(&lin.jacobians, scratch),
+            Some(inverse) if a == 0 && members.len() == 1 && !exact => {
+                // Its bound unless its blocks of H⁻¹ are on the pattern.
+                let Some(gram) = system.propagate_group_selected(inverse, &lin.jacobians, 0) else {
+                    let bound = system.propagate_bound(inverse, &lin.jacobians[0]);
+                    let nu2 = lin.covariances[0]
+                        .and_then(|c| (c + bound).cholesky())
+                        .map(|c| lin.errors[0].dot(&c.solve(&lin.errors[0])));
+                    return (vec![nu2], Some(0.0), false);
+                };
+                gram
+            }
+            Some(inverse) => system.propagate_group_cheaper(inverse, &lin.jacobians, scratch),
         };
-        if a == 0 && members.len() == 1 && !exact {
-            // Its bound unless its blocks of H⁻¹ are on the pattern.
-            let Some(gram) = system.propagate_group_selected(inverse, &lin.jacobians, 0) else {
-                let bound = system.propagate_bound(inverse, &lin.jacobians[0]);
-                let nu2 = lin.covariances[0]
-                    .and_then(|c| (c + bound).cholesky())
-                    .map(|c| lin.errors[0].dot(&c.solve(&lin.errors[0])));
-                return (vec![nu2], Some(0.0), false);
-            };
-            let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
-            return (nu2, joint, true);
-        }
-        let gram = system.propagate_group_cheaper(inverse, &lin.jacobians, scratch);
         let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
         (nu2, joint, true)
     }
