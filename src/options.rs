@@ -149,6 +149,18 @@ pub struct SolverOptions {
     /// 256) uses N.
     #[cfg_attr(feature = "cli", arg(long, default_value = "0", value_parser = parse_threads))]
     pub threads: usize,
+    /// Most iterations of each solve in an incremental update
+    /// ([`crate::PoseGraph::update`]), at least 1, for a bounded time per
+    /// update as a live front end needs it: the map an update returns may
+    /// then be short of the optimum (its report says not converged), the
+    /// next update goes on from it, and an update that adds nothing
+    /// continues the convergence (without this option, finishes it). Loop
+    /// candidates that EM decides are always solved to convergence (EM
+    /// judges each by its innovation at the optimum). Without it every
+    /// update converges to the map a batch job would find. `pgo optimize`
+    /// has no use for it.
+    #[cfg_attr(feature = "cli", arg(skip))]
+    pub update_iterations: Option<usize>,
 }
 
 /// The χ² goodness-of-fit test of the result.
@@ -271,6 +283,13 @@ const SETTERS: &[Setter] = &[
         },
     },
     Setter {
+        name: "update-iters",
+        set: |o, v| {
+            o.solver.update_iterations = Some(parse_update_iters(v)?);
+            Ok(())
+        },
+    },
+    Setter {
         name: "alpha",
         set: |o, v| {
             o.test.alpha = parse_alpha(v)?;
@@ -318,8 +337,18 @@ impl Options {
         })
     }
 
+    /// Whether `other` asks for the same map as these options: they differ
+    /// at most in how many iterations an update may take
+    /// ([`SolverOptions::update_iterations`]), which changes when the map is
+    /// reached, not which.
+    pub(crate) fn same_job(&self, other: &Options) -> bool {
+        let mut other = other.clone();
+        other.solver.update_iterations = self.solver.update_iterations;
+        *self == other
+    }
+
     /// The names [`Options::set`] takes, in the order of `pgo optimize
-    /// --help`.
+    /// --help` (which has all but `update-iters`).
     pub fn names() -> impl Iterator<Item = &'static str> {
         SETTERS.iter().map(|s| s.name)
     }
@@ -346,6 +375,9 @@ impl Options {
             check("time-limit", t.as_secs_f64(), |t| check_time_limit(*t))?;
         }
         check("threads", self.solver.threads, |n| check_threads(*n))?;
+        if let Some(k) = self.solver.update_iterations {
+            check("update-iters", k, |k| check_update_iters(*k))?;
+        }
         check("alpha", self.test.alpha, |a| check_alpha(*a))
     }
 }
@@ -512,6 +544,18 @@ fn parse_robust_c(text: &str) -> Result<f64, String> {
 
 fn parse_max_iters(text: &str) -> Result<usize, String> {
     parse_usize(text, |_| Ok(()))
+}
+
+fn parse_update_iters(text: &str) -> Result<usize, String> {
+    parse_usize(text, check_update_iters)
+}
+
+fn check_update_iters(k: usize) -> Result<(), &'static str> {
+    if k == 0 {
+        Err("must be at least 1")
+    } else {
+        Ok(())
+    }
 }
 
 fn parse_time_limit(text: &str) -> Result<Duration, String> {

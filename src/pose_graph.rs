@@ -486,8 +486,11 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// decisions swing from the last ones (the new evidence overturned
     /// them, `docs/method.md` §7b) run the whole job
     /// ([`UpdateSolve::Batch`], the reason saying which). A cancelled update keeps the earlier state;
-    /// one cut short by `options.solver.time_limit` (a bound on an update's
-    /// latency) leaves its map as the start of the next.
+    /// one cut short by `options.solver.time_limit` or
+    /// `options.solver.update_iterations` (bounds on an update's latency;
+    /// the report then says not converged) leaves its map as the start of
+    /// the next, and an update with nothing added goes on converging (with
+    /// no such bound, to the batch map).
     /// Errors: those of [`PoseGraph::optimize`].
     ///
     /// ```
@@ -523,7 +526,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         let (mut report, config) = self.start(options)?;
         let mut graph = self.graph.clone();
         let warm = match self.state.as_deref() {
-            Some((last, warm)) if last == options => {
+            Some((last, warm)) if last.same_job(options) => {
                 match pipeline::update_graph(&mut graph, warm, &config, &mut report, observer)
                     .map_err(from_pipeline)?
                 {

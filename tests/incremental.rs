@@ -96,7 +96,20 @@ fn replay<P: pgo::GraphPose<D>, const D: usize>(
     pose: fn(&[f64]) -> P,
     every: usize,
 ) -> Vec<UpdateSolve> {
-    let options = Options::default();
+    replay_with(file, pose, every, &Options::default()).0
+}
+
+/// [`replay`] with `options` for every update; with `update-iters` set,
+/// checks that no update iterated more, and that a closing update (nothing
+/// added, default options) finishes the convergence without the whole
+/// job. Returns each update's kind and how many did not converge.
+fn replay_with<P: pgo::GraphPose<D>, const D: usize>(
+    file: &str,
+    pose: fn(&[f64]) -> P,
+    every: usize,
+    options: &Options,
+) -> (Vec<UpdateSolve>, usize) {
+    let mut unconverged = 0;
     let steps = additions::<P, D>(&sample(file), pose);
     let n = steps.len();
     let mut g = PoseGraph::<P, D>::new();
@@ -106,9 +119,18 @@ fn replay<P: pgo::GraphPose<D>, const D: usize>(
         if (k + 1) % every != 0 && k + 1 != n {
             continue;
         }
-        let s = g.update(&options).unwrap();
+        let s = g.update(options).unwrap();
         let inc = s.incremental().unwrap().clone();
         kinds.push(inc.solve);
+        let o = &s.report().optimizer;
+        unconverged += usize::from(!o.converged);
+        if let (Some(cap), UpdateSolve::Warm, true) = (
+            options.solver.update_iterations,
+            inc.solve,
+            s.loops().is_empty(),
+        ) {
+            assert!(o.iterations <= cap, "{file}: {} iterations", o.iterations);
+        }
         // `changed` lists exactly the earlier candidates whose decision
         // differs from the last update's.
         if let Some(prev) = &last {
@@ -123,7 +145,14 @@ fn replay<P: pgo::GraphPose<D>, const D: usize>(
         }
         last = Some(s);
     }
-    let last = last.unwrap();
+    let mut last = last.unwrap();
+    let options = Options::default();
+    if !last.report().optimizer.converged {
+        last = g.update(&options).unwrap();
+        let inc = last.incremental().unwrap();
+        assert_eq!((inc.solve, inc.new_edges), (UpdateSolve::Warm, 0), "{file}");
+        assert!(last.report().optimizer.converged, "{file}");
+    }
     let batch = g.optimize(&options).unwrap();
     assert!(batch.incremental().is_none());
     let rel = (last.chi2() / batch.chi2() - 1.0).abs();
@@ -134,7 +163,7 @@ fn replay<P: pgo::GraphPose<D>, const D: usize>(
         let d = p.inverse().compose(q).log();
         assert!(d.amax() < 1e-5, "{file} every {every}: vertex {id} {d:?}");
     }
-    kinds
+    (kinds, unconverged)
 }
 
 fn se2(v: &[f64]) -> Se2 {
@@ -170,6 +199,18 @@ fn walk(n: u64) -> PoseGraph2 {
         }
     }
     g
+}
+
+#[test]
+fn capped_updates_iterate_at_most_so_often_and_a_closing_update_reaches_batch() {
+    let mut options = Options::default();
+    options.set("update-iters", "1").unwrap();
+    let (kinds, unconverged) = replay_with::<Se2, 3>("grid2d_clean.g2o", se2, 25, &options);
+    assert!(kinds[1..].iter().all(|k| *k == UpdateSolve::Warm));
+    assert!(unconverged > 0, "no update was cut short");
+    // Loop candidates decided by EM: those updates converge.
+    let (_, unconverged) = replay_with::<Se2, 3>("aliased.g2o", se2, 60, &options);
+    assert_eq!(unconverged, 0);
 }
 
 #[test]
@@ -241,6 +282,14 @@ fn other_options_a_new_gauge_or_forget_start_again() {
         g.update(&other).unwrap().incremental().unwrap().solve,
         UpdateSolve::None
     );
+    // How many iterations an update may take changes no decision: not
+    // another job.
+    let mut capped = other.clone();
+    capped.set("update-iters", "1").unwrap();
+    (g.add_edge(0, 4, Se2::new(4.1, 0.0, 0.0), Matrix3::identity())).unwrap();
+    let s = g.update(&capped).unwrap();
+    assert_eq!(s.incremental().unwrap().solve, UpdateSolve::Warm);
+    assert_eq!(s.report().optimizer.iterations, 1);
     g.fix(2).unwrap();
     assert_eq!(
         g.update(&other).unwrap().incremental().unwrap().solve,

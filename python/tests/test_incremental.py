@@ -180,6 +180,32 @@ def test_a_replay_of_a_square_walk_ends_with_the_batch_job():
     assert set(accepted(batch)) == right and 0 < len(right) < len(batch.loops)
 
 
+def test_capped_updates_iterate_at_most_so_often_and_a_closing_update_reaches_batch():
+    # The right loops only, as trusted edges: no candidate for EM to
+    # decide, so every solve is capped.
+    graph = pgo.PoseGraph(2)
+    cut_short = 0
+    steps = square_walk(laps=4, tail=0)
+    for k, (pose_id, pose, edges) in enumerate(steps):
+        graph.add_pose(pose_id, pose)
+        for i, j, meas, info, inliers in edges:
+            if inliers is None or inliers >= 60:
+                graph.add_edge(i, j, meas, info)
+        if k % 4 == 3 or k + 1 == len(steps):
+            result = graph.update(update_iters=1)
+            optimizer = result.report["optimizer"]
+            assert optimizer["iterations"] <= 1
+            cut_short += not optimizer["converged"]
+            assert result.incremental["solve"] != "batch" or k == 3
+    assert cut_short > 0, "no update was cut short"
+    closing = graph.update()  # nothing added, no cap: the same job
+    assert solve(closing)[0] == "warm" and closing.incremental["new_edges"] == 0
+    assert closing.report["optimizer"]["converged"]
+    assert_same_as_batch(closing, graph.optimize())
+    with pytest.raises(ValueError, match="update-iters must be at least 1"):
+        graph.update(update_iters=0)
+
+
 def walk(n):
     """n poses 1 m apart along x, odometry between neighbours, and one loop
     candidate from the first to the last."""

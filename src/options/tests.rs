@@ -26,6 +26,9 @@ fn every_option() -> Vec<Case> {
             o.solver.time_limit == Some(Duration::from_millis(2500))
         }),
         ("threads", "3", |o| o.solver.threads == 3),
+        ("update-iters", "2", |o| {
+            o.solver.update_iterations == Some(2)
+        }),
         ("alpha", "0.01", |o| o.test.alpha == 0.01),
         ("dof", "constraints", |o| {
             o.test.dof == DofConvention::Constraints
@@ -181,6 +184,11 @@ fn bad_values_name_the_option_and_change_nothing() {
             "-2",
             "--threads must be a non-negative integer, got '-2'",
         ),
+        (
+            "update-iters",
+            "0",
+            "--update-iters must be at least 1, got 0",
+        ),
         ("alpha", "0", "--alpha must be in (0, 1), got 0"),
         ("alpha", "1", "--alpha must be in (0, 1), got 1"),
         ("alpha", "NaN", "--alpha must be in (0, 1), got NaN"),
@@ -248,6 +256,10 @@ fn validate_names_each_field_out_of_range() {
         (
             |o| o.solver.threads = 100_000,
             "--threads must be at most 256, got 100000",
+        ),
+        (
+            |o| o.solver.update_iterations = Some(0),
+            "--update-iters must be at least 1, got 0",
         ),
         (|o| o.test.alpha = 0.0, "--alpha must be in (0, 1), got 0"),
         (|o| o.test.alpha = 1.0, "--alpha must be in (0, 1), got 1"),
@@ -319,7 +331,10 @@ mod cli {
 
     #[test]
     fn every_flag_parses_as_set_does() {
-        for (name, value, _) in every_option() {
+        // `update-iters` bounds incremental updates only: no flag of
+        // `pgo optimize`.
+        let flags = every_option().into_iter();
+        for (name, value, _) in flags.filter(|(n, ..)| *n != "update-iters") {
             let flag = format!("--{name}");
             let args: Vec<&str> = match value {
                 // A switch takes no value on the command line.

@@ -59,6 +59,9 @@ pub struct OptimizeConfig {
     /// solve bounded by `solver.max_iterations`, the rounds by their own
     /// limits).
     pub iteration_budget: Option<usize>,
+    /// Most iterations of each solve in an incremental update (`None`:
+    /// updates converge).
+    pub update_iterations: Option<usize>,
     /// Write SVG pictures (inlier-count histogram with the fitted mixture;
     /// trajectory before and after) into this directory.
     pub plot: Option<PathBuf>,
@@ -113,6 +116,7 @@ impl OptimizeConfig {
             robust_c: options.robust.c,
             layers: options.expert.layers,
             iteration_budget: options.solver.max_iterations,
+            update_iterations: options.solver.update_iterations,
             plot: None,
         }
     }
