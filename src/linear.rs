@@ -300,6 +300,23 @@ impl<const D: usize> BlockSystem<D> {
         self.factor = Vec::new();
     }
 
+    /// Hands over the factor's allocation (its values mean nothing to a
+    /// later system), leaving none.
+    pub fn take_factor_allocation(&mut self) -> Vec<f64> {
+        std::mem::take(&mut self.factor)
+    }
+
+    /// Gives the first factorisation `buffer`'s allocation (an earlier
+    /// system's [`Self::take_factor_allocation`]) to fill, rather than
+    /// memory the system maps afresh — page by page, at a fault each. Does
+    /// nothing once the system has a factor.
+    pub fn reuse_factor_allocation(&mut self, mut buffer: Vec<f64>) {
+        if self.factor.is_empty() {
+            buffer.clear();
+            self.factor = buffer;
+        }
+    }
+
     /// The factor values a covariance ([`Self::propagate`]) reads per block
     /// it starts from, on average: those on the block's path to the root
     /// of the elimination tree.
@@ -922,6 +939,27 @@ mod tests {
             // Predicted decrease of the undamped model: −2δᵀb − δᵀHδ.
             let model = -2.0 * got.dot(&b) - got.dot(&(&h * &got));
             assert!((sys.predicted_decrease(&step) - model).abs() < 1e-9 * model.abs().max(1.0));
+        }
+    }
+
+    #[test]
+    fn a_reused_allocation_factorises_to_the_same_bits() {
+        for seed in 0..3 {
+            let (mut fresh, _, _) = random_system(seed);
+            fresh.factorize(0.0).unwrap();
+            let mut expected = vec![0.0; 24];
+            fresh.solve(&mut expected);
+            // Another system's allocation, holding garbage, larger or smaller.
+            for len in [1, 10_000] {
+                let (mut sys, _, _) = random_system(seed);
+                sys.reuse_factor_allocation(vec![f64::NAN; len]);
+                sys.factorize(0.0).unwrap();
+                let mut step = vec![0.0; 24];
+                sys.solve(&mut step);
+                assert_eq!(step, expected, "seed {seed}, buffer of {len}");
+                let taken = sys.take_factor_allocation();
+                assert_eq!(taken.len(), fresh.nnz_factor());
+            }
         }
     }
 

@@ -473,9 +473,11 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// map and decisions as [`PoseGraph::optimize`] of the graph as it now
     /// is, reached from the last update's. The graph keeps that update's
     /// poses, decisions, report (with the gate's fit, the start of the
-    /// next one) and elimination order (its memory: the
-    /// poses, a byte per edge, 4 bytes per pose, about 100 bytes per loop
-    /// candidate); a new pose is composed along trusted edges from them. Only as much is solved as the additions
+    /// next one), elimination order and the last factorisation's
+    /// allocation (its memory: the poses, a byte per edge, 4 bytes per
+    /// pose, about 100 bytes per loop candidate, and the factor's values,
+    /// which the next factorisation fills instead of fresh memory); a new
+    /// pose is composed along trusted edges from them. Only as much is solved as the additions
     /// need: nothing when nothing was added, no factorisation when the new
     /// poses hang on the map by one trusted edge each (odometry), else
     /// EM's decisions from the last ones ([`UpdateSolve`]). The report's
@@ -524,8 +526,9 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     ) -> Result<Solution<P>, Error> {
         options.validate()?;
         let (mut report, config) = self.start(options)?;
+        let blank = report.clone();
         let mut graph = self.graph.clone();
-        let warm = match self.state.as_deref() {
+        let warm = match self.state.as_deref_mut() {
             Some((last, warm)) if last.same_job(options) => {
                 match pipeline::update_graph(&mut graph, warm, &config, &mut report, observer)
                     .map_err(from_pipeline)?
@@ -534,7 +537,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
                     None => {
                         // EM's decisions swung: the whole job instead.
                         graph = self.graph.clone();
-                        report = self.start(options)?.0;
+                        report = blank;
                         pipeline::optimize_graph(
                             &mut graph,
                             &self.missing,

@@ -440,12 +440,25 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 .iter()
                 .map(|e| e.measurement.prepare())
                 .collect(),
-            prepared: graph.poses.iter().map(|p| p.prepare()).collect(),
+            // Filled by the first linearisation or evaluation.
+            prepared: Vec::new(),
             parallelism,
         };
         optimizer.system = optimizer.pattern(graph, &variable)?;
         optimizer.max_nnz_factor = optimizer.system.nnz_factor();
         Ok(optimizer)
+    }
+
+    /// Hands over the factorisation's allocation, for a later optimiser's
+    /// [`Optimizer::reuse_factor_allocation`].
+    pub fn take_factor_allocation(&mut self) -> Vec<f64> {
+        self.system.take_factor_allocation()
+    }
+
+    /// Lets the first factorisation fill `buffer` (an earlier optimiser's
+    /// [`Optimizer::take_factor_allocation`]) rather than fresh memory.
+    pub fn reuse_factor_allocation(&mut self, buffer: Vec<f64>) {
+        self.system.reuse_factor_allocation(buffer);
     }
 
     /// The elimination order kept for a later [`Optimizer::with_ordering`]
