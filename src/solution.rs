@@ -15,7 +15,9 @@ use std::collections::HashMap;
 pub struct Solution<P> {
     ids: Vec<VertexId>,
     poses: Vec<P>,
-    index: HashMap<VertexId, usize>,
+    /// Where each id is, when the ids are not increasing (found by binary
+    /// search when they are, as a front end's usually are).
+    index: Option<HashMap<VertexId, usize>>,
     loops: Vec<LoopDecision>,
     report: Report,
 }
@@ -72,7 +74,8 @@ impl<P> Solution<P> {
             })
             .collect();
         let ids = graph.ids().to_vec();
-        let index = ids.iter().enumerate().map(|(k, &id)| (id, k)).collect();
+        let increasing = ids.windows(2).all(|w| w[0] < w[1]);
+        let index = (!increasing).then(|| ids.iter().enumerate().map(|(k, &id)| (id, k)).collect());
         Self {
             ids,
             poses: graph.poses.clone(),
@@ -93,7 +96,11 @@ impl<P> Solution<P> {
 
     /// The optimised pose with this id.
     pub fn pose(&self, id: VertexId) -> Option<&P> {
-        self.index.get(&id).map(|&k| &self.poses[k])
+        let k = match &self.index {
+            Some(index) => index.get(&id).copied(),
+            None => self.ids.binary_search(&id).ok(),
+        };
+        k.map(|k| &self.poses[k])
     }
 
     /// Every optimised pose with its id, in the graph's order.

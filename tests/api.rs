@@ -226,6 +226,26 @@ fn a_spatial_graph_built_call_by_call_is_the_job_of_its_file() {
 }
 
 #[test]
+fn a_solution_finds_each_pose_by_its_id_in_any_order() {
+    // Ids increasing (found by search) and not (by a map): the same poses.
+    for ids in [[3u64, 10, 11, 40], [40, 3, 11, 10]] {
+        let mut g = PoseGraph2::new();
+        for (k, &id) in ids.iter().enumerate() {
+            g.add_pose(id, Se2::new(k as f64, 0.0, 0.0)).unwrap();
+        }
+        for w in ids.windows(2) {
+            let step = Se2::new(1.0, 0.0, 0.0);
+            g.add_edge(w[0], w[1], step, Matrix3::identity()).unwrap();
+        }
+        let s = g.optimize(&Options::default()).unwrap();
+        for (k, &id) in ids.iter().enumerate() {
+            assert!((s.pose(id).unwrap().x - k as f64).abs() < 1e-9, "{ids:?}");
+        }
+        assert!(s.pose(4).is_none() && s.pose(41).is_none() && s.pose(0).is_none());
+    }
+}
+
+#[test]
 fn decisions_carry_the_index_the_candidate_was_added_under() {
     let mut g = PoseGraph2::new();
     for k in 0..6 {
