@@ -40,6 +40,7 @@ use faer::sparse::linalg::amd;
 pub use group::{EdgeJacobian, GroupScratch};
 use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
+pub use supernodal::Structure;
 use supernodal::Symbolic;
 
 /// Errors of the linear solver.
@@ -154,15 +155,19 @@ impl<const D: usize> BlockSystem<D> {
         parallelism: Parallelism,
     ) -> Result<Self, LinearError> {
         let position = fill_reducing_order(n_blocks, edges)?;
-        Self::with_positions(n_blocks, edges, parallelism, position)
+        Self::with_positions(n_blocks, edges, parallelism, position, None)
     }
 
-    /// Like [`Self::new`] with a given elimination position of each block.
+    /// Like [`Self::new`] with a given elimination position of each block;
+    /// with `grown`, the factor structure of an earlier system whose blocks
+    /// hold the first positions, extended to the new ones where every edge
+    /// between those blocks is in it ([`Structure`]), else analysed afresh.
     pub fn with_positions(
         n_blocks: usize,
         edges: &[(Option<usize>, Option<usize>)],
         parallelism: Parallelism,
         position: Vec<usize>,
+        grown: Option<&Structure>,
     ) -> Result<Self, LinearError> {
         if n_blocks >= NONE as usize {
             return Err(LinearError::Factorization(format!(
@@ -185,7 +190,10 @@ impl<const D: usize> BlockSystem<D> {
             .iter()
             .map(|&(i, j)| edge_slot(i, j, &position, &later, &off_ptr))
             .collect();
-        let symbolic = Symbolic::<D>::new(&later)?;
+        let symbolic = match grown.and_then(|g| Symbolic::<D>::extended(g, &later)) {
+            Some(extended) => extended,
+            None => Symbolic::<D>::new(&later)?,
+        };
         let diag_dest = (0..n_blocks)
             .map(|p| symbolic.block_offset(p, p).0)
             .collect();
@@ -292,6 +300,12 @@ impl<const D: usize> BlockSystem<D> {
             }
         }
         (col_ptr, rows, values)
+    }
+
+    /// The supernodes of the factor and their block rows, for a grown
+    /// system's [`Self::with_positions`].
+    pub fn structure(&self) -> Structure {
+        self.symbolic.structure()
     }
 
     /// Frees the factor's values (the next [`Self::factorize`] allocates

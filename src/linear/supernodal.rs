@@ -110,6 +110,104 @@ pub(super) struct Symbolic<const D: usize> {
     update_scratch: usize,
 }
 
+/// A factor's supernodes (`begin`, with the end) and the block rows below
+/// each one's diagonal block (`rows[row_ptr[s]..row_ptr[s + 1]]`).
+#[derive(Clone, Debug, Default)]
+pub struct Structure {
+    begin: Vec<usize>,
+    row_ptr: Vec<usize>,
+    rows: Vec<u32>,
+}
+
+impl Structure {
+    /// Block columns of the factor.
+    pub fn len(&self) -> usize {
+        self.begin.last().copied().unwrap_or(0)
+    }
+
+    /// The new block rows (at or after the old size) of each old supernode
+    /// in the factor of the grown matrix `later`: those of its columns'
+    /// entries and of its children's, which all lie below its columns.
+    /// `None` if an entry between old columns is outside the old factor.
+    fn added_rows(&self, later: &[Vec<usize>]) -> Option<Vec<Vec<u32>>> {
+        let ns = self.begin.len() - 1;
+        let n_old = self.begin[ns];
+        let mut supernode_of = vec![0u32; n_old];
+        for s in 0..ns {
+            supernode_of[self.begin[s]..self.begin[s + 1]].fill(s as u32);
+        }
+        let mut added: Vec<Vec<u32>> = vec![Vec::new(); ns];
+        for s in 0..ns {
+            let end = self.begin[s + 1];
+            let below = &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]];
+            let mut a = std::mem::take(&mut added[s]);
+            for l in &later[self.begin[s]..end] {
+                for &q in l {
+                    if q >= n_old {
+                        a.push(q as u32);
+                    } else if q >= end && below.binary_search(&(q as u32)).is_err() {
+                        return None;
+                    }
+                }
+            }
+            a.sort_unstable();
+            a.dedup();
+            if let Some(&r) = below.first() {
+                added[supernode_of[r as usize] as usize].extend_from_slice(&a);
+            }
+            added[s] = a;
+        }
+        Some(added)
+    }
+}
+
+/// The supernodes of the new columns `n_old..` of a grown factor: each
+/// new column's block rows (its entries in `later`, and what its children
+/// in the elimination tree pass on — old supernodes without old rows
+/// among them, whose new rows `added` says), then runs of columns where
+/// each has the next as its only first row and the same rows after it.
+/// Returns where each starts and its rows below.
+fn new_supernodes(
+    n_old: usize,
+    later: &[Vec<usize>],
+    prev: &Structure,
+    added: &[Vec<u32>],
+) -> (Vec<usize>, Vec<Vec<u32>>) {
+    let n = later.len();
+    let mut pending: Vec<Vec<u32>> = vec![Vec::new(); n - n_old];
+    for (s, a) in added.iter().enumerate() {
+        if prev.row_ptr[s + 1] == prev.row_ptr[s] && !a.is_empty() {
+            pending[a[0] as usize - n_old].extend_from_slice(&a[1..]);
+        }
+    }
+    let mut column = Vec::with_capacity(n - n_old);
+    for q in n_old..n {
+        let mut st = std::mem::take(&mut pending[q - n_old]);
+        st.extend(later[q].iter().map(|&r| r as u32));
+        st.sort_unstable();
+        st.dedup();
+        if let Some(&p) = st.first() {
+            pending[p as usize - n_old].extend_from_slice(&st[1..]);
+        }
+        column.push(st);
+    }
+    let (mut begin, mut rows) = (Vec::new(), Vec::new());
+    let mut q = n_old;
+    while q < n {
+        let start = q;
+        while q + 1 < n && {
+            let (this, next) = (&column[q - n_old], &column[q + 1 - n_old]);
+            this.first() == Some(&((q + 1) as u32)) && this[1..] == next[..]
+        } {
+            q += 1;
+        }
+        begin.push(start);
+        rows.push(std::mem::take(&mut column[q - n_old]));
+        q += 1;
+    }
+    (begin, rows)
+}
+
 /// A panel's geometry: first block column, width in blocks, block rows below.
 #[derive(Clone, Copy)]
 struct Panel {
@@ -204,6 +302,62 @@ impl<const D: usize> Symbolic<D> {
         }
         drop(symbolic);
         Ok(Self::from_structure(begin, row_ptr, rows, scratch))
+    }
+
+    /// Every block row of block column `b` in the factor (its supernode's
+    /// columns after `b`, then the rows below), for tests.
+    #[cfg(test)]
+    fn rows_of(&self, b: usize) -> Vec<usize> {
+        let s = self.supernode_of[b] as usize;
+        let below = self.rows[self.row_ptr[s]..self.row_ptr[s + 1]].iter();
+        (b + 1..self.begin[s + 1])
+            .chain(below.map(|&r| r as usize))
+            .collect()
+    }
+
+    /// The supernodes and their block rows, without the numbers of `D`
+    /// ([`Self::extended`] grows a factor from them).
+    pub(super) fn structure(&self) -> Structure {
+        Structure {
+            begin: self.begin.clone(),
+            row_ptr: self.row_ptr.clone(),
+            rows: self.rows.clone(),
+        }
+    }
+
+    /// The structure of the factor of the matrix of `prev` grown by block
+    /// columns appended at the end: `later` as for [`Self::new`], its
+    /// first `prev`'s-size lists holding no block between old columns that
+    /// `prev` does not (else `None`). The old supernodes are kept, each
+    /// with the new block rows its columns and its descendants reach (rows
+    /// of zeros are allowed in a supernode, as faer's relaxed ones hold);
+    /// the new columns form fundamental supernodes. Cheaper than the
+    /// analysis afresh, which is what a kept elimination order with poses
+    /// appended would otherwise cost at every update.
+    pub(super) fn extended(prev: &Structure, later: &[Vec<usize>]) -> Option<Self> {
+        let n_old = *prev.begin.last()?;
+        let n = later.len();
+        if n_old == 0 || n < n_old {
+            return None;
+        }
+        let added = prev.added_rows(later)?;
+        let (begin_new, rows_new) = new_supernodes(n_old, later, prev, &added);
+        let mut begin = prev.begin.clone();
+        begin.pop();
+        begin.extend(begin_new);
+        begin.push(n);
+        let mut row_ptr = vec![0usize];
+        let mut rows = Vec::with_capacity(prev.rows.len());
+        for (s, a) in added.iter().enumerate() {
+            rows.extend_from_slice(&prev.rows[prev.row_ptr[s]..prev.row_ptr[s + 1]]);
+            rows.extend_from_slice(a);
+            row_ptr.push(rows.len());
+        }
+        for r in rows_new {
+            rows.extend(r);
+            row_ptr.push(rows.len());
+        }
+        Some(Self::from_structure(begin, row_ptr, rows, UPDATE_SCRATCH))
     }
 
     /// Everything else from the supernodes and their patterns.
@@ -1200,7 +1354,7 @@ fn blocked_cholesky(panel: &mut [f64], w: usize, ld: usize, par: Par) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::DMatrix;
+    use nalgebra::{DMatrix, DVector};
     use rand::{Rng, SeedableRng, rngs::StdRng};
 
     /// A random SPD block matrix with a random sparse block pattern, dense.
@@ -1278,6 +1432,49 @@ mod tests {
         let mut x: Vec<f64> = (0..2 * later.len()).map(|i| i as f64 - 3.0).collect();
         sym.solve(&values, &mut x, &mut Vec::new());
         x
+    }
+
+    #[test]
+    fn an_extended_structure_factorises_the_grown_matrix() {
+        let mut refused = 0;
+        for seed in 0..12 {
+            let n = 30 + seed as usize;
+            let (later, a) = random_problem(100 + seed, n);
+            let n_old = n - 1 - (seed as usize % 9);
+            // The matrix before: its first n_old blocks (no entry reaching
+            // a new block).
+            let old_later: Vec<Vec<usize>> = later[..n_old]
+                .iter()
+                .map(|l| l.iter().copied().filter(|&q| q < n_old).collect())
+                .collect();
+            let old = Symbolic::<2>::new(&old_later).unwrap().structure();
+            let sym =
+                Symbolic::<2>::extended(&old, &later).expect("no new entry between old blocks");
+            let values = factor_dense(&sym, &later, &a, 1, None);
+            let mut x: Vec<f64> = (0..2 * n).map(|i| i as f64 - 3.0).collect();
+            let b = DVector::from_vec(x.clone());
+            sym.solve(&values, &mut x, &mut Vec::new());
+            let expected = a.clone().cholesky().unwrap().solve(&b);
+            let err = (DVector::from_vec(x) - &expected).norm();
+            assert!(err < 1e-10 * expected.norm(), "seed {seed}: {err:e}");
+            // An entry between old blocks the old factor lacks: analysed
+            // afresh instead.
+            let missing = (0..n_old).find_map(|p| {
+                let rows = sym.rows_of(p);
+                (p + 1..n_old).find(|q| !rows.contains(q)).map(|q| (p, q))
+            });
+            if let Some((p, q)) = missing {
+                let mut more = later.clone();
+                more[p].push(q);
+                more[p].sort_unstable();
+                assert!(
+                    Symbolic::<2>::extended(&old, &more).is_none(),
+                    "seed {seed}"
+                );
+                refused += 1;
+            }
+        }
+        assert!(refused > 0);
     }
 
     #[test]

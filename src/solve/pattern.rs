@@ -5,7 +5,8 @@
 use super::{Optimizer, SolveError};
 use crate::geometry::Pose;
 use crate::graph::PoseGraph;
-use crate::linear::{BlockSystem, LinearError, Parallelism};
+use crate::linear::{BlockSystem, LinearError, Parallelism, Structure};
+use std::sync::Arc;
 
 /// How much more an earlier elimination order may cost than the
 /// fill-reducing order it started as before a pattern is ordered afresh
@@ -28,6 +29,9 @@ const ORDER_SLACK: f64 = 0.1;
 #[derive(Clone, Debug, Default)]
 pub struct Ordering {
     rank: Vec<u32>,
+    /// The factor structure of the system this order was taken from, for
+    /// one of the same graph grown ([`BlockSystem::with_positions`]).
+    structure: Arc<Structure>,
     values_per_block: f64,
     path_values: f64,
     /// Whether the paths' cost counts (innovations will be computed).
@@ -56,7 +60,14 @@ impl Ordering {
         }
         let n_blocks = vertex_of.len();
         let position = self.positions(vertex_of);
-        let kept = BlockSystem::with_positions(n_blocks, pairs, parallelism.clone(), position)?;
+        // The old structure extends when every one of its blocks is still
+        // a variable (they then keep their positions).
+        let old = (vertex_of.iter())
+            .filter(|&&v| self.rank.get(v).is_some_and(|&r| r != u32::MAX))
+            .count();
+        let grown = (old == self.structure.len()).then_some(&*self.structure);
+        let kept =
+            BlockSystem::with_positions(n_blocks, pairs, parallelism.clone(), position, grown)?;
         let within = |cost: f64, fresh: f64| cost <= (1.0 + ORDER_SLACK) * fresh;
         let fill = within(
             kept.nnz_factor() as f64,
@@ -120,6 +131,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         for (&v, &p) in self.vertex_of.iter().zip(system.positions()) {
             ordering.rank[v] = p as u32;
         }
+        ordering.structure = Arc::new(system.structure());
         Ok(system)
     }
 
