@@ -81,7 +81,25 @@ impl Ordering {
     /// (`vertex_of`: each block's vertex): the old vertices in their old
     /// order, then the rest by vertex.
     fn positions(&self, vertex_of: &[usize]) -> Vec<usize> {
-        let key = |b: usize| (self.rank.get(vertex_of[b]).copied().unwrap_or(u32::MAX), b);
+        let rank = |b: usize| self.rank.get(vertex_of[b]).copied().unwrap_or(u32::MAX);
+        // Every old block still a variable (the usual update): their ranks
+        // are their positions, and the new ones follow in block order.
+        let old = (0..vertex_of.len())
+            .filter(|&b| rank(b) != u32::MAX)
+            .count();
+        if (0..vertex_of.len()).all(|b| rank(b) == u32::MAX || (rank(b) as usize) < old) {
+            let mut next = old;
+            return (0..vertex_of.len())
+                .map(|b| match rank(b) {
+                    u32::MAX => {
+                        next += 1;
+                        next - 1
+                    }
+                    r => r as usize,
+                })
+                .collect();
+        }
+        let key = |b: usize| (rank(b), b);
         let mut blocks: Vec<usize> = (0..vertex_of.len()).collect();
         blocks.sort_unstable_by_key(|&b| key(b));
         let mut position = vec![0; blocks.len()];
