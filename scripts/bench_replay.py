@@ -40,7 +40,7 @@ Replay (the same for both tools)
     default: pgo's defaults, one thread). Edges without an inlier count are
     trusted edges (add_edge), edges with one are loop candidates
     (add_loop_candidate), as `pgo optimize` reads a file.
-  * pgo-capped (row "pgo update_iters=1"): the same with update_iters=1, at
+  * pgo-capped: the same with update_iters=1, at
     most one iteration per solve of an update (loop candidates EM decides
     are still solved to convergence), as iSAM2 takes one Gauss-Newton step
     per update; after the last step a closing g.update() without the cap
@@ -332,7 +332,7 @@ class PgoCapped(Pgo):
     (as iSAM2 does one Gauss-Newton step per update), and a closing update
     after the last step (nothing added, no cap) that finishes the
     convergence; its time is the replay's last step."""
-    name = "pgo update_iters=1"
+    name = "pgo-capped"
 
     def __init__(self, options):
         super().__init__(options)
