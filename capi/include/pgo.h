@@ -790,6 +790,19 @@ enum PgoStatus pgo_result_verdict(const struct PgoResult *result, int32_t *out);
 enum PgoStatus pgo_result_cancelled(const struct PgoResult *result, bool *out);
 
 /**
+ * Stores at `*out` whether the solve converged: false when it stopped at
+ * an iteration or time limit — an update capped by the `update-iters`
+ * option then left the map short of the optimum, and the next update
+ * goes on from it — or was cancelled.
+ *
+ * Errors: `PGO_ERR_INVALID_ARGUMENT`.
+ *
+ * # Safety
+ * `result` is NULL or a live result; `out` is NULL or writable.
+ */
+enum PgoStatus pgo_result_converged(const struct PgoResult *result, bool *out);
+
+/**
  * The report `pgo optimize --json` prints, as a NUL-terminated JSON
  * string owned by the result: valid until `pgo_result_free`, never free
  * it. Its fields are documented with the command line, not by this API.

@@ -628,6 +628,24 @@ pub unsafe extern "C" fn pgo_result_cancelled(
     unsafe { get(result, out, |s| s.cancelled()) }
 }
 
+/// Stores at `*out` whether the solve converged: false when it stopped at
+/// an iteration or time limit — an update capped by the `update-iters`
+/// option then left the map short of the optimum, and the next update
+/// goes on from it — or was cancelled.
+///
+/// Errors: `PGO_ERR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `result` is NULL or a live result; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_converged(
+    result: *const PgoResult,
+    out: *mut bool,
+) -> PgoStatus {
+    // SAFETY: the caller's contract.
+    unsafe { get(result, out, |s| s.report().optimizer.converged) }
+}
+
 /// The report `pgo optimize --json` prints, as a NUL-terminated JSON
 /// string owned by the result: valid until `pgo_result_free`, never free
 /// it. Its fields are documented with the command line, not by this API.

@@ -853,6 +853,63 @@ fn updates_say_how_they_solved() {
     }
 }
 
+/// Whether the result's solve converged, through C.
+fn converged(r: *const PgoResult) -> bool {
+    let mut c = false;
+    ok(unsafe { pgo_result_converged(r, &mut c) });
+    c
+}
+
+#[test]
+fn capped_updates_go_on_and_one_with_nothing_added_finishes() {
+    use PgoUpdateSolve::*;
+    let g = chain();
+    unsafe {
+        pgo_result_free(update(g, ptr::null()));
+        let mut capped = ptr::null_mut();
+        ok(pgo_options_new(&mut capped));
+        ok(pgo_options_set(
+            capped,
+            c"update-iters".as_ptr(),
+            c"1".as_ptr(),
+        ));
+        assert_fails(
+            pgo_options_set(capped, c"update_iters".as_ptr(), c"0".as_ptr()),
+            PgoStatus::PgoErrInvalidOption,
+            "--update-iters must be at least 1",
+        );
+        // A loop 0.3 m off the chain: one iteration does not settle it.
+        for n in 3..8 {
+            extend(g, n);
+        }
+        let z = [7.3, 0.2, 0.1];
+        ok(pgo_graph_add_edge(
+            g,
+            0,
+            7,
+            z.as_ptr(),
+            3,
+            IDENTITY3.as_ptr(),
+            9,
+        ));
+        let r = update(g, capped);
+        assert_eq!(update_of(r).solve, PgoUpdateWarm, "{}", update_reason(r));
+        assert!(!converged(r));
+        pgo_result_free(r);
+        // Nothing added, no cap: the same job, finished.
+        let r = update(g, ptr::null());
+        assert_eq!(update_of(r).solve, PgoUpdateWarm, "{}", update_reason(r));
+        assert!(converged(r));
+        pgo_result_free(r);
+        let mut b = ptr::null_mut();
+        ok(pgo_graph_optimize(g, ptr::null(), &mut b));
+        assert!(converged(b));
+        pgo_result_free(b);
+        pgo_options_free(capped);
+        pgo_graph_free(g);
+    }
+}
+
 #[test]
 fn a_failed_update_keeps_the_earlier_state() {
     let g = chain();
