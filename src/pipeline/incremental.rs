@@ -364,6 +364,47 @@ fn update_iterations(config: &OptimizeConfig, method: RobustMethod) -> usize {
     }
 }
 
+/// The options of an update's solves: its iteration bound
+/// ([`update_iterations`]), and an update's tolerances
+/// ([`UPDATE_TOLERANCE`], [`MODEL_TOLERANCE`]) or, `closing` (nothing
+/// added: a capped update's convergence carried on), a batch job's.
+fn update_solver(config: &OptimizeConfig, method: RobustMethod, closing: bool) -> SolverOptions {
+    let max_iterations = update_iterations(config, method);
+    if closing {
+        return SolverOptions {
+            max_iterations,
+            ..config.solver.clone()
+        };
+    }
+    SolverOptions {
+        relative_tolerance: UPDATE_TOLERANCE,
+        model_tolerance: Some(MODEL_TOLERANCE),
+        max_iterations,
+        ..config.solver.clone()
+    }
+}
+
+/// The report's start of an update: the χ² of the placed map — the old
+/// poses are the last map's ([`place`]), so their edges' χ² is the last
+/// report's and only the new edges are evaluated.
+fn report_start<P: G2oPose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    warm: &Warm<P>,
+    report: &mut Report,
+    start: Instant,
+) {
+    let added: f64 = (graph.edges[warm.edges..].iter())
+        .map(|e| graph.edge_chi2(e))
+        .sum();
+    report.input_chi2 = warm.report.optimizer.final_chi2 + added;
+    report.initialization = InitializationReport {
+        method: Initialization::Previous,
+        chi2: report.input_chi2,
+        time_s: start.elapsed().as_secs_f64(),
+        vertices_without_line: 0,
+    };
+}
+
 /// What [`resolve`] returns: whether every candidate was weighed again,
 /// each edge's earlier decision, the elimination order used and the
 /// factorisation's allocation.
@@ -394,39 +435,13 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         RobustMethod::None
     };
     let (mut weights, previous) = start_weights(graph, warm, &candidates, method);
-    // An update that adds nothing finishes a capped update's convergence,
-    // to a batch job's tolerance.
-    let solver = SolverOptions {
-        relative_tolerance: if closing {
-            config.solver.relative_tolerance
-        } else {
-            UPDATE_TOLERANCE
-        },
-        model_tolerance: if closing {
-            config.solver.model_tolerance
-        } else {
-            Some(MODEL_TOLERANCE)
-        },
-        max_iterations: update_iterations(config, method),
-        ..config.solver.clone()
-    };
+    let solver = update_solver(config, method, closing);
     let evaluated = method != RobustMethod::None;
     let ordering = Some(warm.ordering.clone().for_innovations(evaluated));
     let mut optimizer = Optimizer::with_ordering(graph, Some(&weights), solver.clone(), ordering)
         .map_err(solve_error)?;
     optimizer.reuse_factor_allocation(spare);
-    // The old poses are the last map's ([`place`]): their edges' χ² is the
-    // last report's, and only the new edges are evaluated.
-    let added: f64 = (graph.edges[warm.edges..].iter())
-        .map(|e| graph.edge_chi2(e))
-        .sum();
-    report.input_chi2 = warm.report.optimizer.final_chi2 + added;
-    report.initialization = InitializationReport {
-        method: Initialization::Previous,
-        chi2: report.input_chi2,
-        time_s: start.elapsed().as_secs_f64(),
-        vertices_without_line: 0,
-    };
+    report_start(graph, warm, report, start);
     let proposal = (warm.report.robust.model.as_ref())
         .filter(|_| optimal)
         .map(|model| robust::Proposal {
