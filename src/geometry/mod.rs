@@ -208,8 +208,9 @@ pub fn wrap_angle(theta: f64) -> f64 {
 
 #[cfg(test)]
 pub(crate) mod testing {
-    //! Central finite differences of the edge error, shared by the SE(2) and
-    //! SE(3) tests.
+    //! Central finite differences of the edge error, and the structured
+    //! normal blocks against the multiplied-out ones, shared by the SE(2)
+    //! and SE(3) tests.
     use super::*;
 
     /// Numerical Jacobians of `Pose::error` with respect to right updates of
@@ -267,6 +268,33 @@ pub(crate) mod testing {
             lin.jac_j,
             nj
         );
+    }
+
+    /// Asserts that a pose type's normal blocks (its structured
+    /// [`Pose::normal_blocks_prepared`]) equal those multiplied out from its
+    /// Jacobians, to 1e-12 relative, on an edge with information `omega`.
+    pub fn check_normal_blocks<P: Pose<D>, const D: usize>(
+        xi: &P,
+        xj: &P,
+        z: &P,
+        omega: &SMatrix<f64, D, D>,
+    ) {
+        let (pi, pj, pz) = (xi.prepare(), xj.prepare(), z.prepare());
+        let fast = P::normal_blocks_prepared(&pi, &pj, &pz, omega);
+        let lin = P::error_and_jacobians_prepared(&pi, &pj, &pz);
+        let slow = NormalBlocks::from_jacobians(&lin, omega);
+        let scale = slow.h_ii.norm() + slow.h_jj.norm();
+        for (a, b) in [
+            (fast.h_ii, slow.h_ii),
+            (fast.h_ij, slow.h_ij),
+            (fast.h_jj, slow.h_jj),
+        ] {
+            assert!((a - b).norm() < 1e-12 * scale, "{a} vs {b}");
+        }
+        let bscale = slow.b_i.norm() + slow.b_j.norm() + 1.0;
+        assert!((fast.b_i - slow.b_i).norm() < 1e-12 * bscale);
+        assert!((fast.b_j - slow.b_j).norm() < 1e-12 * bscale);
+        assert!((fast.chi2 - slow.chi2).abs() < 1e-12 * slow.chi2.max(1.0));
     }
 }
 

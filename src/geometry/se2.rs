@@ -231,7 +231,7 @@ impl Se2Prepared {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::testing::check_jacobians;
+    use crate::geometry::testing::{check_jacobians, check_normal_blocks};
     use rand::{Rng, SeedableRng, rngs::StdRng};
     use std::f64::consts::PI;
 
@@ -275,22 +275,7 @@ mod tests {
             let z = random_pose(&mut rng, 5.0);
             let m = Matrix3::from_fn(|_, _| rng.random_range(-1.0..1.0));
             let omega = m * m.transpose() + Matrix3::identity();
-            let (pi, pj, pz) = (xi.prepare(), xj.prepare(), z.prepare());
-            let fast = Se2::normal_blocks_prepared(&pi, &pj, &pz, &omega);
-            let lin = Se2::error_and_jacobians_prepared(&pi, &pj, &pz);
-            let slow = NormalBlocks::from_jacobians(&lin, &omega);
-            let scale = slow.h_ii.norm() + slow.h_jj.norm();
-            for (a, b) in [
-                (fast.h_ii, slow.h_ii),
-                (fast.h_ij, slow.h_ij),
-                (fast.h_jj, slow.h_jj),
-            ] {
-                assert!((a - b).norm() < 1e-12 * scale, "{a} vs {b}");
-            }
-            let bscale = slow.b_i.norm() + slow.b_j.norm() + 1.0;
-            assert!((fast.b_i - slow.b_i).norm() < 1e-12 * bscale);
-            assert!((fast.b_j - slow.b_j).norm() < 1e-12 * bscale);
-            assert!((fast.chi2 - slow.chi2).abs() < 1e-12 * slow.chi2.max(1.0));
+            check_normal_blocks(&xi, &xj, &z, &omega);
         }
     }
 
