@@ -326,7 +326,7 @@ impl<const D: usize> Symbolic<D> {
     }
 
     /// The structure of the factor of the matrix of `prev` grown by block
-    /// columns appended at the end: `later` as for [`Self::new`], its
+    /// columns appended at the end (at least one): `later` as for [`Self::new`], its
     /// first `prev`'s-size lists holding no block between old columns that
     /// `prev` does not (else `None`). The old supernodes are kept, each
     /// with the new block rows its columns and its descendants reach (rows
@@ -337,7 +337,9 @@ impl<const D: usize> Symbolic<D> {
     pub(super) fn extended(prev: &Structure, later: &[Vec<usize>]) -> Option<Self> {
         let n_old = *prev.begin.last()?;
         let n = later.len();
-        if n_old == 0 || n < n_old {
+        // Nothing appended: a pattern rebuilt without some edges (loops a
+        // robust method removed) is analysed afresh, for the fill it sheds.
+        if n_old == 0 || n <= n_old {
             return None;
         }
         let added = prev.added_rows(later)?;
