@@ -83,7 +83,7 @@ class PoseGraph:
     def optimize(self, *, cancel: Optional[Cancel] = None, **options: OptionValue) -> Result:
         """Runs the job of ``pgo optimize``; options are its flags, ``_`` for ``-``; ``cancel`` stops it."""
     def update(self, *, cancel: Optional[Cancel] = None, **options: OptionValue) -> Result:
-        """The job again after additions, from the last update's map; options and cancel as optimize's."""
+        """The job again after additions, from the last update's map; options and cancel as optimize's, plus update_iters=K (at most K iterations per solve; the map may then be short of the optimum, and a later update goes on from it)."""
     def forget(self) -> None:
         """Drops what update keeps: the next update runs the whole job."""
     def __repr__(self) -> str: ...
