@@ -143,7 +143,10 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         new_candidates,
         changed: Vec::new(),
     };
-    if step.new_edges == 0 && step.new_poses == 0 && warm.converged {
+    // Nothing added: the last map stands if it converged, else its solve
+    // goes on (a capped update's, to a batch job's tolerance).
+    let closing = step.new_edges == 0 && step.new_poses == 0;
+    if closing && warm.converged {
         *report = warm.report.clone();
         step.solve = UpdateSolve::None;
         step.reason = "nothing added".into();
@@ -159,7 +162,6 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         next.factor = std::mem::take(&mut warm.factor);
         return Ok(Some(next));
     }
-    let closing = step.new_edges == 0 && step.new_poses == 0;
     let spare = std::mem::take(&mut warm.factor.0);
     let Some((full, previous, ordering, spare)) = resolve(
         graph,
@@ -178,9 +180,7 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         UpdateSolve::Warm
     };
     step.reason = match (full, config.robust) {
-        _ if step.new_edges == 0 && step.new_poses == 0 => {
-            "nothing added: the last map's solve continued".into()
-        }
+        _ if closing => "nothing added: the last map's solve continued".into(),
         (false, _) if report.loops.is_empty() => "new edges: solved from the last map".into(),
         (false, _) => "new edges: EM's decisions from the last ones".into(),
         (true, RobustMethod::Em) => format!(

@@ -59,12 +59,9 @@ impl Ordering {
             return Ok(None);
         }
         let n_blocks = vertex_of.len();
-        let position = self.positions(vertex_of);
+        let (position, old) = self.positions(vertex_of);
         // The old structure extends when every one of its blocks is still
         // a variable (they then keep their positions).
-        let old = (vertex_of.iter())
-            .filter(|&&v| self.rank.get(v).is_some_and(|&r| r != u32::MAX))
-            .count();
         let grown = (old == self.structure.len()).then_some(&*self.structure);
         let kept =
             BlockSystem::with_positions(n_blocks, pairs, parallelism.clone(), position, grown)?;
@@ -79,8 +76,8 @@ impl Ordering {
 
     /// The elimination position of each of `n_blocks` variable blocks
     /// (`vertex_of`: each block's vertex): the old vertices in their old
-    /// order, then the rest by vertex.
-    fn positions(&self, vertex_of: &[usize]) -> Vec<usize> {
+    /// order, then the rest by vertex; and how many blocks are old.
+    fn positions(&self, vertex_of: &[usize]) -> (Vec<usize>, usize) {
         let rank = |b: usize| self.rank.get(vertex_of[b]).copied().unwrap_or(u32::MAX);
         // Every old block still a variable (the usual update): their ranks
         // are their positions, and the new ones follow in block order.
@@ -89,7 +86,7 @@ impl Ordering {
             .count();
         if (0..vertex_of.len()).all(|b| rank(b) == u32::MAX || (rank(b) as usize) < old) {
             let mut next = old;
-            return (0..vertex_of.len())
+            let position = (0..vertex_of.len())
                 .map(|b| match rank(b) {
                     u32::MAX => {
                         next += 1;
@@ -98,6 +95,7 @@ impl Ordering {
                     r => r as usize,
                 })
                 .collect();
+            return (position, old);
         }
         let key = |b: usize| (rank(b), b);
         let mut blocks: Vec<usize> = (0..vertex_of.len()).collect();
@@ -106,7 +104,7 @@ impl Ordering {
         for (p, &b) in blocks.iter().enumerate() {
             position[b] = p;
         }
-        position
+        (position, old)
     }
 }
 

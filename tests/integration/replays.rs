@@ -93,6 +93,21 @@ fn add(graph: &mut AnyPoseGraph, t: &[String], (m, d): (usize, usize)) {
     .unwrap();
 }
 
+/// Adds the edges (g2o lines) whose later end is in `ids`, as [`add`] does.
+fn add_ending_in(
+    graph: &mut AnyPoseGraph,
+    edges: &[Vec<String>],
+    ids: std::ops::Range<u64>,
+    sizes: (usize, usize),
+) {
+    for t in edges {
+        let (i, j): (u64, u64) = (t[1].parse().unwrap(), t[2].parse().unwrap());
+        if ids.contains(&i.max(j)) {
+            add(graph, t, sizes);
+        }
+    }
+}
+
 /// The aliasing benchmark's intel file, replayed every 100 poses, ends
 /// with the batch job's decisions and map. Its last updates judge clusters
 /// whose own loops are nearly all that ties the newest poses to the map
@@ -113,12 +128,7 @@ fn an_aliased_intel_replay_ends_with_the_batch_decisions() {
     let mut last = None;
     for (k, (id, pose)) in poses.iter().enumerate() {
         graph.add_pose(*id, pose).unwrap();
-        for t in &edges {
-            let (i, j): (u64, u64) = (t[1].parse().unwrap(), t[2].parse().unwrap());
-            if i.max(j) == *id {
-                add(&mut graph, t, (3, 3));
-            }
-        }
+        add_ending_in(&mut graph, &edges, *id..*id + 1, (3, 3));
         if (k + 1) % 100 == 0 || k + 1 == poses.len() {
             last = Some(graph.update(&options).unwrap());
         }
@@ -156,12 +166,7 @@ fn an_update_whose_decisions_swing_runs_the_whole_job() {
         for (id, pose) in poses.iter().filter(|(id, _)| (end - 100..end).contains(id)) {
             graph.add_pose(*id, pose).unwrap();
         }
-        for t in &edges {
-            let (i, j): (u64, u64) = (t[1].parse().unwrap(), t[2].parse().unwrap());
-            if (end - 100..end).contains(&i.max(j)) {
-                add(&mut graph, t, (7, 6));
-            }
-        }
+        add_ending_in(&mut graph, &edges, end - 100..end, (7, 6));
         let s = graph.update(&options).unwrap();
         let inc = s.incremental().unwrap().clone();
         if inc.reason.contains("swung") {
