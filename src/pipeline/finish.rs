@@ -112,8 +112,11 @@ where
         });
     }
     // One pass over the edges at the final map serves the test and the
-    // report.
-    let edge_chi2 = graph.edge_chi2s();
+    // report; the optimiser's last evaluation was usually that pass.
+    let edge_chi2 = match optimizer.edge_chi2s_at(graph) {
+        Some(chi2) => chi2.to_vec(),
+        None => graph.edge_chi2s(),
+    };
     match test_of(&edge_chi2, graph, weights, config) {
         Ok(t) => report.chi2_test = Some(t),
         Err(e) => report.warnings.push(format!("no χ² test: {e}")),

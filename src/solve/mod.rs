@@ -365,8 +365,9 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     best: Vec<P>,
     step: Vec<f64>,
     terms: Vec<EdgeTerms<D>>,
-    /// Each edge's weighted χ² at the last trial point.
+    /// Each edge's plain χ² at `chi2_poses`, the last poses evaluated.
     edge_chi2: Vec<f64>,
+    chi2_poses: Vec<P>,
     /// Each edge's measurement, prepared once ([`Pose::prepare`]).
     measurements: Vec<P::Prepared>,
     /// The poses being evaluated, prepared.
@@ -435,6 +436,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             options,
             terms: Vec::new(),
             edge_chi2: Vec::new(),
+            chi2_poses: Vec::new(),
             measurements: graph
                 .edges
                 .iter()

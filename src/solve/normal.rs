@@ -128,20 +128,31 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             &mut self.edge_chi2,
             &graph.edges,
             |k, chi2, e| {
-                let w = weights.map_or(1.0, |w| w[k]);
-                *chi2 = if w == 0.0 {
-                    0.0
-                } else {
-                    let r = P::error_prepared(&prepared[e.from], &prepared[e.to], &measurements[k]);
-                    w * r.dot(&(e.information * r))
-                };
+                let r = P::error_prepared(&prepared[e.from], &prepared[e.to], &measurements[k]);
+                *chi2 = r.dot(&(e.information * r));
             },
         );
+        self.chi2_poses.clear();
+        self.chi2_poses.extend_from_slice(poses);
         // Summed in edge order, not as the parallel loop was split (that
         // split follows the work stealing, and a floating-point sum depends
         // on its order): the same bits in every run and with any number of
-        // threads.
-        self.edge_chi2.iter().sum()
+        // threads. An edge of weight 0 adds nothing, even where its cost
+        // is not finite.
+        (self.edge_chi2.iter().enumerate())
+            .map(|(k, &chi2)| match weights.map_or(1.0, |w| w[k]) {
+                0.0 => 0.0,
+                w => w * chi2,
+            })
+            .sum()
+    }
+
+    /// Each edge's plain `eᵀΩe` at the graph's poses if the optimiser's last
+    /// evaluation was there (the same bits as [`PoseGraph::edge_chi2s`]),
+    /// which it usually was after [`Optimizer::run`].
+    pub fn edge_chi2s_at(&self, graph: &PoseGraph<P, D>) -> Option<&[f64]> {
+        (self.edge_chi2.len() == graph.edges.len() && self.chi2_poses == graph.poses)
+            .then_some(&self.edge_chi2[..])
     }
 
     /// Factorises `H + λ·diag H` and solves for the step into `self.step`;

@@ -796,3 +796,21 @@ mod simulated {
         assert_eq!((s.iterations, s.stop_reason), (0, StopReason::SmallStep));
     }
 }
+
+#[test]
+fn the_last_evaluation_gives_each_edges_chi2_at_the_map_while_it_is_there() {
+    // A noisy loop (non-zero optimum), one edge weighted 0 with a huge cost.
+    let mut g = square(0.3, 4);
+    g.edges[1].measurement = Se2::new(0.5, -0.2, 0.1).compose(&g.edges[1].measurement);
+    let weights = [1.0, 1.0, 0.5, 0.0];
+    let mut opt = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
+    opt.run(&mut g, Some(&weights), &mut |_: &IterationRecord| {})
+        .unwrap();
+    let reused = opt.edge_chi2s_at(&g).expect("the run ended at an evaluated map");
+    let fresh = g.edge_chi2s();
+    assert!(fresh.iter().all(|&c| c > 0.0), "{fresh:?}");
+    let bits = |v: &[f64]| v.iter().map(|c| c.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(reused), bits(&fresh));
+    g.poses[2].x += 1e-9;
+    assert!(opt.edge_chi2s_at(&g).is_none());
+}
