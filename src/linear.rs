@@ -481,7 +481,9 @@ impl<const D: usize> BlockSystem<D> {
             }
         }
         let floor = DIAGONAL_FLOOR * max_diag;
-        if self.factor.is_empty() {
+        // A fresh allocation is zeroed here, and its panels need not be.
+        let zeroed = self.factor.is_empty();
+        if zeroed {
             let len = self.symbolic.len_values();
             self.factor
                 .try_reserve_exact(len)
@@ -513,7 +515,7 @@ impl<const D: usize> BlockSystem<D> {
                 }
             }
         };
-        match sym.factorize(&mut self.factor, &load, &self.parallelism) {
+        match sym.factorize(&mut self.factor, zeroed, &load, &self.parallelism) {
             Ok(()) => Ok(()),
             Err(p) => {
                 let block = self.position.iter().position(|&q| q == p).unwrap_or(p);

@@ -630,17 +630,20 @@ impl<const D: usize> Symbolic<D> {
     }
 
     /// Factorises in place: `load(s, panel)` must write the values of the
-    /// matrix into supernode `s`'s (zeroed) panel. Runs in the calling
-    /// thread, or with a pool on its threads ([`Parallelism`]); the values
-    /// are the same bits for a given number of threads. Returns the first
-    /// block column (in elimination order) whose pivot is not positive.
+    /// matrix into supernode `s`'s (zeroed) panel; `zeroed` says `values`
+    /// are all zero already (else each panel is zeroed first). Runs in the
+    /// calling thread, or with a pool on its threads ([`Parallelism`]); the
+    /// values are the same bits for a given number of threads. Returns the
+    /// first block column (in elimination order) whose pivot is not
+    /// positive.
     pub(super) fn factorize(
         &self,
         values: &mut [f64],
+        zeroed: bool,
         load: &(dyn Fn(usize, &mut [f64]) + Sync),
         parallelism: &Parallelism,
     ) -> Result<(), usize> {
-        self.factorize_with_grain(values, load, parallelism, None)
+        self.factorize_with_grain(values, zeroed, load, parallelism, None)
     }
 
     /// [`Self::factorize`] with the size of the sequential tasks (default:
@@ -648,6 +651,7 @@ impl<const D: usize> Symbolic<D> {
     fn factorize_with_grain(
         &self,
         values: &mut [f64],
+        zeroed: bool,
         load: &(dyn Fn(usize, &mut [f64]) + Sync),
         parallelism: &Parallelism,
         grain: Option<f64>,
@@ -655,7 +659,7 @@ impl<const D: usize> Symbolic<D> {
         assert_eq!(values.len(), self.len_values());
         let ns = self.supernodes();
         let failed = AtomicUsize::new(usize::MAX);
-        let shared = Shared(values.as_mut_ptr());
+        let shared = Shared(values.as_mut_ptr(), zeroed);
         let threads = parallelism.threads();
         if threads == 1 || ns < 2 {
             for s in 0..ns {
@@ -768,7 +772,9 @@ impl<const D: usize> Symbolic<D> {
         let len = self.val_ptr[s + 1] - self.val_ptr[s];
         // SAFETY: the panels are disjoint; the caller owns this one.
         let panel = unsafe { std::slice::from_raw_parts_mut(shared.0.add(self.val_ptr[s]), len) };
-        panel.fill(0.0);
+        if !shared.1 {
+            panel.fill(0.0);
+        }
         load(s, panel);
         let pattern = &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]];
         WORKSPACE.with_borrow_mut(|ws| {
@@ -1270,8 +1276,9 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// The factor's values, shared by the threads of one factorisation: each
-/// supernode's panel is written by exactly one task.
-struct Shared(*mut f64);
+/// supernode's panel is written by exactly one task; and whether they are
+/// all zero already (a fresh allocation), so that no panel needs zeroing.
+struct Shared(*mut f64, bool);
 // SAFETY: see `factor_node`: disjoint writes, reads of finished panels only.
 unsafe impl Sync for Shared {}
 unsafe impl Send for Shared {}
@@ -1417,7 +1424,7 @@ mod tests {
                 }
             }
         };
-        sym.factorize_with_grain(&mut values, &load, &parallelism, grain)
+        sym.factorize_with_grain(&mut values, true, &load, &parallelism, grain)
             .unwrap();
         values
     }
@@ -1574,10 +1581,10 @@ mod tests {
         let empty = Symbolic::<3>::new(&[]).unwrap();
         assert_eq!((empty.supernodes(), empty.len_values()), (0, 0));
         let seq = Parallelism::sequential();
-        empty.factorize(&mut [], &|_, _| {}, &seq).unwrap();
+        empty.factorize(&mut [], true, &|_, _| {}, &seq).unwrap();
         let one = Symbolic::<1>::new(&[Vec::new()]).unwrap();
         let mut values = vec![0.0; one.len_values()];
-        one.factorize(&mut values, &|_, panel: &mut [f64]| panel[0] = 4.0, &seq)
+        one.factorize(&mut values, false, &|_, panel: &mut [f64]| panel[0] = 4.0, &seq)
             .unwrap();
         let mut x = vec![8.0];
         one.solve(&values, &mut x, &mut Vec::new());
