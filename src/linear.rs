@@ -41,7 +41,7 @@ pub use group::{EdgeJacobian, GroupScratch};
 use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
 pub use supernodal::Structure;
-use supernodal::Symbolic;
+use supernodal::{Adjacency, Symbolic};
 
 /// Errors of the linear solver.
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
@@ -174,12 +174,9 @@ impl<const D: usize> BlockSystem<D> {
                 "{n_blocks} variable blocks are too many"
             )));
         }
-        let later = later_neighbours(n_blocks, edges, &position);
-        let mut off_ptr = Vec::with_capacity(n_blocks + 1);
-        off_ptr.push(0usize);
-        for l in &later {
-            off_ptr.push(off_ptr.last().copied().unwrap_or(0) + l.len());
-        }
+        let pairs = edges.iter().filter_map(|&(i, j)| Some((position[i?], position[j?])));
+        let later = Adjacency::from_pairs(n_blocks, pairs);
+        let off_ptr = later.starts().to_vec();
         let n_off = off_ptr[n_blocks];
         if n_off >= NONE as usize {
             return Err(LinearError::Factorization(format!(
@@ -188,7 +185,7 @@ impl<const D: usize> BlockSystem<D> {
         }
         let slots = edges
             .iter()
-            .map(|&(i, j)| edge_slot(i, j, &position, &later, &off_ptr))
+            .map(|&(i, j)| edge_slot(i, j, &position, &later))
             .collect();
         let symbolic = match grown.and_then(|g| Symbolic::<D>::extended(g, &later)) {
             Some(extended) => extended,
@@ -726,38 +723,14 @@ impl<const D: usize> BlockSystem<D> {
     }
 }
 
-/// The neighbours of each block that come later in the elimination order,
-/// by elimination position, increasing.
-fn later_neighbours(
-    n_blocks: usize,
-    edges: &[(Option<usize>, Option<usize>)],
-    position: &[usize],
-) -> Vec<Vec<usize>> {
-    let mut later: Vec<Vec<usize>> = vec![Vec::new(); n_blocks];
-    for &(i, j) in edges {
-        if let (Some(i), Some(j)) = (i, j) {
-            if i != j {
-                let (pi, pj) = (position[i], position[j]);
-                later[pi.min(pj)].push(pi.max(pj));
-            }
-        }
-    }
-    for l in &mut later {
-        l.sort_unstable();
-        l.dedup();
-    }
-    later
-}
-
 /// The slots of an edge between variable blocks `i` and `j` (`None`: a
-/// fixed vertex), given the later neighbours of each position and where
-/// each position's off-diagonal blocks start.
+/// fixed vertex), given the later neighbours of each position (whose
+/// entries are the off-diagonal blocks, in order).
 fn edge_slot(
     i: Option<usize>,
     j: Option<usize>,
     position: &[usize],
-    later: &[Vec<usize>],
-    off_ptr: &[usize],
+    later: &Adjacency,
 ) -> EdgeSlot {
     let pos = |b: Option<usize>| b.map_or(NONE, |b| position[b] as u32);
     let (pi, pj) = (pos(i), pos(j));
@@ -771,7 +744,7 @@ fn edge_slot(
         let (col, row) = (pi.min(pj) as usize, pi.max(pj) as usize);
         // Cannot fail: `row` was recorded as a later neighbour of `col`.
         let rank = later[col].binary_search(&row).unwrap_or(0);
-        slot.off = (off_ptr[col] + rank) as u32;
+        slot.off = (later.starts()[col] + rank) as u32;
         slot.i_is_row = pi > pj;
     }
     slot

@@ -110,6 +110,87 @@ pub(super) struct Symbolic<const D: usize> {
     update_scratch: usize,
 }
 
+/// The lower triangle's pattern of a block matrix by columns: the block
+/// rows `q > p` of each block column `p`, increasing (its later neighbours
+/// in the elimination order), all in one array.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Adjacency {
+    ptr: Vec<usize>,
+    rows: Vec<usize>,
+}
+
+impl Adjacency {
+    /// The pattern of the blocks `(max(p, q), min(p, q))` for `(p, q)` in
+    /// `pairs` with `p ≠ q`, among `n` block columns (duplicates once).
+    pub(super) fn from_pairs(n: usize, pairs: impl Iterator<Item = (usize, usize)> + Clone) -> Self {
+        let mut ptr = vec![0usize; n + 1];
+        for (p, q) in pairs.clone().filter(|(p, q)| p != q) {
+            ptr[p.min(q) + 1] += 1;
+        }
+        for k in 0..n {
+            ptr[k + 1] += ptr[k];
+        }
+        let mut next = ptr.clone();
+        let mut rows = vec![0usize; ptr[n]];
+        for (p, q) in pairs.filter(|(p, q)| p != q) {
+            let c = p.min(q);
+            rows[next[c]] = p.max(q);
+            next[c] += 1;
+        }
+        // Each column's rows sorted and without repeats, moved down over
+        // the repeats removed before it.
+        let mut kept = 0;
+        for c in 0..n {
+            let (start, end) = (ptr[c], ptr[c + 1]);
+            rows[start..end].sort_unstable();
+            ptr[c] = kept;
+            for k in start..end {
+                if k == start || rows[k] != rows[k - 1] {
+                    rows[kept] = rows[k];
+                    kept += 1;
+                }
+            }
+        }
+        ptr[n] = kept;
+        rows.truncate(kept);
+        Self { ptr, rows }
+    }
+
+    /// The pattern whose column `p` has the rows `lists[p]` (each
+    /// increasing, after `p`).
+    #[cfg(test)]
+    pub(super) fn from_lists(lists: &[Vec<usize>]) -> Self {
+        let pairs = lists
+            .iter()
+            .enumerate()
+            .flat_map(|(p, l)| l.iter().map(move |&q| (p, q)));
+        Self::from_pairs(lists.len(), pairs)
+    }
+
+    /// Block columns.
+    pub(super) fn len(&self) -> usize {
+        self.ptr.len().saturating_sub(1)
+    }
+
+    /// Where each column's rows start in the entries (and the end).
+    pub(super) fn starts(&self) -> &[usize] {
+        &self.ptr
+    }
+
+    /// Each column's rows, in column order.
+    pub(super) fn iter(&self) -> impl Iterator<Item = &[usize]> {
+        (0..self.len()).map(|p| &self[p])
+    }
+}
+
+impl std::ops::Index<usize> for Adjacency {
+    type Output = [usize];
+
+    fn index(&self, p: usize) -> &[usize] {
+        &self.rows[self.ptr[p]..self.ptr[p + 1]]
+    }
+}
+
 /// A factor's supernodes (`begin`, with the end) and the block rows below
 /// each one's diagonal block (`rows[row_ptr[s]..row_ptr[s + 1]]`).
 #[derive(Clone, Debug, Default)]
@@ -129,7 +210,7 @@ impl Structure {
     /// in the factor of the grown matrix `later`: those of its columns'
     /// entries and of its children's, which all lie below its columns.
     /// `None` if an entry between old columns is outside the old factor.
-    fn added_rows(&self, later: &[Vec<usize>]) -> Option<Vec<Vec<u32>>> {
+    fn added_rows(&self, later: &Adjacency) -> Option<Vec<Vec<u32>>> {
         let ns = self.begin.len() - 1;
         let n_old = self.begin[ns];
         let mut supernode_of = vec![0u32; n_old];
@@ -141,8 +222,8 @@ impl Structure {
             let end = self.begin[s + 1];
             let below = &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]];
             let mut a = std::mem::take(&mut added[s]);
-            for l in &later[self.begin[s]..end] {
-                for &q in l {
+            for p in self.begin[s]..end {
+                for &q in &later[p] {
                     if q >= n_old {
                         a.push(q as u32);
                     } else if q >= end && below.binary_search(&(q as u32)).is_err() {
@@ -169,7 +250,7 @@ impl Structure {
 /// Returns where each starts and its rows below.
 fn new_supernodes(
     n_old: usize,
-    later: &[Vec<usize>],
+    later: &Adjacency,
     prev: &Structure,
     added: &[Vec<u32>],
 ) -> (Vec<usize>, Vec<Vec<u32>>) {
@@ -231,12 +312,12 @@ impl<const D: usize> Symbolic<D> {
     /// The structure of the factor of a block matrix whose lower triangle has
     /// block `(q, p)` for every `q` in `later[p]` (each list increasing, all
     /// `q > p`) and every diagonal block.
-    pub(super) fn new(later: &[Vec<usize>]) -> Result<Self, LinearError> {
+    pub(super) fn new(later: &Adjacency) -> Result<Self, LinearError> {
         Self::with_update_scratch(later, UPDATE_SCRATCH)
     }
 
     /// [`Self::new`] with the scratch of an update product given in scalars.
-    fn with_update_scratch(later: &[Vec<usize>], scratch: usize) -> Result<Self, LinearError> {
+    fn with_update_scratch(later: &Adjacency, scratch: usize) -> Result<Self, LinearError> {
         let n = later.len();
         if n == 0 {
             return Ok(Self::from_structure(vec![0], vec![0], Vec::new(), scratch));
@@ -334,7 +415,7 @@ impl<const D: usize> Symbolic<D> {
     /// the new columns form fundamental supernodes. Cheaper than the
     /// analysis afresh, which is what a kept elimination order with poses
     /// appended would otherwise cost at every update.
-    pub(super) fn extended(prev: &Structure, later: &[Vec<usize>]) -> Option<Self> {
+    pub(super) fn extended(prev: &Structure, later: &Adjacency) -> Option<Self> {
         let n_old = *prev.begin.last()?;
         let n = later.len();
         // Nothing appended: a pattern rebuilt without some edges (loops a
@@ -1436,11 +1517,22 @@ mod tests {
         grain: Option<f64>,
         scratch: usize,
     ) -> Vec<f64> {
-        let sym = Symbolic::<2>::with_update_scratch(later, scratch).unwrap();
+        let sym = Symbolic::<2>::with_update_scratch(&Adjacency::from_lists(later), scratch).unwrap();
         let values = factor_dense(&sym, later, a, threads, grain);
         let mut x: Vec<f64> = (0..2 * later.len()).map(|i| i as f64 - 3.0).collect();
         sym.solve(&values, &mut x, &mut Vec::new());
         x
+    }
+
+    #[test]
+    fn an_adjacency_holds_each_pair_once_below_the_diagonal_in_order() {
+        let pairs = [(3, 1), (1, 3), (0, 2), (2, 2), (4, 0), (0, 2), (1, 2)];
+        let a = Adjacency::from_pairs(5, pairs.iter().copied());
+        let lists: Vec<Vec<usize>> = a.iter().map(<[usize]>::to_vec).collect();
+        assert_eq!(lists, [vec![2, 4], vec![2, 3], vec![], vec![], vec![]]);
+        assert_eq!(a.starts(), [0, 2, 4, 4, 4, 4]);
+        assert_eq!(Adjacency::from_lists(&lists).starts(), a.starts());
+        assert_eq!(Adjacency::from_pairs(0, std::iter::empty()).len(), 0);
     }
 
     #[test]
@@ -1456,9 +1548,11 @@ mod tests {
                 .iter()
                 .map(|l| l.iter().copied().filter(|&q| q < n_old).collect())
                 .collect();
-            let old = Symbolic::<2>::new(&old_later).unwrap().structure();
-            let sym =
-                Symbolic::<2>::extended(&old, &later).expect("no new entry between old blocks");
+            let old = Symbolic::<2>::new(&Adjacency::from_lists(&old_later))
+                .unwrap()
+                .structure();
+            let sym = Symbolic::<2>::extended(&old, &Adjacency::from_lists(&later))
+                .expect("no new entry between old blocks");
             let values = factor_dense(&sym, &later, &a, 1, None);
             let mut x: Vec<f64> = (0..2 * n).map(|i| i as f64 - 3.0).collect();
             let b = DVector::from_vec(x.clone());
@@ -1477,7 +1571,7 @@ mod tests {
                 more[p].push(q);
                 more[p].sort_unstable();
                 assert!(
-                    Symbolic::<2>::extended(&old, &more).is_none(),
+                    Symbolic::<2>::extended(&old, &Adjacency::from_lists(&more)).is_none(),
                     "seed {seed}"
                 );
                 refused += 1;
@@ -1520,7 +1614,7 @@ mod tests {
         const D: usize = 2;
         for seed in 0..4 {
             let (later, a) = random_problem(seed, 30 + 25 * seed as usize);
-            let sym = Symbolic::<D>::new(&later).unwrap();
+            let sym = Symbolic::<D>::new(&Adjacency::from_lists(&later)).unwrap();
             let values = factor_dense(&sym, &later, &a, 1, None);
             let z = sym.selected_inverse(&values);
             let inverse = a.clone().try_inverse().unwrap();
@@ -1557,7 +1651,7 @@ mod tests {
         for seed in [1, 6] {
             let n = if seed == 6 { 400 } else { 60 };
             let (later, a) = random_problem(seed, n);
-            let sym = Symbolic::<2>::new(&later).unwrap();
+            let sym = Symbolic::<2>::new(&Adjacency::from_lists(&later)).unwrap();
             let values = factor_dense(&sym, &later, &a, 1, None);
             let rows = 2 * n;
             let k = 3;
@@ -1578,11 +1672,11 @@ mod tests {
 
     #[test]
     fn empty_and_single_block_systems() {
-        let empty = Symbolic::<3>::new(&[]).unwrap();
+        let empty = Symbolic::<3>::new(&Adjacency::from_lists(&[])).unwrap();
         assert_eq!((empty.supernodes(), empty.len_values()), (0, 0));
         let seq = Parallelism::sequential();
         empty.factorize(&mut [], true, &|_, _| {}, &seq).unwrap();
-        let one = Symbolic::<1>::new(&[Vec::new()]).unwrap();
+        let one = Symbolic::<1>::new(&Adjacency::from_lists(&[Vec::new()])).unwrap();
         let mut values = vec![0.0; one.len_values()];
         one.factorize(&mut values, false, &|_, panel: &mut [f64]| panel[0] = 4.0, &seq)
             .unwrap();
