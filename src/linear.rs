@@ -174,7 +174,9 @@ impl<const D: usize> BlockSystem<D> {
                 "{n_blocks} variable blocks are too many"
             )));
         }
-        let pairs = edges.iter().filter_map(|&(i, j)| Some((position[i?], position[j?])));
+        let pairs = edges
+            .iter()
+            .filter_map(|&(i, j)| Some((position[i?], position[j?])));
         let later = Adjacency::from_pairs(n_blocks, pairs);
         let off_ptr = later.starts().to_vec();
         let n_off = off_ptr[n_blocks];

@@ -122,7 +122,10 @@ pub(super) struct Adjacency {
 impl Adjacency {
     /// The pattern of the blocks `(max(p, q), min(p, q))` for `(p, q)` in
     /// `pairs` with `p ≠ q`, among `n` block columns (duplicates once).
-    pub(super) fn from_pairs(n: usize, pairs: impl Iterator<Item = (usize, usize)> + Clone) -> Self {
+    pub(super) fn from_pairs(
+        n: usize,
+        pairs: impl Iterator<Item = (usize, usize)> + Clone,
+    ) -> Self {
         let mut ptr = vec![0usize; n + 1];
         for (p, q) in pairs.clone().filter(|(p, q)| p != q) {
             ptr[p.min(q) + 1] += 1;
@@ -1517,7 +1520,8 @@ mod tests {
         grain: Option<f64>,
         scratch: usize,
     ) -> Vec<f64> {
-        let sym = Symbolic::<2>::with_update_scratch(&Adjacency::from_lists(later), scratch).unwrap();
+        let sym =
+            Symbolic::<2>::with_update_scratch(&Adjacency::from_lists(later), scratch).unwrap();
         let values = factor_dense(&sym, later, a, threads, grain);
         let mut x: Vec<f64> = (0..2 * later.len()).map(|i| i as f64 - 3.0).collect();
         sym.solve(&values, &mut x, &mut Vec::new());
@@ -1678,8 +1682,13 @@ mod tests {
         empty.factorize(&mut [], true, &|_, _| {}, &seq).unwrap();
         let one = Symbolic::<1>::new(&Adjacency::from_lists(&[Vec::new()])).unwrap();
         let mut values = vec![0.0; one.len_values()];
-        one.factorize(&mut values, false, &|_, panel: &mut [f64]| panel[0] = 4.0, &seq)
-            .unwrap();
+        one.factorize(
+            &mut values,
+            false,
+            &|_, panel: &mut [f64]| panel[0] = 4.0,
+            &seq,
+        )
+        .unwrap();
         let mut x = vec![8.0];
         one.solve(&values, &mut x, &mut Vec::new());
         assert_eq!(x, vec![2.0]);
