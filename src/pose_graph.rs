@@ -146,7 +146,7 @@ impl sealed::Sealed<6> for Se3 {
 /// # Ok::<(), pgo::Error>(())
 /// ```
 #[derive(Clone, Debug)]
-pub struct PoseGraph<P, const D: usize> {
+pub struct PoseGraph<P: GraphPose<D>, const D: usize> {
     graph: graph::PoseGraph<P, D>,
     /// Indices of the vertices a file's edges named without a vertex line
     /// (their poses are placeholders until the job initialises them).
@@ -158,7 +158,7 @@ pub struct PoseGraph<P, const D: usize> {
     repaired: usize,
     /// What [`PoseGraph::update`] keeps between calls: the options of the
     /// last one and its solution's state.
-    state: Option<Box<(Options, Warm<P>)>>,
+    state: Option<Box<(Options, Warm<P, D>)>>,
 }
 
 /// A planar pose graph (SE(2), 3 degrees of freedom).

@@ -20,6 +20,7 @@
 //!    that would find them.
 
 use super::{OptimizeConfig, PipelineError, candidates, finish};
+use crate::geometry::Pose;
 use crate::graph::PoseGraph;
 use crate::io::g2o::G2oPose;
 use crate::report::{
@@ -27,7 +28,7 @@ use crate::report::{
 };
 use crate::robust::{self, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization, grow_tree};
-use crate::solve::{Observer, Optimizer, Ordering, Session, SolverOptions};
+use crate::solve::{Observer, Optimizer, Ordering, Session, SolverOptions, Spare};
 use crate::stats::Chi2Test;
 use std::time::Instant;
 
@@ -57,12 +58,14 @@ pub const MODEL_TOLERANCE: f64 = 1e-8;
 /// What a graph keeps between updates: the last solution's poses (of its
 /// first `poses.len()` vertices), how many edges it had, whether each
 /// candidate edge was accepted, the last report (returned again when
-/// nothing was added), the elimination order and the last factorisation's
-/// allocation. Its memory is that of the poses, one byte per edge, four
-/// bytes per pose (the order), the report (about 100 bytes per loop
-/// candidate) and the factor's values (8 bytes each).
+/// nothing was added), the elimination order and what the last optimiser
+/// spares the next ([`Spare`]). Its memory is that of the poses, one byte
+/// per edge, four bytes per pose (the order), the report (about 100 bytes
+/// per loop candidate), the factor's values (8 bytes each) and the
+/// prepared poses and measurements (two poses' worth per pose, one per
+/// edge).
 #[derive(Clone, Debug)]
-pub(crate) struct Warm<P> {
+pub(crate) struct Warm<P: Pose<D>, const D: usize> {
     poses: Vec<P>,
     edges: usize,
     /// Per edge: `Some(accepted)` for a loop candidate, `None` for a
@@ -73,34 +76,16 @@ pub(crate) struct Warm<P> {
     ordering: Ordering,
     /// Whether the last solve converged.
     converged: bool,
-    /// The last factorisation's allocation, for the next update's.
-    factor: Spare,
+    /// The last optimiser's allocation and preparations, for the next
+    /// update's (manhattanOlson3500 replayed every 10 poses with one
+    /// iteration per update, `examples/replay`: the factor's allocation
+    /// alone took 975–1042 ms to 940–968 ms).
+    spare: Spare<P, D>,
 }
 
-/// An allocation handed from one update's factorisation to the next: the
-/// next fills memory already mapped instead of faulting fresh pages in
-/// (manhattanOlson3500 replayed every 10 poses with one iteration per
-/// update, `examples/replay`: 975–1042 ms before, 940–968 ms with it).
-/// Its values mean nothing, so a copy of the state starts without one.
-#[derive(Debug, Default)]
-struct Spare(Vec<f64>);
-
-impl Clone for Spare {
-    fn clone(&self) -> Self {
-        Self::default()
-    }
-}
-
-impl<P: Clone> Warm<P> {
+impl<P: Pose<D>, const D: usize> Warm<P, D> {
     /// The state after a job on `graph` that made `report`.
-    pub(crate) fn after<const D: usize>(
-        graph: &PoseGraph<P, D>,
-        report: &Report,
-        ordering: Ordering,
-    ) -> Self
-    where
-        P: crate::geometry::Pose<D>,
-    {
+    pub(crate) fn after(graph: &PoseGraph<P, D>, report: &Report, ordering: Ordering) -> Self {
         let mut accepted = vec![None; graph.edges.len()];
         let candidates = (0..graph.edges.len()).filter(|&k| graph.edges[k].is_candidate());
         for (k, l) in candidates.zip(&report.loops) {
@@ -113,7 +98,7 @@ impl<P: Clone> Warm<P> {
             report: report.clone(),
             ordering,
             converged: report.optimizer.converged,
-            factor: Spare::default(),
+            spare: Spare::default(),
         }
     }
 }
@@ -124,11 +109,11 @@ impl<P: Clone> Warm<P> {
 /// ([`robust::Outcome::swung`]): the caller then runs the whole job.
 pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     graph: &mut PoseGraph<P, D>,
-    warm: &mut Warm<P>,
+    warm: &mut Warm<P, D>,
     config: &OptimizeConfig,
     report: &mut Report,
     observer: &mut dyn Observer,
-) -> Result<Option<Warm<P>>, PipelineError> {
+) -> Result<Option<Warm<P, D>>, PipelineError> {
     let start = Instant::now();
     let added = place(graph, warm);
     candidates::mark(graph, config.candidates);
@@ -159,10 +144,10 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         step.reason = "only poses hung on the map by one trusted edge each".into();
         report.incremental = Some(step);
         let mut next = Warm::after(graph, report, warm.ordering.clone());
-        next.factor = std::mem::take(&mut warm.factor);
+        next.spare = std::mem::take(&mut warm.spare);
         return Ok(Some(next));
     }
-    let spare = std::mem::take(&mut warm.factor.0);
+    let spare = std::mem::take(&mut warm.spare);
     let Some((full, previous, ordering, spare)) = resolve(
         graph,
         (warm, added.trusted_by_tree, closing, spare),
@@ -192,7 +177,7 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     step.changed = changes(graph, &previous, report);
     report.incremental = Some(step);
     let mut next = Warm::after(graph, report, ordering);
-    next.factor = Spare(spare);
+    next.spare = spare;
     Ok(Some(next))
 }
 
@@ -227,7 +212,7 @@ fn changes<P: G2oPose<D>, const D: usize>(
 /// changed.
 pub(crate) fn after_swing<P: G2oPose<D>, const D: usize>(
     graph: &PoseGraph<P, D>,
-    warm: &Warm<P>,
+    warm: &Warm<P, D>,
     report: &Report,
 ) -> IncrementalReport {
     IncrementalReport {
@@ -256,7 +241,7 @@ struct Placed {
 /// Puts the last solution's poses back and composes every new pose along
 /// trusted edges from them (a pose no trusted edge reaches keeps the
 /// caller's).
-fn place<P: G2oPose<D>, const D: usize>(graph: &mut PoseGraph<P, D>, warm: &Warm<P>) -> Placed {
+fn place<P: G2oPose<D>, const D: usize>(graph: &mut PoseGraph<P, D>, warm: &Warm<P, D>) -> Placed {
     let old = warm.poses.len();
     graph.poses[..old].clone_from_slice(&warm.poses);
     // Old edges join old poses only: the new trusted edges reach every
@@ -280,7 +265,7 @@ fn place<P: G2oPose<D>, const D: usize>(graph: &mut PoseGraph<P, D>, warm: &Warm
 /// change, as each new edge brings one new pose.
 fn extended<P: G2oPose<D>, const D: usize>(
     graph: &PoseGraph<P, D>,
-    warm: &Warm<P>,
+    warm: &Warm<P, D>,
     config: &OptimizeConfig,
     report: &mut Report,
     start: Instant,
@@ -336,7 +321,7 @@ fn extended<P: G2oPose<D>, const D: usize>(
 /// (`None` for a trusted or new edge).
 fn start_weights<P: G2oPose<D>, const D: usize>(
     graph: &PoseGraph<P, D>,
-    warm: &Warm<P>,
+    warm: &Warm<P, D>,
     candidates: &[robust::Candidate],
     method: RobustMethod,
 ) -> (Vec<f64>, Vec<Option<bool>>) {
@@ -389,7 +374,7 @@ fn update_solver(config: &OptimizeConfig, method: RobustMethod, closing: bool) -
 /// report's and only the new edges are evaluated.
 fn report_start<P: G2oPose<D>, const D: usize>(
     graph: &PoseGraph<P, D>,
-    warm: &Warm<P>,
+    warm: &Warm<P, D>,
     report: &mut Report,
     start: Instant,
 ) {
@@ -406,24 +391,23 @@ fn report_start<P: G2oPose<D>, const D: usize>(
 }
 
 /// What [`resolve`] returns: whether every candidate was weighed again,
-/// each edge's earlier decision, the elimination order used and the
-/// factorisation's allocation.
-type Resolved = (bool, Vec<Option<bool>>, Ordering, Vec<f64>);
+/// each edge's earlier decision, the elimination order used and what the
+/// optimiser spares the next update's.
+type Resolved<P, const D: usize> = (bool, Vec<Option<bool>>, Ordering, Spare<P, D>);
 
 /// The gate, and the robust solve from the last decisions (and, where the
 /// placed map is the last accepted set's optimum, `optimal`, the new
 /// candidates the last loop model accepts against it); `closing`: nothing
 /// was added, and the last solve, cut short, is finished to a batch job's
-/// tolerance; `spare`: the last factorisation's allocation, to fill
-/// again. Returns [`Resolved`], or `None` when EM's decisions swung.
+/// tolerance; `spare`: what the last update's optimiser spared this one. Returns [`Resolved`], or `None` when EM's decisions swung.
 fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     graph: &mut PoseGraph<P, D>,
-    (warm, optimal, closing, spare): (&Warm<P>, bool, bool, Vec<f64>),
+    (warm, optimal, closing, spare): (&Warm<P, D>, bool, bool, Spare<P, D>),
     config: &OptimizeConfig,
     report: &mut Report,
     observer: &mut dyn Observer,
     start: Instant,
-) -> Result<Option<Resolved>, PipelineError> {
+) -> Result<Option<Resolved<P, D>>, PipelineError> {
     let solve_error = |source| PipelineError::Solve {
         path: config.input.clone(),
         source,
@@ -440,7 +424,7 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let ordering = Some(warm.ordering.clone().for_innovations(evaluated));
     let mut optimizer = Optimizer::with_ordering(graph, Some(&weights), solver.clone(), ordering)
         .map_err(solve_error)?;
-    optimizer.reuse_factor_allocation(spare);
+    optimizer.reuse_spare(spare);
     report_start(graph, warm, report, start);
     let proposal = (warm.report.robust.model.as_ref())
         .filter(|_| optimal)
@@ -483,6 +467,6 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         return Ok(None);
     }
     let ordering = optimizer.ordering().cloned().unwrap_or_default();
-    let spare = optimizer.take_factor_allocation();
+    let spare = optimizer.take_spare();
     Ok(Some((full, previous, ordering, spare)))
 }

@@ -370,13 +370,52 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     chi2_poses: Vec<P>,
     /// Each edge's measurement, prepared once ([`Pose::prepare`]).
     measurements: Vec<P::Prepared>,
-    /// The poses being evaluated, prepared.
-    prepared: Vec<P::Prepared>,
+    /// The poses last evaluated, each with its preparation.
+    prepared: Vec<(P, P::Prepared)>,
     /// Where the parallel work runs ([`SolverOptions::threads`]); shared
     /// with `system`.
     parallelism: Parallelism,
     /// The order kept across a growing graph's solves, if any.
     ordering: Option<Ordering>,
+}
+
+/// What an optimiser hands to the next one of the same graph grown by
+/// vertices and edges appended (an incremental update's): its
+/// factorisation's allocation, which the next fills instead of faulting
+/// fresh pages in; each edge's measurement, prepared; and the poses it
+/// last evaluated, prepared, which the next does not prepare again while
+/// they are unchanged. Its copy holds nothing, so that a copy of a graph's
+/// state starts without one.
+pub struct Spare<P: Pose<D>, const D: usize> {
+    factor: Vec<f64>,
+    measurements: Vec<P::Prepared>,
+    prepared: Vec<(P, P::Prepared)>,
+}
+
+impl<P: Pose<D>, const D: usize> Default for Spare<P, D> {
+    fn default() -> Self {
+        Self {
+            factor: Vec::new(),
+            measurements: Vec::new(),
+            prepared: Vec::new(),
+        }
+    }
+}
+
+impl<P: Pose<D>, const D: usize> Clone for Spare<P, D> {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl<P: Pose<D>, const D: usize> std::fmt::Debug for Spare<P, D> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Spare")
+            .field("factor", &self.factor.capacity())
+            .field("measurements", &self.measurements.len())
+            .field("prepared", &self.prepared.len())
+            .finish()
+    }
 }
 
 impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
@@ -437,12 +476,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             terms: Vec::new(),
             edge_chi2: Vec::new(),
             chi2_poses: Vec::new(),
-            measurements: graph
-                .edges
-                .iter()
-                .map(|e| e.measurement.prepare())
-                .collect(),
             // Filled by the first linearisation or evaluation.
+            measurements: Vec::new(),
             prepared: Vec::new(),
             parallelism,
         };
@@ -451,16 +486,23 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         Ok(optimizer)
     }
 
-    /// Hands over the factorisation's allocation, for a later optimiser's
-    /// [`Optimizer::reuse_factor_allocation`].
-    pub fn take_factor_allocation(&mut self) -> Vec<f64> {
-        self.system.take_factor_allocation()
+    /// Hands over what a later optimiser of this graph grown can reuse
+    /// ([`Optimizer::reuse_spare`]).
+    pub fn take_spare(&mut self) -> Spare<P, D> {
+        Spare {
+            factor: self.system.take_factor_allocation(),
+            measurements: std::mem::take(&mut self.measurements),
+            prepared: std::mem::take(&mut self.prepared),
+        }
     }
 
-    /// Lets the first factorisation fill `buffer` (an earlier optimiser's
-    /// [`Optimizer::take_factor_allocation`]) rather than fresh memory.
-    pub fn reuse_factor_allocation(&mut self, buffer: Vec<f64>) {
-        self.system.reuse_factor_allocation(buffer);
+    /// Takes over `spare`, from an earlier optimiser of this graph when it
+    /// had the same first edges ([`Optimizer::take_spare`]), before the
+    /// first linearisation or evaluation.
+    pub fn reuse_spare(&mut self, spare: Spare<P, D>) {
+        self.system.reuse_factor_allocation(spare.factor);
+        self.measurements = spare.measurements;
+        self.prepared = spare.prepared;
     }
 
     /// The elimination order kept for a later [`Optimizer::with_ordering`]

@@ -79,6 +79,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         self.system.clear();
         let parallel = self.parallelism.is_parallel();
         prepare(&graph.poses, &mut self.prepared, parallel);
+        self.prepare_measurements(graph);
         let mut objective = 0.0;
         // Edges are linearised in parallel, a chunk at a time, into a buffer
         // reused across iterations, then added into H in parallel by
@@ -94,7 +95,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 *t = if w == 0.0 {
                     EdgeTerms::default()
                 } else {
-                    let (xi, xj) = (&prepared[e.from], &prepared[e.to]);
+                    let (xi, xj) = (&prepared[e.from].1, &prepared[e.to].1);
                     EdgeTerms::new::<P>(xi, xj, &measurements[k], &e.information, w)
                 };
             });
@@ -120,6 +121,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     fn sum_chi2(&mut self, poses: &[P], graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
         let parallel = self.parallelism.is_parallel();
         prepare(poses, &mut self.prepared, parallel);
+        self.prepare_measurements(graph);
         let (prepared, measurements) = (&self.prepared, &self.measurements);
         self.edge_chi2.resize(graph.edges.len(), 0.0);
         zip_each(
@@ -128,7 +130,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             &mut self.edge_chi2,
             &graph.edges,
             |k, chi2, e| {
-                let r = P::error_prepared(&prepared[e.from], &prepared[e.to], &measurements[k]);
+                let (xi, xj) = (&prepared[e.from].1, &prepared[e.to].1);
+                let r = P::error_prepared(xi, xj, &measurements[k]);
                 *chi2 = r.dot(&(e.information * r));
             },
         );
@@ -224,6 +227,15 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         })
     }
 
+    /// Prepares the measurements of the edges not prepared yet (those
+    /// appended since, when `measurements` came from an optimiser of the
+    /// graph before it grew: [`Optimizer::reuse_spare`]).
+    fn prepare_measurements(&mut self, graph: &PoseGraph<P, D>) {
+        let done = self.measurements.len().min(graph.edges.len());
+        self.measurements.truncate(done);
+        (self.measurements).extend(graph.edges[done..].iter().map(|e| e.measurement.prepare()));
+    }
+
     /// `trial = poses ⊞ step`.
     fn apply_step(&mut self, graph: &PoseGraph<P, D>) {
         self.trial.clone_from(&graph.poses);
@@ -236,15 +248,29 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 }
 
-/// `out[k] = poses[k].prepare()`, in parallel if `parallel`.
-fn prepare<P: Pose<D>, const D: usize>(poses: &[P], out: &mut Vec<P::Prepared>, parallel: bool) {
-    if out.len() != poses.len() {
-        *out = poses.iter().map(|p| p.prepare()).collect();
-    } else {
-        zip_each(parallel, POSES_PER_TASK, out, poses, |_, o, p| {
-            *o = p.prepare()
-        });
-    }
+/// `out[k] = (poses[k], poses[k].prepare())`, in parallel if `parallel`;
+/// a pose already prepared in `out` is not prepared again. Most poses are:
+/// an iteration linearises at the poses its last step evaluated, and an
+/// update's solve starts from the last one's map.
+fn prepare<P: Pose<D>, const D: usize>(
+    poses: &[P],
+    out: &mut Vec<(P, P::Prepared)>,
+    parallel: bool,
+) {
+    out.truncate(poses.len());
+    let old = out.len();
+    out.extend(poses[old..].iter().map(|p| (*p, p.prepare())));
+    zip_each(
+        parallel,
+        POSES_PER_TASK,
+        &mut out[..old],
+        poses,
+        |_, o, p| {
+            if o.0 != *p {
+                *o = (*p, p.prepare());
+            }
+        },
+    );
 }
 
 /// The least edges (linearisations or χ² terms) a parallel task gets: a
