@@ -9,7 +9,8 @@
 //!
 //! With `--update-iters K` each update solves for at most K iterations
 //! (`update-iters`), and a closing update with nothing added finishes the
-//! convergence; its time counts in the total.
+//! convergence; its time counts in the total. `--set NAME=VALUE` sets any
+//! other option by its name (`Options::set`), e.g. `--set threads=1`.
 //!
 //! Prints one line per update (poses, how it was solved, milliseconds) and
 //! the earlier decisions it changed with `-v`, and a summary: updates,
@@ -99,12 +100,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     while let Some(a) = it.next() {
         if a == "--update-iters" {
             options.set("update-iters", it.next().ok_or("--update-iters needs K")?)?;
+        } else if a == "--set" {
+            let setting = it.next().ok_or("--set needs NAME=VALUE")?;
+            let (name, value) = setting.split_once('=').ok_or("--set needs NAME=VALUE")?;
+            options.set(name, value)?;
         } else {
             rest.push(a);
         }
     }
     let (Some(path), every) = (rest.first(), rest.get(1)) else {
-        return Err("usage: replay FILE.g2o [EVERY_N_POSES] [--update-iters K] [-v]".into());
+        return Err(
+            "usage: replay FILE.g2o [EVERY_N_POSES] [--update-iters K] [--set NAME=VALUE]… [-v]"
+                .into(),
+        );
     };
     let every: usize = every.map_or(Ok(1), |s| s.parse())?;
     let (dim, vertices, edges) = read(path)?;

@@ -837,7 +837,9 @@ fn an_optimiser_of_the_grown_graph_given_the_last_ones_spare_solves_alike() {
         if let Some(s) = spare {
             opt.reuse_spare(s);
         }
-        let s = opt.run(&mut g, None, &mut |_: &IterationRecord| {}).unwrap();
+        let s = opt
+            .run(&mut g, None, &mut |_: &IterationRecord| {})
+            .unwrap();
         (s.final_objective.to_bits(), g.poses)
     };
     assert_eq!(run(Some(spare)), run(None));
