@@ -136,7 +136,9 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         step.solve = UpdateSolve::None;
         step.reason = "nothing added".into();
         report.incremental = Some(step);
-        return Ok(Some(warm.clone()));
+        let mut next = warm.clone();
+        next.spare = std::mem::take(&mut warm.spare);
+        return Ok(Some(next));
     }
     if new_candidates == 0 && added.all_by_tree && warm.converged {
         extended(graph, warm, config, report, start);
