@@ -154,7 +154,11 @@ pub struct SolverOptions {
     /// update as a live front end needs it: the map an update returns may
     /// then be short of the optimum (its report says not converged), the
     /// next update goes on from it, and an update that adds nothing
-    /// continues the convergence (without this option, finishes it). Loop
+    /// continues the convergence (without this option, finishes it). A
+    /// capped solve whose step the Gauss–Newton model foresaw to within an
+    /// update's tolerance counts as converged, so that poses added by
+    /// odometry alone are composed onto its map; an update that adds
+    /// nothing still finishes it. Loop
     /// candidates that EM decides are always solved to convergence (EM
     /// judges each by its innovation at the optimum). Without it every
     /// update converges to the map a batch job would find. `pgo optimize`
