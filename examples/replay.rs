@@ -11,14 +11,16 @@
 //! (`update-iters`), and a closing update with nothing added finishes the
 //! convergence; its time counts in the total. `--set NAME=VALUE` sets any
 //! other option by its name (`Options::set`), e.g. `--set threads=1`.
+//! `--gap-every M` compares every M-th update's map with a batch solve of
+//! the graph at that point (untimed): how far its χ² is above the optimum.
 //!
 //! Prints one line per update (poses, how it was solved, milliseconds) and
 //! the earlier decisions it changed with `-v`, and a summary: updates,
-//! total and p99 time, how many of each kind, and the final χ² and
-//! decisions against the batch ones (with `-v`, each decision that
+//! total and p99 time, how many of each kind, the gaps, and the final χ²
+//! and decisions against the batch ones (with `-v`, each decision that
 //! differs).
 
-use pgo::{AnyPoseGraph, Options, UpdateSolve};
+use pgo::{AnyPoseGraph, AnySolution, Options, UpdateSolve};
 use std::collections::HashMap;
 use std::io::Write;
 use std::time::Instant;
@@ -89,37 +91,136 @@ fn read(path: &str) -> Result<(usize, Vec<Vertex>, Vec<Edge>), String> {
     Ok((dim, vertices, edges))
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// The command line.
+struct Args {
+    path: String,
+    /// Update every this many poses.
+    every: usize,
+    options: Options,
+    verbose: bool,
+    /// Measure every this many updates' gap to the batch optimum (0: none).
+    gap_every: usize,
+}
+
+const USAGE: &str = "usage: replay FILE.g2o [EVERY_N_POSES] [--update-iters K] \
+                     [--set NAME=VALUE]… [--gap-every M] [-v]";
+
+fn parse_args() -> Result<Args, Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let verbose = args.iter().any(|a| a == "-v");
-    // A closed stdout (`| head`) ends the replay with an error, not a panic.
-    let mut out = std::io::stdout().lock();
-    let mut options = Options::default();
-    let mut rest = Vec::new();
+    let (mut options, mut gap_every, mut rest) = (Options::default(), 0, Vec::new());
     let mut it = args.iter().filter(|a| *a != "-v");
     while let Some(a) = it.next() {
-        if a == "--update-iters" {
-            options.set("update-iters", it.next().ok_or("--update-iters needs K")?)?;
-        } else if a == "--set" {
-            let setting = it.next().ok_or("--set needs NAME=VALUE")?;
-            let (name, value) = setting.split_once('=').ok_or("--set needs NAME=VALUE")?;
-            options.set(name, value)?;
-        } else {
-            rest.push(a);
+        let mut value = || it.next().ok_or(format!("{a} needs a value"));
+        match a.as_str() {
+            "--update-iters" => options.set("update-iters", value()?)?,
+            "--set" => {
+                let (name, v) = value()?.split_once('=').ok_or("--set needs NAME=VALUE")?;
+                options.set(name, v)?;
+            }
+            "--gap-every" => gap_every = value()?.parse()?,
+            _ => rest.push(a.clone()),
         }
     }
     let (Some(path), every) = (rest.first(), rest.get(1)) else {
-        return Err(
-            "usage: replay FILE.g2o [EVERY_N_POSES] [--update-iters K] [--set NAME=VALUE]… [-v]"
-                .into(),
-        );
+        return Err(USAGE.into());
     };
-    let every: usize = every.map_or(Ok(1), |s| s.parse())?;
-    let (dim, vertices, edges) = read(path)?;
-    let mut at: HashMap<u64, usize> = HashMap::new();
-    for (k, (id, _)) in vertices.iter().enumerate() {
-        at.insert(*id, k);
+    Ok(Args {
+        path: path.clone(),
+        every: every.map_or(Ok(1), |s| s.parse())?,
+        options,
+        verbose,
+        gap_every,
+    })
+}
+
+/// What the updates did: each one's milliseconds, how many of each kind,
+/// the earlier decisions they changed, and the measured gaps.
+#[derive(Default)]
+struct Tally {
+    times: Vec<f64>,
+    kinds: HashMap<&'static str, usize>,
+    changed: usize,
+    gaps: Vec<f64>,
+}
+
+/// `options` without the bound on an update's iterations.
+fn unbounded(options: &Options) -> Options {
+    let mut plain = options.clone();
+    plain.solver.update_iterations = None;
+    plain
+}
+
+/// Adds one edge of the file to `graph`.
+fn add(graph: &mut AnyPoseGraph, e: &Edge) -> Result<(), pgo::Error> {
+    match e.inliers {
+        Some(n) => graph.add_loop_candidate(e.from, e.to, &e.measurement, &e.information, Some(n)),
+        None => graph.add_edge(e.from, e.to, &e.measurement, &e.information),
     }
+    .map(|_| ())
+}
+
+/// One timed update at `poses` poses, tallied (and printed with `-v`).
+fn update(
+    graph: &mut AnyPoseGraph,
+    args: &Args,
+    poses: usize,
+    tally: &mut Tally,
+    out: &mut impl Write,
+) -> Result<AnySolution, Box<dyn std::error::Error>> {
+    let t = Instant::now();
+    let solution = graph.update(&args.options)?;
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    tally.times.push(ms);
+    let inc = solution.incremental();
+    let name = match inc.map_or(UpdateSolve::Batch, |i| i.solve) {
+        UpdateSolve::Batch => "batch",
+        UpdateSolve::None => "none",
+        UpdateSolve::Extended => "extended",
+        UpdateSolve::Warm => "warm",
+        UpdateSolve::Full => "full",
+    };
+    *tally.kinds.entry(name).or_default() += 1;
+    let changes = inc.map_or(&[][..], |i| &i.changed[..]);
+    tally.changed += changes.len();
+    if args.gap_every > 0 && tally.times.len() % args.gap_every == 0 {
+        let batch = graph.optimize(&unbounded(&args.options))?;
+        tally.gaps.push(solution.chi2() / batch.chi2() - 1.0);
+    }
+    if args.verbose {
+        let r = solution.report();
+        let o = &r.optimizer;
+        writeln!(
+            out,
+            "{poses:>7} poses  {name:<8} {ms:8.2} ms  {} iterations, {} factorisations ({:.2} ms), optimiser {:.2} ms; {} EM decisions ({:.2} ms judging), {} earlier decisions changed",
+            o.iterations,
+            o.factorizations,
+            o.timing.factorize_s * 1e3,
+            o.time_s * 1e3,
+            r.robust.decisions,
+            r.time.evaluation_s * 1e3,
+            changes.len(),
+        )?;
+        for c in changes {
+            let verb = if c.accepted { "accepted" } else { "rejected" };
+            writeln!(
+                out,
+                "          {verb} loop {}–{} ({:?})",
+                c.from, c.to, c.reason
+            )?;
+        }
+    }
+    Ok(solution)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args = parse_args()?;
+    // A closed stdout (`| head`) ends the replay with an error, not a panic.
+    let mut out = std::io::stdout().lock();
+    let (dim, vertices, edges) = read(&args.path)?;
+    let at: HashMap<u64, usize> = (vertices.iter().enumerate())
+        .map(|(k, (id, _))| (*id, k))
+        .collect();
     // Each edge is added once its later end is.
     let mut due: Vec<Vec<&Edge>> = vec![Vec::new(); vertices.len()];
     for e in &edges {
@@ -128,112 +229,81 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     let mut graph = AnyPoseGraph::new(dim)?;
-    let (mut times, mut kinds) = (Vec::new(), HashMap::<&str, usize>::new());
-    let (mut last, mut changed) = (None, 0);
+    let (mut tally, mut last) = (Tally::default(), None);
     for (k, (id, pose)) in vertices.iter().enumerate() {
         graph.add_pose(*id, pose)?;
         for e in &due[k] {
-            match e.inliers {
-                Some(n) => graph.add_loop_candidate(
-                    e.from,
-                    e.to,
-                    &e.measurement,
-                    &e.information,
-                    Some(n),
-                )?,
-                None => graph.add_edge(e.from, e.to, &e.measurement, &e.information)?,
-            };
+            add(&mut graph, e)?;
         }
-        if (k + 1) % every != 0 && k + 1 != vertices.len() {
-            continue;
+        if (k + 1) % args.every == 0 || k + 1 == vertices.len() {
+            last = Some(update(&mut graph, &args, k + 1, &mut tally, &mut out)?);
         }
-        let t = Instant::now();
-        let solution = graph.update(&options)?;
-        let ms = t.elapsed().as_secs_f64() * 1e3;
-        times.push(ms);
-        let how = solution
-            .incremental()
-            .map_or(UpdateSolve::Batch, |i| i.solve);
-        let name = match how {
-            UpdateSolve::Batch => "batch",
-            UpdateSolve::None => "none",
-            UpdateSolve::Extended => "extended",
-            UpdateSolve::Warm => "warm",
-            UpdateSolve::Full => "full",
-        };
-        *kinds.entry(name).or_default() += 1;
-        let changes = solution.incremental().map_or(&[][..], |i| &i.changed[..]);
-        changed += changes.len();
-        if verbose {
-            let r = solution.report();
-            let o = &r.optimizer;
-            writeln!(
-                out,
-                "{:>7} poses  {name:<8} {ms:8.2} ms  {} iterations, {} factorisations ({:.2} ms), optimiser {:.2} ms; {} EM decisions ({:.2} ms judging), {} earlier decisions changed",
-                k + 1,
-                o.iterations,
-                o.factorizations,
-                o.timing.factorize_s * 1e3,
-                o.time_s * 1e3,
-                r.robust.decisions,
-                r.time.evaluation_s * 1e3,
-                changes.len(),
-            )?;
-            for c in changes {
-                let verb = if c.accepted { "accepted" } else { "rejected" };
-                writeln!(
-                    out,
-                    "          {verb} loop {}–{} ({:?})",
-                    c.from, c.to, c.reason
-                )?;
-            }
-        }
-        last = Some(solution);
     }
     let mut last = last.ok_or("no vertex in the file")?;
     // Without the bound: the same job, to the batch tolerance.
-    let plain = Options::default();
-    if options.solver.update_iterations.is_some() {
+    let plain = unbounded(&args.options);
+    if args.options.solver.update_iterations.is_some() {
         // The closing update: nothing added, the convergence finished.
         let t = Instant::now();
         last = graph.update(&plain)?;
         let ms = t.elapsed().as_secs_f64() * 1e3;
-        times.push(ms);
+        tally.times.push(ms);
         writeln!(out, "closing update: {ms:.2} ms")?;
     }
     let t = Instant::now();
     let batch = graph.optimize(&plain)?;
     let batch_ms = t.elapsed().as_secs_f64() * 1e3;
+    summary(&mut out, &args, tally, (&last, &batch, batch_ms))
+}
+
+/// The summary lines: times, kinds, gaps, and the last map against batch.
+fn summary(
+    out: &mut impl Write,
+    args: &Args,
+    mut tally: Tally,
+    (last, batch, batch_ms): (&AnySolution, &AnySolution, f64),
+) -> Result<(), Box<dyn std::error::Error>> {
+    let times = &mut tally.times;
     times.sort_by(f64::total_cmp);
     let total: f64 = times.iter().sum();
     let p99 = times[((times.len() as f64 * 0.99).ceil() as usize).clamp(1, times.len()) - 1];
-    let accepted = |s: &pgo::AnySolution| -> Vec<usize> {
-        s.loops()
-            .iter()
-            .filter(|d| d.accepted)
+    writeln!(
+        out,
+        "{} updates every {} poses: {total:.1} ms in all, median {:.2} ms, p99 {p99:.2} ms, max {:.2} ms; {:?}; {} earlier decisions changed",
+        times.len(),
+        args.every,
+        times[times.len() / 2],
+        times[times.len() - 1],
+        tally.kinds,
+        tally.changed,
+    )?;
+    if !tally.gaps.is_empty() {
+        let gaps = &mut tally.gaps;
+        gaps.sort_by(f64::total_cmp);
+        writeln!(
+            out,
+            "χ² above the batch optimum at every {}th update: median {:.1e}, max {:.1e} ({} checks)",
+            args.gap_every,
+            gaps[gaps.len() / 2],
+            gaps[gaps.len() - 1],
+            gaps.len(),
+        )?;
+    }
+    let accepted = |s: &AnySolution| -> Vec<usize> {
+        (s.loops().iter().filter(|d| d.accepted))
             .map(|d| d.index)
             .collect()
     };
-    writeln!(
-        out,
-        "{} updates every {every} poses: {total:.1} ms in all, median {:.2} ms, p99 {p99:.2} ms, max {:.2} ms; {kinds:?}; {changed} earlier decisions changed",
-        times.len(),
-        times[times.len() / 2],
-        times[times.len() - 1],
-    )?;
+    let same = accepted(last) == accepted(batch);
     writeln!(
         out,
         "final χ² {:.10e}, batch {:.10e} ({batch_ms:.1} ms): relative difference {:.1e}; accepted sets {}",
         last.chi2(),
         batch.chi2(),
         (last.chi2() / batch.chi2() - 1.0).abs(),
-        if accepted(&last) == accepted(&batch) {
-            "identical"
-        } else {
-            "DIFFER"
-        }
+        if same { "identical" } else { "DIFFER" }
     )?;
-    if verbose {
+    if args.verbose {
         for (u, b) in last.loops().iter().zip(batch.loops()) {
             if u.accepted != b.accepted {
                 writeln!(
