@@ -52,6 +52,17 @@ const SMALL_WIDTH: usize = 12;
 /// are where the tree itself offers no parallelism.
 const PARALLEL_PRODUCT: f64 = 2e6;
 
+/// Update products of at most this many multiply-adds are formed by one
+/// dense product of the whole rectangle — the top block's upper half too,
+/// at most as much work again — rather than two (the top block's lower
+/// triangle, then the rows below): a call into faer's kernels has a fixed
+/// cost of a few thousand multiply-adds, which the small updates of a pose
+/// graph's factor do not repay twice. One call for these took a
+/// factorisation of intel from 548–569 to 457–461 µs and of a simulated
+/// 3D graph of 10⁴ poses from 6.9–7.2 to 5.5–5.7 ms (`cargo bench
+/// --features internals --bench pipeline -- factorize`, one thread).
+const ONE_CALL_PRODUCT: usize = 4096;
+
 /// Scratch for one update product, in scalars (2 MiB): the product is
 /// formed this many entries at a time (at least one block column), not
 /// whole — the largest update of a big graph's top separator would
@@ -945,6 +956,18 @@ impl<const D: usize> Symbolic<D> {
             } else {
                 Par::Seq
             };
+            if mc * nc * wd <= ONE_CALL_PRODUCT {
+                matmul(
+                    MatMut::from_column_major_slice_mut(temp, mc, nc),
+                    Accum::Replace,
+                    a.subrows(r0, mc),
+                    b.transpose(),
+                    1.0,
+                    Par::Seq,
+                );
+                scatter_lower::<D>(panel, g.ld::<D>(), local, j0..j1, temp, mc);
+                continue;
+            }
             let (top, bottom) =
                 MatMut::from_column_major_slice_mut(temp, mc, nc).split_at_row_mut(nc);
             triangular::matmul(
