@@ -339,8 +339,9 @@ REPLAY = {
         "map with every candidate weighed again (full), or ran the whole job (batch). "
         "On this shared 2-core machine the same replay's total time changes from one run "
         "to the next by more than the smaller gaps between the tools (iSAM2's manhattan at "
-        "N = 10 took 1.50 s in the run below and 0.81 s in the next, its city10000 at N = 1 "
-        "124 s and 104 s): compare the tools within a run, where they ran back to back."),
+        "N = 10 took 1.50 s, 0.81 s and 1.17 s in three runs of one evening, its city10000 "
+        "at N = 1 124 s, 104 s and 123 s): compare the tools within a run, where they ran "
+        "back to back."),
     "aliased_intro": (
         "The aliased case: manhattan corrupted by `pgo corrupt --wrong 100 --wrong-mode "
         "aliased --group-size 5 --true-like-counts 0.5 --seed 1` (100 wrong candidates i–j "
