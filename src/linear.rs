@@ -178,8 +178,7 @@ impl<const D: usize> BlockSystem<D> {
             .iter()
             .filter_map(|&(i, j)| Some((position[i?], position[j?])));
         let later = Adjacency::from_pairs(n_blocks, pairs);
-        let off_ptr = later.starts().to_vec();
-        let n_off = off_ptr[n_blocks];
+        let n_off = later.starts()[n_blocks];
         if n_off >= NONE as usize {
             return Err(LinearError::Factorization(format!(
                 "{n_off} off-diagonal blocks are too many"
@@ -209,7 +208,7 @@ impl<const D: usize> BlockSystem<D> {
             edges: slots,
             diag: vec![0.0; n_blocks * D * D],
             off: vec![0.0; n_off * D * D],
-            off_ptr,
+            off_ptr: later.into_starts(),
             diag_dest,
             off_dest,
             undamped_diagonal: vec![0.0; n],

@@ -212,6 +212,7 @@ pub(crate) mod testing {
     //! normal blocks against the multiplied-out ones, shared by the SE(2)
     //! and SE(3) tests.
     use super::*;
+    use rand::{Rng, SeedableRng, rngs::StdRng};
 
     /// Numerical Jacobians of `Pose::error` with respect to right updates of
     /// `xi` and `xj` (central differences, step `h`).
@@ -270,10 +271,27 @@ pub(crate) mod testing {
         );
     }
 
+    /// [`check_normal_blocks`] on 200 random edges: poses from
+    /// `random_pose(rng, scale)` (scale 20, the measurement 5) and a random
+    /// positive definite information matrix.
+    pub fn check_normal_blocks_on_random_edges<P: Pose<D>, const D: usize>(
+        random_pose: fn(&mut StdRng, f64) -> P,
+    ) {
+        let mut rng = StdRng::seed_from_u64(17);
+        for _ in 0..200 {
+            let xi = random_pose(&mut rng, 20.0);
+            let xj = random_pose(&mut rng, 20.0);
+            let z = random_pose(&mut rng, 5.0);
+            let m = SMatrix::<f64, D, D>::from_fn(|_, _| rng.random_range(-1.0..1.0));
+            let omega = m * m.transpose() + SMatrix::<f64, D, D>::identity();
+            check_normal_blocks(&xi, &xj, &z, &omega);
+        }
+    }
+
     /// Asserts that a pose type's normal blocks (its structured
     /// [`Pose::normal_blocks_prepared`]) equal those multiplied out from its
     /// Jacobians, to 1e-12 relative, on an edge with information `omega`.
-    pub fn check_normal_blocks<P: Pose<D>, const D: usize>(
+    fn check_normal_blocks<P: Pose<D>, const D: usize>(
         xi: &P,
         xj: &P,
         z: &P,

@@ -231,7 +231,7 @@ impl Se2Prepared {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::testing::{check_jacobians, check_normal_blocks};
+    use crate::geometry::testing::{check_jacobians, check_normal_blocks_on_random_edges};
     use rand::{Rng, SeedableRng, rngs::StdRng};
     use std::f64::consts::PI;
 
@@ -268,15 +268,7 @@ mod tests {
 
     #[test]
     fn structured_normal_blocks_equal_the_multiplied_out_ones() {
-        let mut rng = StdRng::seed_from_u64(17);
-        for _ in 0..200 {
-            let xi = random_pose(&mut rng, 20.0);
-            let xj = random_pose(&mut rng, 20.0);
-            let z = random_pose(&mut rng, 5.0);
-            let m = Matrix3::from_fn(|_, _| rng.random_range(-1.0..1.0));
-            let omega = m * m.transpose() + Matrix3::identity();
-            check_normal_blocks(&xi, &xj, &z, &omega);
-        }
+        check_normal_blocks_on_random_edges(random_pose);
     }
 
     #[test]

@@ -191,6 +191,11 @@ impl Adjacency {
         &self.ptr
     }
 
+    /// [`Self::starts`], the rest dropped.
+    pub(super) fn into_starts(self) -> Vec<usize> {
+        self.ptr
+    }
+
     /// Each column's rows, in column order.
     pub(super) fn iter(&self) -> impl Iterator<Item = &[usize]> {
         (0..self.len()).map(|p| &self[p])
@@ -754,7 +759,10 @@ impl<const D: usize> Symbolic<D> {
         assert_eq!(values.len(), self.len_values());
         let ns = self.supernodes();
         let failed = AtomicUsize::new(usize::MAX);
-        let shared = Shared(values.as_mut_ptr(), zeroed);
+        let shared = Shared {
+            values: values.as_mut_ptr(),
+            zeroed,
+        };
         let threads = parallelism.threads();
         if threads == 1 || ns < 2 {
             for s in 0..ns {
@@ -866,8 +874,9 @@ impl<const D: usize> Symbolic<D> {
         let (wc, ld) = (g.cols::<D>(), g.ld::<D>());
         let len = self.val_ptr[s + 1] - self.val_ptr[s];
         // SAFETY: the panels are disjoint; the caller owns this one.
-        let panel = unsafe { std::slice::from_raw_parts_mut(shared.0.add(self.val_ptr[s]), len) };
-        if !shared.1 {
+        let panel =
+            unsafe { std::slice::from_raw_parts_mut(shared.values.add(self.val_ptr[s]), len) };
+        if !shared.zeroed {
             panel.fill(0.0);
         }
         load(s, panel);
@@ -924,7 +933,7 @@ impl<const D: usize> Symbolic<D> {
         // SAFETY: `d` is a finished descendant; its panel is only read.
         let a = unsafe {
             MatRef::from_raw_parts(
-                shared.0.add(self.val_ptr[d] + D * (gd.w + start)) as *const f64,
+                shared.values.add(self.val_ptr[d] + D * (gd.w + start)) as *const f64,
                 m,
                 wd,
                 1,
@@ -950,45 +959,7 @@ impl<const D: usize> Symbolic<D> {
             let (r0, nc) = (D * j0, D * (j1 - j0));
             let mc = m - r0;
             let temp = &mut ws.temp[..mc * nc];
-            let b = a.subrows(r0, nc);
-            let par = if (mc * nc * wd) as f64 > PARALLEL_PRODUCT {
-                par
-            } else {
-                Par::Seq
-            };
-            if mc * nc * wd <= ONE_CALL_PRODUCT {
-                matmul(
-                    MatMut::from_column_major_slice_mut(temp, mc, nc),
-                    Accum::Replace,
-                    a.subrows(r0, mc),
-                    b.transpose(),
-                    1.0,
-                    Par::Seq,
-                );
-                scatter_lower::<D>(panel, g.ld::<D>(), local, j0..j1, temp, mc);
-                continue;
-            }
-            let (top, bottom) =
-                MatMut::from_column_major_slice_mut(temp, mc, nc).split_at_row_mut(nc);
-            triangular::matmul(
-                top,
-                BlockStructure::TriangularLower,
-                Accum::Replace,
-                b,
-                BlockStructure::Rectangular,
-                b.transpose(),
-                BlockStructure::Rectangular,
-                1.0,
-                par,
-            );
-            matmul(
-                bottom,
-                Accum::Replace,
-                a.subrows(r0 + nc, mc - nc),
-                b.transpose(),
-                1.0,
-                par,
-            );
+            update_product(temp, a.subrows(r0, mc), nc, par);
             scatter_lower::<D>(panel, g.ld::<D>(), local, j0..j1, temp, mc);
         }
     }
@@ -1364,6 +1335,46 @@ fn scatter_lower<const D: usize>(
     }
 }
 
+/// `temp = a·a[..nc]ᵀ` (`temp` column-major, `a.nrows() × nc`; of its top
+/// `nc × nc` block only the lower triangle is needed): one dense product
+/// for a small one ([`ONE_CALL_PRODUCT`]), else the top block's lower
+/// triangle and the rows below, on `par`'s threads when large
+/// ([`PARALLEL_PRODUCT`]).
+fn update_product(temp: &mut [f64], a: MatRef<'_, f64>, nc: usize, par: Par) {
+    let (mc, wd) = (a.nrows(), a.ncols());
+    let out = MatMut::from_column_major_slice_mut(temp, mc, nc);
+    let b = a.subrows(0, nc);
+    if mc * nc * wd <= ONE_CALL_PRODUCT {
+        matmul(out, Accum::Replace, a, b.transpose(), 1.0, Par::Seq);
+        return;
+    }
+    let par = if (mc * nc * wd) as f64 > PARALLEL_PRODUCT {
+        par
+    } else {
+        Par::Seq
+    };
+    let (top, bottom) = out.split_at_row_mut(nc);
+    triangular::matmul(
+        top,
+        BlockStructure::TriangularLower,
+        Accum::Replace,
+        b,
+        BlockStructure::Rectangular,
+        b.transpose(),
+        BlockStructure::Rectangular,
+        1.0,
+        par,
+    );
+    matmul(
+        bottom,
+        Accum::Replace,
+        a.subrows(nc, mc - nc),
+        b.transpose(),
+        1.0,
+        par,
+    );
+}
+
 /// `Σ aᵢbᵢ` with eight partial sums (so that it vectorises).
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     let mut acc = [0.0; 8];
@@ -1385,7 +1396,10 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// The factor's values, shared by the threads of one factorisation: each
 /// supernode's panel is written by exactly one task; and whether they are
 /// all zero already (a fresh allocation), so that no panel needs zeroing.
-struct Shared(*mut f64, bool);
+struct Shared {
+    values: *mut f64,
+    zeroed: bool,
+}
 // SAFETY: see `factor_node`: disjoint writes, reads of finished panels only.
 unsafe impl Sync for Shared {}
 unsafe impl Send for Shared {}

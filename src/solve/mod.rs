@@ -365,9 +365,11 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     best: Vec<P>,
     step: Vec<f64>,
     terms: Vec<EdgeTerms<D>>,
-    /// Each edge's plain χ² at `chi2_poses`, the last poses evaluated.
+    /// Each edge's plain χ² at the last poses evaluated.
     edge_chi2: Vec<f64>,
-    chi2_poses: Vec<P>,
+    /// Whether those are still the poses in `prepared` (a linearisation
+    /// elsewhere since replaces them).
+    chi2_at_prepared: bool,
     /// Each edge's measurement, prepared once ([`Pose::prepare`]).
     measurements: Vec<P::Prepared>,
     /// The poses last evaluated, each with its preparation.
@@ -475,7 +477,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             options,
             terms: Vec::new(),
             edge_chi2: Vec::new(),
-            chi2_poses: Vec::new(),
+            chi2_at_prepared: false,
             // Filled by the first linearisation or evaluation.
             measurements: Vec::new(),
             prepared: Vec::new(),

@@ -8,6 +8,7 @@ use crate::graph::PoseGraph;
 use crate::linear::LinearError;
 use nalgebra::SMatrix;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
 
 /// Edges linearised per parallel batch (512 × ~1 kB of terms in 3D: the
 /// buffer is memory held for the whole run, and larger batches were not
@@ -78,7 +79,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     fn assemble(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
         self.system.clear();
         let parallel = self.parallelism.is_parallel();
-        prepare(&graph.poses, &mut self.prepared, parallel);
+        if prepare(&graph.poses, &mut self.prepared, parallel) {
+            self.chi2_at_prepared = false;
+        }
         self.prepare_measurements(graph);
         let mut objective = 0.0;
         // Edges are linearised in parallel, a chunk at a time, into a buffer
@@ -135,8 +138,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 *chi2 = r.dot(&(e.information * r));
             },
         );
-        self.chi2_poses.clear();
-        self.chi2_poses.extend_from_slice(poses);
+        self.chi2_at_prepared = true;
         // Summed in edge order, not as the parallel loop was split (that
         // split follows the work stealing, and a floating-point sum depends
         // on its order): the same bits in every run and with any number of
@@ -154,7 +156,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// evaluation was there (the same bits as [`PoseGraph::edge_chi2s`]),
     /// which it usually was after [`Optimizer::run`].
     pub fn edge_chi2s_at(&self, graph: &PoseGraph<P, D>) -> Option<&[f64]> {
-        (self.edge_chi2.len() == graph.edges.len() && self.chi2_poses == graph.poses)
+        let at_poses = self.prepared.len() == graph.poses.len()
+            && (self.prepared.iter().zip(&graph.poses)).all(|((p, _), q)| p == q);
+        (self.chi2_at_prepared && at_poses && self.edge_chi2.len() == graph.edges.len())
             .then_some(&self.edge_chi2[..])
     }
 
@@ -251,12 +255,14 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
 /// `out[k] = (poses[k], poses[k].prepare())`, in parallel if `parallel`;
 /// a pose already prepared in `out` is not prepared again. Most poses are:
 /// an iteration linearises at the poses its last step evaluated, and an
-/// update's solve starts from the last one's map.
+/// update's solve starts from the last one's map. Returns whether any pose
+/// was prepared (or dropped).
 fn prepare<P: Pose<D>, const D: usize>(
     poses: &[P],
     out: &mut Vec<(P, P::Prepared)>,
     parallel: bool,
-) {
+) -> bool {
+    let changed = AtomicBool::new(out.len() != poses.len());
     out.truncate(poses.len());
     let old = out.len();
     out.extend(poses[old..].iter().map(|p| (*p, p.prepare())));
@@ -268,9 +274,11 @@ fn prepare<P: Pose<D>, const D: usize>(
         |_, o, p| {
             if o.0 != *p {
                 *o = (*p, p.prepare());
+                changed.store(true, Relaxed);
             }
         },
     );
+    changed.into_inner()
 }
 
 /// The least edges (linearisations or χ² terms) a parallel task gets: a

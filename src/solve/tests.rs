@@ -815,6 +815,9 @@ fn the_last_evaluation_gives_each_edges_chi2_at_the_map_while_it_is_there() {
     assert_eq!(bits(reused), bits(&fresh));
     g.poses[2].x += 1e-9;
     assert!(opt.edge_chi2s_at(&g).is_none());
+    // Linearised there since: its poses are prepared, their χ² is not.
+    opt.linearize(&g, Some(&weights));
+    assert!(opt.edge_chi2s_at(&g).is_none());
 }
 
 #[test]
