@@ -339,9 +339,9 @@ impl LoopModel {
             let fits = parallelism.map(&ks, |&k| fit_k(k));
             for (k, model) in fits.into_iter().map_while(|f| f).enumerate() {
                 // Free parameters: the true loops' mean and spread, each
-                // wrong population's mean and spread, their k − 1 shares,
-                // and the two rates.
-                let parameters = 2 + 3 * k + 1;
+                // wrong population's mean and spread, their k − 1 shares
+                // (none without a population), and the two rates.
+                let parameters = 4 + 3 * k - usize::from(k > 0);
                 let bic = parameters as f64 * n.ln() - 2.0 * model.ln_likelihood;
                 if best.as_ref().is_none_or(|(b, _)| bic < *b) {
                     best = Some((bic, model));
