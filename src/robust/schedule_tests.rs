@@ -312,3 +312,102 @@ fn a_few_clusters_are_judged_by_their_solves_alone_to_the_same_innovations() {
         assert!(solved.exact[k] && bounds[k].unwrap() <= b * (1.0 + 1e-12));
     }
 }
+
+/// The walk's map with every candidate accepted, its decisions (each
+/// candidate its own cluster: (2, 10) is beside the true (3, 9)) and the
+/// χ² test of a map; `tight` scales every information matrix by 10⁴ and
+/// puts the true loops a little off, so that no set of loops passes.
+fn search_case(tight: bool) -> (PoseGraph<Se2, 3>, Vec<Candidate>, Vec<f64>) {
+    let (mut g, candidates) = walk();
+    if tight {
+        for (k, c) in candidates[..4].iter().enumerate() {
+            let z = g.edges[c.edge].measurement;
+            let off = 0.01 * (k as f64 + 1.0);
+            g.edges[c.edge].measurement = z.compose(&Se2::new(off, -off, off));
+        }
+        for e in &mut g.edges {
+            e.information *= 1e4;
+        }
+    }
+    let weights = vec![1.0; g.edges.len()];
+    (g, candidates, weights)
+}
+
+/// The χ² test the pipeline makes ([`crate::pipeline`]), at 5 %.
+fn chi2_test(g: &PoseGraph<Se2, 3>, w: &[f64]) -> Option<crate::stats::Chi2Test> {
+    let chi2 = g.edge_chi2s();
+    let used: Vec<usize> = (0..w.len()).filter(|&k| w[k] >= 0.5).collect();
+    let d2 = used.iter().map(|&k| chi2[k]).sum();
+    let residual = 3 * (used.len() as i64 - (g.num_vertices() as i64 - 1));
+    let convention = crate::stats::DofConvention::Residual;
+    crate::stats::Chi2Test::new(d2, used.len() as u64, residual, convention, 0.05).ok()
+}
+
+/// The χ² search on [`search_case`] from its converged map: the search's
+/// result, the decisions and weights it left, and whether the map passes.
+fn run_search(tight: bool) -> (super::super::search::Search, Decided, Vec<f64>, bool) {
+    let (mut g, candidates, mut weights) = search_case(tight);
+    let options = SolverOptions::default();
+    let mut optimizer = Optimizer::new(&g, Some(&weights), options.clone()).unwrap();
+    let mut cancel = Cancel::new();
+    let mut session = Session::new(
+        &mut optimizer,
+        &mut g,
+        options,
+        Budget::unlimited(),
+        &mut cancel,
+    );
+    session.converge(&weights).unwrap();
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    let layers = Layers {
+        clusters: false,
+        ..Layers::default()
+    };
+    let mut decided = Decided::start(session.graph, &edges, &weights, &layers);
+    decided.innovations = Evaluation::new(session.optimizer, session.graph, &weights)
+        .unwrap()
+        .innovations(&edges, &decided.accepted, &decided.clusters);
+    assert!(!chi2_test(session.graph, &weights).unwrap().passed);
+    let search = super::super::search::explain(
+        &mut session,
+        &mut weights,
+        &candidates,
+        &mut decided,
+        &chi2_test,
+    )
+    .unwrap();
+    let passed = chi2_test(session.graph, &weights).unwrap().passed;
+    (search, decided, weights, passed)
+}
+
+#[test]
+fn the_chi2_search_takes_out_the_wrong_loop_that_explains_a_failed_test() {
+    // Every candidate accepted, the wrong one too: its map fails the test,
+    // and removing the wrong loop alone would pass it. The search takes it
+    // out, solves again, and stops at a passing map with the true loops.
+    let (search, decided, weights, passed) = run_search(false);
+    assert_eq!(search.removed.len(), 1, "{search:?}");
+    assert_eq!(search.removed[0].loops, [4]);
+    assert!(search.removed[0].explains && search.suspects.is_empty());
+    assert_eq!(decided.accepted, [true, true, true, true, false]);
+    assert_eq!(weights.iter().filter(|&&w| w == 0.0).count(), 1);
+    assert!(passed);
+}
+
+#[test]
+fn a_failure_no_loop_explains_leaves_the_loops_and_names_the_suspects() {
+    // Information 10⁴ times too tight: every loop fails, none explains it.
+    // Nothing is removed (fewer loops would only fail by less), and the
+    // suspects are the accepted loops by the drop of D² without them, the
+    // wrong loop first.
+    let (search, decided, weights, passed) = run_search(true);
+    assert!(search.removed.is_empty(), "{search:?}");
+    assert!(!passed);
+    assert_eq!(decided.accepted, [true; 5]);
+    assert!(weights.iter().all(|&w| w == 1.0));
+    assert_eq!(search.suspects.len(), 5);
+    assert_eq!(search.suspects[0].loops, [4]);
+    assert!(search.suspects.iter().all(|s| !s.explains));
+    let drops: Vec<f64> = search.suspects.iter().map(|s| s.d2_drop).collect();
+    assert!(drops.windows(2).all(|d| d[0] >= d[1]), "{drops:?}");
+}
