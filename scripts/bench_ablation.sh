@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Ablation of EM's layers: the outlier benchmark's pgo run with each layer
 # switched off (`pgo optimize --expert no-LAYER`), on every dataset family,
-# with random, grouped and aliased wrong candidates (100 per case,
-# information calibrated and as published). One JSON per configuration
+# with random, grouped and aliased wrong candidates (100 per case) and on
+# the public max-mixture outlier files, information calibrated and as
+# published. One JSON per configuration
 # into OUT_DIR (default bench/results/ablation); scripts/benchmarks_md.py
 # tabulates them.
 #
@@ -20,7 +21,7 @@ for layer in all annealing decisions clusters aliasing populations search relaxa
         flags=(--pgo-flags "--expert no-$layer")
     fi
     "$py" scripts/bench_robust.py --tools pgo "${flags[@]}" \
-        --policies random grouped aliased --outliers 100 --no-maxmix --scales calibrated published \
-        --only intel manhattan sphere2500 city10000 parking-garage \
+        --policies random grouped aliased --outliers 100 --maxmix --scales calibrated published \
+        --only intel manhattan sphere2500 city10000 parking-garage manhattanOlson3500 manhattanG2O3500 \
         --out "$out/$layer.json" "$@"
 done
