@@ -177,7 +177,20 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     } else {
         UpdateSolve::Warm
     };
-    step.reason = match (full, config.robust) {
+    step.reason = solve_reason(full, closing, config.robust, report);
+    step.changed = changes(graph, &previous, report);
+    report.incremental = Some(step);
+    let mut next = Warm::after(graph, report, ordering);
+    next.settled &= strict;
+    next.spare = spare;
+    Ok(Some(next))
+}
+
+/// Why an update that solved did so as it did: from the last decisions
+/// (`full` false) or every candidate weighed again, after `closing` (nothing
+/// added) or new edges.
+fn solve_reason(full: bool, closing: bool, robust: RobustMethod, report: &Report) -> String {
+    match (full, robust) {
         _ if closing => "nothing added: the last map's solve continued".into(),
         (false, _) if report.loops.is_empty() => "new edges: solved from the last map".into(),
         (false, _) => "new edges: EM's decisions from the last ones".into(),
@@ -186,13 +199,7 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             robust::MIN_CANDIDATES
         ),
         (true, m) => format!("every candidate weighed again by {}", m.name()),
-    };
-    step.changed = changes(graph, &previous, report);
-    report.incremental = Some(step);
-    let mut next = Warm::after(graph, report, ordering);
-    next.settled &= strict;
-    next.spare = spare;
-    Ok(Some(next))
+    }
 }
 
 /// The earlier decisions (`previous`, by edge) that `report`'s differ from.
