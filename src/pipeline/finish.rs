@@ -113,9 +113,9 @@ where
     }
     // One pass over the edges at the final map serves the test and the
     // report; the optimiser's last evaluation was usually that pass.
-    let edge_chi2 = match optimizer.edge_chi2s_at(graph) {
-        Some(chi2) => chi2.to_vec(),
-        None => graph.edge_chi2s(),
+    let edge_chi2: std::borrow::Cow<'_, [f64]> = match optimizer.edge_chi2s_at(graph) {
+        Some(chi2) => chi2.into(),
+        None => graph.edge_chi2s().into(),
     };
     match test_of(&edge_chi2, graph, weights, config) {
         Ok(t) => report.chi2_test = Some(t),
