@@ -4,6 +4,8 @@
 
 mod candidates;
 mod finish;
+#[cfg(test)]
+pub(crate) use finish::chi2_test;
 mod incremental;
 
 pub(crate) use incremental::{Warm, after_swing, update_graph};

@@ -77,20 +77,30 @@ fn twist(g: &mut PoseGraph<Se2, 3>) {
     }
 }
 
+/// Runs `f` on a session of `g` (no budget, never cancelled) whose
+/// optimiser starts with `weights`, which `f` gets to change.
+fn with_session<R>(
+    g: &mut PoseGraph<Se2, 3>,
+    weights: &mut [f64],
+    options: SolverOptions,
+    f: impl FnOnce(Session<'_, Se2, 3>, &mut [f64]) -> R,
+) -> R {
+    let mut optimizer = Optimizer::new(g, Some(weights), options.clone()).unwrap();
+    let mut cancel = Cancel::new();
+    let session = Session::new(&mut optimizer, g, options, Budget::unlimited(), &mut cancel);
+    f(session, weights)
+}
+
 #[test]
 fn the_chordal_annealing_holds_the_true_loops_at_one_relaxation_per_e_step() {
     let (mut g, candidates) = walk();
     let mut weights = vec![1.0; g.edges.len()];
-    let mut optimizer = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
-    let mut observer = Cancel::new();
-    let mut session = Session::new(
-        &mut optimizer,
+    let annealed = with_session(
         &mut g,
+        &mut weights,
         SolverOptions::default(),
-        Budget::unlimited(),
-        &mut observer,
+        |mut s, w| anneal_chordal(&mut s, w, &candidates, 2.0).unwrap(),
     );
-    let annealed = anneal_chordal(&mut session, &mut weights, &candidates, 2.0).unwrap();
     assert!(annealed.steps > 1 && !annealed.cut_short);
     assert_eq!(annealed.relaxations, annealed.steps);
     // The wrong loop is down-weighted, the true ones held, not all at 1.
@@ -110,19 +120,17 @@ fn a_map_at_the_optimum_of_the_accepted_set_is_kept_over_its_relaxation() {
     let (mut g, candidates) = walk();
     let mut weights = vec![1.0; g.edges.len()];
     weights[candidates[4].edge] = 0.0;
-    let mut optimizer = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
-    let mut cancel = Cancel::new();
-    let mut session = Session::new(
-        &mut optimizer,
+    with_session(
         &mut g,
+        &mut weights,
         SolverOptions::default(),
-        Budget::unlimited(),
-        &mut cancel,
+        |mut s, w| {
+            s.converge(w).unwrap();
+            let optimum = s.graph.poses.clone();
+            assert!(!relaxed_start(&mut s, w).unwrap());
+            assert_eq!(s.graph.poses, optimum);
+        },
     );
-    session.converge(&weights).unwrap();
-    let optimum = session.graph.poses.clone();
-    assert!(!relaxed_start(&mut session, &weights).unwrap());
-    assert_eq!(session.graph.poses, optimum);
 }
 
 #[test]
@@ -134,26 +142,24 @@ fn a_solve_that_would_end_in_a_local_minimum_starts_from_the_relaxation() {
     let mut weights = vec![1.0; g.edges.len()];
     weights[candidates[4].edge] = 0.0;
     twist(&mut g);
-    let mut optimizer = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
-    let mut cancel = Cancel::new();
-    let mut session = Session::new(
-        &mut optimizer,
+    with_session(
         &mut g,
+        &mut weights,
         SolverOptions::default(),
-        Budget::unlimited(),
-        &mut cancel,
+        |mut s, w| {
+            let twisted = s.graph.poses.clone();
+            s.converge(w).unwrap();
+            let fit = |g: &PoseGraph<Se2, 3>| g.chi2_where(|k| w[k] > 0.0);
+            let local = fit(s.graph);
+            // From the twisted map, the relaxation fits better: the solve
+            // starts there and ends far lower.
+            s.graph.poses = twisted;
+            assert!(relaxed_start(&mut s, w).unwrap());
+            s.converge(w).unwrap();
+            let lower = fit(s.graph);
+            assert!(lower < 0.5 * local, "{lower} against {local}");
+        },
     );
-    let twisted = session.graph.poses.clone();
-    session.converge(&weights).unwrap();
-    let fit = |g: &PoseGraph<Se2, 3>| g.chi2_where(|k| weights[k] > 0.0);
-    let local = fit(session.graph);
-    // From the twisted map, the relaxation fits better: the solve starts
-    // there and ends far lower.
-    session.graph.poses = twisted;
-    assert!(relaxed_start(&mut session, &weights).unwrap());
-    session.converge(&weights).unwrap();
-    let lower = fit(session.graph);
-    assert!(lower < 0.5 * local, "{lower} against {local}");
 }
 
 #[test]
@@ -208,27 +214,20 @@ fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
         initial_lambda: 1e2,
         ..SolverOptions::default()
     };
-    let mut optimizer = Optimizer::new(&g, Some(&weights), options.clone()).unwrap();
-    let mut cancel = Cancel::new();
-    let mut session = Session::new(
-        &mut optimizer,
-        &mut g,
-        options,
-        Budget::unlimited(),
-        &mut cancel,
-    );
-    let layers = Layers::default();
-    let decided = decide(
-        &mut session,
-        &mut weights,
-        &candidates,
-        Scale::Learned,
-        &layers,
-        false,
-        Swing::Continue,
-    )
-    .unwrap();
-    let summary = session.finish(false).unwrap();
+    let (decided, summary) = with_session(&mut g, &mut weights, options, |mut s, w| {
+        let layers = Layers::default();
+        let swing = Swing::Continue;
+        let decided = decide(
+            &mut s,
+            w,
+            &candidates,
+            Scale::Learned,
+            &layers,
+            false,
+            swing,
+        );
+        (decided.unwrap(), s.finish(false).unwrap())
+    });
     assert!(summary.history.iter().any(|r| r.lambda > 0.0));
     assert!(summary.converged(), "{summary:?}");
     assert!(decided.decisions >= 2);
@@ -333,50 +332,38 @@ fn search_case(tight: bool) -> (PoseGraph<Se2, 3>, Vec<Candidate>, Vec<f64>) {
     (g, candidates, weights)
 }
 
-/// The χ² test the pipeline makes ([`crate::pipeline`]), at 5 %.
+/// The χ² test a job with the default options makes.
 fn chi2_test(g: &PoseGraph<Se2, 3>, w: &[f64]) -> Option<crate::stats::Chi2Test> {
-    let chi2 = g.edge_chi2s();
-    let used: Vec<usize> = (0..w.len()).filter(|&k| w[k] >= 0.5).collect();
-    let d2 = used.iter().map(|&k| chi2[k]).sum();
-    let residual = 3 * (used.len() as i64 - (g.num_vertices() as i64 - 1));
-    let convention = crate::stats::DofConvention::Residual;
-    crate::stats::Chi2Test::new(d2, used.len() as u64, residual, convention, 0.05).ok()
+    let config = crate::pipeline::OptimizeConfig::new("walk.g2o");
+    crate::pipeline::chi2_test(g, w, &config).ok()
 }
 
 /// The χ² search on [`search_case`] from its converged map: the search's
 /// result, the decisions and weights it left, and whether the map passes.
 fn run_search(tight: bool) -> (super::super::search::Search, Decided, Vec<f64>, bool) {
     let (mut g, candidates, mut weights) = search_case(tight);
-    let options = SolverOptions::default();
-    let mut optimizer = Optimizer::new(&g, Some(&weights), options.clone()).unwrap();
-    let mut cancel = Cancel::new();
-    let mut session = Session::new(
-        &mut optimizer,
-        &mut g,
-        options,
-        Budget::unlimited(),
-        &mut cancel,
-    );
-    session.converge(&weights).unwrap();
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     let layers = Layers {
         clusters: false,
         ..Layers::default()
     };
-    let mut decided = Decided::start(session.graph, &edges, &weights, &layers);
-    decided.innovations = Evaluation::new(session.optimizer, session.graph, &weights)
-        .unwrap()
-        .innovations(&edges, &decided.accepted, &decided.clusters);
-    assert!(!chi2_test(session.graph, &weights).unwrap().passed);
-    let search = super::super::search::explain(
-        &mut session,
+    let (search, decided, passed) = with_session(
+        &mut g,
         &mut weights,
-        &candidates,
-        &mut decided,
-        &chi2_test,
-    )
-    .unwrap();
-    let passed = chi2_test(session.graph, &weights).unwrap().passed;
+        SolverOptions::default(),
+        |mut s, w| {
+            s.converge(w).unwrap();
+            let mut decided = Decided::start(s.graph, &edges, w, &layers);
+            decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
+                .unwrap()
+                .innovations(&edges, &decided.accepted, &decided.clusters);
+            assert!(!chi2_test(s.graph, w).unwrap().passed);
+            let search =
+                super::super::search::explain(&mut s, w, &candidates, &mut decided, &chi2_test);
+            let passed = chi2_test(s.graph, w).unwrap().passed;
+            (search.unwrap(), decided, passed)
+        },
+    );
     (search, decided, weights, passed)
 }
 
