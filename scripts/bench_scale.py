@@ -89,15 +89,16 @@ def plot(results, svg):
     matplotlib.use("svg")
     import matplotlib.pyplot as plt
     fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(9, 3.8))
-    for world, marker in (("grid2d", "o"), ("sphere3d", "s")):
+    for world, marker, colour in (("grid2d", "o", "C0"), ("sphere3d", "s", "C1")):
         rows = sorted((r for r in results if r["world"] == world and r["threads"] == 1),
                       key=lambda r: r["robust"]["poses"])
         if not rows:
             continue
         n = [r["robust"]["poses"] for r in rows]
         for run, style in (("robust", "-"), ("plain", ":")):
-            ax_t.loglog(n, [r[run]["wall_s"] for r in rows], marker + style, label="%s: %s" % (world, run))
-            ax_m.loglog(n, [r[run]["rss_mb"] for r in rows], marker + style, label="%s: %s" % (world, run))
+            for ax, key in ((ax_t, "wall_s"), (ax_m, "rss_mb")):
+                ax.loglog(n, [r[run][key] for r in rows], marker + style, color=colour,
+                          label="%s: %s" % (world, run))
     for ax, label, title in ((ax_t, "seconds", "pgo optimize, wall time"), (ax_m, "MB", "peak RSS")):
         ax.set_xlabel("poses")
         ax.set_ylabel(label)
