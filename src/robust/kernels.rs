@@ -51,8 +51,9 @@ pub fn gnc_tls_weight(r2: f64, c: f64, mu: f64) -> f64 {
     }
 }
 
-/// The factor by which GNC's μ grows per round (GTSAM's).
-const GNC_MU_STEP: f64 = 1.4;
+/// The factor by which GNC's μ grows per round (GTSAM's `GncParams`
+/// default).
+pub const GNC_MU_STEP: f64 = 1.4;
 /// GNC stops when μ passes this: every weight is binary long before.
 const GNC_MU_MAX: f64 = 1e9;
 /// A weight that moves less than this no longer needs another solve.

@@ -21,7 +21,7 @@
 
 use super::clusters::clusters;
 use super::innovation::{Evaluation, Innovations};
-use super::kernels::cauchy_weight;
+use super::kernels::{GNC_MU_STEP, cauchy_weight};
 use super::model::{Evidence, LoopModel, Scale};
 use super::{Candidate, Layers};
 use crate::geometry::Pose;
@@ -32,8 +32,8 @@ use crate::solve::{Session, SolveError};
 use std::time::Instant;
 
 /// The kernel width's square is divided by this every E-step until it
-/// reaches `c²` (GTSAM's GNC grows μ by the same factor).
-pub const ANNEAL_STEP: f64 = 1.4;
+/// reaches `c²`: the factor by which GNC's μ grows per round.
+pub const ANNEAL_STEP: f64 = GNC_MU_STEP;
 
 /// E-steps at the final width before the annealing watches its held set
 /// (the candidates of weight ≥ ½). The first weighs a map solved at the
