@@ -282,8 +282,10 @@ struct OptimizeArgs {
     #[arg(long)]
     fix_information: bool,
     /// Write SVG pictures into this directory: counts.svg (histogram of the
-    /// normalised inlier counts with the fitted mixture and T_GV) and
-    /// trajectory.svg (before and after, loops coloured by final weight).
+    /// normalised inlier counts with the fitted mixture and T_GV), loops.svg
+    /// (each candidate's innovation and prior against the loop model, with
+    /// the line where its posterior is ½) and trajectory.svg (before and
+    /// after, loops coloured by final weight).
     #[arg(long, value_name = "DIR")]
     plot: Option<PathBuf>,
     /// Everything the job itself can be told (the library's `Options`).

@@ -3,9 +3,11 @@
 //! * [`plot_counts`]: the density histogram of the normalised inlier counts
 //!   with the two weighted mixture components, their sum and `T_GV` marked;
 //! * [`plot_trajectory`]: the trajectory before and after optimisation, side
-//!   by side, with the loop closures coloured by their final weight.
+//!   by side, with the loop closures coloured by their final weight;
+//! * [`plot_loops`]: every candidate's innovation and prior against the
+//!   loop model's densities and the line where its posterior is ½.
 //!
-//! Both are drawn with plotters' SVG backend into a string and then written
+//! All are drawn with plotters' SVG backend into a string and then written
 //! atomically ([`crate::io::write_atomically`]), so a reader never sees half
 //! a picture. Text is emitted as SVG `<text>` elements and rendered by the
 //! viewer with its own fonts: no font files are needed to draw.
@@ -14,6 +16,10 @@
 //! decimated to about [`MAX_POLYLINE_POINTS`] points and at most
 //! [`MAX_LOOP_SEGMENTS`] loops are drawn, sampled evenly; the caption says
 //! when either happened.
+
+mod loops;
+
+pub use loops::{LoopPoint, plot_loops};
 
 use crate::gate::{Component, LogNormalMixture, Threshold, ThresholdFit};
 use crate::geometry::Pose;

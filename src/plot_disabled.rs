@@ -5,6 +5,7 @@
 
 use crate::gate::ThresholdFit;
 use crate::geometry::Pose;
+use crate::robust::LoopModel;
 use std::path::{Path, PathBuf};
 
 /// Why a picture was not drawn.
@@ -27,6 +28,24 @@ pub struct LoopLine {
     pub to: usize,
     /// Final weight in `[0, 1]`.
     pub weight: f64,
+}
+
+/// A candidate as the loop model saw it: see the `plot` feature's module.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoopPoint {
+    /// Its squared innovation.
+    pub innovation: f64,
+    /// Its prior probability of a true loop.
+    pub prior: f64,
+    /// Whether the final map was solved with it.
+    pub accepted: bool,
+}
+
+/// Always [`PlotError::Disabled`].
+pub fn plot_loops(path: &Path, _points: &[LoopPoint], _model: &LoopModel) -> Result<(), PlotError> {
+    Err(PlotError::Disabled {
+        path: path.to_owned(),
+    })
 }
 
 /// The (x, y) of every pose's position.

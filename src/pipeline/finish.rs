@@ -238,8 +238,9 @@ pub fn report<P: G2oPose<D>, const D: usize>(
         .collect();
 }
 
-/// Writes `counts.svg` (when there are counts) and `trajectory.svg` into
-/// `dir`, and lists them in the report.
+/// Writes `counts.svg` (when there are counts), `loops.svg` (when EM's
+/// loop model decided) and `trajectory.svg` into `dir`, and lists them in
+/// the report.
 pub fn plot<P: G2oPose<D>, const D: usize>(
     dir: &Path,
     graph: &PoseGraph<P, D>,
@@ -248,7 +249,7 @@ pub fn plot<P: G2oPose<D>, const D: usize>(
     config: &OptimizeConfig,
     report: &mut Report,
 ) -> Result<(), PipelineError> {
-    use crate::plot::{LoopLine, plot_counts, plot_trajectory, top_view};
+    use crate::plot::{LoopLine, plot_counts, plot_loops, plot_trajectory, top_view};
     std::fs::create_dir_all(dir).map_err(|source| PipelineError::Write {
         path: dir.to_owned(),
         source,
@@ -261,6 +262,11 @@ pub fn plot<P: G2oPose<D>, const D: usize>(
     if let (false, Some(fit)) = (counts.is_empty(), &report.gate.fit) {
         let path = dir.join("counts.svg");
         plot_counts(&path, &counts, fit)?;
+        report.plots.push(path.display().to_string());
+    }
+    if let Some(model) = &report.robust.model {
+        let path = dir.join("loops.svg");
+        plot_loops(&path, &loop_points(report), model)?;
         report.plots.push(path.display().to_string());
     }
     let ids = graph.ids();
@@ -296,6 +302,20 @@ pub fn plot<P: G2oPose<D>, const D: usize>(
     )?;
     report.plots.push(path.display().to_string());
     Ok(())
+}
+
+/// The candidates the loop model weighed, for its picture: those with an
+/// innovation and a prior.
+fn loop_points(report: &Report) -> Vec<crate::plot::LoopPoint> {
+    (report.loops.iter())
+        .filter_map(|l| {
+            Some(crate::plot::LoopPoint {
+                innovation: l.innovation?,
+                prior: l.prior?,
+                accepted: l.accepted,
+            })
+        })
+        .collect()
 }
 
 /// A sum in the order given, from +0 ([`PoseGraph::chi2_where`]'s bits).

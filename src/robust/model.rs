@@ -640,6 +640,24 @@ impl LoopModel {
         }
     }
 
+    /// The true loops' density of `y = ln ν²`, `f_in(y)`.
+    pub fn true_density(&self, y: f64) -> f64 {
+        ln_density(&self.inlier, y).exp()
+    }
+
+    /// The wrong loops' density of `y = ln ν²`, `f_out(y)` (all their
+    /// populations, or uniform over the span without one).
+    pub fn wrong_density(&self, y: f64) -> f64 {
+        self.ln_outlier_density(y).exp()
+    }
+
+    /// The least prior at which a candidate with log innovation `y` is
+    /// accepted: where its posterior is ½, `1 / (1 + f_in/f_out)` with the
+    /// non-increasing likelihood ratio ([`Self::ln_likelihood_ratio`]).
+    pub fn acceptance_prior(&self, y: f64) -> f64 {
+        1.0 / (1.0 + self.ln_likelihood_ratio(y).exp())
+    }
+
     /// `ln` of the posterior odds of a true loop.
     pub fn ln_odds(&self, e: &Evidence) -> f64 {
         let p = self.prior(e.count_posterior);
@@ -841,5 +859,47 @@ mod tests {
         assert!(e.iter().all(|x| m.posterior(x) >= 0.5));
         // A candidate far beyond them is not.
         assert!(m.posterior(&ev(None, 1e4)) < 0.5);
+    }
+
+    #[test]
+    fn a_candidate_at_its_acceptance_prior_has_posterior_one_half() {
+        let (e, _) = population();
+        let m = LoopModel::fit(
+            &e,
+            &vec![true; e.len()],
+            (3, Scale::Learned),
+            &Layers::default(),
+            &Parallelism::sequential(),
+        );
+        let mut last = 0.0;
+        for y in [-3.0, -1.0, 0.5, 2.0, 3.5, 4.2, 8.0, 12.0] {
+            let at = m.acceptance_prior(y);
+            assert!(
+                (0.0..=1.0).contains(&at) && at >= last,
+                "{y}: {at} after {last}"
+            );
+            last = at;
+            // The count posterior that gives exactly this prior.
+            let p = at / (1.0 - m.aliasing_rate);
+            if p < 1.0 && at > 1e-12 && at < 1.0 - 1e-12 {
+                let posterior = m.posterior(&ev(Some(p), y.exp()));
+                assert!((posterior - 0.5).abs() < 1e-9, "{y}: {posterior}");
+            }
+        }
+        // True loops' innovations need little prior, the wrong loops' far
+        // out more than any count gives.
+        assert!(m.acceptance_prior(-1.0) < 0.01, "{m:?}");
+        assert!(m.acceptance_prior(12.0) > 1.0 - m.aliasing_rate, "{m:?}");
+        // The two densities are the model's: each integrates to 1.
+        let integral = |f: &dyn Fn(f64) -> f64| {
+            (0..40_000)
+                .map(|i| f(-20.0 + i as f64 * 1e-3) * 1e-3)
+                .sum::<f64>()
+        };
+        assert!((integral(&|y| m.true_density(y)) - 1.0).abs() < 1e-6);
+        assert!(
+            (integral(&|y| m.wrong_density(y)) - 1.0).abs() < 1e-3,
+            "{m:?}"
+        );
     }
 }

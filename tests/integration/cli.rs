@@ -207,7 +207,7 @@ fn gate_prints_the_threshold_of_a_sample_and_fails_on_degenerate_counts() {
 }
 
 #[test]
-fn plot_writes_the_count_histogram_and_the_trajectory() {
+fn plot_writes_the_count_histogram_the_loop_decisions_and_the_trajectory() {
     let dir = temp_dir("plot");
     let plots = dir.join("pictures");
     let out = pgo(&[
@@ -219,7 +219,7 @@ fn plot_writes_the_count_histogram_and_the_trajectory() {
         "-q",
     ]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    for name in ["counts.svg", "trajectory.svg"] {
+    for name in ["counts.svg", "loops.svg", "trajectory.svg"] {
         let svg = std::fs::read_to_string(plots.join(name)).unwrap();
         assert!(
             svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"),
@@ -231,8 +231,13 @@ fn plot_writes_the_count_histogram_and_the_trajectory() {
             .unwrap()
             .contains("T_GV = ")
     );
+    assert!(
+        std::fs::read_to_string(plots.join("loops.svg"))
+            .unwrap()
+            .contains("posterior ½: accepted above")
+    );
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(r["plots"].as_array().unwrap().len(), 2);
+    assert_eq!(r["plots"].as_array().unwrap().len(), 3);
     // A graph without candidates gets the trajectory only.
     let out = pgo(&[
         "optimize",
