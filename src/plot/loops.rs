@@ -39,8 +39,9 @@ pub struct LoopPoint {
 /// * bottom: each candidate at its `y` and its prior (accepted green,
 ///   rejected red), and the line where the posterior is ½
 ///   ([`LoopModel::acceptance_prior`]): the model accepts what lies above
-///   it. A candidate on the wrong side of the line was decided by
-///   something after the model (the χ² search, or its cluster).
+///   it. A candidate on the wrong side of the line was decided otherwise
+///   after the model's last evaluation (its `reason` in the report says
+///   why, e.g. taken out by the χ² search).
 ///
 /// At most [`MAX_LOOP_SEGMENTS`] candidates are drawn, evenly sampled (the
 /// caption says so). A point that is not finite, or a prior outside
