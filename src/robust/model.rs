@@ -728,6 +728,18 @@ mod tests {
             .collect()
     }
 
+    /// The model of `e` in 3 dimensions at a learned scale, started from
+    /// every candidate taken as a true loop, on one thread.
+    fn fitted(e: &[Evidence]) -> LoopModel {
+        LoopModel::fit(
+            e,
+            &vec![true; e.len()],
+            (3, Scale::Learned),
+            &Layers::default(),
+            &Parallelism::sequential(),
+        )
+    }
+
     #[test]
     fn digamma_matches_closed_forms() {
         // ψ(1) = −γ, ψ(3/2) = 2 − γ − 2 ln 2.
@@ -764,13 +776,7 @@ mod tests {
     fn em_learns_the_aliasing_rate_and_rejects_the_aliased_loops() {
         let (e, truth) = population();
         // Start from every candidate accepted: EM must find the split.
-        let m = LoopModel::fit(
-            &e,
-            &vec![true; e.len()],
-            (3, Scale::Learned),
-            &Layers::default(),
-            &Parallelism::sequential(),
-        );
+        let m = fitted(&e);
         // 20 of the 420 true-like counts are wrong.
         assert!((m.aliasing_rate - 21.0 / 421.8).abs() < 0.01, "{m:?}");
         for (x, t) in e.iter().zip(&truth) {
@@ -814,13 +820,7 @@ mod tests {
             })
             .collect();
         e.extend((0..30).map(|k| ev(Some(0.01), 1e7 * (1.0 + k as f64))));
-        let m = LoopModel::fit(
-            &e,
-            &vec![true; e.len()],
-            (3, Scale::Learned),
-            &Layers::default(),
-            &Parallelism::sequential(),
-        );
+        let m = fitted(&e);
         assert!(e[..400].iter().all(|x| m.posterior(x) >= 0.5), "{m:?}");
         assert!(e[400..].iter().all(|x| m.posterior(x) < 0.5), "{m:?}");
         assert!(m.inlier.sigma > 1.5, "{m:?}");
@@ -829,13 +829,7 @@ mod tests {
     #[test]
     fn a_smaller_innovation_is_never_evidence_against_a_loop() {
         let (e, _) = population();
-        let m = LoopModel::fit(
-            &e,
-            &vec![true; e.len()],
-            (3, Scale::Learned),
-            &Layers::default(),
-            &Parallelism::sequential(),
-        );
+        let m = fitted(&e);
         let mut last = f64::INFINITY;
         for k in -400..600 {
             let l = m.ln_likelihood_ratio(k as f64 * 0.05);
@@ -848,13 +842,7 @@ mod tests {
     #[test]
     fn without_wrong_loops_every_consistent_candidate_is_kept() {
         let e = gaussian_loops(100, 2.0, None);
-        let m = LoopModel::fit(
-            &e,
-            &[true; 100],
-            (3, Scale::Learned),
-            &Layers::default(),
-            &Parallelism::sequential(),
-        );
+        let m = fitted(&e);
         assert!(m.outliers.is_empty(), "{m:?}");
         assert!(e.iter().all(|x| m.posterior(x) >= 0.5));
         // A candidate far beyond them is not.
@@ -864,13 +852,7 @@ mod tests {
     #[test]
     fn a_candidate_at_its_acceptance_prior_has_posterior_one_half() {
         let (e, _) = population();
-        let m = LoopModel::fit(
-            &e,
-            &vec![true; e.len()],
-            (3, Scale::Learned),
-            &Layers::default(),
-            &Parallelism::sequential(),
-        );
+        let m = fitted(&e);
         let mut last = 0.0;
         for y in [-3.0, -1.0, 0.5, 2.0, 3.5, 4.2, 8.0, 12.0] {
             let at = m.acceptance_prior(y);
