@@ -151,19 +151,7 @@ fn draw_densities(
         .fold(0.0, f64::max)
         .max(f64::MIN_POSITIVE)
         * 1.15;
-    let mut chart = ChartBuilder::on(area)
-        .margin(24)
-        .x_label_area_size(20)
-        .y_label_area_size(72)
-        .build_cartesian_2d(range.0..range.1, 0.0..top)?;
-    chart
-        .configure_mesh()
-        .y_desc("density of ln ν²")
-        .axis_desc_style((FONT, 17))
-        .label_style((FONT, 14))
-        .light_line_style(TRANSPARENT)
-        .bold_line_style(BLACK.mix(0.08))
-        .draw()?;
+    let mut chart = panel(area, range, top, ("", "density of ln ν²"))?;
     for (points, colour, label) in [
         (true_loops, LOOP_COLOUR, "true loops"),
         (wrong_loops, REJECTED_COLOUR, "wrong loops"),
@@ -185,20 +173,8 @@ fn draw_decisions(
     model: &LoopModel,
     range: (f64, f64),
 ) -> DrawResult<()> {
-    let mut chart = ChartBuilder::on(area)
-        .margin(24)
-        .x_label_area_size(56)
-        .y_label_area_size(72)
-        .build_cartesian_2d(range.0..range.1, 0.0..1.0)?;
-    chart
-        .configure_mesh()
-        .x_desc("ln ν² (squared innovation against the map without the candidate's cluster)")
-        .y_desc("prior P(true loop | count)")
-        .axis_desc_style((FONT, 17))
-        .label_style((FONT, 14))
-        .light_line_style(TRANSPARENT)
-        .bold_line_style(BLACK.mix(0.08))
-        .draw()?;
+    let x_desc = "ln ν² (squared innovation against the map without the candidate's cluster)";
+    let mut chart = panel(area, range, 1.0, (x_desc, "prior P(true loop | count)"))?;
     // Rejected first, so that the accepted ones show where both meet.
     for (accepted, colour, label) in [
         (false, REJECTED_COLOUR, "rejected"),
@@ -225,6 +201,32 @@ fn draw_decisions(
         });
     // Lower left: few candidates are both consistent and of a low prior.
     legend(&mut chart, SeriesLabelPosition::LowerLeft)
+}
+
+/// A panel's chart and its axes: `range` of `y = ln ν²` on x, `0..top`
+/// on y, each described (no x description: no room kept for one).
+fn panel<'a, 'b>(
+    area: &'a DrawingArea<SVGBackend<'b>, Shift>,
+    range: (f64, f64),
+    top: f64,
+    (x_desc, y_desc): (&str, &str),
+) -> DrawResult<Chart<'a, 'b>> {
+    let mut chart = ChartBuilder::on(area)
+        .margin(24)
+        .x_label_area_size(if x_desc.is_empty() { 20 } else { 56 })
+        .y_label_area_size(72)
+        .build_cartesian_2d(range.0..range.1, 0.0..top)?;
+    let mut mesh = chart.configure_mesh();
+    if !x_desc.is_empty() {
+        mesh.x_desc(x_desc);
+    }
+    mesh.y_desc(y_desc)
+        .axis_desc_style((FONT, 17))
+        .label_style((FONT, 14))
+        .light_line_style(TRANSPARENT)
+        .bold_line_style(BLACK.mix(0.08))
+        .draw()?;
+    Ok(chart)
 }
 
 /// A chart of either panel: `y = ln ν²` on x.
