@@ -4,11 +4,20 @@
 //! information says (every loop a little off, none more than the others)
 //! or some accepted loops are wrong in a way their innovations did not
 //! show. For a cluster of accepted loops, removing it lowers `D²` by its
-//! joint statistic `e_Aᵀ·S⁻¹·e_A` ([`super::innovation`]); a cluster
-//! *explains* the failure when the map without it would pass. The search
-//! removes the cluster that explains the failure with the largest drop,
-//! solves again, and repeats while the test fails and a cluster explains
-//! it; what is left is reported as the suspects.
+//! joint statistic `e_Aᵀ·S⁻¹·e_A` ([`super::innovation`]), which for true
+//! loops under the file's information is χ²(m·D), `m` loops of dimension
+//! `D`. A cluster *explains* the failure when the map without it would
+//! pass and its drop stands out as an outlier on its own: above the
+//! critical value of χ²(m·D) at `α/K`, the χ² test's level shared among
+//! the `K` clusters tested (Baarda's data snooping, with Bonferroni's
+//! correction for testing them all). Without the second condition a true
+//! loop explains a map that fails by chance, as one in `1/α` correct maps
+//! does: in a simulated 10⁴-pose sphere without wrong loops, the map
+//! failed at p = 0.04 and removing its one loop with a drop of 22.6 (on 6
+//! dimensions, one of 900 clusters: p = 0.001 alone, 0.9 among them) made
+//! it pass. The search removes the cluster that explains the failure with
+//! the largest drop, solves again, and repeats while the test fails and a
+//! cluster explains it; what is left is reported as the suspects.
 //!
 //! When no cluster explains it, the decisions may have started from a map
 //! the wrong loops had already bent (most candidates wrong, their counts
@@ -29,7 +38,7 @@ use super::schedule::Decided;
 use crate::geometry::Pose;
 use crate::graph::PoseGraph;
 use crate::solve::{Session, SolveError};
-use crate::stats::Chi2Test;
+use crate::stats::{Chi2Test, chi2_critical};
 use serde::Serialize;
 use std::time::Instant;
 
@@ -48,7 +57,8 @@ pub struct Suspect {
     pub loops: Vec<usize>,
     /// By how much `D²` drops without them.
     pub d2_drop: f64,
-    /// Whether the map without them passes the test.
+    /// Whether they explain the failure: the map without them passes the
+    /// test, and their drop stands out among the clusters tested.
     pub explains: bool,
 }
 
@@ -109,7 +119,7 @@ pub fn explain<P: Pose<D>, const D: usize>(
 }
 
 /// The accepted clusters by the drop of `D²` without them, largest first,
-/// each marked with whether the test `t` would pass without it.
+/// each marked with whether it explains the failure of the test `t`.
 fn rank(decided: &Decided, t: &Chi2Test, dimension: usize) -> Vec<Suspect> {
     let mut out: Vec<Suspect> = decided
         .clusters
@@ -122,15 +132,29 @@ fn rank(decided: &Decided, t: &Chi2Test, dimension: usize) -> Vec<Suspect> {
                 .filter(|&k| decided.accepted[k])
                 .collect();
             let drop = (*joint)?;
-            (!loops.is_empty()).then(|| Suspect {
-                explains: passes_without(t, drop, loops.len(), dimension),
+            (!loops.is_empty()).then_some(Suspect {
+                explains: false,
                 loops,
                 d2_drop: drop,
             })
         })
         .collect();
+    let tested = out.len();
+    for s in &mut out {
+        s.explains = explains(t, s.d2_drop, (s.loops.len(), dimension), tested);
+    }
     out.sort_by(|a, b| b.d2_drop.total_cmp(&a.d2_drop));
     out
+}
+
+/// Whether `loops` accepted loops of dimension `dimension` whose removal
+/// lowers `D²` by `drop` explain the failure of the test `t`, as one of
+/// `tested` clusters: the test passes without them, and the drop exceeds
+/// the critical value of χ²(loops·dimension) at `t.alpha / tested`.
+fn explains(t: &Chi2Test, drop: f64, (loops, dimension): (usize, usize), tested: usize) -> bool {
+    let alpha = t.alpha / tested.max(1) as f64;
+    let stands_out = chi2_critical((loops * dimension) as u64, alpha).is_ok_and(|c| drop > c);
+    stands_out && passes_without(t, drop, loops, dimension)
 }
 
 /// Whether the test `t` would pass without `loops` accepted loops (edges of
@@ -182,4 +206,41 @@ pub fn restart<P: Pose<D>, const D: usize>(
     session.graph.poses = saved.0;
     weights.copy_from_slice(&saved.1);
     Ok(false)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::stats::DofConvention;
+
+    /// The simulated 10⁴-pose sphere of the module doc: 5400 residual
+    /// degrees of freedom, `D²` 5585 (p = 0.04), 900 clusters of 6-D loops.
+    fn failed_by_chance() -> Chi2Test {
+        let t = Chi2Test::new(5585.3, 10_899, 5400, DofConvention::Residual, 0.05).unwrap();
+        assert!(!t.passed);
+        t
+    }
+
+    #[test]
+    fn a_drop_that_passes_the_map_explains_it_only_if_it_stands_out_among_the_clusters() {
+        let t = failed_by_chance();
+        // One loop of 900 lowering D² by 22.6: the map would pass, but
+        // χ²₆ exceeds 22.6 once in a thousand, so among 900 clusters that
+        // is no outlier.
+        assert!(passes_without(&t, 22.6, 1, 6));
+        assert!(!explains(&t, 22.6, (1, 6), 900));
+        // The same drop as the only cluster tested stands out (χ²₆ at 0.05
+        // is 12.6).
+        assert!(explains(&t, 22.6, (1, 6), 1));
+        // A wrong loop's drop stands out among any number of clusters.
+        assert!(explains(&t, 200.0, (1, 6), 900));
+        // A cluster of five loops is held to χ²₃₀: 60 stands out alone,
+        // not among 900.
+        assert!(explains(&t, 60.0, (5, 6), 1));
+        assert!(!explains(&t, 60.0, (5, 6), 900));
+        // A drop that leaves the map failing explains nothing, however it
+        // stands out.
+        assert!(!passes_without(&t, 5.0, 1, 6));
+        assert!(!explains(&t, 5.0, (1, 6), 1));
+    }
 }
