@@ -398,3 +398,56 @@ fn a_failure_no_loop_explains_leaves_the_loops_and_names_the_suspects() {
     let drops: Vec<f64> = search.suspects.iter().map(|s| s.d2_drop).collect();
     assert!(drops.windows(2).all(|d| d[0] >= d[1]), "{drops:?}");
 }
+
+#[test]
+fn a_restart_that_still_fails_is_undone_but_its_work_is_counted() {
+    // Information 10⁴ times too tight: deciding again from the trusted
+    // edges' map fails the test too, so the map and weights from before
+    // are kept, and the decisions count the restart's work with their own.
+    let (mut g, candidates, mut weights) = search_case(true);
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    let layers = Layers {
+        clusters: false,
+        ..Layers::default()
+    };
+    with_session(
+        &mut g,
+        &mut weights,
+        SolverOptions::default(),
+        |mut s, w| {
+            s.converge(w).unwrap();
+            let mut decided = Decided::start(s.graph, &edges, w, &layers);
+            (decided.decisions, decided.relaxations) = (3, 1);
+            let (poses, before) = (s.graph.poses.clone(), w.to_vec());
+            let mut made = (0, 0);
+            let kept = super::super::search::restart(
+                &mut s,
+                w,
+                &candidates,
+                &mut decided,
+                &chi2_test,
+                |s, w| {
+                    let again = decide(
+                        s,
+                        w,
+                        &candidates,
+                        Scale::Learned,
+                        &layers,
+                        true,
+                        Swing::Continue,
+                    )?;
+                    made = (again.decisions, again.relaxations);
+                    Ok(again)
+                },
+            )
+            .unwrap();
+            assert!(!kept && made.0 > 0, "{made:?}");
+            assert_eq!(
+                (decided.decisions, decided.relaxations),
+                (3 + made.0, 1 + made.1)
+            );
+            assert_eq!(s.graph.poses, poses);
+            assert_eq!(w, &before[..]);
+        },
+    );
+}

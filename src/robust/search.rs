@@ -184,7 +184,8 @@ pub fn verdict<P: Pose<D>, const D: usize>(
 
 /// The restart of the module doc: `decide` run again from no candidate
 /// accepted; keeps its end (the map, `weights` and the decisions) if that
-/// has a χ² test and passes it, and says whether it did.
+/// has a χ² test and passes it, and says whether it did. Either way
+/// `decided` counts the decisions and relaxations of both.
 pub fn restart<P: Pose<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -197,12 +198,19 @@ pub fn restart<P: Pose<D>, const D: usize>(
     for c in candidates {
         weights[c.edge] = 0.0;
     }
-    let again = decide(session, weights)?;
+    let mut again = decide(session, weights)?;
+    // Whichever end is kept counts the work of both.
+    again.decisions += decided.decisions;
+    again.relaxations += decided.relaxations;
+    again.relaxed_starts += decided.relaxed_starts;
     // Only a passing map explains the failure; one without a test does not.
     if !again.cut_short && verdict(session, weights, test) == Some(true) {
         *decided = again;
         return Ok(true);
     }
+    decided.decisions = again.decisions;
+    decided.relaxations = again.relaxations;
+    decided.relaxed_starts = again.relaxed_starts;
     session.graph.poses = saved.0;
     weights.copy_from_slice(&saved.1);
     Ok(false)
