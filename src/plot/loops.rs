@@ -2,12 +2,11 @@
 //! against the loop model that weighed them (docs/method.md §4).
 
 use super::{
-    DrawResult, FONT, LOOP_COLOUR, MAX_LOOP_SEGMENTS, PlotError, draw_error, even_indices, invalid,
-    text_style, write_svg,
+    Chart, DrawResult, FONT, LOOP_COLOUR, MAX_LOOP_SEGMENTS, PlotError, draw_error, draw_mesh,
+    even_indices, invalid, text_style, write_svg,
 };
 use crate::robust::LoopModel;
 use plotters::coord::Shift;
-use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -216,21 +215,9 @@ fn panel<'a, 'b>(
         .x_label_area_size(if x_desc.is_empty() { 20 } else { 56 })
         .y_label_area_size(72)
         .build_cartesian_2d(range.0..range.1, 0.0..top)?;
-    let mut mesh = chart.configure_mesh();
-    if !x_desc.is_empty() {
-        mesh.x_desc(x_desc);
-    }
-    mesh.y_desc(y_desc)
-        .axis_desc_style((FONT, 17))
-        .label_style((FONT, 14))
-        .light_line_style(TRANSPARENT)
-        .bold_line_style(BLACK.mix(0.08))
-        .draw()?;
+    draw_mesh(&mut chart, x_desc, y_desc)?;
     Ok(chart)
 }
-
-/// A chart of either panel: `y = ln ν²` on x.
-type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// The chart's legend at `position`.
 fn legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>, position: SeriesLabelPosition) -> DrawResult<()> {
