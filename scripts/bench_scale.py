@@ -78,12 +78,6 @@ def optimize(pgo, path, threads, flags, wrong):
             "time": r.get("time"), "chi2_passed": r["chi2_test"]["passed"], "accepted_true": len(accepted) - bad, "accepted_wrong": bad}
 
 
-def all_factorizations(run):
-    """Numeric factorisations of the run beyond its initial guess: LM's, one
-    per EM evaluation, two per chordal relaxation (rotations, translations)."""
-    return run["factorizations"] + run["decisions"] + 2 * run["relaxations"]
-
-
 def plot(results, svg):
     import matplotlib
     matplotlib.use("svg")

@@ -247,9 +247,10 @@ def plain_scale_table(rows):
            "plain solve's χ² test is at α = 0.05, so a correct map fails it one time in twenty.", "",
            "| world | poses | threads | wall (s) | factorisations | peak RSS (MB) | plain solve's χ² test |",
            "|---|---|---|---|---|---|---|"]
+    def ratio(a, b, f):
+        return (f + " / " + f + " = %.1f×") % (a, b, a / b)
     for row in rows:
         r, p = row["robust"], row["plain"]
-        ratio = lambda a, b, f: (f + " / " + f + " = %.1f×") % (a, b, a / b)
         out.append("| %s | %d | %d | %s | %s | %s | %s |" % (
             row["world"], r["poses"], row["threads"], ratio(r["wall_s"], p["wall_s"], "%.2f"),
             ratio(all_factorizations(r), all_factorizations(p), "%d"), ratio(r["rss_mb"], p["rss_mb"], "%.0f"),

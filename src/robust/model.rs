@@ -853,7 +853,7 @@ mod tests {
     fn a_candidate_at_its_acceptance_prior_has_posterior_one_half() {
         let (e, _) = population();
         let m = fitted(&e);
-        let mut last = 0.0;
+        let (mut last, mut checked) = (0.0, 0);
         for y in [-3.0, -1.0, 0.5, 2.0, 3.5, 4.2, 8.0, 12.0] {
             let at = m.acceptance_prior(y);
             assert!(
@@ -866,8 +866,11 @@ mod tests {
             if p < 1.0 && at > 1e-12 && at < 1.0 - 1e-12 {
                 let posterior = m.posterior(&ev(Some(p), y.exp()));
                 assert!((posterior - 0.5).abs() < 1e-9, "{y}: {posterior}");
+                checked += 1;
             }
         }
+        // The line crosses from true loops to wrong ones within the range.
+        assert!(checked >= 2, "{checked} of the points lie between 0 and 1");
         // True loops' innovations need little prior, the wrong loops' far
         // out more than any count gives.
         assert!(m.acceptance_prior(-1.0) < 0.01, "{m:?}");

@@ -268,6 +268,14 @@ pub enum Swing {
 }
 
 impl Decided {
+    /// Adds the work of `other` (its decisions, relaxations and relaxed
+    /// starts) to these decisions' counts.
+    pub fn count_work_of(&mut self, other: &Decided) {
+        self.decisions += other.decisions;
+        self.relaxations += other.relaxations;
+        self.relaxed_starts += other.relaxed_starts;
+    }
+
     /// Nothing decided yet: the candidates `edges` of weight ≥ ½ accepted,
     /// and their clusters (each its own with the layer off).
     fn start<P: Pose<D>, const D: usize>(

@@ -338,32 +338,48 @@ fn chi2_test(g: &PoseGraph<Se2, 3>, w: &[f64]) -> Option<crate::stats::Chi2Test>
     crate::pipeline::chi2_test(g, w, &config).ok()
 }
 
-/// The χ² search on [`search_case`] from its converged map: the search's
-/// result, the decisions and weights it left, and whether the map passes.
-fn run_search(tight: bool) -> (super::super::search::Search, Decided, Vec<f64>, bool) {
+/// Runs `f` on [`search_case`]'s converged map with a session, the
+/// weights, the candidates, the layers (clusters off: each candidate its
+/// own) and the decisions with every candidate accepted; returns what `f`
+/// returns and the weights it left.
+fn on_search_case<R>(
+    tight: bool,
+    f: impl FnOnce(Session<'_, Se2, 3>, &mut [f64], &[Candidate], &Layers, Decided) -> R,
+) -> (R, Vec<f64>) {
     let (mut g, candidates, mut weights) = search_case(tight);
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     let layers = Layers {
         clusters: false,
         ..Layers::default()
     };
-    let (search, decided, passed) = with_session(
+    let out = with_session(
         &mut g,
         &mut weights,
         SolverOptions::default(),
         |mut s, w| {
             s.converge(w).unwrap();
-            let mut decided = Decided::start(s.graph, &edges, w, &layers);
+            let decided = Decided::start(s.graph, &edges, w, &layers);
+            f(s, w, &candidates, &layers, decided)
+        },
+    );
+    (out, weights)
+}
+
+/// The χ² search on [`search_case`] from its converged map: the search's
+/// result, the decisions and weights it left, and whether the map passes.
+fn run_search(tight: bool) -> (super::super::search::Search, Decided, Vec<f64>, bool) {
+    let ((search, decided, passed), weights) =
+        on_search_case(tight, |mut s, w, candidates, _, mut decided| {
+            let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
             decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
                 .unwrap()
                 .innovations(&edges, &decided.accepted, &decided.clusters);
             assert!(!chi2_test(s.graph, w).unwrap().passed);
             let search =
-                super::super::search::explain(&mut s, w, &candidates, &mut decided, &chi2_test);
+                super::super::search::explain(&mut s, w, candidates, &mut decided, &chi2_test);
             let passed = chi2_test(s.graph, w).unwrap().passed;
             (search.unwrap(), decided, passed)
-        },
-    );
+        });
     (search, decided, weights, passed)
 }
 
@@ -404,50 +420,30 @@ fn a_restart_that_still_fails_is_undone_but_its_work_is_counted() {
     // Information 10⁴ times too tight: deciding again from the trusted
     // edges' map fails the test too, so the map and weights from before
     // are kept, and the decisions count the restart's work with their own.
-    let (mut g, candidates, mut weights) = search_case(true);
-    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
-    let layers = Layers {
-        clusters: false,
-        ..Layers::default()
-    };
-    with_session(
-        &mut g,
-        &mut weights,
-        SolverOptions::default(),
-        |mut s, w| {
-            s.converge(w).unwrap();
-            let mut decided = Decided::start(s.graph, &edges, w, &layers);
-            (decided.decisions, decided.relaxations) = (3, 1);
-            let (poses, before) = (s.graph.poses.clone(), w.to_vec());
-            let mut made = (0, 0);
-            let kept = super::super::search::restart(
-                &mut s,
-                w,
-                &candidates,
-                &mut decided,
-                &chi2_test,
-                |s, w| {
-                    let again = decide(
-                        s,
-                        w,
-                        &candidates,
-                        Scale::Learned,
-                        &layers,
-                        true,
-                        Swing::Continue,
-                    )?;
-                    made = (again.decisions, again.relaxations);
-                    Ok(again)
-                },
-            )
-            .unwrap();
-            assert!(!kept && made.0 > 0, "{made:?}");
-            assert_eq!(
-                (decided.decisions, decided.relaxations),
-                (3 + made.0, 1 + made.1)
-            );
-            assert_eq!(s.graph.poses, poses);
-            assert_eq!(w, &before[..]);
-        },
-    );
+    on_search_case(true, |mut s, w, candidates, layers, mut decided| {
+        (decided.decisions, decided.relaxations) = (3, 1);
+        let (poses, before) = (s.graph.poses.clone(), w.to_vec());
+        let mut made = (0, 0);
+        let kept = super::super::search::restart(
+            &mut s,
+            w,
+            candidates,
+            &mut decided,
+            &chi2_test,
+            |s, w| {
+                let swing = Swing::Continue;
+                let again = decide(s, w, candidates, Scale::Learned, layers, true, swing)?;
+                made = (again.decisions, again.relaxations);
+                Ok(again)
+            },
+        )
+        .unwrap();
+        assert!(!kept && made.0 > 0, "{made:?}");
+        assert_eq!(
+            (decided.decisions, decided.relaxations),
+            (3 + made.0, 1 + made.1)
+        );
+        assert_eq!(s.graph.poses, poses);
+        assert_eq!(w, &before[..]);
+    });
 }

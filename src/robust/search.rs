@@ -199,18 +199,14 @@ pub fn restart<P: Pose<D>, const D: usize>(
         weights[c.edge] = 0.0;
     }
     let mut again = decide(session, weights)?;
-    // Whichever end is kept counts the work of both.
-    again.decisions += decided.decisions;
-    again.relaxations += decided.relaxations;
-    again.relaxed_starts += decided.relaxed_starts;
     // Only a passing map explains the failure; one without a test does not.
+    // Whichever end is kept counts the work of both.
     if !again.cut_short && verdict(session, weights, test) == Some(true) {
+        again.count_work_of(decided);
         *decided = again;
         return Ok(true);
     }
-    decided.decisions = again.decisions;
-    decided.relaxations = again.relaxations;
-    decided.relaxed_starts = again.relaxed_starts;
+    decided.count_work_of(&again);
     session.graph.poses = saved.0;
     weights.copy_from_slice(&saved.1);
     Ok(false)
