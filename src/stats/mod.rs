@@ -8,6 +8,7 @@
 //! the like name them directly.
 
 pub mod chi2;
+pub mod log_chi2;
 pub mod mixture;
 pub mod separation;
 pub mod squarem;
