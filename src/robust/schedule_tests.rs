@@ -398,6 +398,29 @@ fn the_chi2_search_takes_out_the_wrong_loop_that_explains_a_failed_test() {
 }
 
 #[test]
+fn a_wrong_loop_in_a_cluster_of_true_ones_is_taken_out_alone() {
+    // The wrong loop shares a cluster with a true one (an alias a few poses
+    // off joins the true loops of its place). The cluster explains the
+    // failure, and so does the wrong loop alone: only it goes.
+    let ((search, decided, passed), _) =
+        on_search_case(false, |mut s, w, candidates, _, mut decided| {
+            let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+            decided.clusters = vec![vec![0], vec![1], vec![2], vec![3, 4]];
+            decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
+                .unwrap()
+                .innovations(&edges, &decided.accepted, &decided.clusters);
+            let search =
+                super::super::search::explain(&mut s, w, candidates, &mut decided, &chi2_test);
+            let passed = chi2_test(s.graph, w).unwrap().passed;
+            (search.unwrap(), decided, passed)
+        });
+    assert_eq!(search.removed.len(), 1, "{search:?}");
+    assert_eq!(search.removed[0].loops, [4]);
+    assert_eq!(decided.accepted, [true, true, true, true, false]);
+    assert!(passed);
+}
+
+#[test]
 fn a_failure_no_loop_explains_leaves_the_loops_and_names_the_suspects() {
     // Information 10⁴ times too tight: every loop fails, none explains it.
     // Nothing is removed (fewer loops would only fail by less), and the

@@ -15,9 +15,10 @@
 //! does: in a simulated 10⁴-pose sphere without wrong loops, the map
 //! failed at p = 0.04 and removing its one loop with a drop of 22.6 (on 6
 //! dimensions, one of 900 clusters: p = 0.001 alone, 0.9 among them) made
-//! it pass. The search removes the cluster that explains the failure with
-//! the largest drop, solves again, and repeats while the test fails and a
-//! cluster explains it; what is left is reported as the suspects.
+//! it pass. The search takes the cluster that explains the failure with
+//! the largest drop — or only its member that explains it alone, if one
+//! does ([`alone`]) — out, solves again, and repeats while the test fails
+//! and a cluster explains it; what is left is reported as the suspects.
 //!
 //! When no cluster explains it, the decisions may have started from a map
 //! the wrong loops had already bent (most candidates wrong, their counts
@@ -102,6 +103,11 @@ pub fn explain<P: Pose<D>, const D: usize>(
             search.suspects = ranked.into_iter().take(SUSPECTS).collect();
             return Ok(search);
         };
+        let tested = ranked.len();
+        let cluster = match alone(session, weights, (&edges, decided), (&t, tested), &cluster)? {
+            Some(member) => member,
+            None => cluster,
+        };
         for &k in &cluster.loops {
             decided.accepted[k] = false;
             weights[edges[k]] = 0.0;
@@ -116,6 +122,42 @@ pub fn explain<P: Pose<D>, const D: usize>(
             .innovations(&edges, &decided.accepted, &decided.clusters);
         session.evaluated_since(start);
     }
+}
+
+/// The member of the explaining cluster `cluster` that explains the
+/// failure of `t` alone, with the largest drop, if any: one wrong loop
+/// among the true loops of a place (an alias a few poses off joins their
+/// cluster) is taken out without them. Each member is tested as a cluster
+/// of one against the map with the rest of the cluster; the level is
+/// shared among the `tested` clusters and these members.
+fn alone<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &[f64],
+    (edges, decided): (&[usize], &Decided),
+    (t, tested): (&Chi2Test, usize),
+    cluster: &Suspect,
+) -> Result<Option<Suspect>, SolveError> {
+    if cluster.loops.len() < 2 {
+        return Ok(None);
+    }
+    let start = Instant::now();
+    let singles: Vec<Vec<usize>> = cluster.loops.iter().map(|&k| vec![k]).collect();
+    let joint =
+        Evaluation::for_clusters(session.optimizer, session.graph, weights, (edges, &singles))?
+            .innovations(edges, &decided.accepted, &singles)
+            .joint;
+    session.evaluated_since(start);
+    let tests = tested + singles.len();
+    Ok((cluster.loops.iter().zip(joint))
+        .filter_map(|(&k, drop)| {
+            let drop = drop?;
+            explains(t, drop, (1, D), tests).then_some(Suspect {
+                loops: vec![k],
+                d2_drop: drop,
+                explains: true,
+            })
+        })
+        .max_by(|a, b| a.d2_drop.total_cmp(&b.d2_drop)))
 }
 
 /// The accepted clusters by the drop of `D²` without them, largest first,
