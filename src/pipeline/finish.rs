@@ -121,6 +121,13 @@ where
         Ok(t) => report.chi2_test = Some(t),
         Err(e) => report.warnings.push(format!("no χ² test: {e}")),
     }
+    if !outcome.accepted.is_empty() && !outcome.accepted.contains(&true) {
+        report.warnings.push(format!(
+            "none of the {} loop candidates was accepted: the map is that of the trusted edges \
+             alone",
+            outcome.accepted.len()
+        ));
+    }
     self::report(
         graph,
         optimizer,

@@ -282,3 +282,27 @@ fn simulate_plants_wrong_candidates_with_the_count_models_asked_for() {
         );
     }
 }
+
+#[test]
+fn a_map_without_any_loop_says_so() {
+    // A gate above every count leaves no candidate: the map is the
+    // odometry's, which has no χ² test; the report says both.
+    let dir = temp_dir("no-loop");
+    let g = simulated(
+        &dir,
+        "g.g2o",
+        &["--poses", "200", "--loops", "20", "--inliers"],
+    );
+    let out = dir.join("out.g2o").to_string_lossy().into_owned();
+    let r = report(&[&g, "-o", &out, "--gate", "100000"]);
+    let warnings: Vec<&str> = (r["warnings"].as_array().unwrap().iter())
+        .map(|w| w.as_str().unwrap())
+        .collect();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.starts_with("none of the 20 loop candidates was accepted")),
+        "{warnings:?}"
+    );
+    assert!(r["chi2_test"].is_null(), "{}", r["chi2_test"]);
+}
