@@ -1092,15 +1092,16 @@ fn steps_2d(name: &str) -> Vec<Step> {
     steps
 }
 
-/// Replays the aliased sample through C and through the library side by
-/// side, an update every 50 poses: each C update is the library's (its
-/// account of itself, its poses and decisions), every changed decision
-/// is one that flipped, and the last map is the batch job's.
+/// Replays the grid2d sample (wrong candidates with low counts, some of
+/// whose decisions later updates change) through C and through the library
+/// side by side, an update every 50 poses: each C update is the library's
+/// (its account of itself, its poses and decisions), every changed
+/// decision is one that flipped, and the last map is the batch job's.
 #[test]
 fn a_replay_through_c_is_the_librarys_and_ends_with_the_batch_job() {
     let g = new_graph(2);
     let mut library = AnyPoseGraph::new(2).unwrap();
-    let steps = steps_2d("aliased.g2o");
+    let steps = steps_2d("grid2d.g2o");
     let n = steps.len();
     let (mut previous, mut kinds, mut changes) = (None::<*mut PgoResult>, Vec::new(), 0);
     for (k, ((id, pose), edges)) in steps.into_iter().enumerate() {
