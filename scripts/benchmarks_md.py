@@ -304,11 +304,15 @@ def sweep_section(folder):
     out += ["| dataset | information | runs | lowest precision | lowest recall | wrong loops accepted "
             "(all runs) | true loops rejected (all runs) | largest map error (ATE, %) | χ² failed | "
             "errors |", "|---|---|---|---|---|---|---|---|---|---|"]
+    def lowest(ok, key):
+        """The smallest `key` of the runs `ok` (NaN, a precision of
+        nothing accepted, left out)."""
+        return min((r[key] for r in ok if r.get(key) == r.get(key)), default=None)
+
     for (name, scale), rs in groups.items():
         ok = [r for r in rs if "f1" in r]
-        low = lambda k: min((r[k] for r in ok if r.get(k) == r.get(k)), default=None)
         out.append("| %s | %s | %d | %s | %s | %d | %d | %s | %d | %d |" % (
-            name, scale, len(rs), fmt(low("precision")), fmt(low("recall")),
+            name, scale, len(rs), fmt(lowest(ok, "precision")), fmt(lowest(ok, "recall")),
             sum(r["fp"] for r in ok), sum(r["true"] - r["tp"] for r in ok),
             "%.3g" % max(r["ate_pct"] for r in ok) if ok else "–",
             sum(1 for r in ok if r.get("chi2_passed") is False), len(rs) - len(ok)))

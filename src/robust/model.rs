@@ -32,7 +32,7 @@
 
 use super::Layers;
 use crate::linear::Parallelism;
-use crate::stats::log_chi2::LogChi2;
+use crate::stats::log_chi2::{Density, LogChi2};
 pub use crate::stats::log_chi2::{ln_chi2_mean, ln_chi2_sigma};
 use crate::stats::mixture::{NormalComponent, log_sum_exp, normalize_log_terms};
 use crate::stats::squarem;
@@ -507,8 +507,8 @@ impl LoopModel {
                 p.mean,
             )
         };
-        let truth = LogChi2::of(self.dof);
-        let (mean, sigma) = (self.inlier.mean, self.inlier.sigma);
+        let table = LogChi2::of(self.dof);
+        let truth = self.true_loops(&table);
         let outliers: Vec<(f64, f64, f64)> = self.outliers.iter().map(constants).collect();
         let mut terms = [0.0; MAX_WRONG_POPULATIONS + 1];
         // `ln π` and `ln(1 − π)` of each distinct count posterior.
@@ -523,7 +523,7 @@ impl LoopModel {
         for ((e, &yi), &c) in evidence.iter().zip(y).zip(&counts.index) {
             let (ln_in, ln_out) = ln_priors[c as usize];
             let term = |(c, h, m): (f64, f64, f64)| c - (yi - m) * (yi - m) * h;
-            terms[0] = ln_in + truth.ln_density(yi, mean, sigma);
+            terms[0] = ln_in + truth.ln(yi);
             let n = if outliers.is_empty() {
                 terms[1] = ln_out - self.span.ln();
                 2
@@ -550,9 +550,14 @@ impl LoopModel {
         log_sum_exp(self.outliers.iter().map(|o| o.log_weighted_density(y)))
     }
 
+    /// The true loops' density of `y` from the table of their dimension.
+    fn true_loops<'t>(&self, table: &'t LogChi2) -> Density<'t> {
+        table.with(self.inlier.mean, self.inlier.sigma)
+    }
+
     /// `ln f_in(y) − ln f_out(y)`, `f_in` the true loops' density `truth`.
-    fn raw_ratio(&self, truth: &LogChi2, y: f64) -> f64 {
-        truth.ln_density(y, self.inlier.mean, self.inlier.sigma) - self.ln_outlier_density(y)
+    fn raw_ratio(&self, truth: &Density<'_>, y: f64) -> f64 {
+        truth.ln(y) - self.ln_outlier_density(y)
     }
 
     /// Tabulates the running minimum of the likelihood ratio from the true
@@ -561,7 +566,8 @@ impl LoopModel {
         let top = y.iter().copied().fold(self.inlier.mean, f64::max);
         let steps = ((top - self.inlier.mean) / GRID_STEP).ceil() as usize + 1;
         let mut low = f64::INFINITY;
-        let truth = LogChi2::of(self.dof);
+        let table = LogChi2::of(self.dof);
+        let truth = self.true_loops(&table);
         self.envelope = (0..=steps)
             .map(|i| {
                 low = low.min(self.raw_ratio(&truth, self.inlier.mean + i as f64 * GRID_STEP));
@@ -590,7 +596,7 @@ impl LoopModel {
             // Beyond the table: the raw ratio there, and no more than the
             // table's last value.
             _ => {
-                let raw = self.raw_ratio(&LogChi2::of(self.dof), y);
+                let raw = self.raw_ratio(&self.true_loops(&LogChi2::of(self.dof)), y);
                 self.envelope.last().map_or(raw, |&v| v.min(raw))
             }
         }
@@ -598,9 +604,7 @@ impl LoopModel {
 
     /// The true loops' density of `y = ln ν²`, `f_in(y)`.
     pub fn true_density(&self, y: f64) -> f64 {
-        LogChi2::of(self.dof)
-            .ln_density(y, self.inlier.mean, self.inlier.sigma)
-            .exp()
+        self.true_loops(&LogChi2::of(self.dof)).ln(y).exp()
     }
 
     /// The wrong loops' density of `y = ln ν²`, `f_out(y)` (all their

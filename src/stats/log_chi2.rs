@@ -16,6 +16,7 @@
 //! The density has no closed form. [`LogChi2::ln_density`] interpolates a
 //! table of it, computed once per dimension ([`LogChi2::of`]).
 
+use super::mixture::log_normal_pdf;
 use statrs::function::gamma::ln_gamma;
 use std::sync::OnceLock;
 
@@ -165,24 +166,51 @@ impl LogChi2 {
         }
     }
 
-    /// `ln f(y)` for the mean `mean` and standard deviation `sigma` of `y`
-    /// (`sigma` below `√ψ₁(D/2)` is taken as that); −∞ where the density
-    /// is below the smallest `f64`.
-    pub fn ln_density(&self, y: f64, mean: f64, sigma: f64) -> f64 {
+    /// The density of mean `mean` and standard deviation `sigma` of `y`
+    /// (`sigma` below `√ψ₁(D/2)` is taken as that): its rows and weights
+    /// found once, for the many `y` it is then evaluated at.
+    pub fn with(&self, mean: f64, sigma: f64) -> Density<'_> {
         let tau = (sigma * sigma - self.variance).max(0.0).sqrt();
         if tau > MAX_TAU {
-            let z = (y - mean) / sigma;
-            return -0.5 * z * z - sigma.ln() - 0.5 * (2.0 * std::f64::consts::PI).ln();
+            return Density::Normal { mean, sigma };
         }
         let at = tau / STEP;
         let i = (at.floor() as usize).min(self.rows.len() - 2);
-        let t = at - i as f64;
-        let x = y - mean;
-        let (lo, hi) = (row_at(&self.rows[i], x), row_at(&self.rows[i + 1], x));
-        match (t > 0.0, lo.is_finite() && hi.is_finite()) {
-            (false, _) => lo,
-            (true, true) => lo + t * (hi - lo),
-            (true, false) => lo.min(hi),
+        Density::Table {
+            rows: (&self.rows[i], &self.rows[i + 1]),
+            t: at - i as f64,
+            mean,
+        }
+    }
+
+    /// `ln f(y)` of [`LogChi2::with`]`(mean, sigma)`.
+    pub fn ln_density(&self, y: f64, mean: f64, sigma: f64) -> f64 {
+        self.with(mean, sigma).ln(y)
+    }
+}
+
+/// The density of `y` for one mean and spread ([`LogChi2::with`]).
+#[derive(Clone, Copy, Debug)]
+pub enum Density<'a> {
+    /// Between two rows of the table, `t` of the way to the second.
+    Table {
+        rows: (&'a [f64], &'a [f64]),
+        t: f64,
+        mean: f64,
+    },
+    /// Beyond the table's widest spread: normal.
+    Normal { mean: f64, sigma: f64 },
+}
+
+impl Density<'_> {
+    /// `ln f(y)`; −∞ where the density is below the smallest `f64`.
+    pub fn ln(&self, y: f64) -> f64 {
+        match *self {
+            Density::Normal { mean, sigma } => log_normal_pdf(y, mean, sigma),
+            Density::Table { rows, t, mean } => {
+                let x = y - mean;
+                lerp(row_at(rows.0, x), row_at(rows.1, x), t)
+            }
         }
     }
 }
@@ -191,15 +219,20 @@ impl LogChi2 {
 /// along the line through the two outermost columns beyond the table.
 fn row_at(row: &[f64], x: f64) -> f64 {
     let at = (x + LEFT) / STEP;
-    let last = row.len() - 1;
     let j = if at < 0.0 {
         0
     } else {
-        (at.floor() as usize).min(last - 1)
+        (at.floor() as usize).min(row.len() - 2)
     };
-    let t = at - j as f64;
-    let (lo, hi) = (row[j], row[j + 1]);
-    if lo.is_finite() && hi.is_finite() {
+    lerp(row[j], row[j + 1], at - j as f64)
+}
+
+/// `lo + t·(hi − lo)` of two log densities: `lo` at `t = 0`, and −∞ when
+/// either is −∞ (a density below the smallest `f64` on one side).
+fn lerp(lo: f64, hi: f64, t: f64) -> f64 {
+    if t == 0.0 {
+        lo
+    } else if lo.is_finite() && hi.is_finite() {
         lo + t * (hi - lo)
     } else {
         f64::NEG_INFINITY

@@ -704,7 +704,7 @@ fn mean_and_variance(y: &[f64]) -> (f64, f64) {
 }
 
 /// `ln N(y | μ, σ)`.
-fn log_normal_pdf(y: f64, mu: f64, sigma: f64) -> f64 {
+pub(crate) fn log_normal_pdf(y: f64, mu: f64, sigma: f64) -> f64 {
     let z = (y - mu) / sigma;
     -0.5 * z * z - sigma.ln() - LN_SQRT_2PI
 }
