@@ -56,7 +56,7 @@ use crate::stats::mixture::{
     EmFit, EmOptions, MIN_VARIANCE_FLOOR, NormalComponent, NormalMixture, best_fit, bic,
     kmeans_start, quantile_start,
 };
-use crate::stats::separation::{ashman_d, crossing};
+use crate::stats::separation::{CLEAN_SEPARATION, ashman_d, crossing};
 use serde::Serialize;
 use std::fmt;
 
@@ -148,8 +148,8 @@ pub struct MixtureOptions {
     pub variance_floor: VarianceFloor,
     /// Fewer non-zero counts than this are degenerate (default 8).
     pub min_counts: usize,
-    /// Ashman's D below this is degenerate (default 2.0, the usual bound for
-    /// a clean separation of two normals).
+    /// Ashman's D below this is degenerate (default [`CLEAN_SEPARATION`],
+    /// the usual bound for a clean separation of two normals).
     pub min_ashman_d: f64,
     /// A loop-component weight below this is degenerate (default 0.02).
     pub min_loop_weight: f64,
@@ -166,7 +166,7 @@ impl Default for MixtureOptions {
             max_iterations: 1000,
             variance_floor: VarianceFloor::Quantization,
             min_counts: 8,
-            min_ashman_d: 2.0,
+            min_ashman_d: CLEAN_SEPARATION,
             min_loop_weight: 0.02,
             min_loop_size: 3.0,
         }

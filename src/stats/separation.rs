@@ -4,6 +4,12 @@
 
 use super::mixture::NormalComponent;
 
+/// Ashman's D of two cleanly separated normals: a mixture of two normals of
+/// equal weights is bimodal only beyond it. The gate asks it of its two
+/// components, the loop model of each wrong population against the true
+/// loops.
+pub const CLEAN_SEPARATION: f64 = 2.0;
+
 /// Ashman's D = √2·|μ₁ − μ₀| / √(σ₀² + σ₁²) of two components; above 2
 /// they are cleanly separated (a mixture of two normals is bimodal only for
 /// D > 2, with equal weights).
