@@ -252,7 +252,9 @@ impl Sums {
 impl LoopModel {
     /// Fits the model by EM to candidates of innovation dimension
     /// `dimension`, for each number of wrong populations from 0 to
-    /// [`MAX_WRONG_POPULATIONS`], and keeps the fit of the lowest BIC.
+    /// [`MAX_WRONG_POPULATIONS`], and keeps the fit of the lowest BIC among
+    /// those whose wrong populations stand apart from the true loops
+    /// ([`CLEAN_SEPARATION`]; the fit without one always does).
     /// `start` marks the candidates taken as true loops for the first
     /// M-step (e.g. those the map was solved with). The fits for each
     /// number of populations run on `parallelism`'s threads.
