@@ -5,10 +5,11 @@
 //!    `w = c_t² / (c_t² + r²)`, with a kernel width `c_t` that starts at the
 //!    median residual and narrows by [`ANNEAL_STEP`] per E-step to `c` (as
 //!    GNC's μ schedule does), each E-step followed by *one* linearised step
-//!    of the map from where it is. It ends [`SETTLE_STEPS`] E-steps after
-//!    the width reached `c`: a map close to the consensus of the loops,
-//!    found at the cost of a few steps instead of a solve per E-step, and
-//!    its set of candidates of weight ≥ ½ (the held set) to decide from.
+//!    of the map from where it is. It ends at the E-step after the first
+//!    [`SETTLE_STEPS`] at the final width `c`: a map close to the
+//!    consensus of the loops, found at the cost of a few steps instead of a
+//!    solve per E-step, and its set of candidates of weight ≥ ½ (the held
+//!    set) to decide from.
 //! 2. **Decisions by innovation** ([`decide`]): the candidates of weight ≥ ½
 //!    are accepted and the map is solved with them (at full weight, the
 //!    others left out); every candidate — accepted, rejected, or dropped by
