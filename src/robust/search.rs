@@ -18,7 +18,10 @@
 //! it pass. The search takes the cluster that explains the failure with
 //! the largest drop — or only its member that explains it alone, if one
 //! does ([`alone`]) — out, solves again, and repeats while the test fails
-//! and a cluster explains it; what is left is reported as the suspects.
+//! and a cluster explains it, and, once it passes, while a cluster stands
+//! out that did not before: loops consistent with one taken out, which
+//! only its removal shows. What is left of a failure is reported as the
+//! suspects.
 //!
 //! When no cluster explains it, the decisions may have started from a map
 //! the wrong loops had already bent (most candidates wrong, their counts
@@ -90,20 +93,36 @@ pub fn explain<P: Pose<D>, const D: usize>(
 ) -> Result<Search, SolveError> {
     let mut search = Search::default();
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    // The loops of every cluster that stood out at an earlier ranking.
+    let mut stood_out = vec![false; candidates.len()];
     loop {
         let Some(t) = test(session.graph, weights) else {
             return Ok(search);
         };
-        if t.passed {
+        if t.passed && search.removed.is_empty() {
             return Ok(search);
         }
+        // Once the test passes, a cluster is taken out only if it stands out
+        // now and did not before: loops consistent with one taken out, which
+        // only its removal shows (a true loop of a heavy tail stood out from
+        // the start, and a map that passes keeps it).
         let ranked = rank(decided, &t, D);
-        let found = ranked.iter().find(|s| s.explains).cloned();
+        let tested = ranked.len();
+        let found = (ranked.iter())
+            .filter(|s| !t.passed || !s.loops.iter().any(|&k| stood_out[k]))
+            .find(|s| s.explains)
+            .cloned();
+        for s in &ranked {
+            if stands_out(&t, s.d2_drop, (s.loops.len(), D), tested) {
+                s.loops.iter().for_each(|&k| stood_out[k] = true);
+            }
+        }
         let Some(cluster) = found.filter(|_| search.removed.len() < MAX_REMOVALS) else {
-            search.suspects = ranked.into_iter().take(SUSPECTS).collect();
+            if !t.passed {
+                search.suspects = ranked.into_iter().take(SUSPECTS).collect();
+            }
             return Ok(search);
         };
-        let tested = ranked.len();
         let cluster = match alone(session, weights, (&edges, decided), (&t, tested), &cluster)? {
             Some(member) => member,
             None => cluster,
@@ -194,9 +213,15 @@ fn rank(decided: &Decided, t: &Chi2Test, dimension: usize) -> Vec<Suspect> {
 /// `tested` clusters: the test passes without them, and the drop exceeds
 /// the critical value of χ²(loops·dimension) at `t.alpha / tested`.
 fn explains(t: &Chi2Test, drop: f64, (loops, dimension): (usize, usize), tested: usize) -> bool {
+    stands_out(t, drop, (loops, dimension), tested) && passes_without(t, drop, loops, dimension)
+}
+
+/// Whether a drop of `D²` by `drop` without `loops` accepted loops of
+/// dimension `dimension` is an outlier as one of `tested` clusters: above
+/// the critical value of χ²(loops·dimension) at `t.alpha / tested`.
+fn stands_out(t: &Chi2Test, drop: f64, (loops, dimension): (usize, usize), tested: usize) -> bool {
     let alpha = t.alpha / tested.max(1) as f64;
-    let stands_out = chi2_critical((loops * dimension) as u64, alpha).is_ok_and(|c| drop > c);
-    stands_out && passes_without(t, drop, loops, dimension)
+    chi2_critical((loops * dimension) as u64, alpha).is_ok_and(|c| drop > c)
 }
 
 /// Whether the test `t` would pass without `loops` accepted loops (edges of
