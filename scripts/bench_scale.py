@@ -139,6 +139,7 @@ def main():
     args = ap.parse_args()
     if not args.plot_only:
         os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+        os.makedirs(args.work, exist_ok=True)
         results = json.load(open(args.out)) if os.path.exists(args.out) else []
         for world in args.worlds:
             for size in args.sizes:
