@@ -744,9 +744,15 @@ mod tests {
     /// The model of `e` in 3 dimensions at a learned scale, started from
     /// every candidate taken as a true loop, on one thread.
     fn fitted(e: &[Evidence]) -> LoopModel {
+        fitted_from(e, &vec![true; e.len()])
+    }
+
+    /// The model of 3-D innovations `e`, EM started from the candidates
+    /// `start` marks as true loops.
+    fn fitted_from(e: &[Evidence], start: &[bool]) -> LoopModel {
         LoopModel::fit(
             e,
-            &vec![true; e.len()],
+            start,
             (3, Scale::Learned),
             &Layers::default(),
             &Parallelism::sequential(),
@@ -883,13 +889,7 @@ mod tests {
             .flat_map(|(g, s)| vec![s; g.len()])
             .collect();
         let e: Vec<Evidence> = groups.concat();
-        let m = LoopModel::fit(
-            &e,
-            &start,
-            (3, Scale::Learned),
-            &Layers::default(),
-            &Parallelism::sequential(),
-        );
+        let m = fitted_from(&e, &start);
         let kept = e[..n].iter().filter(|x| m.posterior(x) >= 0.5).count();
         // Without the rule: 514 here, and none on the unbinned innovations.
         assert!(kept >= n * 4 / 5, "{kept} of {n} kept: {m:?}");
@@ -911,13 +911,7 @@ mod tests {
         // Started, as the decisions start it, from the loops the map was
         // solved with: the true ones.
         let start: Vec<bool> = (0..e.len()).map(|i| i < true_loops.len()).collect();
-        let m = LoopModel::fit(
-            &e,
-            &start,
-            (3, Scale::Learned),
-            &Layers::default(),
-            &Parallelism::sequential(),
-        );
+        let m = fitted_from(&e, &start);
         let kept = true_loops.iter().filter(|x| m.posterior(x) >= 0.5).count();
         assert_eq!(kept, true_loops.len(), "{m:?}");
         assert!(
