@@ -282,7 +282,7 @@ impl LoopModel {
         // Every number of populations: a second tight population can pay for
         // itself where a first one spread over both does not. The fits are
         // independent, so they run side by side where there are threads.
-        for start in starts(&y, start) {
+        for start in starts(&order, start) {
             let fit_k = |k: usize| {
                 Self::fit_k(
                     (evidence, &counts),
@@ -295,11 +295,11 @@ impl LoopModel {
             };
             let ks: Vec<usize> = (0..=most).collect();
             let fits = parallelism.map(&ks, |&k| fit_k(k));
-            for (k, model) in fits.into_iter().map_while(|f| f).enumerate() {
+            for (k, (model, sums)) in fits.into_iter().map_while(|f| f).enumerate() {
                 if !model.separated() {
                     continue;
                 }
-                let length = model.message_length((evidence, &counts), &y, k, pinned);
+                let length = model.message_length(&sums, k, y.len());
                 if best.as_ref().is_none_or(|(b, _)| length < *b) {
                     best = Some((length, model));
                 }
@@ -321,16 +321,9 @@ impl LoopModel {
     /// own candidates, not from all `n` (Figueiredo & Jain's criterion for
     /// mixtures): at `ln n` each, a population of ten wrong loops among
     /// eight hundred true ones would cost as much as one of four hundred.
-    fn message_length(
-        &self,
-        (evidence, counts): (&[Evidence], &Counts),
-        y: &[f64],
-        k: usize,
-        pinned: Option<f64>,
-    ) -> f64 {
-        let mut sums = Sums::new(pinned);
-        self.e_step((evidence, counts), y, k, &mut sums);
-        let n = y.len().max(1) as f64;
+    /// `sums` are those of this model's E-step, over `n` candidates.
+    fn message_length(&self, sums: &Sums, k: usize, n: usize) -> f64 {
+        let n = n.max(1) as f64;
         let populations: f64 = (sums.columns[..=k].iter())
             .map(|&(n_j, _, _)| 2.0 * n_j.max(1.0).ln())
             .sum();
@@ -377,7 +370,9 @@ impl LoopModel {
     /// marks as true loops and the others split by rank into `k` groups (or,
     /// with fewer than `k` others, the upper quarter of all split so);
     /// `None` when there are fewer than `k` candidates to start from.
-    /// `order` ranks the candidates by `y`.
+    /// `order` ranks the candidates by `y`. Returns the fit with the sums of
+    /// its own E-step (its populations' expected sizes, for the message
+    /// length).
     fn fit_k(
         (evidence, counts): (&[Evidence], &Counts),
         (y, order): (&[f64], &[usize]),
@@ -385,7 +380,7 @@ impl LoopModel {
         k: usize,
         (floor, pinned, dof): (f64, Option<f64>, usize),
         aliasing: bool,
-    ) -> Option<Self> {
+    ) -> Option<(Self, Sums)> {
         let mut rest: Vec<usize> = order.iter().copied().filter(|&i| !start[i]).collect();
         if rest.len() < k {
             rest = order[order.len() - order.len() / 4..].to_vec();
@@ -432,12 +427,12 @@ impl LoopModel {
         while iterations + 2 <= MAX_ITERATIONS {
             let first = iterate(&at.1);
             if settled(&at.0, &first.0) {
-                return Some(first.0);
+                return Some(first);
             }
             let second = iterate(&first.1);
             iterations += 2;
             if settled(&first.0, &second.0) {
-                return Some(second.0);
+                return Some(second);
             }
             let path = [&at.0, &first.0, &second.0].map(|m| m.parameters());
             at = squarem::jumps(&path[0], &path[1], &path[2])
@@ -446,7 +441,7 @@ impl LoopModel {
                 .find(|jump| jump.0.ln_likelihood >= second.0.ln_likelihood)
                 .unwrap_or(second);
         }
-        Some(at.0)
+        Some(at)
     }
 
     /// The fitted parameters in one vector: the true loops' mean and
@@ -686,23 +681,21 @@ impl LoopModel {
 /// the true loops' upper tail, and EM started with them among the wrong
 /// loops can end with one population spread over both; with none marked,
 /// the lower half of `y` (true loops are the more consistent ones).
-fn starts(y: &[f64], marked: &[bool]) -> Vec<Vec<bool>> {
+/// `order` ranks the candidates by `y`.
+fn starts(order: &[usize], marked: &[bool]) -> Vec<Vec<bool>> {
     if marked.contains(&true) {
-        let mut rest: Vec<usize> = (0..y.len()).filter(|&i| !marked[i]).collect();
+        let rest: Vec<usize> = order.iter().copied().filter(|&i| !marked[i]).collect();
         if rest.len() < 2 {
             return vec![marked.to_vec()];
         }
-        rest.sort_by(|&a, &b| y[a].total_cmp(&y[b]));
         let mut more = marked.to_vec();
         for &i in &rest[..rest.len() / 2] {
             more[i] = true;
         }
         return vec![marked.to_vec(), more];
     }
-    let mut order: Vec<usize> = (0..y.len()).collect();
-    order.sort_by(|&a, &b| y[a].total_cmp(&y[b]));
-    let mut lower = vec![false; y.len()];
-    for &i in &order[..y.len() / 2] {
+    let mut lower = vec![false; order.len()];
+    for &i in &order[..order.len() / 2] {
         lower[i] = true;
     }
     vec![lower]
