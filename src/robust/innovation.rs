@@ -132,12 +132,16 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     }
 
     /// The innovations of candidates `edges` (edge indices; `accepted[k]`:
-    /// the map was solved with it) grouped by `clusters`.
+    /// the map was solved with it) grouped by `clusters`. A lone candidate
+    /// outside the map whose blocks of `H⁻¹` are off the factor's pattern
+    /// gets a lower bound of its `ν²` unless `exact` asks for the value
+    /// ([`Innovations::exact`]).
     pub fn innovations(
         &mut self,
         edges: &[usize],
         accepted: &[bool],
         clusters: &[Vec<usize>],
+        exact: bool,
     ) -> Innovations {
         let mut out = Innovations {
             nu2: vec![None; edges.len()],
@@ -154,7 +158,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
                 (members, a)
             })
             .collect();
-        let judged = self.judge_all(edges, &groups, false);
+        let judged = self.judge_all(edges, &groups, exact);
         for ((members, _), (nu2, joint, exact)) in groups.iter().zip(judged) {
             for (&k, v) in members.iter().zip(nu2) {
                 out.nu2[k] = v;

@@ -203,6 +203,10 @@ pub enum Reason {
     Unchecked,
     /// Taken out because the map failed the χ² test without it.
     ExplainsChi2,
+    /// The decisions did not settle on it: the last evaluation's posterior
+    /// and the set the map was solved with disagree (accepted on some maps
+    /// of a cycle of sets and rejected on others: left out).
+    Unsettled,
     /// Weighted by a kernel (weight ≥ ½ or not).
     Kernel,
     /// Dropped by the gate, and the method weighs only the kept ones.
@@ -463,21 +467,18 @@ fn settle<P: ChordalInit<D>, const D: usize>(
     test: &Test<'_, P, D>,
     out: &mut Outcome,
 ) -> Result<(), SolveError> {
-    let mut decided = schedule::decide(
+    let (mut decided, mut search) = decide_and_explain(
         session,
-        weights,
-        candidates,
-        Scale::Learned,
+        (weights, candidates),
+        (chordal, swing),
         layers,
-        chordal,
-        swing,
+        test,
     )?;
     if decided.swung {
         out.swung = true;
         out.decisions = decided.decisions;
         return Ok(());
     }
-    let mut search = explain(session, weights, candidates, &mut decided, layers, test)?;
     // A failed test no cluster explains: decide again from the trusted
     // edges' map, with the scale learned and with the file's.
     for scale in [Scale::Learned, Scale::File] {
@@ -508,6 +509,58 @@ fn settle<P: ChordalInit<D>, const D: usize>(
     Ok(())
 }
 
+/// The decisions by innovation and the χ² search, again while the search
+/// takes clusters out: a wrong loop that bent the map can leave true loops
+/// inconsistent with it, which the map without it shows. The clusters
+/// taken out stay out (their prior of a true loop is 0) and the decisions
+/// start from the set the search left; the searches' removals add up to at
+/// most [`MAX_REMOVALS`].
+fn decide_and_explain<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    (weights, candidates): (&mut [f64], &[Candidate]),
+    (chordal, swing): (bool, Swing),
+    layers: &Layers,
+    test: &Test<'_, P, D>,
+) -> Result<(schedule::Decided, Option<Search>), SolveError> {
+    let mut judged = candidates.to_vec();
+    let mut removed: Vec<Suspect> = Vec::new();
+    let mut before: Option<schedule::Decided> = None;
+    loop {
+        let mut decided = schedule::decide(
+            session,
+            weights,
+            &judged,
+            Scale::Learned,
+            layers,
+            chordal,
+            swing,
+        )?;
+        if let Some(b) = &before {
+            decided.count_work_of(b);
+        }
+        if decided.swung {
+            return Ok((decided, None));
+        }
+        let Some(mut search) = explain(session, weights, &judged, &mut decided, layers, test)?
+        else {
+            return Ok((decided, None));
+        };
+        let again = !search.removed.is_empty()
+            && removed.len() + search.removed.len() < MAX_REMOVALS
+            && !decided.cut_short
+            && !session.exhausted();
+        for k in search.removed.iter().flat_map(|r| r.loops.iter().copied()) {
+            judged[k].count_posterior = Some(0.0);
+        }
+        removed.append(&mut search.removed);
+        if !again {
+            search.removed = removed;
+            return Ok((decided, Some(search)));
+        }
+        before = Some(decided);
+    }
+}
+
 /// Fills `out` with what the decisions `decided` and the χ² search
 /// `search` found: the counts, and each candidate's innovation, posterior
 /// and reason.
@@ -533,11 +586,14 @@ fn record(
             Some(e) => m.posterior(e),
             None => m.prior(candidates[k].count_posterior),
         });
+        let consistent = out.posteriors[k].is_some_and(|p| p >= 0.5);
         out.reasons[k] = if removed.contains(&k) {
             Reason::ExplainsChi2
         } else if e.is_none() {
             Reason::Unchecked
-        } else if out.posteriors[k].is_some_and(|p| p >= 0.5) {
+        } else if consistent != decided.accepted[k] {
+            Reason::Unsettled
+        } else if consistent {
             Reason::Consistent
         } else {
             Reason::Inconsistent

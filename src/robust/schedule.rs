@@ -330,7 +330,8 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
 ) -> Result<Decided, SolveError> {
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     let mut out = Decided::start(session.graph, &edges, weights, layers);
-    let mut seen: Vec<Vec<bool>> = Vec::new();
+    // The sets solved, each with its map's fit ([`excess`]).
+    let mut seen: Vec<(Vec<bool>, f64)> = Vec::new();
     let mut swings = Swings::new(edges.len());
     // Whether the map in the graph met the job's own tolerance, and whether
     // the set repeats on a map that did not (it is then solved again).
@@ -378,16 +379,30 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             out.swung = true;
             break;
         }
-        seen.push(std::mem::replace(&mut out.accepted, next));
-        if seen.contains(&out.accepted) {
-            // Settled, or cycling: keep the set the map was solved with.
-            out.accepted = seen.pop().unwrap_or_default();
+        let fit = excess(session.graph, weights, &out.accepted, D);
+        seen.push((std::mem::replace(&mut out.accepted, next), fit));
+        if let Some(first) = seen.iter().position(|(s, _)| *s == out.accepted) {
+            // Settled (a cycle of one set), or cycling: each map of the
+            // cycle judges the next set. Keep the one whose map fits its
+            // measurements best, as the χ² test measures it.
+            let best = (seen.drain(first..)).min_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((set, _)) = best.filter(|(set, _)| {
+                edges
+                    .iter()
+                    .zip(set)
+                    .any(|(&e, &a)| a != (weights[e] == 1.0))
+            }) {
+                for (&e, &a) in edges.iter().zip(&set) {
+                    weights[e] = if a { 1.0 } else { 0.0 };
+                }
+                converged = false;
+            }
             break;
         }
     }
-    // Whatever ended the decisions, the set kept is the one the map was
-    // solved with (after MAX_DECISIONS, not the last one judged), and its
-    // map is solved to the job's tolerance.
+    // Whatever ended the decisions, the set kept is the one in `weights`
+    // (after MAX_DECISIONS, the one the map was solved with, not the last
+    // one judged), and its map is solved to the job's tolerance.
     for (a, &k) in out.accepted.iter_mut().zip(&edges) {
         *a = weights[k] == 1.0;
     }
@@ -395,6 +410,21 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
         session.converge(weights)?;
     }
     Ok(out)
+}
+
+/// How much more `Σ eᵀΩe` the least-squares map of the accepted set in
+/// `weights` (`accepted` of the candidates) has than its measurements'
+/// information expects: each accepted loop of dimension `dimension` adds
+/// that many degrees of freedom to the χ² test, so between sets that
+/// differ in a few loops this ranks their maps as the test does.
+fn excess<P: Pose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    weights: &[f64],
+    accepted: &[bool],
+    dimension: usize,
+) -> f64 {
+    let loops = accepted.iter().filter(|&&a| a).count();
+    graph.chi2_where(|k| weights[k] > 0.0) - (loops * dimension) as f64
 }
 
 /// One evaluation of the map in the session's graph (the least-squares map
@@ -412,15 +442,18 @@ fn evaluate<P: Pose<D>, const D: usize>(
 ) -> Result<Vec<bool>, SolveError> {
     let start = Instant::now();
     let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?;
-    let mut innov = eval.innovations(edges, &out.accepted, &out.clusters);
-    let (model, next) = judge_exactly(
+    // Exact innovations: a lower bound (a lone candidate outside the map) is
+    // not the evidence the model describes, and a wrong loop's bound can
+    // sit among the true loops' innovations.
+    let innov = eval.innovations(edges, &out.accepted, &out.clusters, true);
+    let parallelism = eval.parallelism().clone();
+    let (model, next) = judge(
         candidates,
-        edges,
-        &mut eval,
-        &mut innov,
+        &innov,
         &out.accepted,
-        scale,
+        (D, scale),
         layers,
+        &parallelism,
     );
     session.evaluated_since(start);
     out.innovations = innov;
@@ -503,7 +536,7 @@ pub fn propose<P: Pose<D>, const D: usize>(
         weights,
         (&edges, &touched),
     )?;
-    let mut innov = eval.innovations(&edges, &decided.accepted, &touched);
+    let mut innov = eval.innovations(&edges, &decided.accepted, &touched, false);
     let accepts = |innov: &Innovations, k: usize| match evidence(candidates, innov, k) {
         Some(e) => proposal.model.posterior(&e) >= 0.5,
         None => proposal.model.prior(candidates[k].count_posterior) >= 0.5,
@@ -558,39 +591,6 @@ fn relaxed_start<P: ChordalInit<D>, const D: usize>(
     }
     session.relaxed_since(start);
     Ok(better)
-}
-
-/// [`judge`], with the candidates whose innovation is only a lower bound
-/// made exact where the bound would accept them (a larger innovation can
-/// only lower the posterior), and the model fitted again, until none is
-/// left that could be accepted.
-fn judge_exactly<P: Pose<D>, const D: usize>(
-    candidates: &[Candidate],
-    edges: &[usize],
-    eval: &mut Evaluation<'_, P, D>,
-    innov: &mut Innovations,
-    accepted: &[bool],
-    scale: Scale,
-    layers: &Layers,
-) -> (LoopModel, Vec<bool>) {
-    let parallelism = eval.parallelism().clone();
-    loop {
-        let (model, next) = judge(
-            candidates,
-            innov,
-            accepted,
-            (D, scale),
-            layers,
-            &parallelism,
-        );
-        let open: Vec<usize> = (0..candidates.len())
-            .filter(|&k| next[k] && !innov.exact[k])
-            .collect();
-        if open.is_empty() {
-            return (model, next);
-        }
-        eval.refine(edges, &open, innov);
-    }
 }
 
 /// Fits the loop model to every candidate's evidence and returns it with

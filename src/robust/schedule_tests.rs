@@ -233,6 +233,48 @@ fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
 }
 
 #[test]
+fn the_model_is_fitted_on_exact_innovations() {
+    // The wrong loop, rejected and alone outside the map, would have only a
+    // lower bound of its innovation (here 152 for 400); the model is fitted
+    // on the value.
+    let (mut g, candidates) = walk();
+    let mut weights = vec![1.0; g.edges.len()];
+    weights[candidates[4].edge] = 0.0;
+    let decided = with_session(
+        &mut g,
+        &mut weights,
+        SolverOptions::default(),
+        |mut s, w| {
+            // Each candidate its own cluster ((2, 10) is beside the true (3, 9)).
+            let layers = Layers {
+                clusters: false,
+                ..Layers::default()
+            };
+            decide(
+                &mut s,
+                w,
+                &candidates,
+                Scale::Learned,
+                &layers,
+                false,
+                Swing::Continue,
+            )
+            .unwrap()
+        },
+    );
+    assert_eq!(decided.accepted, [true, true, true, true, false]);
+    assert!(decided.innovations.exact.iter().all(|&e| e));
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    let mut o = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
+    let mut eval = Evaluation::new(&mut o, &g, &weights).unwrap();
+    let alone = vec![vec![4]];
+    let bound = eval.innovations(&edges, &decided.accepted, &alone, false);
+    let exact = eval.innovations(&edges, &decided.accepted, &alone, true);
+    let (b, v) = (bound.nu2[4].unwrap(), exact.nu2[4].unwrap());
+    assert!(!bound.exact[4] && b < v, "{b} {v}");
+}
+
+#[test]
 fn a_swing_is_a_round_that_flips_back_what_the_round_before_flipped() {
     let mut swings = Swings::new(4);
     let a = [true, true, false, false];
@@ -293,7 +335,7 @@ fn a_few_clusters_are_judged_by_their_solves_alone_to_the_same_innovations() {
     // The true loop 3–9 alone, the wrong 2–10 alone.
     let few = vec![vec![3], vec![4]];
     let mut full_eval = Evaluation::new(&mut o, &g, &weights).unwrap();
-    let mut full = full_eval.innovations(&edges, &accepted, &few);
+    let mut full = full_eval.innovations(&edges, &accepted, &few, false);
     // A lone candidate outside the map gets a lower bound there, made
     // exact by `refine`; the solves give the exact value at once.
     let bounds = full.nu2.clone();
@@ -303,7 +345,7 @@ fn a_few_clusters_are_judged_by_their_solves_alone_to_the_same_innovations() {
         !eval.holds_inverse(),
         "two loops solve for less than the inverse"
     );
-    let solved = eval.innovations(&edges, &accepted, &few);
+    let solved = eval.innovations(&edges, &accepted, &few, false);
     for k in [3, 4] {
         let (a, b) = (full.nu2[k].unwrap(), solved.nu2[k].unwrap());
         assert!((a / b - 1.0).abs() < 1e-9, "{k}: {a} {b}");
@@ -372,7 +414,7 @@ fn run_search(tight: bool) -> (super::super::search::Search, Decided, Vec<f64>, 
             let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
             decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
                 .unwrap()
-                .innovations(&edges, &decided.accepted, &decided.clusters);
+                .innovations(&edges, &decided.accepted, &decided.clusters, true);
             assert!(!chi2_test(s.graph, w).unwrap().passed);
             let search =
                 super::super::search::explain(&mut s, w, candidates, &mut decided, &chi2_test);
@@ -407,7 +449,7 @@ fn a_wrong_loop_in_a_cluster_of_true_ones_is_taken_out_alone() {
             decided.clusters = vec![vec![0], vec![1], vec![2], vec![3, 4]];
             decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
                 .unwrap()
-                .innovations(&edges, &decided.accepted, &decided.clusters);
+                .innovations(&edges, &decided.accepted, &decided.clusters, true);
             let search =
                 super::super::search::explain(&mut s, w, candidates, &mut decided, &chi2_test);
             let passed = chi2_test(s.graph, w).unwrap().passed;

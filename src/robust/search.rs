@@ -138,7 +138,7 @@ pub fn explain<P: Pose<D>, const D: usize>(
         }
         let start = Instant::now();
         decided.innovations = Evaluation::new(session.optimizer, session.graph, weights)?
-            .innovations(&edges, &decided.accepted, &decided.clusters);
+            .innovations(&edges, &decided.accepted, &decided.clusters, true);
         session.evaluated_since(start);
     }
 }
@@ -163,7 +163,7 @@ fn alone<P: Pose<D>, const D: usize>(
     let singles: Vec<Vec<usize>> = cluster.loops.iter().map(|&k| vec![k]).collect();
     let joint =
         Evaluation::for_clusters(session.optimizer, session.graph, weights, (edges, &singles))?
-            .innovations(edges, &decided.accepted, &singles)
+            .innovations(edges, &decided.accepted, &singles, true)
             .joint;
     session.evaluated_since(start);
     let tests = tested + singles.len();

@@ -317,8 +317,64 @@ fn information_too_tight_fails_the_test_without_dropping_true_loops() {
 /// [`information_too_tight_fails_the_test_without_dropping_true_loops`] on
 /// `name` with `wrong` random wrong candidates made with `seed`.
 fn tight_information_keeps_the_true_loops(name: &str, wrong: usize, seed: u64) {
-    let Some(dir) = datasets() else { return };
-    let work = crate::common::temp_dir(&format!("tight-{name}"));
+    let Some((r, wrong)) = corrupted_and_decided(name, (wrong, seed), Some(10.0)) else {
+        return;
+    };
+    let (accepted_true, gated_true) = true_loops_kept(&r, &wrong);
+    assert!(
+        accepted_true as f64 >= 0.99 * gated_true as f64,
+        "{name}: {accepted_true} of the {gated_true} true loops that passed the gate accepted"
+    );
+    assert!(!r.chi2_test.expect("a χ² test").passed, "{name}");
+}
+
+/// Two cases of the outlier benchmark where true loops used to be lost
+/// (`scripts/bench_robust.py`, 1000 random wrong candidates; the seeds are
+/// the benchmark's). Intel, its published information: EM fitted the lower
+/// bounds of wrong loops' innovations as a population among the true loops
+/// and rejected a true loop with a low count; the model now sees exact
+/// innovations. Manhattan, calibrated: an accepted wrong loop bent the map
+/// and 41 true loops were rejected; the χ² search took it out, and the
+/// decisions now run again on the map without it.
+#[test]
+fn random_wrong_candidates_cost_no_true_loop() {
+    for (name, seed, calibrated) in [("intel.g2o", 2, None), ("manhattan.g2o", 5, Some(1.0))] {
+        let Some((r, wrong)) = corrupted_and_decided(name, (1000, seed), calibrated) else {
+            return;
+        };
+        let (accepted_true, _) = true_loops_kept(&r, &wrong);
+        let true_loops = wrong.iter().filter(|w| !**w).count();
+        assert_eq!(accepted_true, true_loops, "{name}: true loops rejected");
+        assert!(r.chi2_test.expect("a χ² test").passed, "{name}");
+    }
+}
+
+/// How many true loops `r` accepted, of those that passed the gate; no
+/// wrong one accepted (`wrong`: the candidates' labels).
+fn true_loops_kept(r: &pgo::report::Report, wrong: &[bool]) -> (usize, usize) {
+    assert_eq!(r.loops.len(), wrong.len());
+    let count = |keep: &dyn Fn(&pgo::report::LoopReport, bool) -> bool| {
+        r.loops
+            .iter()
+            .zip(wrong)
+            .filter(|(l, w)| keep(l, **w))
+            .count()
+    };
+    assert_eq!(count(&|l, w| l.accepted && w), 0, "wrong loops accepted");
+    (count(&|l, w| l.accepted && !w), count(&|l, w| l.kept && !w))
+}
+
+/// Dataset `name` with `wrong` random wrong candidates made with `seed`
+/// (`pgo corrupt`), its information as published or, with `calibrated`,
+/// scaled to that times the clean optimum's `χ²/dof = 1`, optimised with
+/// the default options; the report and the candidates' labels.
+fn corrupted_and_decided(
+    name: &str,
+    (wrong, seed): (usize, u64),
+    calibrated: Option<f64>,
+) -> Option<(pgo::report::Report, Vec<bool>)> {
+    let dir = datasets()?;
+    let work = crate::common::temp_dir(&format!("corrupted-{name}-{wrong}-{seed}"));
     let (corrupted, labels) = (work.join("m.g2o"), work.join("m.labels.csv"));
     let src = dir.join(name);
     let (wrong, seed) = (wrong.to_string(), seed.to_string());
@@ -337,49 +393,35 @@ fn tight_information_keeps_the_true_loops(name: &str, wrong: usize, seed: u64) {
         &seed,
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
-    // Calibrated (the clean optimum at χ²/dof = 1), then ×10.
-    let clean = pipeline::run(
-        &OptimizeConfig {
-            gate: pgo::gate::GateMode::Off,
-            robust: pgo::robust::RobustMethod::None,
-            ..OptimizeConfig::new(&src)
-        },
-        &mut |_: &_| {},
-    )
-    .expect("clean");
-    let t = clean.chi2_test.expect("test");
-    let factor = 10.0 * t.dof_residual as f64 / t.d2;
-    let AnyPoseGraph::Planar(mut g) = g2o::read(&corrupted, ReadOptions::default())
-        .expect("read")
-        .graph
-    else {
-        unreachable!("{name} is 2D")
+    let input = match calibrated {
+        None => corrupted,
+        Some(times) => {
+            let clean = pipeline::run(
+                &OptimizeConfig {
+                    gate: pgo::gate::GateMode::Off,
+                    robust: pgo::robust::RobustMethod::None,
+                    ..OptimizeConfig::new(&src)
+                },
+                &mut |_: &_| {},
+            )
+            .expect("clean");
+            let t = clean.chi2_test.expect("test");
+            let factor = times * t.dof_residual as f64 / t.d2;
+            let AnyPoseGraph::Planar(mut g) = g2o::read(&corrupted, ReadOptions::default())
+                .expect("read")
+                .graph
+            else {
+                unreachable!("{name} is 2D")
+            };
+            for e in &mut g.edges {
+                e.information *= factor;
+            }
+            let scaled = work.join("m-scaled.g2o");
+            write_graph(&g, &scaled);
+            scaled
+        }
     };
-    for e in &mut g.edges {
-        e.information *= factor;
-    }
-    let tight = work.join("m-tight.g2o");
-    write_graph(&g, &tight);
     let wrong = candidate_wrong(&std::fs::read_to_string(&labels).expect("labels"));
-    let r = pipeline::run(&OptimizeConfig::new(&tight), &mut |_: &_| {}).expect("optimise");
-    assert_eq!(r.loops.len(), wrong.len());
-    let count = |keep: &dyn Fn(&pgo::report::LoopReport, bool) -> bool| {
-        r.loops
-            .iter()
-            .zip(&wrong)
-            .filter(|(l, w)| keep(l, **w))
-            .count()
-    };
-    let gated_true = count(&|l, w| l.kept && !w);
-    let accepted_true = count(&|l, w| l.accepted && !w);
-    assert_eq!(
-        count(&|l, w| l.accepted && w),
-        0,
-        "{name}: wrong loops accepted"
-    );
-    assert!(
-        accepted_true as f64 >= 0.99 * gated_true as f64,
-        "{name}: {accepted_true} of the {gated_true} true loops that passed the gate accepted"
-    );
-    assert!(!r.chi2_test.expect("a χ² test").passed, "{name}");
+    let r = pipeline::run(&OptimizeConfig::new(&input), &mut |_: &_| {}).expect("optimise");
+    Some((r, wrong))
 }
