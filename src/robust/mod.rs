@@ -204,8 +204,9 @@ pub enum Reason {
     /// Taken out because the map failed the χ² test without it.
     ExplainsChi2,
     /// The decisions did not settle on it: the last evaluation's posterior
-    /// and the set the map was solved with disagree (accepted on some maps
-    /// of a cycle of sets and rejected on others: left out).
+    /// and the set the map was solved with disagree (it was accepted on
+    /// some maps of a cycle of sets and rejected on others, and the set
+    /// kept is the cycle's best-fitting one).
     Unsettled,
     /// Weighted by a kernel (weight ≥ ½ or not).
     Kernel,
@@ -543,7 +544,12 @@ fn decide_and_explain<P: ChordalInit<D>, const D: usize>(
         }
         let Some(mut search) = explain(session, weights, &judged, &mut decided, layers, test)?
         else {
-            return Ok((decided, None));
+            // Cut short: what earlier rounds took out stays reported.
+            let search = (!removed.is_empty()).then(|| Search {
+                removed,
+                ..Search::default()
+            });
+            return Ok((decided, search));
         };
         let again = !search.removed.is_empty()
             && removed.len() + search.removed.len() < MAX_REMOVALS

@@ -382,19 +382,8 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
         let fit = excess(session.graph, weights, &out.accepted, D);
         seen.push((std::mem::replace(&mut out.accepted, next), fit));
         if let Some(first) = seen.iter().position(|(s, _)| *s == out.accepted) {
-            // Settled (a cycle of one set), or cycling: each map of the
-            // cycle judges the next set. Keep the one whose map fits its
-            // measurements best, as the χ² test measures it.
-            let best = (seen.drain(first..)).min_by(|a, b| a.1.total_cmp(&b.1));
-            if let Some((set, _)) = best.filter(|(set, _)| {
-                edges
-                    .iter()
-                    .zip(set)
-                    .any(|(&e, &a)| a != (weights[e] == 1.0))
-            }) {
-                for (&e, &a) in edges.iter().zip(&set) {
-                    weights[e] = if a { 1.0 } else { 0.0 };
-                }
+            // Settled (a cycle of one set), or cycling.
+            if keep_best(&seen[first..], &edges, weights) {
                 converged = false;
             }
             break;
@@ -410,6 +399,24 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
         session.converge(weights)?;
     }
     Ok(out)
+}
+
+/// Of the sets of a cycle (each map of which judges the next set), each
+/// with its map's [`excess`], puts the one whose map fits its measurements
+/// best, as the χ² test measures it, in `weights` (for candidates
+/// `edges`); returns whether that changed them.
+fn keep_best(cycle: &[(Vec<bool>, f64)], edges: &[usize], weights: &mut [f64]) -> bool {
+    let Some((set, _)) = cycle.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+        return false;
+    };
+    let changed = edges
+        .iter()
+        .zip(set)
+        .any(|(&e, &a)| a != (weights[e] == 1.0));
+    for (&e, &a) in edges.iter().zip(set) {
+        weights[e] = if a { 1.0 } else { 0.0 };
+    }
+    changed
 }
 
 /// How much more `Σ eᵀΩe` the least-squares map of the accepted set in

@@ -8,6 +8,18 @@ use nalgebra::Matrix3;
 /// A square walk of 16 poses with odometry, four true loops between the
 /// walk's laps and one wrong loop, all candidates; odometry file poses.
 fn walk() -> (PoseGraph<Se2, 3>, Vec<Candidate>) {
+    walk_with(&[
+        (0, 15, false),
+        (1, 14, false),
+        (4, 12, false),
+        (3, 9, false),
+        (2, 10, true),
+    ])
+}
+
+/// [`walk`] with the candidates `loops` (`(i, j, wrong)`; a wrong one's
+/// measurement is off by (3, −2, 1)).
+fn walk_with(loops: &[(usize, usize, bool)]) -> (PoseGraph<Se2, 3>, Vec<Candidate>) {
     let side = 4;
     let mut truth = Vec::new();
     for k in 0..4 * side {
@@ -37,13 +49,7 @@ fn walk() -> (PoseGraph<Se2, 3>, Vec<Candidate>) {
             .unwrap();
     }
     let mut candidates = Vec::new();
-    for (i, j, wrong) in [
-        (0, 15, false),
-        (1, 14, false),
-        (4, 12, false),
-        (3, 9, false),
-        (2, 10, true),
-    ] {
+    for &(i, j, wrong) in loops {
         let z = truth[i].inverse().compose(&truth[j]);
         let z = if wrong {
             Se2::new(z.x + 3.0, z.y - 2.0, z.theta + 1.0)
@@ -462,6 +468,84 @@ fn a_wrong_loop_in_a_cluster_of_true_ones_is_taken_out_alone() {
 }
 
 #[test]
+fn two_wrong_loops_that_explain_the_failure_only_together_are_taken_out() {
+    // Two wrong loops: without either alone the map still fails (the other
+    // bends it), without both it passes. The first goes as one of the two,
+    // the second then explains the failure alone.
+    let (mut g, candidates) = walk_with(&[
+        (0, 15, false),
+        (1, 14, false),
+        (4, 12, false),
+        (3, 9, false),
+        (2, 10, true),
+        (6, 13, true),
+    ]);
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    let layers = Layers {
+        clusters: false,
+        ..Layers::default()
+    };
+    let mut weights = vec![1.0; g.edges.len()];
+    let (search, decided, passed) = with_session(
+        &mut g,
+        &mut weights,
+        SolverOptions::default(),
+        |mut s, w| {
+            s.converge(w).unwrap();
+            let mut decided = Decided::start(s.graph, &edges, w, &layers);
+            decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
+                .unwrap()
+                .innovations(&edges, &decided.accepted, &decided.clusters, true);
+            let search =
+                super::super::search::explain(&mut s, w, &candidates, &mut decided, &chi2_test);
+            let passed = chi2_test(s.graph, w).unwrap().passed;
+            (search.unwrap(), decided, passed)
+        },
+    );
+    let mut removed: Vec<usize> = search
+        .removed
+        .iter()
+        .flat_map(|r| r.loops.clone())
+        .collect();
+    removed.sort_unstable();
+    assert_eq!(removed, [4, 5], "{search:?}");
+    assert_eq!(decided.accepted, [true, true, true, true, false, false]);
+    assert!(passed && search.suspects.is_empty());
+}
+
+#[test]
+fn removals_that_end_failing_are_undone_with_the_suspects_from_before() {
+    // What the search restores when removals that explain the failure only
+    // together end on a map that still fails: the map, weights, decisions
+    // and the findings from before the first of them.
+    on_search_case(false, |mut s, w, candidates, _, mut decided| {
+        let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+        decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
+            .unwrap()
+            .innovations(&edges, &decided.accepted, &decided.clusters, true);
+        let mut search = super::super::search::Search::default();
+        let ranked = vec![super::super::search::Suspect {
+            loops: vec![4],
+            d2_drop: 1.0,
+            explains: false,
+        }];
+        let (poses, weights, accepted) =
+            (s.graph.poses.clone(), w.to_vec(), decided.accepted.clone());
+        let before = super::super::search::Before::take(&s, w, &decided, (&search, &ranked));
+        search.removed.push(ranked[0].clone());
+        decided.accepted[4] = false;
+        w[edges[4]] = 0.0;
+        s.converge(w).unwrap();
+        assert_ne!(s.graph.poses, poses);
+        before.restore(&mut s, w, &mut decided, &mut search);
+        assert_eq!(s.graph.poses, poses);
+        assert_eq!((w.to_vec(), decided.accepted), (weights, accepted));
+        assert!(search.removed.is_empty());
+        assert_eq!(search.suspects[0].loops, [4]);
+    });
+}
+
+#[test]
 fn a_failure_no_loop_explains_leaves_the_loops_and_names_the_suspects() {
     // Information 10⁴ times too tight: every loop fails, none explains it.
     // Nothing is removed (fewer loops would only fail by less), and the
@@ -510,4 +594,17 @@ fn a_restart_that_still_fails_is_undone_but_its_work_is_counted() {
         assert_eq!(s.graph.poses, poses);
         assert_eq!(w, &before[..]);
     });
+}
+
+#[test]
+fn a_cycle_keeps_the_set_whose_map_fits_best() {
+    // Two candidates (edges 1 and 2); the map was solved with the first
+    // set, the second fits better: it is put in the weights.
+    let cycle = vec![(vec![true, false], 40.0), (vec![false, true], 12.0)];
+    let mut weights = vec![1.0, 1.0, 0.0];
+    assert!(keep_best(&cycle, &[1, 2], &mut weights));
+    assert_eq!(weights, [1.0, 0.0, 1.0]);
+    // Already the best: nothing changes.
+    assert!(!keep_best(&cycle, &[1, 2], &mut weights));
+    assert_eq!(weights, [1.0, 0.0, 1.0]);
 }

@@ -20,8 +20,11 @@
 //! does ([`alone`]) — out, solves again, and repeats while the test fails
 //! and a cluster explains it, and, once it passes, while a cluster stands
 //! out that did not before: loops consistent with one taken out, which
-//! only its removal shows. What is left of a failure is reported as the
-//! suspects.
+//! only its removal shows. When no cluster explains the failure alone but
+//! a few that stand out would together ([`jointly`]: two aliases each
+//! bending the map), they are taken out one at a time, most outstanding
+//! first, and kept only if the map ends up passing ([`Before`]). What is
+//! left of a failure is reported as the suspects.
 //!
 //! When no cluster explains it, the decisions may have started from a map
 //! the wrong loops had already bent (most candidates wrong, their counts
@@ -62,7 +65,8 @@ pub struct Suspect {
     /// By how much `D²` drops without them.
     pub d2_drop: f64,
     /// Whether they explain the failure: the map without them passes the
-    /// test, and their drop stands out among the clusters tested.
+    /// test (or would, without the clusters removed after them as well),
+    /// and their drop stands out among the clusters tested.
     pub explains: bool,
 }
 
@@ -95,12 +99,17 @@ pub fn explain<P: Pose<D>, const D: usize>(
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     // The loops of every cluster that stood out at an earlier ranking.
     let mut stood_out = vec![false; candidates.len()];
+    // The state before removals that explain the failure only together.
+    let mut before: Option<Before<P>> = None;
     loop {
         let Some(t) = test(session.graph, weights) else {
             return Ok(search);
         };
         if t.passed && search.removed.is_empty() {
             return Ok(search);
+        }
+        if t.passed {
+            before = None;
         }
         // Once the test passes, a cluster is taken out only if it stands out
         // now and did not before: loops consistent with one taken out, which
@@ -112,6 +121,9 @@ pub fn explain<P: Pose<D>, const D: usize>(
             .filter(|s| !t.passed || !s.loops.iter().any(|&k| stood_out[k]))
             .find(|s| s.explains)
             .cloned();
+        // None alone: the first of the clusters that do together.
+        let together = found.is_none() && !t.passed;
+        let found = found.or_else(|| together.then(|| jointly(&ranked, &t, D)).flatten());
         for s in &ranked {
             if stands_out(&t, s.d2_drop, (s.loops.len(), D), tested) {
                 s.loops.iter().for_each(|&k| stood_out[k] = true);
@@ -120,13 +132,24 @@ pub fn explain<P: Pose<D>, const D: usize>(
         let Some(cluster) = found.filter(|_| search.removed.len() < MAX_REMOVALS) else {
             if !t.passed {
                 search.suspects = ranked.into_iter().take(SUSPECTS).collect();
+                if let Some(b) = before.take() {
+                    b.restore(session, weights, decided, &mut search);
+                }
             }
             return Ok(search);
         };
-        let cluster = match alone(session, weights, (&edges, decided), (&t, tested), &cluster)? {
-            Some(member) => member,
-            None => cluster,
-        };
+        if together && before.is_none() {
+            before = Some(Before::take(session, weights, decided, (&search, &ranked)));
+        }
+        let member = alone(
+            session,
+            weights,
+            (&edges, decided),
+            (&t, tested),
+            &cluster,
+            together,
+        )?;
+        let cluster = member.unwrap_or(cluster);
         for &k in &cluster.loops {
             decided.accepted[k] = false;
             weights[edges[k]] = 0.0;
@@ -134,6 +157,9 @@ pub fn explain<P: Pose<D>, const D: usize>(
         search.removed.push(cluster);
         session.converge(weights)?;
         if session.exhausted() {
+            if let Some(b) = before.take() {
+                b.restore(session, weights, decided, &mut search);
+            }
             return Ok(search);
         }
         let start = Instant::now();
@@ -148,13 +174,16 @@ pub fn explain<P: Pose<D>, const D: usize>(
 /// among the true loops of a place (an alias a few poses off joins their
 /// cluster) is taken out without them. Each member is tested as a cluster
 /// of one against the map with the rest of the cluster; the level is
-/// shared among the `tested` clusters and these members.
+/// shared among the `tested` clusters and these members. With `together`
+/// (the cluster explains the failure only with others, [`jointly`]) a
+/// member need only stand out.
 fn alone<P: Pose<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &[f64],
     (edges, decided): (&[usize], &Decided),
     (t, tested): (&Chi2Test, usize),
     cluster: &Suspect,
+    together: bool,
 ) -> Result<Option<Suspect>, SolveError> {
     if cluster.loops.len() < 2 {
         return Ok(None);
@@ -170,13 +199,103 @@ fn alone<P: Pose<D>, const D: usize>(
     Ok((cluster.loops.iter().zip(joint))
         .filter_map(|(&k, drop)| {
             let drop = drop?;
-            explains(t, drop, (1, D), tests).then_some(Suspect {
+            let enough = if together {
+                stands_out(t, drop, (1, D), tests)
+            } else {
+                explains(t, drop, (1, D), tests)
+            };
+            enough.then_some(Suspect {
                 loops: vec![k],
                 d2_drop: drop,
                 explains: true,
             })
         })
         .max_by(|a, b| a.d2_drop.total_cmp(&b.d2_drop)))
+}
+
+/// When no cluster explains the failure of `t` alone: the clusters of
+/// `ranked` that stand out among them, by how far (the Wilson–Hilferty
+/// normal score of the drop on its degrees of freedom), and the first of
+/// them if the map would pass without it and the next ones (the drops
+/// added up). Taken out one at a time, each removal followed by a solve
+/// and a ranking, they are kept only if the map ends up passing
+/// ([`Before`]).
+fn jointly(ranked: &[Suspect], t: &Chi2Test, dimension: usize) -> Option<Suspect> {
+    let tested = ranked.len();
+    let mut out: Vec<(f64, &Suspect)> = (ranked.iter())
+        .filter(|s| stands_out(t, s.d2_drop, (s.loops.len(), dimension), tested))
+        .map(|s| (normal_score(s.d2_drop, s.loops.len() * dimension), s))
+        .collect();
+    out.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let (mut drop, mut loops) = (0.0, 0);
+    for (_, s) in &out {
+        drop += s.d2_drop;
+        loops += s.loops.len();
+        if passes_without(t, drop, loops, dimension) {
+            let first = out.first()?.1;
+            return Some(Suspect {
+                explains: true,
+                ..first.clone()
+            });
+        }
+    }
+    None
+}
+
+/// The Wilson–Hilferty normal score of `x` under χ²(`dof`): how many
+/// standard deviations `(x/dof)^⅓` lies above its mean.
+fn normal_score(x: f64, dof: usize) -> f64 {
+    let k = dof.max(1) as f64;
+    let v = 2.0 / (9.0 * k);
+    ((x.max(0.0) / k).cbrt() - (1.0 - v)) / v.sqrt()
+}
+
+/// The map, its weights and decisions, and the search's findings before a
+/// removal that explains the failure only together with later ones.
+pub(super) struct Before<P> {
+    poses: Vec<P>,
+    weights: Vec<f64>,
+    decided: Decided,
+    removed: usize,
+    suspects: Vec<Suspect>,
+}
+
+impl<P: Clone> Before<P> {
+    pub(super) fn take<const D: usize>(
+        session: &Session<'_, P, D>,
+        weights: &[f64],
+        decided: &Decided,
+        (search, ranked): (&Search, &[Suspect]),
+    ) -> Self
+    where
+        P: Pose<D>,
+    {
+        Self {
+            poses: session.graph.poses.clone(),
+            weights: weights.to_vec(),
+            decided: decided.clone(),
+            removed: search.removed.len(),
+            suspects: ranked.iter().take(SUSPECTS).cloned().collect(),
+        }
+    }
+
+    /// Undoes the removals since: the test still fails, with the suspects
+    /// of the map before them.
+    pub(super) fn restore<const D: usize>(
+        self,
+        session: &mut Session<'_, P, D>,
+        weights: &mut [f64],
+        decided: &mut Decided,
+        search: &mut Search,
+    ) where
+        P: Pose<D>,
+    {
+        session.graph.poses = self.poses;
+        weights.copy_from_slice(&self.weights);
+        *decided = self.decided;
+        search.removed.truncate(self.removed);
+        search.suspects = self.suspects;
+    }
 }
 
 /// The accepted clusters by the drop of `D²` without them, largest first,
