@@ -379,7 +379,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             out.swung = true;
             break;
         }
-        let fit = excess(session.graph, weights, &out.accepted, D);
+        let fit = excess(session.graph, weights, &out.accepted);
         seen.push((std::mem::replace(&mut out.accepted, next), fit));
         if let Some(first) = seen.iter().position(|(s, _)| *s == out.accepted) {
             // Settled (a cycle of one set), or cycling.
@@ -421,17 +421,16 @@ fn keep_best(cycle: &[(Vec<bool>, f64)], edges: &[usize], weights: &mut [f64]) -
 
 /// How much more `Σ eᵀΩe` the least-squares map of the accepted set in
 /// `weights` (`accepted` of the candidates) has than its measurements'
-/// information expects: each accepted loop of dimension `dimension` adds
-/// that many degrees of freedom to the χ² test, so between sets that
-/// differ in a few loops this ranks their maps as the test does.
+/// information expects: each accepted loop adds `D` degrees of freedom to
+/// the χ² test, so between sets that differ in a few loops this ranks
+/// their maps as the test does.
 fn excess<P: Pose<D>, const D: usize>(
     graph: &PoseGraph<P, D>,
     weights: &[f64],
     accepted: &[bool],
-    dimension: usize,
 ) -> f64 {
     let loops = accepted.iter().filter(|&&a| a).count();
-    graph.chi2_where(|k| weights[k] > 0.0) - (loops * dimension) as f64
+    graph.chi2_where(|k| weights[k] > 0.0) - (loops * D) as f64
 }
 
 /// One evaluation of the map in the session's graph (the least-squares map

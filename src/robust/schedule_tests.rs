@@ -363,7 +363,7 @@ fn a_few_clusters_are_judged_by_their_solves_alone_to_the_same_innovations() {
 /// candidate its own cluster: (2, 10) is beside the true (3, 9)) and the
 /// χ² test of a map; `tight` scales every information matrix by 10⁴ and
 /// puts the true loops a little off, so that no set of loops passes.
-fn search_case(tight: bool) -> (PoseGraph<Se2, 3>, Vec<Candidate>, Vec<f64>) {
+fn search_case(tight: bool) -> (PoseGraph<Se2, 3>, Vec<Candidate>) {
     let (mut g, candidates) = walk();
     if tight {
         for (k, c) in candidates[..4].iter().enumerate() {
@@ -375,8 +375,7 @@ fn search_case(tight: bool) -> (PoseGraph<Se2, 3>, Vec<Candidate>, Vec<f64>) {
             e.information *= 1e4;
         }
     }
-    let weights = vec![1.0; g.edges.len()];
-    (g, candidates, weights)
+    (g, candidates)
 }
 
 /// The χ² test a job with the default options makes.
@@ -385,15 +384,23 @@ fn chi2_test(g: &PoseGraph<Se2, 3>, w: &[f64]) -> Option<crate::stats::Chi2Test>
     crate::pipeline::chi2_test(g, w, &config).ok()
 }
 
-/// Runs `f` on [`search_case`]'s converged map with a session, the
-/// weights, the candidates, the layers (clusters off: each candidate its
-/// own) and the decisions with every candidate accepted; returns what `f`
-/// returns and the weights it left.
+/// [`on_graph`] of [`search_case`].
 fn on_search_case<R>(
     tight: bool,
     f: impl FnOnce(Session<'_, Se2, 3>, &mut [f64], &[Candidate], &Layers, Decided) -> R,
 ) -> (R, Vec<f64>) {
-    let (mut g, candidates, mut weights) = search_case(tight);
+    on_graph(search_case(tight), f)
+}
+
+/// Runs `f` on the converged map of `g` with every candidate accepted: with
+/// a session, the weights, the candidates, the layers (clusters off: each
+/// candidate its own) and the decisions; returns what `f` returns and the
+/// weights it left.
+fn on_graph<R>(
+    (mut g, candidates): (PoseGraph<Se2, 3>, Vec<Candidate>),
+    f: impl FnOnce(Session<'_, Se2, 3>, &mut [f64], &[Candidate], &Layers, Decided) -> R,
+) -> (R, Vec<f64>) {
+    let mut weights = vec![1.0; g.edges.len()];
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     let layers = Layers {
         clusters: false,
@@ -412,20 +419,41 @@ fn on_search_case<R>(
     (out, weights)
 }
 
-/// The χ² search on [`search_case`] from its converged map: the search's
-/// result, the decisions and weights it left, and whether the map passes.
+/// The innovations of `decided`'s candidates against the session's map.
+fn evaluate_all(
+    s: &mut Session<'_, Se2, 3>,
+    w: &[f64],
+    candidates: &[Candidate],
+    decided: &mut Decided,
+) {
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
+        .unwrap()
+        .innovations(&edges, &decided.accepted, &decided.clusters, true);
+}
+
+/// The χ² search from the session's map and `decided` (their innovations
+/// evaluated first): what it found, and whether the map it leaves passes.
+fn search_from(
+    mut s: Session<'_, Se2, 3>,
+    w: &mut [f64],
+    candidates: &[Candidate],
+    decided: &mut Decided,
+) -> (super::super::search::Search, bool) {
+    evaluate_all(&mut s, w, candidates, decided);
+    let search = super::super::search::explain(&mut s, w, candidates, decided, &chi2_test);
+    (search.unwrap(), chi2_test(s.graph, w).unwrap().passed)
+}
+
+/// The χ² search on [`search_case`] from its converged map (which fails
+/// the test): the search's result, the decisions and weights it left, and
+/// whether the map passes.
 fn run_search(tight: bool) -> (super::super::search::Search, Decided, Vec<f64>, bool) {
     let ((search, decided, passed), weights) =
-        on_search_case(tight, |mut s, w, candidates, _, mut decided| {
-            let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
-            decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
-                .unwrap()
-                .innovations(&edges, &decided.accepted, &decided.clusters, true);
+        on_search_case(tight, |s, w, candidates, _, mut decided| {
             assert!(!chi2_test(s.graph, w).unwrap().passed);
-            let search =
-                super::super::search::explain(&mut s, w, candidates, &mut decided, &chi2_test);
-            let passed = chi2_test(s.graph, w).unwrap().passed;
-            (search.unwrap(), decided, passed)
+            let (search, passed) = search_from(s, w, candidates, &mut decided);
+            (search, decided, passed)
         });
     (search, decided, weights, passed)
 }
@@ -450,16 +478,10 @@ fn a_wrong_loop_in_a_cluster_of_true_ones_is_taken_out_alone() {
     // off joins the true loops of its place). The cluster explains the
     // failure, and so does the wrong loop alone: only it goes.
     let ((search, decided, passed), _) =
-        on_search_case(false, |mut s, w, candidates, _, mut decided| {
-            let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+        on_search_case(false, |s, w, candidates, _, mut decided| {
             decided.clusters = vec![vec![0], vec![1], vec![2], vec![3, 4]];
-            decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
-                .unwrap()
-                .innovations(&edges, &decided.accepted, &decided.clusters, true);
-            let search =
-                super::super::search::explain(&mut s, w, candidates, &mut decided, &chi2_test);
-            let passed = chi2_test(s.graph, w).unwrap().passed;
-            (search.unwrap(), decided, passed)
+            let (search, passed) = search_from(s, w, candidates, &mut decided);
+            (search, decided, passed)
         });
     assert_eq!(search.removed.len(), 1, "{search:?}");
     assert_eq!(search.removed[0].loops, [4]);
@@ -472,7 +494,7 @@ fn two_wrong_loops_that_explain_the_failure_only_together_are_taken_out() {
     // Two wrong loops: without either alone the map still fails (the other
     // bends it), without both it passes. The first goes as one of the two,
     // the second then explains the failure alone.
-    let (mut g, candidates) = walk_with(&[
+    let two_wrong = walk_with(&[
         (0, 15, false),
         (1, 14, false),
         (4, 12, false),
@@ -480,28 +502,10 @@ fn two_wrong_loops_that_explain_the_failure_only_together_are_taken_out() {
         (2, 10, true),
         (6, 13, true),
     ]);
-    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
-    let layers = Layers {
-        clusters: false,
-        ..Layers::default()
-    };
-    let mut weights = vec![1.0; g.edges.len()];
-    let (search, decided, passed) = with_session(
-        &mut g,
-        &mut weights,
-        SolverOptions::default(),
-        |mut s, w| {
-            s.converge(w).unwrap();
-            let mut decided = Decided::start(s.graph, &edges, w, &layers);
-            decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
-                .unwrap()
-                .innovations(&edges, &decided.accepted, &decided.clusters, true);
-            let search =
-                super::super::search::explain(&mut s, w, &candidates, &mut decided, &chi2_test);
-            let passed = chi2_test(s.graph, w).unwrap().passed;
-            (search.unwrap(), decided, passed)
-        },
-    );
+    let ((search, decided, passed), _) = on_graph(two_wrong, |s, w, candidates, _, mut decided| {
+        let (search, passed) = search_from(s, w, candidates, &mut decided);
+        (search, decided, passed)
+    });
     let mut removed: Vec<usize> = search
         .removed
         .iter()
@@ -520,9 +524,7 @@ fn removals_that_end_failing_are_undone_with_the_suspects_from_before() {
     // and the findings from before the first of them.
     on_search_case(false, |mut s, w, candidates, _, mut decided| {
         let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
-        decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
-            .unwrap()
-            .innovations(&edges, &decided.accepted, &decided.clusters, true);
+        evaluate_all(&mut s, w, candidates, &mut decided);
         let mut search = super::super::search::Search::default();
         let ranked = vec![super::super::search::Suspect {
             loops: vec![4],

@@ -111,29 +111,14 @@ pub fn explain<P: Pose<D>, const D: usize>(
         if t.passed {
             before = None;
         }
-        // Once the test passes, a cluster is taken out only if it stands out
-        // now and did not before: loops consistent with one taken out, which
-        // only its removal shows (a true loop of a heavy tail stood out from
-        // the start, and a map that passes keeps it).
         let ranked = rank(decided, &t, D);
         let tested = ranked.len();
-        let found = (ranked.iter())
-            .filter(|s| !t.passed || !s.loops.iter().any(|&k| stood_out[k]))
-            .find(|s| s.explains)
-            .cloned();
-        // None alone: the first of the clusters that do together.
-        let together = found.is_none() && !t.passed;
-        let found = found.or_else(|| together.then(|| jointly(&ranked, &t, D)).flatten());
-        for s in &ranked {
-            if stands_out(&t, s.d2_drop, (s.loops.len(), D), tested) {
-                s.loops.iter().for_each(|&k| stood_out[k] = true);
-            }
-        }
+        let (found, together) = choose(&ranked, &t, D, &mut stood_out);
         let Some(cluster) = found.filter(|_| search.removed.len() < MAX_REMOVALS) else {
             if !t.passed {
-                search.suspects = ranked.into_iter().take(SUSPECTS).collect();
-                if let Some(b) = before.take() {
-                    b.restore(session, weights, decided, &mut search);
+                match before.take() {
+                    Some(b) => b.restore(session, weights, decided, &mut search),
+                    None => search.suspects = ranked.into_iter().take(SUSPECTS).collect(),
                 }
             }
             return Ok(search);
@@ -167,6 +152,39 @@ pub fn explain<P: Pose<D>, const D: usize>(
             .innovations(&edges, &decided.accepted, &decided.clusters, true);
         session.evaluated_since(start);
     }
+}
+
+/// The cluster of `ranked` to take out next, if any, and whether it
+/// explains the failure of `t` only together with others ([`jointly`]);
+/// marks in `stood_out` the loops of every cluster that stands out now.
+/// Once the test passes, a cluster is taken out only if it stands out now
+/// and did not before: loops consistent with one taken out, which only its
+/// removal shows (a true loop of a heavy tail stood out from the start, and
+/// a map that passes keeps it).
+fn choose(
+    ranked: &[Suspect],
+    t: &Chi2Test,
+    dimension: usize,
+    stood_out: &mut [bool],
+) -> (Option<Suspect>, bool) {
+    let found = (ranked.iter())
+        .filter(|s| !t.passed || !s.loops.iter().any(|&k| stood_out[k]))
+        .find(|s| s.explains)
+        .cloned();
+    let outstanding: Vec<bool> = (ranked.iter())
+        .map(|s| stands_out(t, s.d2_drop, (s.loops.len(), dimension), ranked.len()))
+        .collect();
+    // None alone: the first of the clusters that do together.
+    let together = found.is_none() && !t.passed;
+    let found = found.or_else(|| {
+        together
+            .then(|| jointly((ranked, &outstanding), t, dimension))
+            .flatten()
+    });
+    for (s, _) in ranked.iter().zip(&outstanding).filter(|(_, o)| **o) {
+        s.loops.iter().for_each(|&k| stood_out[k] = true);
+    }
+    (found, together)
 }
 
 /// The member of the explaining cluster `cluster` that explains the
@@ -214,17 +232,20 @@ fn alone<P: Pose<D>, const D: usize>(
 }
 
 /// When no cluster explains the failure of `t` alone: the clusters of
-/// `ranked` that stand out among them, by how far (the Wilson–Hilferty
+/// `ranked` that stand out among them (`outstanding`), by how far (the Wilson–Hilferty
 /// normal score of the drop on its degrees of freedom), and the first of
 /// them if the map would pass without it and the next ones (the drops
 /// added up). Taken out one at a time, each removal followed by a solve
 /// and a ranking, they are kept only if the map ends up passing
 /// ([`Before`]).
-fn jointly(ranked: &[Suspect], t: &Chi2Test, dimension: usize) -> Option<Suspect> {
-    let tested = ranked.len();
-    let mut out: Vec<(f64, &Suspect)> = (ranked.iter())
-        .filter(|s| stands_out(t, s.d2_drop, (s.loops.len(), dimension), tested))
-        .map(|s| (normal_score(s.d2_drop, s.loops.len() * dimension), s))
+fn jointly(
+    (ranked, outstanding): (&[Suspect], &[bool]),
+    t: &Chi2Test,
+    dimension: usize,
+) -> Option<Suspect> {
+    let mut out: Vec<(f64, &Suspect)> = (ranked.iter().zip(outstanding))
+        .filter(|(_, o)| **o)
+        .map(|(s, _)| (normal_score(s.d2_drop, s.loops.len() * dimension), s))
         .collect();
     out.sort_by(|a, b| b.0.total_cmp(&a.0));
     let (mut drop, mut loops) = (0.0, 0);
@@ -260,7 +281,7 @@ pub(super) struct Before<P> {
     suspects: Vec<Suspect>,
 }
 
-impl<P: Clone> Before<P> {
+impl<P> Before<P> {
     pub(super) fn take<const D: usize>(
         session: &Session<'_, P, D>,
         weights: &[f64],
