@@ -862,6 +862,25 @@ impl GateDecision {
     pub fn dropped_count(&self) -> usize {
         self.kept.len() - self.kept_count()
     }
+
+    /// The mixture whose posteriors `P(true loop | count)` are the
+    /// candidates' count priors downstream: the fit's, when it separates
+    /// two populations of counts. A fit degenerate only for want of a
+    /// crossing does: one population so much larger than the other that
+    /// its weighted density is the higher everywhere between the means
+    /// (a few wrong loops among thousands of true ones) has no threshold
+    /// to drop by, but its posteriors still tell a count from either.
+    /// `None` with the gate off, without a fit, or when the fit is
+    /// degenerate for any other reason (one component, overlapping, too
+    /// small a loop component).
+    pub fn count_model(&self) -> Option<&LogNormalMixture> {
+        let separated =
+            !self.degenerate || matches!(self.reason, Some(Degeneracy::NoCrossing { .. }));
+        self.fit
+            .as_ref()
+            .and_then(|f| f.mixture.as_ref())
+            .filter(|_| separated && self.mode != GateMode::Off)
+    }
 }
 
 /// The rule the gate ends up applying to counted candidates.

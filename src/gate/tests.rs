@@ -6,7 +6,9 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, LogNormal, Uniform};
 use rayon::prelude::*;
-use statrs::distribution::{Continuous, LogNormal as StatrsLogNormal, Normal as StatrsNormal};
+use statrs::distribution::{
+    Continuous, ContinuousCDF, LogNormal as StatrsLogNormal, Normal as StatrsNormal,
+};
 
 /// `n` integer counts whose logarithm is normal with this median and σ.
 fn draw_counts(rng: &mut StdRng, n: usize, median: f64, sigma: f64) -> Vec<u64> {
@@ -604,6 +606,51 @@ fn auto_gate_applies_the_learned_threshold() {
     let strong_kept = d.kept[d.kept.len() - 401..].iter().filter(|&&k| k).count();
     assert!(strong_kept >= 390, "{strong_kept}");
     assert!(d.kept_count() < 480, "{}", d.kept_count());
+}
+
+/// A few low counts among thousands of high ones, the shape of
+/// parking-garage with 10 random wrong candidates (the outlier benchmark's
+/// case): two populations, but the larger one's weighted density is the
+/// higher everywhere between the means. No threshold, every candidate
+/// kept, and the counts still tell the priors.
+#[test]
+fn counts_without_a_crossing_still_give_their_posteriors() {
+    // At the quantiles of the fit to that file's counts (ln(n / 778)).
+    let population = |n: usize, mu: f64, sigma: f64| {
+        let normal = StatrsNormal::new(mu, sigma).unwrap();
+        (0..n).map(move |i| {
+            let y = normal.inverse_cdf((i as f64 + 0.5) / n as f64);
+            (778.0 * y.exp()).round() as u64
+        })
+    };
+    let mut raw: Vec<u64> = population(4602, -1.635, 0.497).collect();
+    raw.extend(population(23, -3.165, 0.549));
+    let counts: Vec<Option<u64>> = raw.iter().map(|&c| Some(c)).collect();
+    let d = gate(
+        &counts,
+        GateMode::Auto,
+        DegeneratePolicy::KeepAll,
+        &MixtureOptions::default(),
+    );
+    assert!(
+        matches!(d.reason, Some(Degeneracy::NoCrossing { .. })),
+        "{:?}",
+        d.reason
+    );
+    assert_eq!((d.kept_count(), d.threshold), (counts.len(), None));
+    let m = d.count_model().expect("the counts' posteriors");
+    let max = *raw.iter().max().unwrap();
+    assert!(m.posterior_true_loop(12, max) < 0.05);
+    assert!(m.posterior_true_loop(150, max) > 0.99);
+    // A fit degenerate for another reason gives no posteriors.
+    let equal = vec![Some(9u64); 40];
+    let one = gate(
+        &equal,
+        GateMode::Auto,
+        DegeneratePolicy::KeepAll,
+        &MixtureOptions::default(),
+    );
+    assert!(one.degenerate && one.count_model().is_none());
 }
 
 #[test]

@@ -78,11 +78,7 @@ pub fn gate<P: Pose<D>, const D: usize>(
     // The counts speak only through a fit that separates two populations,
     // and not when the gate is off; a zero count is no loop by definition.
     let max = report.gate.max_inliers;
-    let mixture = decision
-        .fit
-        .as_ref()
-        .and_then(|f| f.mixture.as_ref())
-        .filter(|_| !decision.degenerate && config.gate != GateMode::Off);
+    let mixture = decision.count_model();
     let drop_all = decision.degenerate && config.degenerate == DegeneratePolicy::DropAll;
     edges
         .iter()
