@@ -340,7 +340,84 @@ fn judge_cluster<const D: usize>(
         };
         nu2.push(ck.cholesky().map(|c| ek.dot(&c.solve(&ek))));
     }
+    let nu2 = if m > 1 {
+        against_better(errors, &sigma, gram, a, nu2)
+    } else {
+        nu2
+    };
     (nu2, Some(joint).filter(|j| j.is_finite()))
+}
+
+/// Each member's `ν²` made the larger of `apart` (against the map without
+/// the cluster) and its `ν²` against the map with those of the cluster's
+/// members in the map that agree better with the rest of it (a smaller
+/// `apart`) and without the others. A run of wrong loops cannot vouch for
+/// its members (the map without the cluster judges them), and a true loop
+/// in the cluster speaks against a wrong one beside it that measures the
+/// same stretch otherwise (the map with the true loop judges it).
+///
+/// In the order of `apart` from the largest, the members the map was
+/// solved with that agree worse than member `k`, and `k` itself if it is
+/// one, are a prefix `B`: `k` is judged against the map without `B` by the
+/// formulas of [`judge_cluster`] on `S_B`, the leading block of `S` in
+/// that order, whose Cholesky factor is the leading block of `S`'s.
+fn against_better<const D: usize>(
+    errors: &[SVector<f64, D>],
+    sigma: &[SMatrix<f64, D, D>],
+    gram: &DMatrix<f64>,
+    a: usize,
+    apart: Vec<Option<f64>>,
+) -> Vec<Option<f64>> {
+    let key = |k: usize| apart[k].unwrap_or(f64::INFINITY);
+    let mut order: Vec<usize> = (0..a).collect();
+    order.sort_by(|&i, &j| key(j).total_cmp(&key(i)).then(i.cmp(&j)));
+    let na = D * a;
+    let at = |r: usize| D * order[r / D] + r % D;
+    let sigma_b: Vec<_> = order.iter().map(|&k| sigma[k]).collect();
+    let gram_b = DMatrix::from_fn(na, na, |r, c| gram[(at(r), at(c))]);
+    let Some(l) = cholesky_of_s(&sigma_b, &gram_b, na) else {
+        return apart;
+    };
+    let mut y = faer::Mat::from_fn(na, 1, |r, _| errors[order[r / D]][r % D]);
+    solve_lower_triangular_in_place(l.as_ref(), y.as_mut(), Par::Seq);
+    let block = |k: usize, j: usize| gram.fixed_view::<D, D>(D * k, D * j).into_owned();
+    (0..errors.len())
+        .map(|k| {
+            let in_b = k < a;
+            let worse = match order.iter().position(|&j| j == k) {
+                Some(position) => position,
+                None => order.iter().filter(|&&j| key(j) > key(k)).count(),
+            };
+            let nb = D * (worse + usize::from(in_b));
+            let mut s_inv_e = y.subrows(0, nb).to_owned();
+            solve_upper_triangular_in_place(
+                l.submatrix(0, 0, nb, nb).transpose(),
+                s_inv_e.as_mut(),
+                Par::Seq,
+            );
+            let (e, c) = if in_b {
+                // The last block of the prefix: (S_B⁻¹)_kk = L_kk⁻ᵀ·L_kk⁻¹.
+                let w = SMatrix::<f64, D, D>::from_fn(|r, c| l[(nb - D + r, nb - D + c)]);
+                let w_inv = w.try_inverse().unwrap_or_else(SMatrix::zeros);
+                let e = sigma[k] * SVector::<f64, D>::from_fn(|r, _| s_inv_e[(nb - D + r, 0)]);
+                (e, sigma[k] * w_inv.transpose() * w_inv * sigma[k])
+            } else {
+                let m_kb = |r: usize, c: usize| gram[(D * k + r, at(c))];
+                let mut x = faer::Mat::from_fn(nb, D, |r, c| m_kb(c, r));
+                solve_lower_triangular_in_place(l.submatrix(0, 0, nb, nb), x.as_mut(), Par::Seq);
+                let e = errors[k]
+                    + SVector::<f64, D>::from_fn(|r, _| {
+                        (0..nb).map(|i| m_kb(r, i) * s_inv_e[(i, 0)]).sum()
+                    });
+                let xtx = SMatrix::<f64, D, D>::from_fn(|r, c| {
+                    (0..nb).map(|i| x[(i, r)] * x[(i, c)]).sum()
+                });
+                (e, sigma[k] + block(k, k) + xtx)
+            };
+            let with_better = c.cholesky().map_or(0.0, |c| e.dot(&c.solve(&e)));
+            apart[k].map(|v| v.max(with_better))
+        })
+        .collect()
 }
 
 /// The lower Cholesky factor of `S = Σ_A − M_AA` (`na × na`; `sigma`: the
@@ -413,13 +490,37 @@ mod tests {
         // Cluster {z1, z2} in the map, z3 out.
         let (nu2, joint) = judge_cluster(&errors, &cov, &gram, 2);
         // Without z1 and z2 the map is the prior alone: x = 0 with variance
-        // 1, so each innovation is z²/(1 + 1).
-        for (v, z) in nu2.iter().zip([z1, z2, z3]) {
-            assert!((v.unwrap() - z * z / 2.0).abs() < 1e-12, "{v:?} {z}");
+        // 1, so each innovation is z²/(1 + 1). z1 and z2 agree with it
+        // better than z3 does, so z3 is also judged against the map with
+        // them: x with variance 1/3, (z3 − x)²/(1 + 1/3), the larger.
+        let against_map = (z3 - x).powi(2) / (1.0 + hinv);
+        for (v, want) in nu2.iter().zip([z1 * z1 / 2.0, z2 * z2 / 2.0, against_map]) {
+            assert!((v.unwrap() - want).abs() < 1e-12, "{v:?} {want}");
         }
         // The drop of Σ eᵀΩe: with them (z1 − x)² + (z2 − x)² + x², without 0.
         let with = (z1 - x).powi(2) + (z2 - x).powi(2) + x * x;
         assert!((joint.unwrap() - with).abs() < 1e-12);
+    }
+
+    /// A true loop and a wrong one measuring the same pose (z = 0 and 5,
+    /// Σ = 1), both in the map, over a prior that knows little (variance
+    /// 100): without the cluster neither is checked much (0 and 25/101),
+    /// but the wrong one is judged against the map with the true one,
+    /// which agrees better with the rest: x = 0 with variance 100/101.
+    #[test]
+    fn a_true_loop_speaks_against_a_wrong_one_of_its_cluster() {
+        let (z_true, z_wrong, prior) = (0.0, 5.0, 100.0);
+        let h = 1.0 / prior + 2.0;
+        let x = (z_true + z_wrong) / h;
+        let errors = [Vector1::new(x - z_true), Vector1::new(x - z_wrong)];
+        let gram = DMatrix::from_element(2, 2, 1.0 / h);
+        let (nu2, _) = judge_cluster(&errors, &[Some(Matrix1::new(1.0)); 2], &gram, 2);
+        let with_true = 1.0 / (1.0 / prior + 1.0);
+        let want = [0.0, z_wrong.powi(2) / (1.0 + with_true)];
+        for (v, want) in nu2.iter().zip(want) {
+            assert!((v.unwrap() - want).abs() < 1e-9, "{v:?} {want}");
+        }
+        assert!(want[1] > 12.0 && z_wrong.powi(2) / (1.0 + prior) < 0.25);
     }
 
     #[test]
