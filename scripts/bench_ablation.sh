@@ -15,7 +15,7 @@ out=${1:-bench/results/ablation}
 shift || true
 mkdir -p "$out"
 py=${PYTHON:-.venv/bin/python}
-for layer in all annealing decisions clusters aliasing populations search relaxation; do
+for layer in all annealing decisions clusters agreement aliasing populations search relaxation; do
     flags=()
     if [ "$layer" != all ]; then
         flags=(--pgo-flags "--expert no-$layer")

@@ -15,9 +15,14 @@
 //!   `Σ_R + M_RR + M_RA·S⁻¹·M_AR`;
 //!
 //! and its squared innovation is `ν² = ẽᵀ·C⁻¹·ẽ` with its own block of
-//! that covariance. A cluster of one is judged by the plain deleted
-//! residual or innovation. When `S` is singular — the cluster is all that
-//! ties part of the map — the map without it says nothing about it: `None`.
+//! that covariance. A member is also judged against the map with the
+//! members in it that agree better with the rest of the map (a smaller
+//! `ν²` so far) and without the others, by the same formulas on that
+//! group, and keeps the larger `ν²`: a wrong run cannot vouch for its
+//! members, and a true loop speaks against an alias beside it. A cluster
+//! of one is judged by the plain deleted residual or innovation. When `S`
+//! is singular — the cluster is all that ties part of the map — the map
+//! without it says nothing about it: `None`.
 //!
 //! [`BlockSystem::propagate_group`]: crate::linear::BlockSystem::propagate_group
 
@@ -74,6 +79,9 @@ pub struct Evaluation<'a, P: Pose<D>, const D: usize> {
     inverse: Option<SelectedInverse>,
     /// Scratch of the sparse solves, one per thread at work.
     scratch: Mutex<Vec<GroupScratch>>,
+    /// Whether a cluster's members are also judged against the map with
+    /// those that agree better ([`against_better`]; the `agreement` layer).
+    within: bool,
 }
 
 impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
@@ -103,7 +111,16 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             block,
             inverse: None,
             scratch: Mutex::default(),
+            within: true,
         })
+    }
+
+    /// Judges a cluster's members also against the map with the members
+    /// that agree better, or (`false`) against the map without the
+    /// cluster only.
+    pub fn judging_within_clusters(mut self, within: bool) -> Self {
+        self.within = within;
+        self
     }
 
     /// [`Evaluation::new`] for the innovations of `clusters` only (of the
@@ -268,7 +285,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             }
             Some(inverse) => system.propagate_group_cheaper(inverse, &lin.jacobians, scratch),
         };
-        let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, a);
+        let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, (a, self.within));
         (nu2, joint, true)
     }
 }
@@ -284,11 +301,15 @@ struct Linearised<const D: usize> {
     covariances: Vec<Option<SMatrix<f64, D, D>>>,
 }
 
+/// A cluster's members' `ν²` (the first `a` in the map) and its joint
+/// statistic; with `within`, each member's the larger of that and its `ν²`
+/// against the map with the members that agree better
+/// ([`against_better`]).
 fn judge_cluster<const D: usize>(
     errors: &[nalgebra::SVector<f64, D>],
     covariances: &[Option<SMatrix<f64, D, D>>],
     gram: &DMatrix<f64>,
-    a: usize,
+    (a, within): (usize, bool),
 ) -> (Vec<Option<f64>>, Option<f64>) {
     let m = errors.len();
     let Some(sigma) = covariances.iter().copied().collect::<Option<Vec<_>>>() else {
@@ -340,7 +361,7 @@ fn judge_cluster<const D: usize>(
         };
         nu2.push(ck.cholesky().map(|c| ek.dot(&c.solve(&ek))));
     }
-    let nu2 = if m > 1 {
+    let nu2 = if within && m > 1 {
         against_better(errors, &sigma, gram, a, nu2)
     } else {
         nu2
@@ -488,7 +509,7 @@ mod tests {
         let hinv = 1.0 / 3.0;
         let gram = DMatrix::from_element(3, 3, hinv);
         // Cluster {z1, z2} in the map, z3 out.
-        let (nu2, joint) = judge_cluster(&errors, &cov, &gram, 2);
+        let (nu2, joint) = judge_cluster(&errors, &cov, &gram, (2, true));
         // Without z1 and z2 the map is the prior alone: x = 0 with variance
         // 1, so each innovation is z²/(1 + 1). z1 and z2 agree with it
         // better than z3 does, so z3 is also judged against the map with
@@ -514,7 +535,7 @@ mod tests {
         let x = (z_true + z_wrong) / h;
         let errors = [Vector1::new(x - z_true), Vector1::new(x - z_wrong)];
         let gram = DMatrix::from_element(2, 2, 1.0 / h);
-        let (nu2, _) = judge_cluster(&errors, &[Some(Matrix1::new(1.0)); 2], &gram, 2);
+        let (nu2, _) = judge_cluster(&errors, &[Some(Matrix1::new(1.0)); 2], &gram, (2, true));
         let with_true = 1.0 / (1.0 / prior + 1.0);
         let want = [0.0, z_wrong.powi(2) / (1.0 + with_true)];
         for (v, want) in nu2.iter().zip(want) {
@@ -531,7 +552,7 @@ mod tests {
             &errors,
             &[Some(Matrix1::new(2.0))],
             &DMatrix::from_element(1, 1, 2.0),
-            1,
+            (1, true),
         );
         assert_eq!((nu2, joint), (vec![None], None));
     }

@@ -109,6 +109,10 @@ pub struct Layers {
     /// Judge a candidate against the map without its whole cluster
     /// ([`clusters`]); off: without itself only.
     pub clusters: bool,
+    /// Judge a cluster's member also against the map with the members
+    /// that agree better with the rest of it, keeping the larger
+    /// innovation ([`innovation`]); off: without the cluster only.
+    pub agreement: bool,
     /// Learn the rate at which verification is fooled ([`model`]); off: a
     /// count's posterior is the prior.
     pub aliasing: bool,
@@ -128,6 +132,7 @@ impl Default for Layers {
             annealing: true,
             decisions: true,
             clusters: true,
+            agreement: true,
             aliasing: true,
             populations: true,
             search: true,
@@ -138,10 +143,11 @@ impl Default for Layers {
 
 impl Layers {
     /// The layer names, as `--expert` takes them (with `no-`).
-    pub const NAMES: [&'static str; 7] = [
+    pub const NAMES: [&'static str; 8] = [
         "annealing",
         "decisions",
         "clusters",
+        "agreement",
         "aliasing",
         "populations",
         "search",
@@ -162,6 +168,7 @@ impl Layers {
                 "no-annealing" => &mut layers.annealing,
                 "no-decisions" => &mut layers.decisions,
                 "no-clusters" => &mut layers.clusters,
+                "no-agreement" => &mut layers.agreement,
                 "no-aliasing" => &mut layers.aliasing,
                 "no-populations" => &mut layers.populations,
                 "no-search" => &mut layers.search,

@@ -226,6 +226,9 @@ pub struct Decided {
     pub innovations: Innovations,
     /// The cluster of each candidate.
     pub clusters: Vec<Vec<usize>>,
+    /// Whether a cluster's members are also judged against the map with
+    /// those that agree better ([`Layers::agreement`]).
+    pub within: bool,
     /// Accepted sets solved.
     pub decisions: usize,
     /// Chordal relaxations of accepted sets solved ([`relaxed_start`]).
@@ -290,6 +293,7 @@ impl Decided {
             } else {
                 (0..ends.len()).map(|k| vec![k]).collect()
             },
+            within: layers.agreement,
             decisions: 0,
             relaxations: 0,
             relaxed_starts: 0,
@@ -447,7 +451,8 @@ fn evaluate<P: Pose<D>, const D: usize>(
     layers: &Layers,
 ) -> Result<Vec<bool>, SolveError> {
     let start = Instant::now();
-    let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?;
+    let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?
+        .judging_within_clusters(out.within);
     // Exact innovations: a lower bound (a lone candidate outside the map) is
     // not the evidence the model describes, and a wrong loop's bound can
     // sit among the true loops' innovations.
@@ -541,7 +546,8 @@ pub fn propose<P: Pose<D>, const D: usize>(
         session.graph,
         weights,
         (&edges, &touched),
-    )?;
+    )?
+    .judging_within_clusters(decided.within);
     let mut innov = eval.innovations(&edges, &decided.accepted, &touched, false);
     let accepts = |innov: &Innovations, k: usize| match evidence(candidates, innov, k) {
         Some(e) => proposal.model.posterior(&e) >= 0.5,

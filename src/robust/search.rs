@@ -149,6 +149,7 @@ pub fn explain<P: Pose<D>, const D: usize>(
         }
         let start = Instant::now();
         decided.innovations = Evaluation::new(session.optimizer, session.graph, weights)?
+            .judging_within_clusters(decided.within)
             .innovations(&edges, &decided.accepted, &decided.clusters, true);
         session.evaluated_since(start);
     }
