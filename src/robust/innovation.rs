@@ -401,7 +401,6 @@ fn against_better<const D: usize>(
     };
     let mut y = faer::Mat::from_fn(na, 1, |r, _| errors[order[r / D]][r % D]);
     solve_lower_triangular_in_place(l.as_ref(), y.as_mut(), Par::Seq);
-    let block = |k: usize, j: usize| gram.fixed_view::<D, D>(D * k, D * j).into_owned();
     (0..errors.len())
         .map(|k| {
             let in_b = k < a;
@@ -410,6 +409,10 @@ fn against_better<const D: usize>(
                 None => order.iter().filter(|&&j| key(j) > key(k)).count(),
             };
             let nb = D * (worse + usize::from(in_b));
+            if nb == na {
+                // Every member in the map is taken out: that is `apart`.
+                return apart[k];
+            }
             let mut s_inv_e = y.subrows(0, nb).to_owned();
             solve_upper_triangular_in_place(
                 l.submatrix(0, 0, nb, nb).transpose(),
@@ -433,7 +436,8 @@ fn against_better<const D: usize>(
                 let xtx = SMatrix::<f64, D, D>::from_fn(|r, c| {
                     (0..nb).map(|i| x[(i, r)] * x[(i, c)]).sum()
                 });
-                (e, sigma[k] + block(k, k) + xtx)
+                let m_kk = gram.fixed_view::<D, D>(D * k, D * k);
+                (e, sigma[k] + m_kk + xtx)
             };
             let with_better = c.cholesky().map_or(0.0, |c| e.dot(&c.solve(&e)));
             apart[k].map(|v| v.max(with_better))
