@@ -1,29 +1,49 @@
 #!/usr/bin/env bash
-# Perceptual aliasing beyond the benchmark's one setting: pgo alone on 300
-# aliased candidates per case (`pgo corrupt --wrong-mode aliased`), for
-# groups of 1, 5 and 10 candidates sharing an offset, shares 0.3 and 1.0 of
-# them with counts drawn like a true loop's, and seeds 1 to 3, on five
-# datasets with the information calibrated and as published: 180 runs. One
-# JSON per (seed, group, share) into OUT_DIR (default
+# Perceptual aliasing over where aliases fall, how long their groups are,
+# how far off they are and how many look like true loops: `pgo corrupt
+# --wrong-mode aliased` with
+#   * --alias-place revisited (a group at a true loop, a few poses off) and
+#     anywhere (between any two places, most never revisited: a stretch of
+#     the map said to be another, moved rigidly);
+#   * groups of 1, 10 and 20 candidates, offsets of 5 to 50 steps;
+#   * seeds 1, 2, 3, with 30 %, 50 % and 100 % of the aliases given counts
+#     drawn like a true loop's (one share per seed);
+# on the five datasets of the outlier benchmark, MIT (a real 2D map with 20
+# loops: 30 aliases), ais2klinik (a real two-session 2D map) and torus3D,
+# with the information calibrated and as published. pgo and the peers
+# (GTSAM's GNC-TLS and LM + Cauchy, each alone and behind pgo's gate) run
+# on every case; the peers' results are cached in the work directory
+# (bench-out/aliasing_sweep/peers), so re-running measures pgo alone.
+# One JSON per (place, seed, group) into OUT_DIR (default
 # bench/results/aliasing_sweep); scripts/benchmarks_md.py tabulates them.
 #
 # usage: scripts/bench_aliasing_sweep.sh [OUT_DIR] (extra arguments go to
 #        bench_robust.py, e.g. --pgo target/release/pgo)
+#        SWEEP_DATASETS="intel MIT" restricts the datasets; SWEEP_PLACES,
+#        SWEEP_SEEDS and SWEEP_GROUPS the other axes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-bench/results/aliasing_sweep}
 shift || true
 mkdir -p "$out"
 py=${PYTHON:-.venv/bin/python}
-for seed in 1 2 3; do
-    for group in 1 5 10; do
-        for share in 0.3 1.0; do
-            "$py" scripts/bench_robust.py --tools pgo --policies aliased \
-                --alias-group-size "$group" --alias-true-like "$share" --outliers 300 \
-                --no-maxmix --scales calibrated published --seed "$seed" \
-                --only intel manhattan city10000 sphere2500 parking-garage \
-                --work "bench-out/aliasing_sweep/seed$seed" \
-                --out "$out/s${seed}_g${group}_t${share}.json" "$@"
+datasets=${SWEEP_DATASETS:-"intel manhattan city10000 sphere2500 parking-garage MIT ais2klinik torus3D"}
+tools=(pgo "GTSAM cauchy" "GTSAM gnc" "GTSAM cauchy+gate" "GTSAM gnc+gate")
+share() { case $1 in 1) echo 0.3 ;; 2) echo 0.5 ;; *) echo 1.0 ;; esac; }
+for place in ${SWEEP_PLACES:-anywhere revisited}; do
+    for seed in ${SWEEP_SEEDS:-1 2 3}; do
+        for group in ${SWEEP_GROUPS:-1 10 20}; do
+            for name in $datasets; do
+                count=300
+                [[ $name == MIT ]] && count=30
+                "$py" scripts/bench_robust.py --tools "${tools[@]}" --policies aliased \
+                    --alias-place "$place" --alias-offset 5,50 \
+                    --alias-group-size "$group" --alias-true-like "$(share "$seed")" \
+                    --outliers "$count" --no-maxmix --scales calibrated published \
+                    --seed "$seed" --only "$name" --timeout 600 \
+                    --work "bench-out/aliasing_sweep" \
+                    --out "$out/${place}_s${seed}_g${group}_${name}.json" "$@"
+            done
         done
     done
 done

@@ -157,6 +157,23 @@ impl From<PolicyArg> for pgo::simulate::OutlierPolicy {
     }
 }
 
+#[derive(Copy, Clone, Debug, ValueEnum)]
+enum AliasPlaceArg {
+    /// At places the trajectory revisited, a few poses off a true loop.
+    Revisited,
+    /// Between any two places, most never revisited.
+    Anywhere,
+}
+
+impl From<AliasPlaceArg> for pgo::simulate::AliasPlace {
+    fn from(p: AliasPlaceArg) -> Self {
+        match p {
+            AliasPlaceArg::Revisited => Self::Revisited,
+            AliasPlaceArg::Anywhere => Self::Anywhere,
+        }
+    }
+}
+
 /// A log-normal inlier-count model from the command line: `MEDIAN[,SIGMA]`.
 #[derive(Copy, Clone, Debug)]
 struct CountModel {
@@ -177,6 +194,11 @@ struct WrongLoopArgs {
     /// scattered aliases).
     #[arg(long, default_value_t = 10)]
     group_size: usize,
+    /// Where aliased groups fall: at places the trajectory revisited (a
+    /// true loop beside every group), or between any two places (the
+    /// stretch from j said to be the stretch from i+s, moved rigidly).
+    #[arg(long, value_enum, default_value_t = AliasPlaceArg::Revisited)]
+    alias_place: AliasPlaceArg,
     /// Range of |s|, the offset in steps of aliased candidates (either
     /// sign), 1 ≤ MIN ≤ MAX [default: 5,40].
     #[arg(long, value_name = "MIN,MAX", value_parser = parse_alias_offsets)]
@@ -359,6 +381,7 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
         policy: args.placement.wrong_mode.into(),
         group_size: args.placement.group_size,
         alias_offsets: args.placement.alias_offsets(),
+        alias_place: args.placement.alias_place.into(),
         known_wrong_last: args.known_wrong_last,
         inliers: Some(args.placement.inlier_model()),
         true_like_share: args.placement.true_like_counts,
@@ -435,6 +458,7 @@ fn simulate(args: SimulateArgs) -> ExitCode {
         outlier_policy: args.placement.wrong_mode.into(),
         group_size: args.placement.group_size,
         alias_offsets: args.placement.alias_offsets(),
+        alias_place: args.placement.alias_place.into(),
         true_like_share: args.placement.true_like_counts,
         inliers: (args.inliers || args.placement.counts_given())
             .then(|| args.placement.inlier_model()),

@@ -162,6 +162,7 @@ fn aliased_groups_share_an_offset_within_the_range() {
         group_size: 10,
         local_window: DEFAULT_LOCAL_WINDOW,
         alias_offsets: AliasOffsets::default(),
+        alias_place: AliasPlace::Revisited,
         translation_scale: DEFAULT_OUTLIER_TRANSLATION,
         rotation_scale: DEFAULT_OUTLIER_ROTATION,
     };
@@ -176,8 +177,11 @@ fn aliased_groups_share_an_offset_within_the_range() {
         assert!((5..=40).contains(&s.unsigned_abs()), "s = {s}");
         positive += usize::from(s > 0);
         negative += usize::from(s < 0);
-        assert_eq!(alias.targets.len(), g.pairs.len());
-        for (k, (&(i, j), &t)) in g.pairs.iter().zip(&alias.targets).enumerate() {
+        let super::wrong::AliasFrame::Targets(targets) = &alias.frame else {
+            panic!("a revisited alias measures vertices");
+        };
+        assert_eq!(targets.len(), g.pairs.len());
+        for (k, (&(i, j), &t)) in g.pairs.iter().zip(targets).enumerate() {
             assert_eq!((i, j), (g.pairs[0].0 + k, g.pairs[0].1 + k));
             assert_eq!(t as isize, j as isize + s);
             assert!(t < 500 && t != i);
@@ -322,4 +326,111 @@ fn corrupt_refuses_information_that_cannot_draw_noise() {
         Err(SimulationError::UnusableInformation { .. })
     ));
     assert_eq!(graph.edges, before);
+}
+
+/// The offset `s` (within `offsets`) and group start `(i, j)` for which the
+/// edge measures `X_from⁻¹·X_{i+s}·X_j⁻¹·X_to` among `poses`, to rounding,
+/// with `from − i = to − j` (the rigid move of [`AliasPlace::Anywhere`]).
+fn rigid_alias<P: Pose<D>, const D: usize>(
+    poses: &[P],
+    e: &Edge<P, D>,
+    offsets: AliasOffsets,
+    group: usize,
+) -> Vec<(isize, usize, usize)> {
+    let mut found = Vec::new();
+    for k in 0..group.min(e.from + 1) {
+        let (i, j) = (e.from - k, e.to - k);
+        for m in offsets.min as isize..=offsets.max as isize {
+            for s in [m, -m] {
+                let Some(anchor) = i.checked_add_signed(s).filter(|&t| t < poses.len()) else {
+                    continue;
+                };
+                let claimed = poses[anchor]
+                    .compose(&poses[j].inverse())
+                    .compose(&poses[e.to]);
+                if P::error(&poses[e.from], &claimed, &e.measurement).norm() < 1e-9 {
+                    found.push((s, i, j));
+                }
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn aliases_anywhere_move_a_stretch_rigidly_onto_another_place() {
+    // The smallest noise: the measurements are exact to rounding.
+    let offsets = AliasOffsets { min: 5, max: 50 };
+    for world in [World::Sphere3d, World::Torus3d] {
+        let options = SimulationOptions {
+            world,
+            poses: 800,
+            loops: 100,
+            outliers: 45,
+            outlier_policy: OutlierPolicy::Aliased,
+            alias_place: AliasPlace::Anywhere,
+            group_size: 15,
+            alias_offsets: offsets,
+            translation_noise: MIN_NOISE,
+            rotation_noise: MIN_NOISE,
+            seed: 5,
+            ..Default::default()
+        };
+        let sim = simulate_spatial(&options).unwrap();
+        let wrong = wrong_edges(&sim.noisy, &sim.wrong);
+        assert_eq!(wrong.len(), 45);
+        let radius = match world {
+            World::Sphere3d => super::world::sphere_trajectory(800).loop_radius,
+            _ => super::world::torus_trajectory(800).loop_radius,
+        };
+        let truth = &sim.truth.poses;
+        let mut groups: Vec<(isize, usize, usize)> = Vec::new();
+        for e in &wrong {
+            let found = rigid_alias(truth, e, offsets, 15);
+            assert!(!found.is_empty(), "{}–{} is no rigid alias", e.from, e.to);
+            // The claim is wrong: the stretch moves by more than the loop
+            // radius, and the pair's ends are other places.
+            let (s, i, j) = found[0];
+            let anchor = i.checked_add_signed(s).unwrap();
+            assert!((truth[anchor].position() - truth[j].position()).norm() > radius);
+            assert!((truth[e.from].position() - truth[e.to].position()).norm() > radius);
+            if !groups.contains(&found[0]) {
+                groups.push(found[0]);
+            }
+        }
+        // Three groups of 15 consecutive pairs, each sharing one move.
+        assert_eq!(groups.len(), 3, "{groups:?}");
+    }
+}
+
+#[test]
+fn aliases_anywhere_fall_away_from_the_true_loops_of_a_corrupted_graph() {
+    // Corrupting a graph: with the revisited placement every group starts
+    // at a true loop; anywhere, at most by chance.
+    let sim = simulate_planar(&SimulationOptions {
+        poses: 600,
+        loops: 30,
+        ..Default::default()
+    })
+    .unwrap();
+    let revisits: Vec<(usize, usize)> = (sim.noisy.edges.iter())
+        .filter(|e| e.to != e.from + 1)
+        .map(|e| (e.from.min(e.to), e.from.max(e.to)))
+        .collect();
+    let at_revisits = |place: AliasPlace| {
+        let mut graph = sim.noisy.clone();
+        let options = CorruptionOptions {
+            outliers: 40,
+            policy: OutlierPolicy::Aliased,
+            group_size: 4,
+            alias_place: place,
+            ..Default::default()
+        };
+        let out = corrupt(&mut graph, &options, &mut StdRng::seed_from_u64(9)).unwrap();
+        (graph.edges.iter().zip(&out.wrong))
+            .filter(|(e, w)| **w && revisits.contains(&(e.from.min(e.to), e.from.max(e.to))))
+            .count()
+    };
+    assert_eq!(at_revisits(AliasPlace::Revisited), 10);
+    assert!(at_revisits(AliasPlace::Anywhere) <= 1);
 }

@@ -112,6 +112,7 @@ fn wrong_loops<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
         group_size: options.group_size,
         local_window: DEFAULT_LOCAL_WINDOW,
         alias_offsets: options.alias_offsets,
+        alias_place: options.alias_place,
         translation_scale: DEFAULT_OUTLIER_TRANSLATION,
         rotation_scale: DEFAULT_OUTLIER_ROTATION,
     };
@@ -124,9 +125,11 @@ fn wrong_loops<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
     for group in groups {
         let measurements: Vec<P> = match &group.alias {
             None => vec![random_measurement::<P, D, R>(&plan, rng)?; group.pairs.len()],
-            Some(alias) => (group.pairs.iter().zip(&alias.targets))
-                .map(|(&(from, _), &target)| {
-                    noisy_edge(truth, (from, target), options, None, rng).measurement
+            Some(alias) => (group.pairs.iter().enumerate())
+                .map(|(k, &pair)| {
+                    let exact = alias.exact(truth, k, pair);
+                    let e = P::sample_error(options.translation_noise, options.rotation_noise, rng);
+                    perturb(&exact, &e)
                 })
                 .collect(),
         };

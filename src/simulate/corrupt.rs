@@ -22,6 +22,7 @@ pub(super) fn plan(options: &CorruptionOptions) -> WrongLoopPlan {
         group_size: options.group_size,
         local_window: options.local_window,
         alias_offsets: options.alias_offsets,
+        alias_place: options.alias_place,
         translation_scale: options.translation_scale,
         rotation_scale: options.rotation_scale,
     }
@@ -77,7 +78,7 @@ pub(super) fn measure<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
         // cannot, another source's (files mix edges of all kinds).
         let mut information = information;
         let mut tries = 0;
-        for (&(i, j), &target) in group.pairs.iter().zip(&alias.targets) {
+        for (k, &(i, j)) in group.pairs.iter().enumerate() {
             let e = loop {
                 if let Some(e) = sample_with_information::<P, D, R>(&information, rng) {
                     break e;
@@ -88,7 +89,7 @@ pub(super) fn measure<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
                 }
                 information = graph.edges[sources[rng.random_range(0..sources.len())]].information;
             };
-            let exact = graph.poses[i].inverse().compose(&graph.poses[target]);
+            let exact = alias.exact(&graph.poses, k, (i, j));
             planned.push((i, j, perturb(&exact, &e), information));
         }
     }

@@ -9,8 +9,8 @@ use super::SimulationError;
 use super::counts::InlierModel;
 use super::world::World;
 use super::wrong::{
-    AliasOffsets, DEFAULT_LOCAL_WINDOW, DEFAULT_OUTLIER_ROTATION, DEFAULT_OUTLIER_TRANSLATION,
-    OutlierPolicy,
+    AliasOffsets, AliasPlace, DEFAULT_LOCAL_WINDOW, DEFAULT_OUTLIER_ROTATION,
+    DEFAULT_OUTLIER_TRANSLATION, OutlierPolicy,
 };
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -76,6 +76,9 @@ pub struct SimulationOptions {
     /// The offsets of [`OutlierPolicy::Aliased`] candidates (default
     /// [`AliasOffsets::default`]).
     pub alias_offsets: AliasOffsets,
+    /// Where [`OutlierPolicy::Aliased`] groups fall (default
+    /// [`AliasPlace::Revisited`]).
+    pub alias_place: AliasPlace,
     /// Share of the wrong candidates whose inlier counts are drawn from the
     /// true-loop model instead of the wrong one, in `[0, 1]` (default 0):
     /// each wrong candidate independently with this probability. Needs an
@@ -100,6 +103,7 @@ impl Default for SimulationOptions {
             outlier_policy: OutlierPolicy::Random,
             group_size: 10,
             alias_offsets: AliasOffsets::default(),
+            alias_place: AliasPlace::Revisited,
             true_like_share: 0.0,
             inliers: None,
         }
@@ -151,6 +155,9 @@ pub struct CorruptionOptions {
     /// The offsets of [`OutlierPolicy::Aliased`] candidates (default
     /// [`AliasOffsets::default`]).
     pub alias_offsets: AliasOffsets,
+    /// Where [`OutlierPolicy::Aliased`] groups fall (default
+    /// [`AliasPlace::Revisited`]).
+    pub alias_place: AliasPlace,
     /// Largest index distance of [`OutlierPolicy::Local`] pairs, in
     /// `[2, MAX_POSES]` (default [`DEFAULT_LOCAL_WINDOW`]).
     pub local_window: usize,
@@ -186,6 +193,7 @@ impl Default for CorruptionOptions {
             policy: OutlierPolicy::Random,
             group_size: 10,
             alias_offsets: AliasOffsets::default(),
+            alias_place: AliasPlace::Revisited,
             local_window: DEFAULT_LOCAL_WINDOW,
             translation_scale: DEFAULT_OUTLIER_TRANSLATION,
             rotation_scale: DEFAULT_OUTLIER_ROTATION,

@@ -45,16 +45,34 @@ pub enum OutlierPolicy {
     /// Groups of consecutive pairs `(i+k, j+k)` that all carry the same wrong
     /// relative transform: mutually consistent wrong loops, the hard case.
     Grouped,
-    /// Perceptual aliasing: where a place was revisited — `(i, j)` a true
-    /// loop of the graph, drawn at random (any pair when it has none) —
-    /// groups of consecutive pairs `(i+k, j+k)` whose measurements are the
-    /// relative poses `Xᵢ₊ₖ⁻¹·Xⱼ₊ₖ₊ₛ` of the reference poses (plus the
-    /// usual measurement noise): verification matched the repeated
-    /// structure (a corridor, a parking row) a few poses off, so the pose
-    /// is correct for a place `s` steps away from `j + k`, one offset `s`
-    /// per group (see [`AliasOffsets`]). Groups of one are scattered
-    /// aliases; longer groups are repeated structures.
+    /// Perceptual aliasing: groups of consecutive pairs `(i+k, j+k)` whose
+    /// measurements say that two places are one, one offset `s` per group
+    /// (see [`AliasOffsets`]); where the groups fall is [`AliasPlace`].
+    /// Groups of one are scattered aliases; longer groups are repeated
+    /// structures (a corridor, a parking row).
     Aliased,
+}
+
+/// Where [`OutlierPolicy::Aliased`] groups fall.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum AliasPlace {
+    /// Where a place was revisited: `(i, j)` a true loop of the graph,
+    /// drawn at random (any pair when it has none); pair `k` measures the
+    /// relative pose `Xᵢ₊ₖ⁻¹·Xⱼ₊ₖ₊ₛ` of the reference poses (plus the usual
+    /// measurement noise): verification matched the repeated structure a
+    /// few poses off, so the pose is correct for a place `s` steps away
+    /// from `j + k`. A true loop beside every alias speaks against it.
+    #[default]
+    Revisited,
+    /// Between any two places, most of them never revisited (two identical
+    /// corridors on different floors, the same shop front on two streets):
+    /// `(i, j)` any pair of distinct places, and the whole group says that
+    /// the stretch from `j` is the stretch from `i + s`, moved rigidly:
+    /// pair `k` measures `Xᵢ₊ₖ⁻¹·T·Xⱼ₊ₖ` with `T = Xᵢ₊ₛ·Xⱼ⁻¹`. The members
+    /// agree with one another and with the odometry along the stretch;
+    /// only the odometry joining `i` to `j` the long way speaks against
+    /// them.
+    Anywhere,
 }
 
 /// The offsets `s` of [`OutlierPolicy::Aliased`] candidates: `|s|` uniform
@@ -106,6 +124,7 @@ pub(super) struct WrongLoopPlan {
     pub(super) group_size: usize,
     pub(super) local_window: usize,
     pub(super) alias_offsets: AliasOffsets,
+    pub(super) alias_place: AliasPlace,
     pub(super) translation_scale: f64,
     pub(super) rotation_scale: f64,
 }
@@ -125,9 +144,39 @@ pub(super) struct WrongGroup {
 pub(super) struct Alias {
     /// The group's offset `s`.
     pub(super) offset: isize,
-    /// `targets[k] = j + k + s`: pair `k` measures the pose of this vertex
-    /// from `i + k`.
-    pub(super) targets: Vec<usize>,
+    /// What its pairs measure.
+    pub(super) frame: AliasFrame,
+}
+
+/// What the pairs `(a, b)` of an aliased group measure.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(super) enum AliasFrame {
+    /// [`AliasPlace::Revisited`]: `targets[k] = j + k + s`, pair `k`
+    /// measures the pose of this vertex from `i + k`.
+    Targets(Vec<usize>),
+    /// [`AliasPlace::Anywhere`]: every pair measures `Xₐ⁻¹·T·X_b` with
+    /// `T = X_anchor·X_start⁻¹` (`anchor = i + s`, `start = j`).
+    Rigid { anchor: usize, start: usize },
+}
+
+impl Alias {
+    /// The exact measurement of the group's `k`-th pair `(a, b)` on the
+    /// reference poses `poses`.
+    pub(super) fn exact<P: Pose<D>, const D: usize>(
+        &self,
+        poses: &[P],
+        k: usize,
+        (a, b): (usize, usize),
+    ) -> P {
+        let from = poses[a].inverse();
+        match &self.frame {
+            AliasFrame::Targets(targets) => from.compose(&poses[targets[k]]),
+            AliasFrame::Rigid { anchor, start } => from
+                .compose(&poses[*anchor])
+                .compose(&poses[*start].inverse())
+                .compose(&poses[b]),
+        }
+    }
 }
 
 /// The vertex `j + s` when there is one among `vertices`.
@@ -168,12 +217,17 @@ pub(super) fn wrong_groups<R: Rng + ?Sized>(
     }
     let fits = |i: usize, j: usize, alias: Option<isize>, k: usize| {
         let (a, b) = (i + k, j + k);
-        b < vertices
-            && a.abs_diff(b) >= 2
-            && !consecutive(a, b)
-            && alias.is_none_or(|s| {
+        let aliased = |s: isize| match plan.alias_place {
+            // The vertex b stands in for is another place than b, and not a.
+            AliasPlace::Revisited => {
                 aliased_vertex(b, s, vertices).is_some_and(|t| t != a && distinct(b, t))
-            })
+            }
+            // The stretch from j moves onto the one from i + s: j and i + s
+            // are other places, and so are the pair's ends.
+            AliasPlace::Anywhere => aliased_vertex(i, s, vertices)
+                .is_some_and(|t| t != j && distinct(j, t) && distinct(a, b)),
+        };
+        b < vertices && a.abs_diff(b) >= 2 && !consecutive(a, b) && alias.is_none_or(aliased)
     };
     let mut groups = Vec::with_capacity(plan.count.div_ceil(group));
     let mut left = plan.count;
@@ -186,9 +240,17 @@ pub(super) fn wrong_groups<R: Rng + ?Sized>(
         let pairs: Vec<(usize, usize)> = (0..len).map(|k| (i + k, j + k)).collect();
         let alias = alias.map(|offset| Alias {
             offset,
-            targets: (pairs.iter())
-                .filter_map(|&(_, b)| aliased_vertex(b, offset, vertices))
-                .collect(),
+            frame: match plan.alias_place {
+                AliasPlace::Revisited => AliasFrame::Targets(
+                    (pairs.iter())
+                        .filter_map(|&(_, b)| aliased_vertex(b, offset, vertices))
+                        .collect(),
+                ),
+                AliasPlace::Anywhere => AliasFrame::Rigid {
+                    anchor: i.saturating_add_signed(offset),
+                    start: j,
+                },
+            },
         });
         groups.push(WrongGroup { pairs, alias });
         left -= len;
@@ -218,7 +280,7 @@ fn draw_group<R: Rng + ?Sized>(
         }
         OutlierPolicy::Aliased => {
             let s = plan.alias_offsets.sample(rng);
-            let (i, j) = if revisits.is_empty() {
+            let (i, j) = if revisits.is_empty() || plan.alias_place == AliasPlace::Anywhere {
                 (
                     rng.random_range(0..=vertices - len),
                     rng.random_range(0..=vertices - len),
