@@ -172,8 +172,9 @@ def read_labels(path):
 
 
 def scale_information(src, dst, factor):
-    """Copy of a g2o file with every edge's information multiplied by factor."""
-    with open(src) as f, open(dst, "w") as g:
+    """Copy of a g2o file with every edge's information multiplied by factor
+    (written to a temporary and renamed: a killed run leaves none)."""
+    with open(src) as f, open(dst + ".tmp", "w") as g:
         for line in f:
             t = line.split()
             if t and t[0] in EDGE_LAYOUT:
@@ -182,6 +183,7 @@ def scale_information(src, dst, factor):
                 t[a:a + ninfo] = [repr(float(x) * factor) for x in t[a:a + ninfo]]
                 line = " ".join(t) + "\n"
             g.write(line)
+    os.replace(dst + ".tmp", dst)
 
 
 def drop_wrong(src, labels_csv, dst):
@@ -212,7 +214,7 @@ def gate_file(args, src, dst):
     stdout, err, _ = run([args.pgo, "gate", src], args.timeout)
     threshold = float(stdout.split()[0]) if stdout and not err else None
     kept = []
-    with open(src) as f, open(dst, "w") as g:
+    with open(src) as f, open(dst + ".tmp", "w") as g:
         for line in f:
             t = line.split()
             if t and t[0] in EDGE_LAYOUT:
@@ -224,6 +226,7 @@ def gate_file(args, src, dst):
                     if not keep:
                         continue
             g.write(line)
+    os.replace(dst + ".tmp", dst)
     return kept
 
 
