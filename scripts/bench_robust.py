@@ -78,6 +78,7 @@ import json
 import math
 import os
 import shlex
+import signal
 import subprocess
 import sys
 import time
@@ -127,14 +128,26 @@ def log(msg):
     print(msg, file=sys.stderr, flush=True)
 
 
-def run(cmd, timeout, capture=True, ok=(0,)):
+def run(cmd, timeout, capture=True, ok=(0,), cpu_limit=None):
     """Runs cmd; (stdout, None, seconds), or (None, error, seconds) on a
-    timeout or an exit status not in `ok`."""
+    timeout or an exit status not in `ok`. With `cpu_limit`, the limit is
+    on the process's CPU time (RLIMIT_CPU), which a loaded machine does not
+    shorten, and the wall-clock timeout is ten times as long."""
     t0 = time.perf_counter()
+    preexec = None
+    if cpu_limit:
+        import resource
+
+        def preexec():
+            resource.setrlimit(resource.RLIMIT_CPU, (cpu_limit, cpu_limit + 5))
+        timeout = 10 * cpu_limit
     try:
-        out = subprocess.run(cmd, capture_output=capture, text=True, timeout=timeout)
+        out = subprocess.run(cmd, capture_output=capture, text=True, timeout=timeout,
+                             preexec_fn=preexec)
     except subprocess.TimeoutExpired:
         return None, "timeout after %d s" % timeout, time.perf_counter() - t0
+    if cpu_limit and out.returncode in (-signal.SIGXCPU, -signal.SIGKILL):
+        return None, "CPU time limit of %d s" % cpu_limit, time.perf_counter() - t0
     if out.returncode not in ok:
         tail = (out.stdout or "")[-300:] + (out.stderr or "")[-300:]
         return None, "exit %d: %s" % (out.returncode, " ".join(tail.split())), time.perf_counter() - t0
@@ -318,7 +331,7 @@ def run_peer(args, path, script, kind, out_g2o, dim, gated=False):
         kept = gate_file(args, path, gated_path)
         path = gated_path
     cmd = [args.python, os.path.join(args.peers, script), path, "--robust", kind, "--json", "--out", out_g2o]
-    stdout, err, wall = run(cmd, args.timeout)
+    stdout, err, wall = run(cmd, args.timeout, cpu_limit=args.timeout)
     if err:
         return {"error": err, "wall_s": wall}
     r = json.loads(stdout.strip().splitlines()[-1])
@@ -454,7 +467,8 @@ def main():
     ap.add_argument("--scales", nargs="*", default=["published", "calibrated"],
                     choices=["published", "calibrated", "overconfident"])
     ap.add_argument("--tools", nargs="*", default=list(PGO_TOOLS) + list(PEER_TOOLS))
-    ap.add_argument("--timeout", type=int, default=300)
+    ap.add_argument("--timeout", type=int, default=300,
+                    help="seconds each run may take: of wall time for pgo, of CPU time for a peer")
     ap.add_argument("--pgo-flags", nargs="*", default=[], help="extra flags for every pgo run (e.g. --robust-c 4)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--peers-from", default=None, metavar="JSON",
