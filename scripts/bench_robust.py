@@ -380,8 +380,9 @@ def prepare(args, work):
                     alias_seed += 1
                     # The revisited placement with the default offsets keeps
                     # the names (and files) of earlier runs.
-                    wide = args.alias_place != "revisited" or args.alias_offset
-                    tag = "-%s-o%s" % (args.alias_place, args.alias_offset or "") if wide else ""
+                    wide = args.alias_place != "revisited" or args.alias_offset or args.alias_by_group
+                    tag = "-%s-o%s%s" % (args.alias_place, args.alias_offset or "",
+                                         "-G" if args.alias_by_group else "") if wide else ""
                     case = "%s aliased%s %d" % (name, " " + args.alias_place if wide else "", n)
                     stem = os.path.join(work, "%s-aliased%s-g%d-t%g-%d" % (
                         name, tag.replace(",", "_"), args.alias_group_size, args.alias_true_like, n))
@@ -391,6 +392,8 @@ def prepare(args, work):
                              "--alias-place", args.alias_place]
                     if args.alias_offset:
                         flags += ["--alias-offset", args.alias_offset]
+                    if args.alias_by_group:
+                        flags += ["--true-like-by-group"]
                     cases.append(corrupt_case(args, case, name, src, stem, flags, clean=src))
                     continue
                 seed += 1
@@ -460,6 +463,8 @@ def main():
                     help="share of aliased candidates with counts from the true-loop model")
     ap.add_argument("--alias-place", default="revisited", choices=["revisited", "anywhere"],
                     help="where aliased groups fall (pgo corrupt --alias-place)")
+    ap.add_argument("--alias-by-group", action="store_true",
+                    help="a group of aliases draws --alias-true-like once for all its members")
     ap.add_argument("--alias-offset", default=None, metavar="MIN,MAX",
                     help="range of the aliases' offsets in steps (pgo corrupt --alias-offset)")
     ap.add_argument("--outliers", nargs="*", type=int, default=[100, 1000])
@@ -570,9 +575,9 @@ def peers_from(args):
     with open(args.peers_from) as f:
         earlier = json.load(f)
     same = ("policies", "outliers", "only", "seed", "alias_group_size", "alias_true_like", "maxmix", "timeout",
-            "alias_place", "alias_offset")
+            "alias_place", "alias_offset", "alias_by_group")
     # Options added later: an earlier run without them ran their defaults.
-    added = {"alias_place": "revisited", "alias_offset": None}
+    added = {"alias_place": "revisited", "alias_offset": None, "alias_by_group": False}
     for key in same:
         if earlier["args"].get(key, added.get(key)) != getattr(args, key):
             raise SystemExit("--peers-from %s: its --%s was %r, not %r: not the same cases" % (

@@ -208,6 +208,11 @@ struct WrongLoopArgs {
     /// `simulate`, a positive share implies --inliers.
     #[arg(long, value_name = "SHARE", default_value_t = 0.0)]
     true_like_counts: f64,
+    /// A grouped or aliased group draws --true-like-counts once for all its
+    /// members (verification fooled by a repeated place is fooled along
+    /// all of it) instead of once per candidate.
+    #[arg(long)]
+    true_like_by_group: bool,
     /// Inlier counts of true loops: median and σ of ln count [default:
     /// 150,0.5].
     #[arg(long, visible_alias = "true-median", value_name = "MEDIAN[,SIGMA]", value_parser = parse_count_model)]
@@ -385,6 +390,7 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
         known_wrong_last: args.known_wrong_last,
         inliers: Some(args.placement.inlier_model()),
         true_like_share: args.placement.true_like_counts,
+        true_like_by_group: args.placement.true_like_by_group,
         ..CorruptionOptions::default()
     };
     let result = match &mut file.graph {
@@ -460,6 +466,7 @@ fn simulate(args: SimulateArgs) -> ExitCode {
         alias_offsets: args.placement.alias_offsets(),
         alias_place: args.placement.alias_place.into(),
         true_like_share: args.placement.true_like_counts,
+        true_like_by_group: args.placement.true_like_by_group,
         inliers: (args.inliers || args.placement.counts_given())
             .then(|| args.placement.inlier_model()),
     };

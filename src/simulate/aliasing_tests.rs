@@ -434,3 +434,53 @@ fn aliases_anywhere_fall_away_from_the_true_loops_of_a_corrupted_graph() {
     assert_eq!(at_revisits(AliasPlace::Revisited), 10);
     assert!(at_revisits(AliasPlace::Anywhere) <= 1);
 }
+
+#[test]
+fn a_group_draws_its_true_like_counts_together_when_asked() {
+    // Counts without spread: 150 for a true-like count, 25 for a wrong one.
+    let model = InlierModel {
+        true_median: 150.0,
+        true_sigma: 0.0,
+        wrong_median: 25.0,
+        wrong_sigma: 0.0,
+    };
+    let sim = simulate_planar(&SimulationOptions {
+        poses: 800,
+        loops: 40,
+        ..Default::default()
+    })
+    .unwrap();
+    let groups_of = |by_group: bool| {
+        let mut graph = sim.noisy.clone();
+        let options = CorruptionOptions {
+            outliers: 400,
+            policy: OutlierPolicy::Aliased,
+            alias_place: AliasPlace::Anywhere,
+            group_size: 10,
+            inliers: Some(model),
+            true_like_share: 0.5,
+            true_like_by_group: by_group,
+            ..Default::default()
+        };
+        let out = corrupt(&mut graph, &options, &mut StdRng::seed_from_u64(4)).unwrap();
+        let counts: Vec<u64> = (graph.edges.iter().zip(&out.wrong))
+            .filter(|(_, w)| **w)
+            .map(|(e, _)| e.candidate.unwrap().inliers.unwrap())
+            .collect();
+        // Appended in group order: 40 groups of 10.
+        counts.chunks(10).map(|g| g.to_vec()).collect::<Vec<_>>()
+    };
+    let together = groups_of(true);
+    assert!(together.iter().all(|g| g.iter().all(|&c| c == g[0])));
+    let like = together.iter().filter(|g| g[0] == 150).count();
+    assert!((10..=30).contains(&like), "{like} of 40 groups true-like");
+    // Each candidate alone: groups mix the two.
+    let apart = groups_of(false);
+    assert!(
+        apart
+            .iter()
+            .filter(|g| g.iter().any(|&c| c != g[0]))
+            .count()
+            > 30
+    );
+}

@@ -1,7 +1,7 @@
 //! Assembling a simulation: odometry, true loops and wrong loops on a true
 //! trajectory, and the noisy and truth graphs built from them.
 
-use super::counts::sample_wrong_candidate;
+use super::counts::sample_wrong_group;
 use super::noise::{ErrorCoordinates, perturb};
 use super::world::{Trajectory, find_loops};
 use super::wrong::{
@@ -133,11 +133,11 @@ fn wrong_loops<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
                 })
                 .collect(),
         };
-        for (&(from, to), measurement) in group.pairs.iter().zip(measurements) {
-            let inliers = options
-                .inliers
-                .as_ref()
-                .map(|model| sample_wrong_candidate(model, options.true_like_share, rng));
+        let shares = (options.true_like_share, options.true_like_by_group);
+        let counts = (options.inliers.as_ref())
+            .map(|model| sample_wrong_group(model, shares, group.pairs.len(), rng));
+        for (k, (&(from, to), measurement)) in group.pairs.iter().zip(measurements).enumerate() {
+            let inliers = counts.as_ref().map(|c| c[k]);
             edges.push(PlannedEdge {
                 from,
                 to,

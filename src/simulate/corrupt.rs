@@ -1,7 +1,7 @@
 //! The steps of [`corrupt`](super::corrupt): placing wrong loops in an
 //! existing graph, measuring them, and giving every candidate its count.
 
-use super::counts::sample_wrong_candidate;
+use super::counts::{sample_wrong_candidate, sample_wrong_group};
 use super::noise::{ErrorCoordinates, perturb, sample_with_information};
 use super::wrong::{WrongGroup, WrongLoopPlan, random_measurement, wrong_groups};
 use super::{CorruptionOptions, SimulationError};
@@ -128,19 +128,26 @@ pub(super) fn mark_candidates<P, const D: usize, R: Rng + ?Sized>(
     marked
 }
 
-/// Appends the planned wrong loops as candidates with counts drawn for
-/// wrong candidates (none without a model).
+/// Appends the planned wrong loops (in the order of `groups`) as
+/// candidates with counts drawn for wrong candidates (none without a
+/// model), group by group.
 pub(super) fn append<P: Pose<D>, const D: usize, R: Rng + ?Sized>(
     graph: &mut PoseGraph<P, D>,
     planned: Vec<PlannedWrong<P, D>>,
+    groups: &[WrongGroup],
     options: &CorruptionOptions,
     rng: &mut R,
 ) -> Result<(), SimulationError> {
-    for (from, to, measurement, information) in planned {
-        let inliers = options
-            .inliers
-            .as_ref()
-            .map(|model| sample_wrong_candidate(model, options.true_like_share, rng));
+    let shares = (options.true_like_share, options.true_like_by_group);
+    let counts: Vec<Option<u64>> = (groups.iter())
+        .flat_map(|g| match &options.inliers {
+            Some(model) => (sample_wrong_group(model, shares, g.pairs.len(), rng).into_iter())
+                .map(Some)
+                .collect(),
+            None => vec![None; g.pairs.len()],
+        })
+        .collect();
+    for ((from, to, measurement, information), inliers) in planned.into_iter().zip(counts) {
         let (from, to) = (graph.id(from), graph.id(to));
         let candidate = Some(LoopCandidate { inliers });
         graph.add_edge(from, to, measurement, information, candidate)?;

@@ -74,6 +74,34 @@ pub(super) fn sample_wrong_candidate<R: Rng + ?Sized>(
     }
 }
 
+/// The counts of one group of `len` wrong candidates: with `by_group`, the
+/// whole group's from the true-loop model with probability
+/// `true_like_share` (one draw: verification fooled by a repeated place is
+/// fooled along all of it), else each candidate's by
+/// [`sample_wrong_candidate`].
+pub(super) fn sample_wrong_group<R: Rng + ?Sized>(
+    model: &InlierModel,
+    (true_like_share, by_group): (f64, bool),
+    len: usize,
+    rng: &mut R,
+) -> Vec<u64> {
+    if !by_group {
+        return (0..len)
+            .map(|_| sample_wrong_candidate(model, true_like_share, rng))
+            .collect();
+    }
+    let like = true_like_share > 0.0 && rng.random_bool(true_like_share);
+    (0..len)
+        .map(|_| {
+            if like {
+                model.sample_true(rng)
+            } else {
+                model.sample_wrong(rng)
+            }
+        })
+        .collect()
+}
+
 /// `round(exp(ln median + σ·z))`; the float-to-integer cast saturates, so
 /// absurd σ's give `u64::MAX` rather than wrapping.
 fn log_normal_count<R: Rng + ?Sized>(median: f64, sigma: f64, rng: &mut R) -> u64 {

@@ -410,7 +410,7 @@ pub fn corrupt<P: ErrorCoordinates<D>, const D: usize>(
 
     let marked = corrupt::mark_candidates(graph, options, &sequential, &wrong, rng);
     wrong.resize(wrong.len() + planned.len(), true);
-    corrupt::append(graph, planned, options, rng)?;
+    corrupt::append(graph, planned, &groups, options, rng)?;
     Ok(Corruption { wrong, marked })
 }
 

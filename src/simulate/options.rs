@@ -84,6 +84,10 @@ pub struct SimulationOptions {
     /// each wrong candidate independently with this probability. Needs an
     /// inlier model when positive.
     pub true_like_share: f64,
+    /// Whether a group of [`OutlierPolicy::Grouped`] or
+    /// [`OutlierPolicy::Aliased`] candidates draws `true_like_share` once
+    /// for all its members (default `false`: each candidate draws its own).
+    pub true_like_by_group: bool,
     /// Inlier-count model of the loop candidates (default `None`: no
     /// counts). With a model, true loops are candidates with counts; see
     /// the module documentation for which edges are candidates.
@@ -105,6 +109,7 @@ impl Default for SimulationOptions {
             alias_offsets: AliasOffsets::default(),
             alias_place: AliasPlace::Revisited,
             true_like_share: 0.0,
+            true_like_by_group: false,
             inliers: None,
         }
     }
@@ -184,6 +189,9 @@ pub struct CorruptionOptions {
     /// counts are drawn from the true-loop model, in `[0, 1]` (default 0),
     /// as [`SimulationOptions::true_like_share`].
     pub true_like_share: f64,
+    /// As [`SimulationOptions::true_like_by_group`], for the appended
+    /// groups.
+    pub true_like_by_group: bool,
 }
 
 impl Default for CorruptionOptions {
@@ -200,6 +208,7 @@ impl Default for CorruptionOptions {
             inliers: Some(InlierModel::default()),
             known_wrong_last: 0,
             true_like_share: 0.0,
+            true_like_by_group: false,
         }
     }
 }
