@@ -302,7 +302,7 @@ def peer_weights(kind, r2, dim, delta):
 def run_pgo(args, path, flags, out_g2o):
     # Exit status 3: the result failed its χ² test (the output is written).
     stdout, err, wall = run([args.pgo, "optimize", path, "--json", "-q", "-o", out_g2o] + flags + [t for f in args.pgo_flags for t in shlex.split(f)],
-                            args.timeout, ok=(0, 3))
+                            args.timeout, ok=(0, 3), cpu_limit=args.timeout)
     if err:
         return {"error": err, "wall_s": wall}
     r = json.loads(stdout)
@@ -331,6 +331,8 @@ def run_peer(args, path, script, kind, out_g2o, dim, gated=False):
         kept = gate_file(args, path, gated_path)
         path = gated_path
     cmd = [args.python, os.path.join(args.peers, script), path, "--robust", kind, "--json", "--out", out_g2o]
+    if kind == "gnc" and args.gnc_rel_tol:
+        cmd += ["--rel-tol", repr(args.gnc_rel_tol)]
     stdout, err, wall = run(cmd, args.timeout, cpu_limit=args.timeout)
     if err:
         return {"error": err, "wall_s": wall}
@@ -473,7 +475,10 @@ def main():
                     choices=["published", "calibrated", "overconfident"])
     ap.add_argument("--tools", nargs="*", default=list(PGO_TOOLS) + list(PEER_TOOLS))
     ap.add_argument("--timeout", type=int, default=300,
-                    help="seconds each run may take: of wall time for pgo, of CPU time for a peer")
+                    help="seconds of CPU time each run may take")
+    ap.add_argument("--gnc-rel-tol", type=float, default=None,
+                    help="relative error tolerance of GNC's inner LM solves (the peers' script "
+                         "defaults to 1e-9; GTSAM's own default is 1e-5)")
     ap.add_argument("--pgo-flags", nargs="*", default=[], help="extra flags for every pgo run (e.g. --robust-c 4)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--peers-from", default=None, metavar="JSON",
@@ -535,8 +540,9 @@ def main():
                     # cached per input, tool and timeout, so that pgo can be
                     # re-run alone (delete --work/peers to run them again).
                     script, kind = PEER_TOOLS[tool]
-                    cache = os.path.join(args.work, "peers", "%s.%s.t%g.json" % (
-                        os.path.basename(path), tool.replace(" ", "-"), args.timeout))
+                    tol = ".rt%g" % args.gnc_rel_tol if kind == "gnc" and args.gnc_rel_tol else ""
+                    cache = os.path.join(args.work, "peers", "%s.%s.t%g%s.json" % (
+                        os.path.basename(path), tool.replace(" ", "-"), args.timeout, tol))
                     if os.path.exists(cache):
                         with open(cache) as f:
                             r = json.load(f)
@@ -575,9 +581,9 @@ def peers_from(args):
     with open(args.peers_from) as f:
         earlier = json.load(f)
     same = ("policies", "outliers", "only", "seed", "alias_group_size", "alias_true_like", "maxmix", "timeout",
-            "alias_place", "alias_offset", "alias_by_group")
+            "alias_place", "alias_offset", "alias_by_group", "gnc_rel_tol")
     # Options added later: an earlier run without them ran their defaults.
-    added = {"alias_place": "revisited", "alias_offset": None, "alias_by_group": False}
+    added = {"alias_place": "revisited", "alias_offset": None, "alias_by_group": False, "gnc_rel_tol": None}
     for key in same:
         if earlier["args"].get(key, added.get(key)) != getattr(args, key):
             raise SystemExit("--peers-from %s: its --%s was %r, not %r: not the same cases" % (
