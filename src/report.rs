@@ -540,6 +540,10 @@ impl Report {
             s += &verdict.join("; ");
             s.push('\n');
         }
+        if let Some(c) = &self.certificate {
+            s += &c.summary();
+            s.push('\n');
+        }
         for w in &self.warnings {
             s += &format!("warning: {w}\n");
         }

@@ -95,6 +95,42 @@ pub struct Certificate {
     pub time: CertificateTime,
 }
 
+impl Certificate {
+    /// The certificate as JSON, as in the report of `pgo optimize
+    /// --certify --json`. Errors: [`crate::Error::Internal`], which plain
+    /// fields like these do not give.
+    #[cfg(feature = "json")]
+    pub fn to_json(&self) -> Result<String, crate::Error> {
+        serde_json::to_string_pretty(self)
+            .map_err(|e| crate::Error::Internal(format!("cannot serialise the certificate: {e}")))
+    }
+
+    /// One line for humans.
+    pub fn summary(&self) -> String {
+        let moved = format!(
+            "refined map within {:.3e} (translation) and {:.3e} rad of pgo's",
+            self.max_translation_change, self.max_rotation_change
+        );
+        match (self.certified, self.gap_bound, self.lambda_min) {
+            (true, Some(gap), _) => format!(
+                "certificate: globally optimal (isotropic cost {:.6e}, gap ≤ {gap:.2e}; {moved}), {:.3} s",
+                self.cost, self.time.total_s
+            ),
+            (_, _, Some(lambda)) => {
+                let poses: Vec<String> = (self.eigenvector_poses.iter().take(3))
+                    .map(|p| format!("{} ({:.0}%)", p.id, 100.0 * p.share))
+                    .collect();
+                format!(
+                    "certificate: NOT certified: λ_min(S) = {lambda:.3e} < −η = {:.3e}, largest at poses {}; {moved}",
+                    -self.eta,
+                    poses.join(", ")
+                )
+            }
+            _ => format!("certificate: NOT certified (η = {:.3e}); {moved}", self.eta),
+        }
+    }
+}
+
 /// A pose where the eigenvector of `λ_min` is large.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct EigenvectorPose {
