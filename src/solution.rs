@@ -167,7 +167,7 @@ impl Solution<Se2> {
     /// factorisation, that the refined map is that problem's global
     /// optimum — or, where it is not, the smallest eigenvalue of the
     /// certificate matrix and the poses where its vector is largest.
-    /// `docs/method.md` §9 says what exactly is certified.
+    /// `docs/method.md` §10 says what exactly is certified.
     /// Errors: [`crate::CertifyError`] (several fixed poses; non-finite
     /// map).
     ///

@@ -12,7 +12,7 @@
 //! the isotropic problem, so the certified map is not pgo's map: how far
 //! the two are apart is part of the certificate. A map in a wrong basin of
 //! pgo's cost refines to a wrong critical point of the isotropic one, and
-//! is not certified. The derivation is in `docs/method.md` §9.
+//! is not certified. The derivation is in `docs/method.md` §10.
 //!
 //! The steps: [`refine`] (Newton on the isotropic problem from pgo's map),
 //! then [`check`] (`S = M − Λ(X)` and a Cholesky factorisation of
@@ -38,12 +38,12 @@ use std::time::Instant;
 /// rows of `X`); the shift must lift them above the factorisation's
 /// rounding. Measured on intel, cubicle, parking-garage, sphere2500,
 /// torus3D, city10000 and manhattan (their maps from `pgo optimize`, the
-/// constant changed by hand): all certify at every shift down to 10⁻¹²;
+/// constant changed by hand, with SE-Sync's rotation weights): all certify at every shift down to 10⁻¹²;
 /// at 10⁻¹⁴ parking-garage and torus3D fail by rounding (`λ_min` of
 /// `−7·10⁻¹³` and `−5·10⁻¹⁰`). 10⁻¹⁰ keeps a factor 100 from there, and
-/// is far above nothing a wrong basin leaves (`λ_min` of the order of `−κ`:
-/// about −4000, η ≈ 10⁻⁴, on sphere_bignoise left by `--init odometry`).
-/// The gap bound `η·d·n` it adds is 10⁻⁷–10⁻⁶ of the cost on those files.
+/// is far below what a wrong basin leaves (`λ_min` of the order of `−κ`:
+/// about −1.2·10³ on sphere_bignoise left by `--init odometry`).
+/// The gap bound `η·d·n` it adds is 10⁻⁷–10⁻⁵ of the cost on those files.
 pub const ETA_RELATIVE: f64 = 1e-10;
 
 /// The certificate of a map: whether it is the global optimum of the

@@ -28,6 +28,12 @@ use nalgebra::{SMatrix, SVector};
 /// changes after the first few).
 const MAX_ITERATIONS: usize = 50;
 
+/// After Newton's step fails (its model is not convex, or the step does
+/// not decrease the cost: far from a critical point, or in a wrong basin),
+/// this many Gauss–Newton steps are taken before it is tried again; each
+/// try costs a factorisation.
+const NEWTON_RETRY: usize = 3;
+
 /// Converged when the model's decrease `−⟨g, ξ⟩` of the step is below this
 /// fraction of the cost: a few hundred times the rounding of a sum of
 /// `10⁴–10⁶` terms, where a further step changes `Λ` by far less than the
@@ -88,11 +94,15 @@ pub(crate) fn refine<const DIM: usize, const DOF: usize>(
         return Ok(out);
     }
     let mut step = vec![0.0; steps.free.len() * DOF];
+    let mut newton_wait = 0;
     while out.iterations < MAX_ITERATIONS {
-        steps.assemble(&map, edges, true);
+        let try_newton = newton_wait == 0;
+        steps.assemble(&map, edges, try_newton);
         // Newton's step, where its model is convex and it decreases F.
         let mut taken = None;
-        if steps.sys.factorize(0.0).is_ok() {
+        if !try_newton {
+            newton_wait -= 1;
+        } else if steps.sys.factorize(0.0).is_ok() {
             steps.sys.solve(&mut step);
             let trial = steps.retract(&map, &step);
             let c = trial.cost(edges);
@@ -104,7 +114,10 @@ pub(crate) fn refine<const DIM: usize, const DOF: usize>(
             }
         }
         if taken.is_none() {
-            steps.assemble(&map, edges, false);
+            if try_newton {
+                newton_wait = NEWTON_RETRY;
+                steps.assemble(&map, edges, false);
+            }
             taken = steps.damped(&map, edges, cost, &mut step)?;
         }
         let Some((trial, c, newton)) = taken else {
