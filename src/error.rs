@@ -161,6 +161,10 @@ pub enum Error {
     /// not allocate its memory, or the like.
     #[error("internal failure: {0}")]
     Internal(String),
+    /// A certificate of global optimality could not be computed
+    /// ([`crate::Solution::certificate`]).
+    #[error(transparent)]
+    Certify(#[from] crate::certify::CertifyError),
 }
 
 /// What is wrong with a pose or a measurement.

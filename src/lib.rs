@@ -51,6 +51,8 @@ pub use nalgebra;
 pub mod geometry;
 pub mod report;
 
+mod certify;
+
 mod error;
 #[cfg(test)]
 mod internal_examples;
@@ -128,6 +130,10 @@ mod plot;
 #[path = "plot_disabled.rs"]
 mod plot;
 
+pub use certify::{
+    Certificate, CertificateTime, CertifyError, ETA_RELATIVE as CERTIFICATE_ETA_RELATIVE,
+    EigenvectorPose,
+};
 pub use error::{Error, InformationProblem, PoseProblem};
 pub use gate::{DegeneratePolicy, GateMode};
 pub use geometry::{Pose, Se2, Se3};

@@ -321,6 +321,10 @@ struct OptimizeArgs {
     /// Print the JSON report on stdout.
     #[arg(long)]
     json: bool,
+    /// Certify the map: prove it the global optimum of SE-Sync's isotropic
+    /// problem over its edges (the report's "certificate"), or say why not.
+    #[arg(long)]
+    certify: bool,
     /// Print nothing on stderr but errors.
     #[arg(short, long)]
     quiet: bool,
@@ -625,6 +629,7 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
     config.inliers = args.inliers.clone();
     config.fix_information = args.fix_information;
     config.plot = args.plot.clone();
+    config.certify = args.certify;
     let verbose = args.verbose && !args.quiet;
     // Ctrl-C stops the optimisation between iterations; the best map so far
     // is written and the exit status says it was interrupted.

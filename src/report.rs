@@ -65,6 +65,11 @@ pub struct Report {
     /// absent from a batch job's report.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub incremental: Option<IncrementalReport>,
+    /// The certificate of global optimality of the map (`pgo optimize
+    /// --certify`; [`crate::Solution::certificate`]); absent unless asked
+    /// for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub certificate: Option<crate::Certificate>,
 }
 
 /// Where a job's time went, in seconds: the phases in the order they ran,
@@ -474,6 +479,7 @@ impl Report {
             warnings: read.warnings.clone(),
             time: JobTime::default(),
             incremental: None,
+            certificate: None,
         }
     }
 
@@ -532,6 +538,10 @@ impl Report {
         }
         if !verdict.is_empty() {
             s += &verdict.join("; ");
+            s.push('\n');
+        }
+        if let Some(c) = &self.certificate {
+            s += &c.summary();
             s.push('\n');
         }
         for w in &self.warnings {

@@ -1,7 +1,9 @@
 //! What the job returns: the optimised poses by id, one decision per loop
 //! candidate, the χ² test's verdict, and the report `pgo optimize` prints.
 
-use crate::geometry::Pose;
+use crate::certify::{self, Certificate};
+use crate::error::Error;
+use crate::geometry::{Pose, Se2, Se3};
 use crate::graph::{self, VertexId};
 use crate::pose_graph::sealed::Sealed;
 use crate::report::{IncrementalReport, Report};
@@ -20,6 +22,9 @@ pub struct Solution<P> {
     index: Option<HashMap<VertexId, usize>>,
     loops: Vec<LoopDecision>,
     report: Report,
+    /// The map's edges with their isotropic weights, for
+    /// [`Solution::certificate`].
+    pub(crate) problem: certify::Problem<P>,
 }
 
 /// How the job decided one loop candidate.
@@ -81,6 +86,7 @@ impl<P> Solution<P> {
             poses: graph.poses.clone(),
             index,
             loops,
+            problem: certify::Problem::of_graph(graph, &report),
             report,
         }
     }
@@ -153,6 +159,56 @@ impl<P> Solution<P> {
     }
 }
 
+impl Solution<Se2> {
+    /// A certificate of global optimality of the map over its edges
+    /// (trusted edges and accepted loops): the map refined on SE-Sync's
+    /// isotropic problem (one rotation and one translation weight per edge
+    /// from its information matrix) and a proof, by one sparse Cholesky
+    /// factorisation, that the refined map is that problem's global
+    /// optimum — or, where it is not, the smallest eigenvalue of the
+    /// certificate matrix and the poses where its vector is largest.
+    /// `docs/method.md` §10 says what exactly is certified.
+    /// Errors: [`crate::CertifyError`] (several fixed poses; non-finite
+    /// map).
+    ///
+    /// ```
+    /// use pgo::nalgebra::Matrix3;
+    /// use pgo::{Options, PoseGraph2, Se2};
+    ///
+    /// let mut graph = PoseGraph2::new();
+    /// for k in 0..4 {
+    ///     graph.add_pose(k, Se2::new(k as f64, 0.0, 0.0))?;
+    /// }
+    /// for k in 1..4 {
+    ///     graph.add_edge(k - 1, k, Se2::new(1.0, 0.1, 0.05), Matrix3::identity())?;
+    /// }
+    /// graph.add_edge(0, 3, Se2::new(3.0, 0.0, 0.0), Matrix3::identity())?;
+    /// let certificate = graph.optimize(&Options::default())?.certificate()?;
+    /// assert!(certificate.certified);
+    /// assert!(certificate.gap_bound.unwrap() < 1e-4);
+    /// # Ok::<(), pgo::Error>(())
+    /// ```
+    pub fn certificate(&self) -> Result<Certificate, Error> {
+        Ok(certify::certify::<Se2, 2, 3, 3>(
+            &self.problem,
+            &self.poses,
+            &self.ids,
+        )?)
+    }
+}
+
+impl Solution<Se3> {
+    /// A certificate of global optimality of the map over its edges; see
+    /// [`Solution::<Se2>::certificate`](Solution#method.certificate).
+    pub fn certificate(&self) -> Result<Certificate, Error> {
+        Ok(certify::certify::<Se3, 3, 4, 6>(
+            &self.problem,
+            &self.poses,
+            &self.ids,
+        )?)
+    }
+}
+
 /// The result of [`crate::AnyPoseGraph::optimize`].
 #[derive(Clone, Debug)]
 pub enum AnySolution {
@@ -212,6 +268,11 @@ impl AnySolution {
     /// See [`Solution::report`].
     pub fn report(&self) -> &Report {
         either!(self, |s| s.report())
+    }
+
+    /// See [`Solution::certificate`](Solution#method.certificate).
+    pub fn certificate(&self) -> Result<Certificate, Error> {
+        either!(self, |s| s.certificate())
     }
 
     /// See [`Solution::incremental`].

@@ -15,6 +15,11 @@
 #include <stdlib.h>
 
 /**
+ * Most poses of the eigenvector `PgoCertificate` lists.
+ */
+#define PGO_CERTIFICATE_POSES 10
+
+/**
  * What a call of the C API returned: `PGO_OK`, or why it failed (then
  * `pgo_last_error()` says more, naming the vertex, option, file or line).
  * Codes may be added in later versions; treat an unknown one as an error.
@@ -193,6 +198,67 @@ typedef struct PgoOptions PgoOptions;
 typedef struct PgoResult PgoResult;
 
 /**
+ * A certificate of global optimality of a map (filled by
+ * `pgo_result_certificate`): the map refined on the isotropic problem
+ * over its edges and whether it is that problem's global optimum, proven
+ * by a sparse Cholesky factorisation of `S + η·D`; where it is not, the
+ * smallest eigenvalue of `S` and the poses where its vector is largest.
+ */
+typedef struct PgoCertificate {
+  /**
+   * Whether the refined map is certified globally optimal.
+   */
+  bool certified;
+  /**
+   * The shift η: every eigenvalue of `Q − Λ` is above −η when certified.
+   */
+  double eta;
+  /**
+   * The isotropic cost of the refined (certified) map.
+   */
+  double cost;
+  /**
+   * The isotropic cost of pgo's map.
+   */
+  double map_cost;
+  /**
+   * When certified, a bound on the cost above the global optimum; NaN
+   * otherwise.
+   */
+  double gap_bound;
+  /**
+   * The largest distance between a pose of the refined map and pgo's.
+   */
+  double max_translation_change;
+  /**
+   * The largest rotation between them (radians).
+   */
+  double max_rotation_change;
+  /**
+   * When not certified, the smallest eigenvalue of `Q − Λ`; NaN
+   * otherwise.
+   */
+  double lambda_min;
+  /**
+   * How many of `eigenvector_ids` are set (0 when certified).
+   */
+  size_t num_eigenvector_poses;
+  /**
+   * The poses where the eigenvector of `lambda_min` is largest, largest
+   * first.
+   */
+  uint64_t eigenvector_ids[PGO_CERTIFICATE_POSES];
+  /**
+   * Their shares of the vector's squared norm.
+   */
+  double eigenvector_shares[PGO_CERTIFICATE_POSES];
+  /**
+   * Seconds the certificate took.
+   */
+  double time_s;
+} PgoCertificate;
+
+/**
  * What an update did (a plain struct the caller owns, filled by
  * `pgo_result_update`); all zero (`PGO_NOT_AN_UPDATE`) for the result of
  * `pgo_graph_optimize`.
@@ -350,6 +416,19 @@ enum PgoStatus pgo_cancel_requested(const struct PgoCancel *cancel, bool *out);
  * or thread uses any more.
  */
 void pgo_cancel_free(struct PgoCancel *cancel);
+
+/**
+ * Computes the certificate of `result`'s map and stores it at `*out`
+ * (each call computes it anew).
+ *
+ * Errors: `PGO_ERR_INVALID_ARGUMENT` (NULL pointers; a graph with more
+ * than one fixed pose), `PGO_ERR_NUMERICAL` (a non-finite map),
+ * `PGO_ERR_INTERNAL`.
+ *
+ * # Safety
+ * `result` is NULL or a live result; `out` is NULL or writable.
+ */
+enum PgoStatus pgo_result_certificate(const struct PgoResult *result, struct PgoCertificate *out);
 
 /**
  * Makes an empty graph of poses in `dim` dimensions (2 or 3) and stores

@@ -13,12 +13,14 @@
 //! owned by the API.
 
 mod cancel;
+mod certificate;
 mod graph;
 mod options;
 mod result;
 mod status;
 
 pub use cancel::*;
+pub use certificate::*;
 pub use graph::*;
 pub use options::*;
 pub use result::*;

@@ -27,6 +27,11 @@ pub struct PgoResult {
 }
 
 impl PgoResult {
+    /// The library's solution.
+    pub(crate) fn solution(&self) -> &AnySolution {
+        &self.solution
+    }
+
     /// A result holding `solution`.
     fn new(solution: AnySolution) -> Box<Self> {
         // The library's words: no NUL (one would be written out).

@@ -128,6 +128,9 @@ pub(crate) fn status_of(error: &pgo::Error) -> PgoStatus {
             PgoErrNumerical
         }
         Error::Threads { .. } | Error::Internal(_) => PgoErrInternal,
+        Error::Certify(pgo::CertifyError::SeveralFixed { .. }) => PgoErrInvalidArgument,
+        Error::Certify(pgo::CertifyError::NonFinite) => PgoErrNumerical,
+        Error::Certify(_) => PgoErrInternal,
         _ => PgoErrOther,
     }
 }

@@ -1286,3 +1286,40 @@ fn a_cancelled_token_stops_jobs_and_an_update_keeps_the_earlier_state() {
         pgo_graph_free(g);
     }
 }
+
+#[test]
+fn a_certificate_through_c_is_the_librarys() {
+    for (name, dim) in [("grid2d.g2o", 2), ("sphere3d.g2o", 3)] {
+        let library = AnyPoseGraph::read_g2o(sample(name)).unwrap();
+        let expected = library
+            .optimize(&Options::default())
+            .unwrap()
+            .certificate()
+            .unwrap();
+        let mut g = ptr::null_mut();
+        ok(unsafe { pgo_graph_read_g2o(c_path(&sample(name)).as_ptr(), &mut g) });
+        let mut found = 0;
+        ok(unsafe { pgo_graph_dim(g, &mut found) });
+        assert_eq!(found, dim);
+        let mut r = ptr::null_mut();
+        ok(unsafe { pgo_graph_optimize(g, ptr::null(), &mut r) });
+        let mut c = PgoCertificate::default();
+        ok(unsafe { pgo_result_certificate(r, &mut c) });
+        assert_eq!(c.certified, expected.certified, "{name}");
+        assert_eq!(
+            (c.cost, c.map_cost, c.eta),
+            (expected.cost, expected.map_cost, expected.eta)
+        );
+        assert_eq!(c.gap_bound.is_nan(), expected.gap_bound.is_none());
+        assert_eq!(c.num_eigenvector_poses, expected.eigenvector_poses.len());
+        assert_fails(
+            unsafe { pgo_result_certificate(r, ptr::null_mut()) },
+            PgoStatus::PgoErrInvalidArgument,
+            "out",
+        );
+        unsafe {
+            pgo_result_free(r);
+            pgo_graph_free(g);
+        }
+    }
+}

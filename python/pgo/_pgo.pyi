@@ -140,6 +140,8 @@ class Result:
     @property
     def cancelled(self) -> bool:
         """Whether a Cancel token stopped the job (the best map so far)."""
+    def certificate(self) -> Dict[str, Any]:
+        """Certificate of global optimality of the map (certified, eta, cost, map_cost, gap_bound, max_translation_change, max_rotation_change, lambda_min, lambda_min_bounds, eigenvector_poses, time)."""
     def __repr__(self) -> str: ...
 
 def read_g2o(

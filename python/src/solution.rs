@@ -177,6 +177,19 @@ impl Solution {
         self.solution.cancelled()
     }
 
+    /// A certificate of global optimality of the map over its edges, as a
+    /// dict (the report's "certificate" of `pgo optimize --certify`):
+    /// `certified`, `eta`, `cost` (isotropic cost of the certified map),
+    /// `map_cost`, `gap_bound`, `max_translation_change`,
+    /// `max_rotation_change`, and where not certified `lambda_min`,
+    /// `lambda_min_bounds` and `eigenvector_poses` (`id`, `share`).
+    /// Computed on each call, without the GIL.
+    fn certificate<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let certificate = py.detach(|| self.solution.certificate()).map_err(error)?;
+        let text = certificate.to_json().map_err(error)?;
+        py.import("json")?.call_method1("loads", (text,))
+    }
+
     /// `Result(poses=…, loops=…, accepted=…, chi2=…, verdict=…)`.
     fn __repr__(&self) -> String {
         let loops = self.solution.loops();

@@ -67,6 +67,9 @@ pub struct OptimizeConfig {
     /// Write SVG pictures (inlier-count histogram with the fitted mixture;
     /// trajectory before and after) into this directory.
     pub plot: Option<PathBuf>,
+    /// Add the map's certificate of global optimality to the report
+    /// (`--certify`).
+    pub certify: bool,
 }
 
 /// Which edges are loop-closure candidates.
@@ -120,6 +123,7 @@ impl OptimizeConfig {
             iteration_budget: options.solver.max_iterations,
             update_iterations: options.solver.update_iterations,
             plot: None,
+            certify: false,
         }
     }
 }
@@ -233,6 +237,9 @@ pub fn run(config: &OptimizeConfig, observer: &mut dyn Observer) -> Result<Repor
             optimize_graph(g, &file.missing, config, &mut report, observer)?
         }
     }
+    if config.certify {
+        certify_into(&file.graph, &mut report);
+    }
     for w in &report.warnings {
         log::warn!("{w}");
     }
@@ -244,6 +251,19 @@ pub fn run(config: &OptimizeConfig, observer: &mut dyn Observer) -> Result<Repor
     }
     report.time.total_s = start.elapsed().as_secs_f64();
     Ok(report)
+}
+
+/// Adds the certificate of the optimised `graph`'s map to `report` (or a
+/// warning saying why there is none).
+fn certify_into(graph: &AnyPoseGraph, report: &mut Report) {
+    let certificate = match graph {
+        AnyPoseGraph::Planar(g) => crate::certify::of_graph::<_, 2, 3, 3, 3>(g, report),
+        AnyPoseGraph::Spatial(g) => crate::certify::of_graph::<_, 3, 4, 6, 6>(g, report),
+    };
+    match certificate {
+        Ok(c) => report.certificate = Some(c),
+        Err(e) => report.warnings.push(format!("no certificate: {e}")),
+    }
 }
 
 /// The job on a graph in memory: gate → initial guess → robust solve → χ²

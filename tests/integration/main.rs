@@ -1,6 +1,7 @@
 //! Integration tests: one test binary (as nalgebra does), one module per
 //! concern.
 
+mod certify;
 mod cli;
 mod common;
 mod datasets;
