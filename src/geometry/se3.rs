@@ -38,8 +38,10 @@ impl Se3 {
     /// already of unit norm to machine precision (so that reading what was
     /// written gives the same bits), whatever its norm: one whose squared
     /// norm over- or underflows (norm beyond 10^±154) is divided by its
-    /// largest component first. Returns `None` for a zero quaternion or a
-    /// non-finite number.
+    /// largest component first. Returns `None` for a quaternion that is
+    /// zero to floating point (its largest component is 0 or subnormal,
+    /// below 2.2·10⁻³⁰⁸, where the ratios of the components have lost
+    /// their precision) or a non-finite number.
     pub fn from_translation_quaternion(t: [f64; 3], q: [f64; 4]) -> Option<Self> {
         let quat = Quaternion::new(q[3], q[0], q[1], q[2]);
         if q.iter().chain(&t).any(|v| !v.is_finite()) {
@@ -51,10 +53,11 @@ impl Se3 {
         } else if n2.is_finite() && n2 > f64::MIN_POSITIVE {
             quat / n2.sqrt()
         } else {
-            // Exact scaling by a power of two (in two halves: 2¹⁰⁷⁴, for a
-            // subnormal largest component, is no f64) into range.
+            // Exact scaling by a power of two into range (in two halves:
+            // 2¹⁰²³ is the largest f64 power of two, the scale may be one
+            // more).
             let largest = q.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            if largest == 0.0 {
+            if largest < f64::MIN_POSITIVE {
                 return None;
             }
             let e = -(largest.log2().floor() as i32);
@@ -504,7 +507,7 @@ mod tests {
         assert_eq!(a, b);
         assert!(Se3::from_translation_quaternion([0.0; 3], [0.0; 4]).is_none());
         // Norms whose square over- or underflows are normalised all the same.
-        for scale in [1e200, 1e300, f64::MAX, 1e-200, 5e-324] {
+        for scale in [1e200, 1e300, f64::MAX, 1e-200, f64::MIN_POSITIVE] {
             let q = Se3::from_translation_quaternion([0.0; 3], [0.0, 0.0, scale, scale])
                 .unwrap()
                 .quaternion_xyzw();
@@ -514,6 +517,9 @@ mod tests {
                 "{scale}: {q:?}"
             );
         }
+        // Subnormal components: zero to floating point.
+        let subnormal = [0.0, 0.0, 5e-324, 1e-320];
+        assert!(Se3::from_translation_quaternion([0.0; 3], subnormal).is_none());
         assert!(
             Se3::from_translation_quaternion([0.0; 3], [f64::INFINITY, 0.0, 0.0, 1.0]).is_none()
         );
