@@ -134,14 +134,14 @@ pub use certify::{
     Certificate, CertificateTime, CertifyError, ETA_RELATIVE as CERTIFICATE_ETA_RELATIVE,
     EigenvectorPose,
 };
-pub use error::{Error, InformationProblem, PoseProblem};
+pub use error::{Error, ErrorKind, InformationProblem, PoseProblem, Setting};
 pub use gate::{DegeneratePolicy, GateMode};
 pub use geometry::{Pose, Se2, Se3};
-pub use graph::VertexId;
+pub use graph::{INFORMATION_RANGE, VertexId};
 pub use io::g2o::{LineProblem, ReadError};
 pub use options::{
-    ExpertOptions, GateOptions, MAX_THREADS, MAX_TIME_LIMIT_S, Options, RobustOptions,
-    SolverOptions, TestOptions,
+    ExpertOptions, GateOptions, MAX_THREADS, MAX_TIME_LIMIT_S, Options, ROBUST_C_RANGE,
+    RobustOptions, SolverOptions, TestOptions,
 };
 pub use pipeline::CandidateRule;
 pub use pose_graph::{AnyPoseGraph, GraphPose, PoseGraph, PoseGraph2, PoseGraph3};

@@ -16,6 +16,7 @@ use nalgebra::SMatrix;
 use sealed::Sealed;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 /// What [`Report::input`] says of a graph that was not read from a file.
 pub(crate) const IN_MEMORY: &str = "(in memory)";
@@ -205,6 +206,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
 
     fn read(path: &Path, fix_information: bool) -> Result<Self, Error> {
         let file = g2o::read(path, ReadOptions { fix_information })?;
+        in_range(&file.graph)?;
         let found = file.graph.dimension();
         let graph = P::unwrap(file.graph).ok_or(Error::Dimension {
             expected: dimension::<D>(),
@@ -457,6 +459,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Result<Solution<P>, Error> {
+        let start = Instant::now();
         options.validate()?;
         let (mut report, config) = self.start(options)?;
         let mut graph = self.graph.clone();
@@ -465,6 +468,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         for w in &report.warnings {
             log::warn!("{w}");
         }
+        report.time.total_s = start.elapsed().as_secs_f64();
         Ok(Solution::new(&graph, report))
     }
 
@@ -526,6 +530,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Result<Solution<P>, Error> {
+        let start = Instant::now();
         options.validate()?;
         let (mut report, config) = self.start(options)?;
         let blank = report.clone();
@@ -578,6 +583,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         for w in &report.warnings {
             log::warn!("{w}");
         }
+        report.time.total_s = start.elapsed().as_secs_f64();
         Ok(Solution::new(&graph, report))
     }
 
@@ -636,9 +642,29 @@ fn from_pipeline(e: PipelineError) -> Error {
             to,
         },
         PipelineError::NonFiniteResult { .. } => Error::NonFinite,
+        PipelineError::Information {
+            from, to, problem, ..
+        } => Error::InvalidInformation { from, to, problem },
         PipelineError::Write { path, source } => Error::Write { path, source },
         // No inlier CSV and no pictures in memory: not reached.
         other => Error::Internal(other.to_string()),
+    }
+}
+
+/// Refuses a graph read from a file whose information matrices leave
+/// [`graph::INFORMATION_RANGE`] (the reader takes any finite scale).
+fn in_range(graph: &graph::AnyPoseGraph) -> Result<(), Error> {
+    let found = match graph {
+        graph::AnyPoseGraph::Planar(g) => g.information_out_of_range(),
+        graph::AnyPoseGraph::Spatial(g) => g.information_out_of_range(),
+    };
+    match found {
+        Some((from, to, index, value)) => Err(Error::InvalidInformation {
+            from,
+            to,
+            problem: InformationProblem::OutOfRange { index, value },
+        }),
+        None => Ok(()),
     }
 }
 
@@ -670,17 +696,21 @@ fn checked_information<const D: usize>(
             kept[(c, r)] = upper;
         }
     }
-    if graph::is_positive_definite(&kept) {
-        return Ok((kept, false));
-    }
-    if !repair {
+    let (kept, repaired) = if graph::is_positive_definite(&kept) {
+        (kept, false)
+    } else if !repair {
         return Err(InformationProblem::NotPositiveDefinite {
             min_eigenvalue: min_eigenvalue(&kept),
         });
+    } else {
+        let repaired =
+            graph::nearest_positive_definite(&kept).ok_or(InformationProblem::NotRepairable)?;
+        (repaired, true)
+    };
+    match graph::information_out_of_range(&kept) {
+        Some((index, value)) => Err(InformationProblem::OutOfRange { index, value }),
+        None => Ok((kept, repaired)),
     }
-    graph::nearest_positive_definite(&kept)
-        .map(|m| (m, true))
-        .ok_or(InformationProblem::NotRepairable)
 }
 
 /// The smallest eigenvalue of a symmetric matrix (NaN if the bounded
@@ -757,6 +787,7 @@ impl AnyPoseGraph {
                 fix_information: fix,
             },
         )?;
+        in_range(&file.graph)?;
         let source = Some((path.to_owned(), file.summary));
         Ok(match file.graph {
             graph::AnyPoseGraph::Planar(graph) => Self::Planar(PoseGraph {
@@ -788,6 +819,24 @@ impl AnyPoseGraph {
         match self {
             Self::Planar(_) => 2,
             Self::Spatial(_) => 3,
+        }
+    }
+
+    /// The numbers of a pose or measurement: 3 (`x y θ`) in 2D, 7
+    /// (`x y z qx qy qz qw`) in 3D.
+    pub fn pose_width(&self) -> usize {
+        match self {
+            Self::Planar(_) => 3,
+            Self::Spatial(_) => 7,
+        }
+    }
+
+    /// The side of an information matrix, the degrees of freedom of a
+    /// pose: 3 in 2D, 6 in 3D (it takes the square's numbers).
+    pub fn information_width(&self) -> usize {
+        match self {
+            Self::Planar(_) => 3,
+            Self::Spatial(_) => 6,
         }
     }
 

@@ -119,6 +119,20 @@ pub enum UpdateSolve {
     Full,
 }
 
+impl UpdateSolve {
+    /// Its name as the JSON report spells it: `batch`, `none`,
+    /// `extended`, `warm` or `full` (for bindings).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Batch => "batch",
+            Self::None => "none",
+            Self::Extended => "extended",
+            Self::Warm => "warm",
+            Self::Full => "full",
+        }
+    }
+}
+
 /// What an incremental update added and changed.
 #[derive(Clone, Debug, Serialize)]
 pub struct IncrementalReport {

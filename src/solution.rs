@@ -27,8 +27,10 @@ pub struct Solution<P> {
     pub(crate) problem: certify::Problem<P>,
 }
 
-/// How the job decided one loop candidate.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// How the job decided one loop candidate. Serialised (with the `json`
+/// feature's `serde_json`, say) under its field names, `reason` as
+/// [`Reason::as_str`] names it.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct LoopDecision {
     /// Its index, as [`crate::PoseGraph::add_loop_candidate`] returned it
     /// (edges and candidates are numbered together; with
@@ -54,6 +56,24 @@ pub struct LoopDecision {
     pub innovation: Option<f64>,
     /// Why it ended where it did.
     pub reason: Reason,
+}
+
+impl Reason {
+    /// Its name as the JSON report spells it (snake case): `consistent`,
+    /// `inconsistent`, `unchecked`, `explains_chi2`, `unsettled`,
+    /// `kernel`, `gated` or `trusted` (for bindings).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Consistent => "consistent",
+            Self::Inconsistent => "inconsistent",
+            Self::Unchecked => "unchecked",
+            Self::ExplainsChi2 => "explains_chi2",
+            Self::Unsettled => "unsettled",
+            Self::Kernel => "kernel",
+            Self::Gated => "gated",
+            Self::Trusted => "trusted",
+        }
+    }
 }
 
 impl<P> Solution<P> {
@@ -233,6 +253,48 @@ impl AnySolution {
     /// `x y z qx qy qz qw`).
     pub fn pose(&self, id: VertexId) -> Option<Vec<f64>> {
         either!(self, |s| s.pose(id).map(Sealed::numbers))
+    }
+
+    /// 2 or 3.
+    pub fn dimension(&self) -> usize {
+        match self {
+            Self::Planar(_) => 2,
+            Self::Spatial(_) => 3,
+        }
+    }
+
+    /// The numbers of a pose: 3 (`x y θ`) in 2D, 7 (`x y z qx qy qz qw`)
+    /// in 3D.
+    pub fn pose_width(&self) -> usize {
+        match self {
+            Self::Planar(_) => 3,
+            Self::Spatial(_) => 7,
+        }
+    }
+
+    /// The ids of the poses, in the graph's order.
+    pub fn ids(&self) -> &[VertexId] {
+        either!(self, |s| &s.ids)
+    }
+
+    /// Every optimised pose's numbers, one pose after the other in the
+    /// order of [`AnySolution::ids`]: [`AnySolution::pose_width`] numbers
+    /// each, an N × width row-major array.
+    ///
+    /// ```
+    /// let mut graph = pgo::AnyPoseGraph::new(2)?;
+    /// graph.add_pose(7, &[0.0, 0.0, 0.0])?;
+    /// graph.add_pose(3, &[0.9, 0.0, 0.0])?;
+    /// graph.add_edge(7, 3, &[1.0, 0.0, 0.0], &[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0])?;
+    /// let solution = graph.optimize(&pgo::Options::default())?;
+    /// assert_eq!(solution.ids(), &[7, 3]);
+    /// let flat = solution.poses_flat();
+    /// assert_eq!(flat.len(), 2 * solution.pose_width());
+    /// assert!((flat[3] - 1.0).abs() < 1e-9); // x of pose 3
+    /// # Ok::<(), pgo::Error>(())
+    /// ```
+    pub fn poses_flat(&self) -> Vec<f64> {
+        either!(self, |s| s.poses.iter().flat_map(Sealed::numbers).collect())
     }
 
     /// See [`Solution::loops`].

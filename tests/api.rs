@@ -595,7 +595,7 @@ fn a_graph_the_job_cannot_run_on_is_refused() {
     let e = g.optimize(&bad).unwrap_err();
     assert_eq!(
         e.to_string(),
-        "--robust-c must be finite and positive, got NaN"
+        "--robust-c must be between 1e-100 and 1e100, got NaN"
     );
     bad.robust.c = None;
     bad.solver.threads = 2;

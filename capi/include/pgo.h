@@ -108,6 +108,11 @@ typedef enum PgoStatus {
    * may hold part of the change.
    */
   PGO_ERR_PANIC,
+  /**
+   * A request pgo does not serve for this graph: a certificate of a map
+   * with several fixed poses.
+   */
+  PGO_ERR_UNSUPPORTED,
 } PgoStatus;
 
 /**
@@ -448,13 +453,30 @@ enum PgoStatus pgo_graph_new(int32_t dim, struct PgoGraph **out);
  * On failure `*out` is NULL.
  *
  * Errors: `PGO_ERR_IO` (the file cannot be read), `PGO_ERR_PARSE` (the
- * message names the file and line), `PGO_ERR_INVALID_ARGUMENT` (NULL or
- * non-UTF-8 `path`, NULL `out`).
+ * message names the file and line; an information matrix that is not
+ * positive definite: `pgo_graph_read_g2o_repairing` repairs it),
+ * `PGO_ERR_INVALID_INFORMATION` (an information matrix beyond the range
+ * pgo computes with, 1e-100 to 1e100 on the diagonal),
+ * `PGO_ERR_INVALID_ARGUMENT` (NULL or non-UTF-8 `path`, NULL `out`).
  *
  * # Safety
  * `path` is NULL or a NUL-terminated string; `out` is NULL or writable.
  */
 enum PgoStatus pgo_graph_read_g2o(const char *path, struct PgoGraph **out);
+
+/**
+ * `pgo_graph_read_g2o`, with information matrices that are not positive
+ * definite projected to the nearest positive-definite ones instead of
+ * refused (as `pgo optimize --fix-information`; the report's
+ * `information_fixed` counts them). Zero or non-finite matrices are
+ * refused either way.
+ *
+ * Errors: those of `pgo_graph_read_g2o`.
+ *
+ * # Safety
+ * As `pgo_graph_read_g2o`.
+ */
+enum PgoStatus pgo_graph_read_g2o_repairing(const char *path, struct PgoGraph **out);
 
 /**
  * Writes the graph as a g2o file at `path`, atomically (a temporary file
@@ -568,7 +590,8 @@ enum PgoStatus pgo_graph_forget(struct PgoGraph *graph);
  * Whether edges added from now on with an information matrix that is not
  * positive definite have it projected to the nearest positive-definite
  * one instead of being refused (off by default; the report counts the
- * repairs). Non-finite or asymmetric matrices are refused either way.
+ * repairs). Non-finite, asymmetric or out-of-range matrices are refused
+ * either way.
  *
  * Errors: `PGO_ERR_INVALID_ARGUMENT`.
  *
@@ -598,6 +621,22 @@ enum PgoStatus pgo_graph_len(const struct PgoGraph *graph, size_t *out);
 enum PgoStatus pgo_graph_num_edges(const struct PgoGraph *graph, size_t *out);
 
 /**
+ * Copies the ids of the graph's poses, in the order they were added (or
+ * read from the file), into the `len` slots at `out`; `len` is the
+ * number of poses (`pgo_graph_len`). Poses are looked up by id
+ * (`pgo_result_pose`), so this is how a caller who read a file learns
+ * them.
+ *
+ * Errors: `PGO_ERR_LENGTH` (`len` is not the number of poses),
+ * `PGO_ERR_INVALID_ARGUMENT`.
+ *
+ * # Safety
+ * `graph` is NULL or a live graph; `out` is NULL or points to `len`
+ * writable `uint64_t`s.
+ */
+enum PgoStatus pgo_graph_ids(const struct PgoGraph *graph, uint64_t *out, size_t len);
+
+/**
  * Stores the graph's dimension, 2 or 3, at `*out`.
  *
  * Errors: `PGO_ERR_INVALID_ARGUMENT`.
@@ -620,13 +659,14 @@ enum PgoStatus pgo_options_new(struct PgoOptions **out);
 
 /**
  * Sets one option by its command-line long flag without the `--` (`gate`,
- * `robust`, `robust-c`, `alpha`, `threads`, ...; `-` and `_` are the
- * same) from its value as text, parsed as the command line parses it. A
- * switch (`innovations`, `no-rescue`, ...) takes `true` or `false`. On
- * failure the options are unchanged.
+ * `robust`, `robust-c`, `alpha`, `threads`, `expert`, ...; `-` and `_`
+ * are the same; the message of `PGO_ERR_UNKNOWN_OPTION` lists them all)
+ * from its value as text, parsed as the command line parses it
+ * (`pgo optimize --help` documents them). On failure the options are
+ * unchanged.
  *
  * Errors: `PGO_ERR_UNKNOWN_OPTION` (the message lists the names),
- * `PGO_ERR_INVALID_OPTION` (the message names the flag and the value),
+ * `PGO_ERR_INVALID_OPTION` (the message names the option and the value),
  * `PGO_ERR_INVALID_ARGUMENT`.
  *
  * # Safety

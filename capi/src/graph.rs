@@ -67,8 +67,11 @@ pub unsafe extern "C" fn pgo_graph_new(dim: i32, out: *mut *mut PgoGraph) -> Pgo
 /// On failure `*out` is NULL.
 ///
 /// Errors: `PGO_ERR_IO` (the file cannot be read), `PGO_ERR_PARSE` (the
-/// message names the file and line), `PGO_ERR_INVALID_ARGUMENT` (NULL or
-/// non-UTF-8 `path`, NULL `out`).
+/// message names the file and line; an information matrix that is not
+/// positive definite: `pgo_graph_read_g2o_repairing` repairs it),
+/// `PGO_ERR_INVALID_INFORMATION` (an information matrix beyond the range
+/// pgo computes with, 1e-100 to 1e100 on the diagonal),
+/// `PGO_ERR_INVALID_ARGUMENT` (NULL or non-UTF-8 `path`, NULL `out`).
 ///
 /// # Safety
 /// `path` is NULL or a NUL-terminated string; `out` is NULL or writable.
@@ -82,6 +85,30 @@ pub unsafe extern "C" fn pgo_graph_read_g2o(
         make(out, || {
             let path = text(path, "path")?;
             Ok(AnyPoseGraph::read_g2o(path)?)
+        })
+    }
+}
+
+/// `pgo_graph_read_g2o`, with information matrices that are not positive
+/// definite projected to the nearest positive-definite ones instead of
+/// refused (as `pgo optimize --fix-information`; the report's
+/// `information_fixed` counts them). Zero or non-finite matrices are
+/// refused either way.
+///
+/// Errors: those of `pgo_graph_read_g2o`.
+///
+/// # Safety
+/// As `pgo_graph_read_g2o`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_graph_read_g2o_repairing(
+    path: *const c_char,
+    out: *mut *mut PgoGraph,
+) -> PgoStatus {
+    // SAFETY: the caller's contract.
+    unsafe {
+        make(out, || {
+            let path = text(path, "path")?;
+            Ok(AnyPoseGraph::read_g2o_repairing(path)?)
         })
     }
 }
@@ -274,7 +301,8 @@ pub unsafe extern "C" fn pgo_graph_forget(graph: *mut PgoGraph) -> PgoStatus {
 /// Whether edges added from now on with an information matrix that is not
 /// positive definite have it projected to the nearest positive-definite
 /// one instead of being refused (off by default; the report counts the
-/// repairs). Non-finite or asymmetric matrices are refused either way.
+/// repairs). Non-finite, asymmetric or out-of-range matrices are refused
+/// either way.
 ///
 /// Errors: `PGO_ERR_INVALID_ARGUMENT`.
 ///
@@ -315,6 +343,43 @@ pub unsafe extern "C" fn pgo_graph_len(graph: *const PgoGraph, out: *mut usize) 
 pub unsafe extern "C" fn pgo_graph_num_edges(graph: *const PgoGraph, out: *mut usize) -> PgoStatus {
     // SAFETY: the caller's contract.
     unsafe { get(graph, out, |g| g.num_edges()) }
+}
+
+/// Copies the ids of the graph's poses, in the order they were added (or
+/// read from the file), into the `len` slots at `out`; `len` is the
+/// number of poses (`pgo_graph_len`). Poses are looked up by id
+/// (`pgo_result_pose`), so this is how a caller who read a file learns
+/// them.
+///
+/// Errors: `PGO_ERR_LENGTH` (`len` is not the number of poses),
+/// `PGO_ERR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `graph` is NULL or a live graph; `out` is NULL or points to `len`
+/// writable `uint64_t`s.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_graph_ids(
+    graph: *const PgoGraph,
+    out: *mut u64,
+    len: usize,
+) -> PgoStatus {
+    status(|| {
+        // SAFETY: the caller's contract.
+        let graph = unsafe { borrow(graph, "graph")? };
+        let ids = graph.graph.ids();
+        if ids.len() != len {
+            return Err(Failure::new(
+                PgoStatus::PgoErrLength,
+                format!("ids: the graph has {} poses, got room for {len}", ids.len()),
+            ));
+        }
+        if len > 0 {
+            let slot = out_ptr(out, "out")?;
+            // SAFETY: `len` writable ids at `slot`, by the caller's contract.
+            unsafe { ptr::copy_nonoverlapping(ids.as_ptr(), slot, len) };
+        }
+        Ok(())
+    })
 }
 
 /// Stores the graph's dimension, 2 or 3, at `*out`.

@@ -36,13 +36,14 @@ pub unsafe extern "C" fn pgo_options_new(out: *mut *mut PgoOptions) -> PgoStatus
 }
 
 /// Sets one option by its command-line long flag without the `--` (`gate`,
-/// `robust`, `robust-c`, `alpha`, `threads`, ...; `-` and `_` are the
-/// same) from its value as text, parsed as the command line parses it. A
-/// switch (`innovations`, `no-rescue`, ...) takes `true` or `false`. On
-/// failure the options are unchanged.
+/// `robust`, `robust-c`, `alpha`, `threads`, `expert`, ...; `-` and `_`
+/// are the same; the message of `PGO_ERR_UNKNOWN_OPTION` lists them all)
+/// from its value as text, parsed as the command line parses it
+/// (`pgo optimize --help` documents them). On failure the options are
+/// unchanged.
 ///
 /// Errors: `PGO_ERR_UNKNOWN_OPTION` (the message lists the names),
-/// `PGO_ERR_INVALID_OPTION` (the message names the flag and the value),
+/// `PGO_ERR_INVALID_OPTION` (the message names the option and the value),
 /// `PGO_ERR_INVALID_ARGUMENT`.
 ///
 /// # Safety

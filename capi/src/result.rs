@@ -463,12 +463,12 @@ pub unsafe extern "C" fn pgo_result_pose(
             )
         })?;
         if pose.len() != len {
-            let dimension = if pose.len() == 3 { 2 } else { 3 };
             return Err(Failure::new(
                 PgoStatus::PgoErrLength,
                 format!(
-                    "pose: expected {} numbers for a {dimension}D graph, got {len}",
-                    pose.len()
+                    "pose: expected {} numbers for a {}D graph, got {len}",
+                    result.solution.pose_width(),
+                    result.solution.dimension()
                 ),
             ));
         }
@@ -552,25 +552,18 @@ unsafe fn decision<'a>(result: *const PgoResult, k: usize) -> Result<&'a LoopDec
     })
 }
 
-/// The name of a reason, the one place it is derived: its variant's name
-/// (its `Debug` form up to the first field) in snake case, interned.
+/// The name of a reason (the library's, [`Reason::as_str`]) as a C
+/// string, interned.
 pub(crate) fn reason_name(reason: &Reason) -> &'static CStr {
     static NAMES: Mutex<Vec<&'static CStr>> = Mutex::new(Vec::new());
-    let debug = format!("{reason:?}");
-    let mut name = String::new();
-    for c in debug.chars().take_while(char::is_ascii_alphanumeric) {
-        if c.is_ascii_uppercase() && !name.is_empty() {
-            name.push('_');
-        }
-        name.push(c.to_ascii_lowercase());
-    }
+    let name = reason.as_str();
     let mut names = NAMES
         .lock()
         .unwrap_or_else(|poisoned| poisoned.into_inner());
     if let Some(known) = names.iter().find(|n| n.to_bytes() == name.as_bytes()) {
         return known;
     }
-    // Alphanumeric: no NUL. One leak per variant, ever.
+    // Snake case: no NUL. One leak per variant, ever.
     let interned: &'static CStr =
         Box::leak(CString::new(name).unwrap_or_default().into_boxed_c_str());
     names.push(interned);

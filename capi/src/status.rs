@@ -3,6 +3,7 @@
 //! panics caught, the library's [`pgo::Error`] turned into a status and a
 //! message.
 
+use pgo::{ErrorKind, Setting};
 use std::any::Any;
 use std::cell::RefCell;
 use std::ffi::{CStr, CString, c_char};
@@ -59,6 +60,9 @@ pub enum PgoStatus {
     /// panic's. Handles stay valid to free, but one the call was changing
     /// may hold part of the change.
     PgoErrPanic,
+    /// A request pgo does not serve for this graph: a certificate of a map
+    /// with several fixed poses.
+    PgoErrUnsupported,
 }
 
 /// A failed call: its status and message.
@@ -101,37 +105,49 @@ impl Failure {
 
 impl From<pgo::Error> for Failure {
     fn from(error: pgo::Error) -> Self {
-        Self::new(status_of(&error), error.to_string())
+        Self::new(status_of(&error), error.message_with(&c_name))
     }
 }
 
-/// The status of each of the library's errors: the one place they are
-/// classified.
+/// The status of a library error: that of its kind (the library
+/// classifies its errors once, for the C and the Python API alike).
 pub(crate) fn status_of(error: &pgo::Error) -> PgoStatus {
-    use PgoStatus::*;
-    use pgo::{Error, ReadError};
-    match error {
-        Error::DuplicateVertex { .. } => PgoErrDuplicateVertex,
-        Error::UnknownVertex { .. } => PgoErrUnknownVertex,
-        Error::SelfLoop { .. } => PgoErrSelfLoop,
-        Error::InvalidPose { .. } | Error::InvalidMeasurement { .. } => PgoErrInvalidPose,
-        Error::InvalidInformation { .. } => PgoErrInvalidInformation,
-        Error::Length { .. } => PgoErrLength,
-        Error::UnsupportedDimension { .. } | Error::Dimension { .. } => PgoErrDimension,
-        Error::UnknownOption { .. } => PgoErrUnknownOption,
-        Error::InvalidOption { .. } => PgoErrInvalidOption,
-        Error::Read(ReadError::Io { .. }) | Error::Write { .. } => PgoErrIo,
-        Error::Read(_) => PgoErrParse,
-        Error::EmptyGraph => PgoErrEmptyGraph,
-        Error::Unconstrained { .. } => PgoErrUnconstrained,
-        Error::Undetermined { .. } | Error::NonFiniteEdge { .. } | Error::NonFinite => {
-            PgoErrNumerical
+    error.kind().into()
+}
+
+impl From<ErrorKind> for PgoStatus {
+    fn from(kind: ErrorKind) -> Self {
+        use PgoStatus::*;
+        match kind {
+            ErrorKind::DuplicateVertex => PgoErrDuplicateVertex,
+            ErrorKind::UnknownVertex => PgoErrUnknownVertex,
+            ErrorKind::SelfLoop => PgoErrSelfLoop,
+            ErrorKind::InvalidPose => PgoErrInvalidPose,
+            ErrorKind::InvalidInformation => PgoErrInvalidInformation,
+            ErrorKind::Length => PgoErrLength,
+            ErrorKind::Dimension => PgoErrDimension,
+            ErrorKind::UnknownOption => PgoErrUnknownOption,
+            ErrorKind::InvalidOption => PgoErrInvalidOption,
+            ErrorKind::Io => PgoErrIo,
+            ErrorKind::Parse => PgoErrParse,
+            ErrorKind::EmptyGraph => PgoErrEmptyGraph,
+            ErrorKind::Unconstrained => PgoErrUnconstrained,
+            ErrorKind::Numerical => PgoErrNumerical,
+            ErrorKind::Internal => PgoErrInternal,
+            ErrorKind::Unsupported => PgoErrUnsupported,
+            _ => PgoErrOther,
         }
-        Error::Threads { .. } | Error::Internal(_) => PgoErrInternal,
-        Error::Certify(pgo::CertifyError::SeveralFixed { .. }) => PgoErrInvalidArgument,
-        Error::Certify(pgo::CertifyError::NonFinite) => PgoErrNumerical,
-        Error::Certify(_) => PgoErrInternal,
-        _ => PgoErrOther,
+    }
+}
+
+/// A setting a message suggests, as a C caller sets it: an option by the
+/// name `pgo_options_set` takes, a repair by its function.
+fn c_name(setting: Setting) -> String {
+    match setting {
+        Setting::Option(name) => format!("option \"{name}\""),
+        Setting::RepairAdded => "pgo_graph_set_repair_information(graph, true)".to_owned(),
+        Setting::RepairRead => "pgo_graph_read_g2o_repairing".to_owned(),
+        other => other.rust_name(),
     }
 }
 
@@ -260,6 +276,65 @@ mod tests {
         assert_eq!(message(), "pgo panicked: boom 7");
         assert_eq!(value(5, || panic!("static")), 5);
         assert_eq!(message(), "pgo panicked: static");
+    }
+
+    #[test]
+    fn each_kind_has_its_status() {
+        let kinds = [
+            (ErrorKind::DuplicateVertex, PgoStatus::PgoErrDuplicateVertex),
+            (ErrorKind::UnknownVertex, PgoStatus::PgoErrUnknownVertex),
+            (ErrorKind::SelfLoop, PgoStatus::PgoErrSelfLoop),
+            (ErrorKind::InvalidPose, PgoStatus::PgoErrInvalidPose),
+            (
+                ErrorKind::InvalidInformation,
+                PgoStatus::PgoErrInvalidInformation,
+            ),
+            (ErrorKind::Length, PgoStatus::PgoErrLength),
+            (ErrorKind::Dimension, PgoStatus::PgoErrDimension),
+            (ErrorKind::UnknownOption, PgoStatus::PgoErrUnknownOption),
+            (ErrorKind::InvalidOption, PgoStatus::PgoErrInvalidOption),
+            (ErrorKind::Io, PgoStatus::PgoErrIo),
+            (ErrorKind::Parse, PgoStatus::PgoErrParse),
+            (ErrorKind::EmptyGraph, PgoStatus::PgoErrEmptyGraph),
+            (ErrorKind::Unconstrained, PgoStatus::PgoErrUnconstrained),
+            (ErrorKind::Numerical, PgoStatus::PgoErrNumerical),
+            (ErrorKind::Internal, PgoStatus::PgoErrInternal),
+        ];
+        let mut seen = Vec::new();
+        for (kind, expected) in kinds {
+            let status = PgoStatus::from(kind);
+            assert_eq!(status, expected, "{kind:?}");
+            assert!(!seen.contains(&status), "{kind:?}: two kinds, one status");
+            seen.push(status);
+        }
+        assert_eq!(
+            status_of(&pgo::Error::Undetermined { vertex: 1 }),
+            PgoStatus::PgoErrNumerical
+        );
+    }
+
+    #[test]
+    fn messages_name_settings_as_c_sets_them() {
+        let e = pgo::Options::default().set("alpha", "2").unwrap_err();
+        let failure = Failure::from(e);
+        assert_eq!(failure.message, "option \"alpha\" must be in (0, 1), got 2");
+        let mut graph = pgo::AnyPoseGraph::new(2).unwrap();
+        graph.add_pose(0, &[0.0; 3]).unwrap();
+        graph.add_pose(1, &[1.0, 0.0, 0.0]).unwrap();
+        let negative = [-1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+        let e = graph
+            .add_edge(0, 1, &[1.0, 0.0, 0.0], &negative)
+            .unwrap_err();
+        let failure = Failure::from(e);
+        assert_eq!(failure.status, PgoStatus::PgoErrInvalidInformation);
+        assert!(
+            failure
+                .message
+                .contains("; pgo_graph_set_repair_information(graph, true) projects"),
+            "{}",
+            failure.message
+        );
+        assert!(!failure.message.contains("PoseGraph::"));
     }
 
     #[test]

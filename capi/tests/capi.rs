@@ -345,13 +345,14 @@ fn options_are_set_by_their_flag_names() {
         assert_fails(
             pgo_options_set(o, c"alpha".as_ptr(), c"2".as_ptr()),
             PgoStatus::PgoErrInvalidOption,
-            "--alpha",
+            "option \"alpha\" must be in (0, 1), got 2",
         );
         assert_fails(
             pgo_options_set(o, c"robust-c".as_ptr(), c"NaN".as_ptr()),
             PgoStatus::PgoErrInvalidOption,
-            "--robust-c",
+            "option \"robust-c\" must be between 1e-100 and 1e100, got NaN",
         );
+        assert!(!last_error().contains("--"), "C names, not flags");
         let not_utf8 = [0xffu8, 0];
         assert_fails(
             pgo_options_set(o, c"alpha".as_ptr(), not_utf8.as_ptr().cast::<c_char>()),
@@ -431,6 +432,107 @@ fn files_that_cannot_be_read_or_written_are_io_and_parse_errors() {
         pgo_graph_free(empty);
         pgo_graph_free(g);
         pgo_graph_free(chain);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+#[test]
+fn the_ids_of_a_graph_read_from_a_file_are_listed() {
+    unsafe {
+        for (name, dim) in [("grid2d.g2o", 2), ("sphere3d.g2o", 3)] {
+            let mut g = ptr::null_mut();
+            ok(pgo_graph_read_g2o(c_path(&sample(name)).as_ptr(), &mut g));
+            let mut n = 0;
+            ok(pgo_graph_len(g, &mut n));
+            let mut ids = vec![u64::MAX; n];
+            ok(pgo_graph_ids(g, ids.as_mut_ptr(), n));
+            let expected = AnyPoseGraph::read_g2o(sample(name)).unwrap();
+            assert_eq!(ids, expected.ids(), "{name}");
+            // Every id has its optimised pose, of the graph's width.
+            let mut r = ptr::null_mut();
+            ok(pgo_graph_optimize(g, ptr::null(), &mut r));
+            let width = if dim == 2 { 3 } else { 7 };
+            let mut pose = vec![0.0; width];
+            for &id in &ids {
+                ok(pgo_result_pose(r, id, pose.as_mut_ptr(), width));
+            }
+            assert_fails(
+                pgo_result_pose(r, ids[0], pose.as_mut_ptr(), 4),
+                PgoStatus::PgoErrLength,
+                &format!("pose: expected {width} numbers for a {dim}D graph, got 4"),
+            );
+            assert_fails(
+                pgo_graph_ids(g, ids.as_mut_ptr(), n - 1),
+                PgoStatus::PgoErrLength,
+                &format!("ids: the graph has {n} poses, got room for {}", n - 1),
+            );
+            assert_fails(
+                pgo_graph_ids(g, ptr::null_mut(), n),
+                PgoStatus::PgoErrInvalidArgument,
+                "out is NULL",
+            );
+            pgo_result_free(r);
+            pgo_graph_free(g);
+        }
+        // No poses, no room needed.
+        let empty = new_graph(2);
+        ok(pgo_graph_ids(empty, ptr::null_mut(), 0));
+        assert_fails(
+            pgo_graph_ids(ptr::null(), ptr::null_mut(), 0),
+            PgoStatus::PgoErrInvalidArgument,
+            "graph is NULL",
+        );
+        pgo_graph_free(empty);
+    }
+}
+
+#[test]
+fn a_file_s_information_is_repaired_when_asked_and_messages_say_how() {
+    unsafe {
+        let dir = std::env::temp_dir().join(format!("pgo-capi-repair-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let indefinite = dir.join("indefinite.g2o");
+        std::fs::write(
+            &indefinite,
+            "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 -1 0 0 1 0 1\n",
+        )
+        .unwrap();
+        let path = c_path(&indefinite);
+        let mut g = ptr::null_mut();
+        assert_fails(
+            pgo_graph_read_g2o(path.as_ptr(), &mut g),
+            PgoStatus::PgoErrParse,
+            "indefinite.g2o:3: information matrix is not positive definite (smallest eigenvalue \
+             -1e0); pgo_graph_read_g2o_repairing projects such matrices",
+        );
+        assert!(!last_error().contains("--fix-information"));
+        assert!(g.is_null());
+        ok(pgo_graph_read_g2o_repairing(path.as_ptr(), &mut g));
+        let mut r = ptr::null_mut();
+        ok(pgo_graph_optimize(g, ptr::null(), &mut r));
+        let json = CStr::from_ptr(pgo_result_report_json(r)).to_str().unwrap();
+        assert!(json.contains("\"information_fixed\": 1"), "{json}");
+        pgo_result_free(r);
+        pgo_graph_free(g);
+
+        // An edge's, added: the function that repairs those.
+        let g = chain();
+        let negative = [-1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+        let z = [1.0, 0.0, 0.0];
+        assert_fails(
+            pgo_graph_add_edge(g, 0, 2, z.as_ptr(), 3, negative.as_ptr(), 9),
+            PgoStatus::PgoErrInvalidInformation,
+            "; pgo_graph_set_repair_information(graph, true) projects such matrices",
+        );
+        // Beyond the range pgo computes with: refused whether repaired or not.
+        let tiny = IDENTITY3.map(|v| v * 1e-120);
+        ok(pgo_graph_set_repair_information(g, true));
+        assert_fails(
+            pgo_graph_add_edge(g, 0, 2, z.as_ptr(), 3, tiny.as_ptr(), 9),
+            PgoStatus::PgoErrInvalidInformation,
+            "diagonal entry (0, 0) = 1e-120, outside the range pgo computes with",
+        );
+        pgo_graph_free(g);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
@@ -876,7 +978,7 @@ fn capped_updates_go_on_and_one_with_nothing_added_finishes() {
         assert_fails(
             pgo_options_set(capped, c"update_iters".as_ptr(), c"0".as_ptr()),
             PgoStatus::PgoErrInvalidOption,
-            "--update-iters must be at least 1",
+            "option \"update-iters\" must be at least 1",
         );
         // A loop 0.3 m off the chain: one iteration does not settle it.
         for n in 3..8 {

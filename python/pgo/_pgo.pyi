@@ -20,7 +20,66 @@ PoseTuple = Tuple[float, ...]
 OptionValue = Union[bool, int, float, str, None]
 
 class Error(ValueError):
-    """Bad input to pgo or a failed optimisation, with the library's message."""
+    """Bad input to pgo or a failed optimisation, with the library's message.
+
+    Each kind of failure is a subclass; every one is a ValueError."""
+
+class InvalidArgumentError(Error):
+    """An argument no call can take: an id or count out of range, an array of the wrong shape."""
+
+class ArgumentTypeError(InvalidArgumentError, TypeError):
+    """An argument of the wrong type: a bool as an id or count, text, complex or masked arrays as numbers, a path that is no str or os.PathLike."""
+
+class DuplicateVertexError(Error):
+    """A pose was added twice under the same id."""
+
+class UnknownVertexError(Error, LookupError):
+    """An edge, fix or look-up names a vertex id the graph does not have."""
+
+class SelfLoopError(Error):
+    """An edge from a vertex to itself."""
+
+class InvalidPoseError(Error):
+    """A pose or measurement that is not one: a NaN or infinite number, a zero quaternion."""
+
+class InvalidInformationError(Error):
+    """An information matrix that is not finite, symmetric, positive definite and within range."""
+
+class LengthError(Error):
+    """Numbers of the wrong count for the graph's dimension."""
+
+class DimensionError(Error):
+    """A dimension other than 2 or 3, or a file of the other dimension."""
+
+class UnknownOptionError(Error):
+    """A name that is no option (option_names() lists them)."""
+
+class InvalidOptionError(Error):
+    """An option's value that does not parse or is out of range."""
+
+class FileError(OSError, Error):
+    """A file that cannot be opened, read or written (errno, strerror, filename as OSError's)."""
+
+class MissingFileError(FileNotFoundError, FileError):
+    """A file (or directory) that does not exist."""
+
+class ParseError(Error):
+    """A malformed g2o file; the message names the file and line."""
+
+class EmptyGraphError(Error):
+    """A graph without poses cannot be optimised."""
+
+class UnconstrainedError(Error):
+    """Poses tied to the fixed ones by no chain of edges."""
+
+class NumericalError(Error):
+    """A problem floating point cannot solve: a pose its edges do not determine, numbers too large."""
+
+class InternalError(Error):
+    """A failure of pgo's own (threads, memory, a bug), not the input's."""
+
+class UnsupportedError(Error):
+    """A request pgo does not serve for this graph: a certificate of a map with several fixed poses."""
 
 class Cancel:
     """A token another thread cancels to stop a running optimize or update."""
@@ -38,11 +97,12 @@ class PoseGraph:
 
     Poses with integer ids, trusted edges (odometry), loop-closure
     candidates with their inlier counts, and the poses held fixed. Every
-    addition is checked and refused with :class:`Error`.
+    addition is checked and refused with the :class:`Error` subclass of
+    its kind.
     """
 
     def __init__(self, dim: int, *, repair_information: bool = False) -> None:
-        """An empty graph of poses in ``dim`` (2 or 3) dimensions."""
+        """An empty graph of poses in ``dim`` (2 or 3) dimensions; with ``repair_information``, matrices that are not positive definite are projected to the nearest ones."""
     def add_pose(self, id: VertexId, pose: Numbers) -> None:
         """Adds a pose: (x, y, θ) or (x, y, z, qx, qy, qz, qw)."""
     def add_edge(self, i: VertexId, j: VertexId, meas: Numbers, info: Matrix) -> int:
@@ -81,7 +141,7 @@ class PoseGraph:
     def write_g2o(self, path: Union[str, os.PathLike[str]]) -> None:
         """Writes the graph as a g2o file, atomically."""
     def optimize(self, *, cancel: Optional[Cancel] = None, **options: OptionValue) -> Result:
-        """Runs the job of ``pgo optimize``; options are its flags, ``_`` for ``-``; ``cancel`` stops it."""
+        """Runs the job of ``pgo optimize``; options are its flags, ``_`` for ``-`` (option_names() lists them); ``cancel`` stops it."""
     def update(self, *, cancel: Optional[Cancel] = None, **options: OptionValue) -> Result:
         """The job again after additions, from the last update's map; options and cancel as optimize's, plus update_iters=K (at most K iterations per solve; the map may then be short of the optimum, and a later update goes on from it)."""
     def forget(self) -> None:
@@ -147,7 +207,7 @@ class Result:
 def read_g2o(
     path: Union[str, os.PathLike[str]], *, repair_information: bool = False
 ) -> PoseGraph:
-    """Reads a g2o file of either dimension."""
+    """Reads a g2o file of either dimension (MissingFileError if there is none, ParseError naming the line if it is malformed)."""
 
 def option_names() -> List[str]:
     """The option names :meth:`PoseGraph.optimize` takes (``-`` or ``_``)."""

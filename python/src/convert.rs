@@ -1,39 +1,111 @@
 //! Python values to what the library takes: vertex ids, inlier counts,
-//! vectors and matrices of numbers, option values as command-line text.
-//! Whatever does not convert is a `pgo.Error` naming what was expected.
+//! the dimension, vectors and matrices of numbers, paths, option values
+//! as command-line text. Whatever does not convert is a `pgo.Error`
+//! naming what was expected: `pgo.ArgumentTypeError` (also a `TypeError`)
+//! for a value of the wrong type — a bool for an integer, text, bytes,
+//! complex numbers or a masked array for numbers — and
+//! `pgo.InvalidArgumentError` for one of the right type out of range.
 
-use crate::Error;
+use crate::errors::{invalid, wrong_type};
 use numpy::{AllowTypeChange, PyArrayLikeDyn, PyUntypedArrayMethods};
+use pyo3::exceptions::PyOverflowError;
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyFloat, PyString};
+use pyo3::sync::PyOnceLock;
+use pyo3::types::{PyBool, PyByteArray, PyBytes, PyFloat, PyString, PyType};
+use std::path::PathBuf;
 
-/// A library error as a `pgo.Error` with the library's message.
+/// A library error as the `pgo.Error` subclass of its kind.
 pub fn error(e: pgo::Error) -> PyErr {
-    Error::new_err(e.to_string())
+    crate::errors::library(e)
+}
+
+/// Whether `value` is a bool, Python's or numpy's (both convert to
+/// integers, and neither is an id or a count).
+fn is_bool(value: &Bound<'_, PyAny>) -> bool {
+    static NUMPY_BOOL: PyOnceLock<Py<PyType>> = PyOnceLock::new();
+    value.is_instance_of::<PyBool>()
+        || NUMPY_BOOL
+            .import(value.py(), "numpy", "bool_")
+            .is_ok_and(|t| value.is_instance(t).unwrap_or(false))
+}
+
+/// An integer argument: `Some` if it fits an `i128`, `None` for a larger
+/// one; a `pgo.ArgumentTypeError` for a bool or a non-integer (a float
+/// included: `5.0` is no id).
+fn integer(what: &str, value: &Bound<'_, PyAny>) -> PyResult<Option<i128>> {
+    if is_bool(value) {
+        return Err(wrong_type(format!(
+            "{what} must be an integer, not a bool, got {}",
+            describe(value)
+        )));
+    }
+    match value.extract::<i128>() {
+        Ok(n) => Ok(Some(n)),
+        Err(e) if e.is_instance_of::<PyOverflowError>(value.py()) => Ok(None),
+        Err(_) => Err(wrong_type(format!(
+            "{what} must be an integer, got {}",
+            describe(value)
+        ))),
+    }
 }
 
 /// A vertex id: a Python integer in `0 ..= 2⁶⁴ − 1`.
 pub fn vertex_id(value: &Bound<'_, PyAny>) -> PyResult<u64> {
-    value.extract::<u64>().map_err(|_| {
-        Error::new_err(format!(
+    let n = integer("a vertex id", value)?;
+    n.and_then(|n| u64::try_from(n).ok()).ok_or_else(|| {
+        invalid(format!(
             "a vertex id must be an integer in 0..=18446744073709551615, got {}",
             describe(value)
         ))
     })
 }
 
+/// A vertex id to look for: `None` for anything that cannot be one.
+pub fn maybe_vertex_id(value: &Bound<'_, PyAny>) -> Option<u64> {
+    if is_bool(value) {
+        return None;
+    }
+    value.extract::<u64>().ok()
+}
+
 /// An inlier count: `None` or a Python integer in `0 ..= 2⁶⁴ − 1`.
 pub fn inlier_count(value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<u64>> {
-    match value {
-        None => Ok(None),
-        Some(v) if v.is_none() => Ok(None),
-        Some(v) => v.extract::<u64>().map(Some).map_err(|_| {
-            Error::new_err(format!(
+    let Some(v) = value.filter(|v| !v.is_none()) else {
+        return Ok(None);
+    };
+    let n = integer("inliers", v)?;
+    n.and_then(|n| u64::try_from(n).ok())
+        .map(Some)
+        .ok_or_else(|| {
+            invalid(format!(
                 "inliers must be None or a non-negative integer, got {}",
                 describe(v)
             ))
-        }),
-    }
+        })
+}
+
+/// A graph's dimension, an integer; the library checks that it is 2 or
+/// 3 (a `pgo.DimensionError` for any other integer).
+pub fn dimension(value: &Bound<'_, PyAny>) -> PyResult<usize> {
+    let n = integer("dim", value)?;
+    n.and_then(|n| usize::try_from(n).ok()).ok_or_else(|| {
+        crate::errors::dimension(format!(
+            "a pose graph is 2D or 3D, not {}D",
+            value
+                .repr()
+                .map_or_else(|_| "?".to_owned(), |r| r.to_string())
+        ))
+    })
+}
+
+/// A path: a `str` or `os.PathLike`.
+pub fn path(value: &Bound<'_, PyAny>) -> PyResult<PathBuf> {
+    value.extract::<PathBuf>().map_err(|_| {
+        wrong_type(format!(
+            "path: expected a str or os.PathLike, got {}",
+            describe(value)
+        ))
+    })
 }
 
 /// The numbers of a vector (`what` is `pose` or `measurement`): any
@@ -42,7 +114,7 @@ pub fn inlier_count(value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<u64>> {
 pub fn vector(what: &str, value: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
     let array = numbers(what, value)?;
     if array.ndim() != 1 {
-        return Err(Error::new_err(format!(
+        return Err(invalid(format!(
             "{what}: expected a sequence of numbers, got an array of shape {}",
             shape(array.shape())
         )));
@@ -57,7 +129,7 @@ pub fn matrix(value: &Bound<'_, PyAny>, size: usize) -> PyResult<Vec<f64>> {
     let array = numbers("information", value)?;
     let square = array.ndim() == 2 && array.shape() == [size, size];
     if !(square || array.ndim() == 1) {
-        return Err(Error::new_err(format!(
+        return Err(invalid(format!(
             "information: expected a {size}×{size} matrix, got an array of shape {}",
             shape(array.shape())
         )));
@@ -66,13 +138,59 @@ pub fn matrix(value: &Bound<'_, PyAny>, size: usize) -> PyResult<Vec<f64>> {
     Ok(array.as_array().iter().copied().collect())
 }
 
-/// Any array-like of numbers as a float64 array, or a `pgo.Error`.
+/// Any array-like of real numbers (integers or floats) as a float64
+/// array. Refused: text and bytes (numpy would parse `'1'` as 1), bools,
+/// complex numbers (numpy would drop the imaginary part), objects, and
+/// masked arrays (numpy would drop the mask).
 fn numbers<'py>(
     what: &str,
     value: &Bound<'py, PyAny>,
 ) -> PyResult<PyArrayLikeDyn<'py, f64, AllowTypeChange>> {
-    value.extract().map_err(|e: PyErr| {
-        Error::new_err(format!(
+    static ASARRAY: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
+    static MASKED: PyOnceLock<Py<PyType>> = PyOnceLock::new();
+    let py = value.py();
+    let text = value.is_instance_of::<PyString>()
+        || value.is_instance_of::<PyBytes>()
+        || value.is_instance_of::<PyByteArray>();
+    if text {
+        return Err(wrong_type(format!(
+            "{what}: expected numbers, got {}",
+            describe(value)
+        )));
+    }
+    if value.is_instance(MASKED.import(py, "numpy.ma", "MaskedArray")?)? {
+        return Err(wrong_type(format!(
+            "{what}: a masked array's mask would be ignored; pass an array without one \
+             (.filled() or .compressed()), got {}",
+            describe(value)
+        )));
+    }
+    let asarray = ASARRAY.import(py, "numpy", "asarray")?;
+    let array = asarray.call1((value,)).map_err(|e| {
+        invalid(format!(
+            "{what}: expected numbers, got {} ({e})",
+            describe(value)
+        ))
+    })?;
+    let dtype = array.getattr("dtype")?;
+    let kind: String = dtype.getattr("kind")?.extract()?;
+    let refused = match kind.as_str() {
+        "f" | "i" | "u" => None,
+        "b" => Some("booleans"),
+        "c" => Some("complex numbers (only real ones are taken)"),
+        _ => Some("no numbers"),
+    };
+    if let Some(found) = refused {
+        return Err(wrong_type(format!(
+            "{what}: expected real numbers, got {found}: {} (dtype {})",
+            describe(value),
+            dtype
+                .str()
+                .map_or_else(|_| "?".to_owned(), |s| s.to_string())
+        )));
+    }
+    array.extract().map_err(|e: PyErr| {
+        invalid(format!(
             "{what}: expected numbers, got {} ({e})",
             describe(value)
         ))
@@ -99,7 +217,7 @@ pub fn option_text(name: &str, value: &Bound<'_, PyAny>) -> PyResult<String> {
         // Debug: the shortest text that reads back to the same number.
         return Ok(format!("{x:?}"));
     }
-    Err(Error::new_err(format!(
+    Err(wrong_type(format!(
         "option {name}: expected a bool, int, float or str, got {}",
         describe(value)
     )))

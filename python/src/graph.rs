@@ -3,7 +3,6 @@
 //! optimisation with options named as `pgo optimize`'s flags, as one batch
 //! job or incrementally (`update`).
 
-use crate::Error;
 use crate::cancel::{Cancel, Stop};
 use crate::convert::{self, error};
 use crate::solution::Solution;
@@ -11,7 +10,6 @@ use pgo::{AnyPoseGraph, AnySolution, Options};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use std::panic::{self, AssertUnwindSafe};
-use std::path::PathBuf;
 
 /// A pose graph in 2D (SE(2), poses `(x, y, θ)`) or 3D (SE(3), poses
 /// `(x, y, z, qx, qy, qz, qw)`, g2o's order): poses with integer ids,
@@ -20,7 +18,7 @@ use std::path::PathBuf;
 ///
 /// Every addition is checked (finite numbers, known and distinct ids, no
 /// edge from a pose to itself, symmetric positive-definite information)
-/// and refused with a `pgo.Error`. With `repair_information=True`,
+/// and refused with a `pgo.Error` subclass naming what is wrong. With `repair_information=True`,
 /// information matrices that are not positive definite are projected to
 /// the nearest ones instead (counted in the report's `information_fixed`).
 #[pyclass(name = "PoseGraph", module = "pgo")]
@@ -34,11 +32,6 @@ impl PoseGraph {
         Self { graph }
     }
 
-    /// Degrees of freedom of a pose: the side of an information matrix.
-    fn dof(&self) -> usize {
-        if self.graph.dimension() == 2 { 3 } else { 6 }
-    }
-
     /// Adds an edge or a loop candidate (`candidate` holds its count).
     fn add(
         &mut self,
@@ -48,7 +41,7 @@ impl PoseGraph {
         let [from, to, measurement, information] = edge;
         let (from, to) = (convert::vertex_id(from)?, convert::vertex_id(to)?);
         let measurement = convert::vector("measurement", measurement)?;
-        let information = convert::matrix(information, self.dof())?;
+        let information = convert::matrix(information, self.graph.information_width())?;
         match candidate {
             None => self.graph.add_edge(from, to, &measurement, &information),
             Some(inliers) => {
@@ -65,8 +58,8 @@ impl PoseGraph {
     /// An empty pose graph of poses in `dim` (2 or 3) dimensions.
     #[new]
     #[pyo3(signature = (dim, *, repair_information = false))]
-    fn new(dim: usize, repair_information: bool) -> PyResult<Self> {
-        let mut graph = AnyPoseGraph::new(dim).map_err(error)?;
+    fn new(dim: &Bound<'_, PyAny>, repair_information: bool) -> PyResult<Self> {
+        let mut graph = AnyPoseGraph::new(convert::dimension(dim)?).map_err(error)?;
         graph.set_repair_information(repair_information);
         Ok(Self { graph })
     }
@@ -126,10 +119,10 @@ impl PoseGraph {
         self.graph.len()
     }
 
-    /// Whether a pose has this id.
+    /// Whether a pose has this id (False for what is no id, a bool
+    /// included).
     fn __contains__(&self, id: &Bound<'_, PyAny>) -> bool {
-        id.extract::<u64>()
-            .is_ok_and(|id| self.graph.ids().contains(&id))
+        convert::maybe_vertex_id(id).is_some_and(|id| self.graph.ids().contains(&id))
     }
 
     /// The dimension: 2 or 3.
@@ -175,16 +168,16 @@ impl PoseGraph {
     }
 
     /// Writes the graph as a g2o file (`str` or path-like), atomically.
-    fn write_g2o(&self, path: PathBuf) -> PyResult<()> {
-        self.graph.write_g2o(path).map_err(error)
+    fn write_g2o(&self, path: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.graph.write_g2o(convert::path(path)?).map_err(error)
     }
 
     /// Runs the job of `pgo optimize` on the graph (left unchanged): the
     /// gate learned from the inlier counts, the robust weighting of the
     /// loops, the χ² test. Options are `pgo optimize`'s flags with `_` for
     /// `-` (`gate="off"`, `robust="none"`, `max_iters=50`, `alpha=0.01`,
-    /// `no_rescue=True`; see `pgo.option_names()`); `None` leaves one at
-    /// its default. The GIL is released while it runs. `cancel`, a
+    /// `expert="no-search"`; see `pgo.option_names()`); `None` leaves one
+    /// at its default. The GIL is released while it runs. `cancel`, a
     /// `pgo.Cancel`, stops it from another thread; Ctrl-C stops it too and
     /// raises `KeyboardInterrupt`.
     #[pyo3(signature = (*, cancel = None, **options))]
@@ -198,11 +191,7 @@ impl PoseGraph {
         let graph = &self.graph;
         let mut stop = Stop::new(cancel);
         let solution = detached(py, &mut stop, |stop| graph.optimize_with(&options, stop))?;
-        Ok(Solution::new(
-            graph.ids().to_vec(),
-            graph.dimension(),
-            solution,
-        ))
+        Ok(Solution::new(solution))
     }
 
     /// The job again after poses, edges or loop candidates were added,
@@ -229,11 +218,7 @@ impl PoseGraph {
         let graph = &mut self.graph;
         let mut stop = Stop::new(cancel);
         let solution = detached(py, &mut stop, |stop| graph.update_with(&options, stop))?;
-        Ok(Solution::new(
-            graph.ids().to_vec(),
-            graph.dimension(),
-            solution,
-        ))
+        Ok(Solution::new(solution))
     }
 
     /// Drops what `update` keeps (the last update's poses, decisions and
@@ -270,8 +255,9 @@ fn parse_options(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
 }
 
 /// Runs a job of the library with the GIL released, stopped by `stop`;
-/// its error, or a panic (a bug), as a `pgo.Error`, and the signal's error
-/// (`KeyboardInterrupt`) if one stopped it.
+/// its error as the `pgo.Error` of its kind, a panic (a bug) as a
+/// `pgo.InternalError`, and the signal's error (`KeyboardInterrupt`) if
+/// one stopped it.
 fn detached(
     py: Python<'_>,
     stop: &mut Stop,
@@ -279,7 +265,9 @@ fn detached(
 ) -> PyResult<AnySolution> {
     let solution = py
         .detach(|| panic::catch_unwind(AssertUnwindSafe(|| job(&mut *stop))))
-        .map_err(|panic| Error::new_err(format!("internal failure: {}", panic_text(&panic))))?
+        .map_err(|panic| {
+            crate::errors::internal(format!("internal failure: {}", panic_text(&panic)))
+        })?
         .map_err(error)?;
     match stop.interrupted.take() {
         Some(signal) => Err(signal),

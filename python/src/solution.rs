@@ -3,10 +3,9 @@
 //! report and, for an update, what it did — read from the library's
 //! [`AnySolution`].
 
-use crate::Error;
-use crate::convert::error;
-use numpy::{PyArray1, PyArray2};
-use pgo::{AnySolution, DecisionChange, LoopDecision, Reason};
+use crate::convert::{self, error};
+use numpy::{PyArray1, PyArray2, PyArrayMethods};
+use pgo::{AnySolution, DecisionChange, LoopDecision};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 
@@ -19,23 +18,13 @@ type PosesArrays<'py> = (Bound<'py, PyArray1<u64>>, Bound<'py, PyArray2<f64>>);
 /// the update did.
 #[pyclass(name = "Result", module = "pgo", frozen)]
 pub struct Solution {
-    /// The ids of the poses, in the graph's order.
-    ids: Vec<u64>,
-    /// Numbers per pose: 3 (2D) or 7 (3D).
-    width: usize,
     solution: AnySolution,
 }
 
 impl Solution {
-    /// The solution of the graph of dimension `dim` whose pose ids are
-    /// `ids`.
-    pub fn new(ids: Vec<u64>, dim: usize, solution: AnySolution) -> Self {
-        let width = if dim == 2 { 3 } else { 7 };
-        Self {
-            ids,
-            width,
-            solution,
-        }
+    /// The result holding `solution`.
+    pub fn new(solution: AnySolution) -> Self {
+        Self { solution }
     }
 
     /// The optimised pose `id`'s numbers (every id of the graph has one).
@@ -53,32 +42,27 @@ impl Solution {
     #[getter]
     fn poses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let poses = PyDict::new(py);
-        for &id in &self.ids {
-            poses.set_item(id, PyTuple::new(py, self.numbers(id)?)?)?;
+        let width = self.solution.pose_width();
+        let flat = self.solution.poses_flat();
+        for (&id, pose) in self.solution.ids().iter().zip(flat.chunks_exact(width)) {
+            poses.set_item(id, PyTuple::new(py, pose)?)?;
         }
         Ok(poses)
     }
 
     /// The optimised pose `id` as a tuple.
-    fn pose<'py>(&self, py: Python<'py>, id: u64) -> PyResult<Bound<'py, PyTuple>> {
-        PyTuple::new(py, self.numbers(id)?)
+    fn pose<'py>(&self, py: Python<'py>, id: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyTuple>> {
+        PyTuple::new(py, self.numbers(convert::vertex_id(id)?)?)
     }
 
     /// The optimised poses for numpy: `(ids, poses)`, ids a uint64 array
     /// of N and poses a float64 array N×3 (2D) or N×7 (3D), row k the pose
     /// of ids[k], in the graph's order.
     fn poses_array<'py>(&self, py: Python<'py>) -> PyResult<PosesArrays<'py>> {
-        let rows = self
-            .ids
-            .iter()
-            .map(|&id| self.numbers(id))
-            .collect::<PyResult<Vec<_>>>()?;
-        let poses = if rows.is_empty() {
-            PyArray2::zeros(py, [0, self.width], false)
-        } else {
-            PyArray2::from_vec2(py, &rows).map_err(|e| Error::new_err(e.to_string()))?
-        };
-        Ok((PyArray1::from_slice(py, &self.ids), poses))
+        let ids = self.solution.ids();
+        let poses = PyArray1::from_vec(py, self.solution.poses_flat())
+            .reshape([ids.len(), self.solution.pose_width()])?;
+        Ok((PyArray1::from_slice(py, ids), poses))
     }
 
     /// One dict per loop candidate, in the order they were added: `index`
@@ -126,7 +110,7 @@ impl Solution {
             return Ok(None);
         };
         let dict = PyDict::new(py);
-        dict.set_item("solve", snake_case(&update.solve))?;
+        dict.set_item("solve", update.solve.as_str())?;
         dict.set_item("reason", &update.reason)?;
         dict.set_item("new_poses", update.new_poses)?;
         dict.set_item("new_edges", update.new_edges)?;
@@ -199,7 +183,7 @@ impl Solution {
             .map_or("None".to_owned(), |v| format!("'{v}'"));
         format!(
             "Result(poses={}, loops={}, accepted={accepted}, chi2={}, verdict={verdict})",
-            self.ids.len(),
+            self.solution.ids().len(),
             loops.len(),
             self.solution.chi2()
         )
@@ -218,7 +202,7 @@ fn loop_dict<'py>(py: Python<'py>, d: &LoopDecision) -> PyResult<Bound<'py, PyDi
     dict.set_item("accepted", d.accepted)?;
     dict.set_item("posterior", d.posterior)?;
     dict.set_item("innovation", d.innovation)?;
-    dict.set_item("reason", reason_name(&d.reason))?;
+    dict.set_item("reason", d.reason.as_str())?;
     Ok(dict)
 }
 
@@ -229,31 +213,6 @@ fn change_dict<'py>(py: Python<'py>, c: &DecisionChange) -> PyResult<Bound<'py, 
     dict.set_item("from", c.from)?;
     dict.set_item("to", c.to)?;
     dict.set_item("accepted", c.accepted)?;
-    dict.set_item("reason", reason_name(&c.reason))?;
+    dict.set_item("reason", c.reason.as_str())?;
     Ok(dict)
-}
-
-/// The name of why a loop ended where it did: the variant's name in
-/// snake case (`Consistent` → "consistent", `ExplainsChi2` →
-/// "explains_chi2"), as the JSON report spells it.
-pub fn reason_name(reason: &Reason) -> String {
-    snake_case(reason)
-}
-
-/// The name of a field-less enum's variant in snake case, as the JSON
-/// report spells it (serde's `snake_case`), taken from its `Debug` text so
-/// that new variants name themselves.
-fn snake_case(variant: &dyn std::fmt::Debug) -> String {
-    let debug = format!("{variant:?}");
-    let mut name = String::new();
-    for c in debug
-        .chars()
-        .take_while(|c| c.is_alphanumeric() || *c == '_')
-    {
-        if c.is_uppercase() && !name.is_empty() {
-            name.push('_');
-        }
-        name.extend(c.to_lowercase());
-    }
-    name
 }

@@ -202,7 +202,7 @@ def test_capped_updates_iterate_at_most_so_often_and_a_closing_update_reaches_ba
     assert solve(closing)[0] == "warm" and closing.incremental["new_edges"] == 0
     assert closing.report["optimizer"]["converged"]
     assert_same_as_batch(closing, graph.optimize())
-    with pytest.raises(ValueError, match="update-iters must be at least 1"):
+    with pytest.raises(pgo.InvalidOptionError, match="option update_iters must be at least 1"):
         graph.update(update_iters=0)
 
 

@@ -36,18 +36,33 @@ impl Se3 {
     /// A pose from a translation and a quaternion `(qx, qy, qz, qw)` as
     /// stored in g2o files. The quaternion is normalised unless it is
     /// already of unit norm to machine precision (so that reading what was
-    /// written gives the same bits). Returns `None` for a quaternion of zero
-    /// or non-finite norm.
+    /// written gives the same bits), whatever its norm: one whose squared
+    /// norm over- or underflows (norm beyond 10^±154) is divided by its
+    /// largest component first. Returns `None` for a quaternion that is
+    /// zero to floating point (its largest component is 0 or subnormal,
+    /// below 2.2·10⁻³⁰⁸, where the ratios of the components have lost
+    /// their precision) or a non-finite number.
     pub fn from_translation_quaternion(t: [f64; 3], q: [f64; 4]) -> Option<Self> {
         let quat = Quaternion::new(q[3], q[0], q[1], q[2]);
-        let n2 = quat.norm_squared();
-        if !n2.is_finite() || n2 <= f64::MIN_POSITIVE || t.iter().any(|v| !v.is_finite()) {
+        if q.iter().chain(&t).any(|v| !v.is_finite()) {
             return None;
         }
+        let n2 = quat.norm_squared();
         let quat = if (n2 - 1.0).abs() <= UNIT_NORM_TOLERANCE {
             quat
-        } else {
+        } else if n2.is_finite() && n2 > f64::MIN_POSITIVE {
             quat / n2.sqrt()
+        } else {
+            // Exact scaling by a power of two into range (in two halves:
+            // 2¹⁰²³ is the largest f64 power of two, the scale may be one
+            // more).
+            let largest = q.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            if largest < f64::MIN_POSITIVE {
+                return None;
+            }
+            let e = -(largest.log2().floor() as i32);
+            let scaled = quat * 2f64.powi(e / 2) * 2f64.powi(e - e / 2);
+            scaled / scaled.norm()
         };
         Some(Self::new(
             UnitQuaternion::new_unchecked(quat),
@@ -491,6 +506,23 @@ mod tests {
         let b = Se3::from_translation_quaternion([1.0, 2.0, 3.0], a.quaternion_xyzw()).unwrap();
         assert_eq!(a, b);
         assert!(Se3::from_translation_quaternion([0.0; 3], [0.0; 4]).is_none());
+        // Norms whose square over- or underflows are normalised all the same.
+        for scale in [1e200, 1e300, f64::MAX, 1e-200, f64::MIN_POSITIVE] {
+            let q = Se3::from_translation_quaternion([0.0; 3], [0.0, 0.0, scale, scale])
+                .unwrap()
+                .quaternion_xyzw();
+            let half = std::f64::consts::FRAC_1_SQRT_2;
+            assert!(
+                (q[2] - half).abs() < 1e-15 && (q[3] - half).abs() < 1e-15,
+                "{scale}: {q:?}"
+            );
+        }
+        // Subnormal components: zero to floating point.
+        let subnormal = [0.0, 0.0, 5e-324, 1e-320];
+        assert!(Se3::from_translation_quaternion([0.0; 3], subnormal).is_none());
+        assert!(
+            Se3::from_translation_quaternion([0.0; 3], [f64::INFINITY, 0.0, 0.0, 1.0]).is_none()
+        );
         assert!(Se3::from_translation_quaternion([0.0; 3], [f64::NAN, 0.0, 0.0, 1.0]).is_none());
     }
 }

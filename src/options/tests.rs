@@ -120,22 +120,32 @@ fn bad_values_name_the_option_and_change_nothing() {
         (
             "robust-c",
             "nan",
-            "--robust-c must be finite and positive, got nan",
+            "--robust-c must be between 1e-100 and 1e100, got nan",
         ),
         (
             "robust-c",
             "0",
-            "--robust-c must be finite and positive, got 0",
+            "--robust-c must be between 1e-100 and 1e100, got 0",
         ),
         (
             "robust-c",
             "-1",
-            "--robust-c must be finite and positive, got -1",
+            "--robust-c must be between 1e-100 and 1e100, got -1",
         ),
         (
             "robust-c",
             "inf",
-            "--robust-c must be finite and positive, got inf",
+            "--robust-c must be between 1e-100 and 1e100, got inf",
+        ),
+        (
+            "robust-c",
+            "1e-101",
+            "--robust-c must be between 1e-100 and 1e100, got 1e-101",
+        ),
+        (
+            "robust-c",
+            "2e100",
+            "--robust-c must be between 1e-100 and 1e100, got 2e100",
         ),
         (
             "robust-c",
@@ -239,15 +249,15 @@ fn validate_names_each_field_out_of_range() {
     let cases: Vec<(Break, &str)> = vec![
         (
             |o| o.robust.c = Some(f64::NAN),
-            "--robust-c must be finite and positive, got NaN",
+            "--robust-c must be between 1e-100 and 1e100, got NaN",
         ),
         (
             |o| o.robust.c = Some(-2.0),
-            "--robust-c must be finite and positive, got -2",
+            "--robust-c must be between 1e-100 and 1e100, got -2",
         ),
         (
             |o| o.robust.c = Some(f64::INFINITY),
-            "--robust-c must be finite and positive, got inf",
+            "--robust-c must be between 1e-100 and 1e100, got inf",
         ),
         (
             |o| o.solver.time_limit = Some(Duration::MAX),

@@ -175,6 +175,19 @@ pub enum PipelineError {
         /// The initial guess.
         initialization: Initialization,
     },
+    /// An information matrix outside the range the job computes with
+    /// ([`crate::graph::INFORMATION_RANGE`]).
+    #[error("{path}: edge {from} → {to}: information matrix {problem}")]
+    Information {
+        /// The input file.
+        path: PathBuf,
+        /// Its first vertex id.
+        from: crate::graph::VertexId,
+        /// Its second vertex id.
+        to: crate::graph::VertexId,
+        /// What is wrong.
+        problem: crate::InformationProblem,
+    },
     /// The optimiser produced non-finite poses (nothing was written).
     #[error("{path}: the optimiser produced non-finite poses; nothing was written")]
     NonFiniteResult {
@@ -199,6 +212,7 @@ impl PipelineError {
         match self {
             Self::Read(ReadError::Io { .. }) | Self::Inliers(InlierCsvError::Io { .. }) => 2,
             Self::Read(_) | Self::Inliers(_) | Self::NonFiniteEdge { .. } => 2,
+            Self::Information { .. } => 2,
             Self::Solve {
                 source: SolveError::Unconstrained { .. } | SolveError::NotPositiveDefinite { .. },
                 ..
@@ -229,6 +243,7 @@ pub fn run(config: &OptimizeConfig, observer: &mut dyn Observer) -> Result<Repor
             fix_information: config.fix_information,
         },
     )?;
+    check_information_range(&file.graph, &config.input)?;
     let mut report = Report::new(&config.input, &file);
     report.time.read_s = start.elapsed().as_secs_f64();
     match &mut file.graph {
@@ -263,6 +278,24 @@ fn certify_into(graph: &AnyPoseGraph, report: &mut Report) {
     match certificate {
         Ok(c) => report.certificate = Some(c),
         Err(e) => report.warnings.push(format!("no certificate: {e}")),
+    }
+}
+
+/// Refuses a graph whose information matrices leave
+/// [`crate::graph::INFORMATION_RANGE`], naming the first such edge.
+fn check_information_range(graph: &AnyPoseGraph, path: &Path) -> Result<(), PipelineError> {
+    let found = match graph {
+        AnyPoseGraph::Planar(g) => g.information_out_of_range(),
+        AnyPoseGraph::Spatial(g) => g.information_out_of_range(),
+    };
+    match found {
+        Some((from, to, index, value)) => Err(PipelineError::Information {
+            path: path.to_owned(),
+            from,
+            to,
+            problem: crate::InformationProblem::OutOfRange { index, value },
+        }),
+        None => Ok(()),
     }
 }
 

@@ -399,18 +399,29 @@ fn weight(weights: Option<&[f64]>, k: usize) -> f64 {
 /// The marginal information of the trailing `R`×`R` block (the rotation)
 /// and the leading `T`×`T` block (the translation, conditioned on the
 /// rotation) of an information matrix.
+///
+/// Scale-invariant: the matrix is inverted divided by the power of two
+/// nearest below its largest entry (exact, so in-range matrices give the
+/// same bits), since a 3×3 inverse goes through the determinant, the cube
+/// of the scale, which over- or underflows for entries beyond 10^±102.
 fn rotation_precision<const D: usize>(
     information: &SMatrix<f64, D, D>,
     rot: std::ops::Range<usize>,
 ) -> f64 {
     let r = rot.len();
-    let covariance = information.try_inverse();
+    let largest = information.amax();
+    if !(largest.is_normal()) {
+        return 0.0;
+    }
+    let exponent = largest.log2().floor() as i32;
+    let covariance = (information * 2f64.powi(-exponent)).try_inverse();
     match covariance {
         Some(c) => {
             let block = c.view((rot.start, rot.start), (r, r)).clone_owned();
             let trace = block.trace();
-            if trace > 0.0 && trace.is_finite() {
-                r as f64 / trace
+            let precision = r as f64 / trace * 2f64.powi(exponent);
+            if trace > 0.0 && precision.is_finite() {
+                precision
             } else {
                 0.0
             }
@@ -664,6 +675,28 @@ fn polar_newton(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rotation_precision_is_scale_invariant() {
+        // Through a 3×3 determinant, scales beyond 10^±103 used to give 0:
+        // no rotation term, "the edges at vertex … do not determine its
+        // pose".
+        let info = Matrix3::new(400.0, 12.0, 3.0, 12.0, 300.0, -5.0, 3.0, -5.0, 1e4);
+        let unit = rotation_precision(&info, 2..3);
+        assert!(unit > 0.0);
+        for scale in [1e-300, 1e-150, 1e-110, 1e110, 1e150, 1e300] {
+            let scaled = rotation_precision(&(info * scale), 2..3);
+            assert!(
+                (scaled / (unit * scale) - 1.0).abs() < 1e-12,
+                "{scale}: {scaled} vs {}",
+                unit * scale
+            );
+        }
+        // In range, the same bits as without the scaling.
+        let direct = 1.0 / info.try_inverse().unwrap()[(2, 2)];
+        assert_eq!(unit, direct);
+        assert_eq!(rotation_precision(&Matrix3::zeros(), 2..3), 0.0);
+    }
 
     #[test]
     fn nearest_rotation_of_half_turns_and_degenerate_matrices_returns() {

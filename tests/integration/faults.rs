@@ -171,8 +171,9 @@ fn overflowing_and_singular_problems_are_named_errors_and_write_nothing() {
             vec!["--init", "file"],
             "edge 1 (vertex 0 → 1) has a non-finite χ² at the file initial guess",
         ),
-        // Information spanning 600 orders of magnitude: the normal
-        // equations are numerically singular at vertex 1.
+        // Information spanning 600 orders of magnitude (the normal
+        // equations would be numerically singular at vertex 1): refused
+        // as out of the range the job computes with.
         (
             "singular.g2o",
             format!(
@@ -181,7 +182,20 @@ fn overflowing_and_singular_problems_are_named_errors_and_write_nothing() {
                  EDGE_SE2 0 2 5 3 2 1e300 0 0 1e300 0 1e300\n"
             ),
             vec![],
-            "the normal equations are not positive definite at vertex 1",
+            "edge 0 → 1: information matrix has diagonal entry (0, 0) = 1e300, outside the range \
+             pgo computes with (1e-100 to 1e100",
+        ),
+        // Information beyond the cube root of the float range, uniformly:
+        // this used to be "not positive definite at vertex 3" (the chordal
+        // guess's 3×3 inverse) or every loop rejected (EM's).
+        (
+            "tiny-information.g2o",
+            format!(
+                "{v}EDGE_SE2 0 1 1 0 0 1e-120 0 0 1e-120 0 1e-120\n\
+                 EDGE_SE2 1 2 1 0 0 1e-120 0 0 1e-120 0 1e-120\n"
+            ),
+            vec![],
+            "edge 0 → 1: information matrix has diagonal entry (0, 0) = 1e-120, outside",
         ),
     ];
     for (name, text, args, message) in cases {
