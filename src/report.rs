@@ -292,6 +292,10 @@ pub struct RobustReport {
     /// EM: what the search on a failed χ² test did (removed clusters, and
     /// the suspects when it still fails).
     pub search: Option<Search>,
+    /// EM: where each of its starts ended and which was kept (empty with
+    /// one start).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub starts: Vec<crate::robust::StartEnd>,
 }
 
 impl RobustReport {

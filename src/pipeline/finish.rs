@@ -16,7 +16,8 @@ use std::time::Instant;
 
 /// Reports the file's own guess, then makes the configured initial guess
 /// from the edges of non-zero `weights`, and checks that every edge of
-/// weight 1 has a finite cost there.
+/// weight 1 has a finite cost there. Returns the file's own guess (the
+/// vertices without a line composed along a spanning tree).
 pub fn initialize<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     graph: &mut PoseGraph<P, D>,
     missing: &[usize],
@@ -24,7 +25,7 @@ pub fn initialize<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     weights: &[f64],
     report: &mut Report,
     start: Instant,
-) -> Result<(), PipelineError> {
+) -> Result<Vec<P>, PipelineError> {
     let solve_error = |source| PipelineError::Solve {
         path: config.input.clone(),
         source,
@@ -39,6 +40,7 @@ pub fn initialize<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             report.input_chi2
         ));
     }
+    let given = graph.poses.clone();
     if config.initialization != Initialization::File {
         init_poses(graph, missing, config.initialization, Some(weights)).map_err(solve_error)?;
     }
@@ -62,7 +64,7 @@ pub fn initialize<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         time_s: start.elapsed().as_secs_f64(),
         vertices_without_line: missing.len(),
     };
-    Ok(())
+    Ok(given)
 }
 
 /// The robust solve (`method`: how the job weighs `candidates`, from
@@ -218,6 +220,7 @@ pub fn report<P: G2oPose<D>, const D: usize>(
             .count(),
         model: outcome.model.clone(),
         search: outcome.search.clone(),
+        starts: outcome.starts.clone(),
     };
     report.time.relaxation_s = phases.relaxation.as_secs_f64();
     report.time.evaluation_s = phases.evaluation.as_secs_f64();

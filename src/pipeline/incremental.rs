@@ -491,16 +491,16 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let (mut full, mut swung) = (false, false);
     let weigh =
         |session: &mut Session<'_, P, D>, weights: &mut [f64], c: f64, test: &Test<'_, P, D>| {
-            let (outcome, all) = robust::resume(
-                session,
-                weights,
-                &candidates,
+            let job = robust::Job {
+                candidates: &candidates,
                 method,
                 c,
-                &config.layers,
+                layers: &config.layers,
                 test,
-                proposal.as_ref(),
-            )?;
+                chordal: false,
+                given: None,
+            };
+            let (outcome, all) = robust::resume(session, weights, &job, proposal.as_ref())?;
             full = all;
             swung = outcome.swung;
             Ok(outcome)

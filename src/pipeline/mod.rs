@@ -330,7 +330,7 @@ pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let mut optimizer =
         Optimizer::new(graph, Some(&weights), config.solver.clone()).map_err(solve_error)?;
     let start = Instant::now();
-    finish::initialize(graph, missing, config, &weights, report, start)?;
+    let given = finish::initialize(graph, missing, config, &weights, report, start)?;
     report.time.initialize_s = report.initialization.time_s;
     let before = config
         .plot
@@ -342,16 +342,16 @@ pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let chordal = config.initialization == Initialization::Chordal;
     let weigh =
         |session: &mut Session<'_, P, D>, weights: &mut [f64], c: f64, test: &Test<'_, P, D>| {
-            robust::solve(
-                session,
-                chordal,
-                weights,
-                &candidates,
+            let job = robust::Job {
+                candidates: &candidates,
                 method,
                 c,
-                &config.layers,
+                layers: &config.layers,
                 test,
-            )
+                chordal,
+                given: Some(&given),
+            };
+            robust::solve(session, weights, &job)
         };
     finish::solve_and_test(
         graph,

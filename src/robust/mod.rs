@@ -23,12 +23,14 @@ mod kernels;
 mod model;
 mod schedule;
 mod search;
+mod starts;
 
 pub use clusters::{MAX_CLUSTER, NEIGHBOURHOOD};
 pub use kernels::{cauchy_weight, dcs_weight, gnc_tls_weight, huber_weight};
 pub use model::{Evidence, LoopModel, Scale, ln_chi2_mean, ln_chi2_sigma};
 pub use schedule::{ANNEAL_STEP, MAX_ANNEAL_STEPS, MAX_DECISIONS, Proposal, SETTLE_STEPS, Swing};
 pub use search::{MAX_REMOVALS, SUSPECTS, Search, Suspect, Test};
+pub use starts::{Start, StartEnd};
 
 use crate::geometry::Pose;
 use crate::solve::init::ChordalInit;
@@ -215,6 +217,11 @@ pub enum Reason {
     /// some maps of a cycle of sets and rejected on others, and the set
     /// kept is the cycle's best-fitting one).
     Unsettled,
+    /// The loop model's posterior and the set kept disagree because the
+    /// set the posterior chose fitted worse: its map raised the objective
+    /// `J` (docs/method.md §5), so the decisions ended at the set before
+    /// (accepted: leaving it out fitted worse; rejected: taking it in did).
+    WorseFit,
     /// Weighted by a kernel (weight ≥ ½ or not).
     Kernel,
     /// Dropped by the gate, and the method weighs only the kept ones.
@@ -257,6 +264,9 @@ pub struct Outcome {
     /// ([`schedule::Swing`]) and it gave up, the map and decisions left
     /// unfinished: the caller runs the whole job instead.
     pub swung: bool,
+    /// EM: where each of its starts ended ([`starts`]; empty with one
+    /// start).
+    pub starts: Vec<StartEnd>,
 }
 
 impl Outcome {
@@ -277,25 +287,42 @@ impl Outcome {
             search: None,
             cut_short: false,
             swung: false,
+            starts: Vec::new(),
         }
     }
 }
 
-/// Solves for the map with the candidates weighed by `method` (kernel
-/// width `c`), leaving the map in the session's graph and the weights in
-/// `weights` (one per edge: the trusted edges stay 1). `test` is the χ²
-/// test EM's search acts on.
-#[allow(clippy::too_many_arguments)]
+/// What the robust solve is asked to do: the candidates, the method that
+/// weighs them and its kernel width, EM's layers, and the χ² test EM's
+/// search acts on.
+pub struct Job<'a, P: Pose<D>, const D: usize> {
+    /// Every loop candidate.
+    pub candidates: &'a [Candidate],
+    /// How they are weighed.
+    pub method: RobustMethod,
+    /// The kernel width on the whitened residual norm.
+    pub c: f64,
+    /// EM's layers.
+    pub layers: &'a Layers,
+    /// The χ² test of a map and its weights.
+    pub test: &'a Test<'a, P, D>,
+    /// Whether the map starts from the chordal relaxation (EM anneals on
+    /// it and solves each accepted set from it when that fits better).
+    pub chordal: bool,
+    /// The caller's own poses (a g2o file's vertices), from which EM's
+    /// second start runs a plain kernel ([`starts`]); `None`: one start.
+    pub given: Option<&'a [P]>,
+}
+
+/// Solves for the map with the candidates weighed by the job's method,
+/// leaving the map in the session's graph and the weights in `weights`
+/// (one per edge: the trusted edges stay 1).
 pub fn solve<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
-    chordal: bool,
     weights: &mut [f64],
-    candidates: &[Candidate],
-    method: RobustMethod,
-    c: f64,
-    layers: &Layers,
-    test: &Test<'_, P, D>,
+    job: &Job<'_, P, D>,
 ) -> Result<Outcome, SolveError> {
+    let (candidates, method, c) = (job.candidates, job.method, job.c);
     let n = candidates.len();
     for cand in candidates {
         weights[cand.edge] = if cand.kept { 1.0 } else { 0.0 };
@@ -310,9 +337,9 @@ pub fn solve<P: ChordalInit<D>, const D: usize>(
     // prior ½, the Cauchy kernel at EM's width.
     let few = method == RobustMethod::Em && n < MIN_CANDIDATES;
     match method {
-        RobustMethod::Em if n >= MIN_CANDIDATES => em(
-            session, chordal, weights, candidates, c, layers, test, &mut out,
-        )?,
+        RobustMethod::Em if n >= MIN_CANDIDATES => {
+            out = starts::em(session, weights, job)?;
+        }
         RobustMethod::None => {
             session.converge(weights)?;
             out.cut_short = session.exhausted();
@@ -363,29 +390,26 @@ fn explain<P: Pose<D>, const D: usize>(
     search::explain(session, weights, candidates, decided, test).map(Some)
 }
 
-/// EM: annealing, decisions by innovation, and the χ² search.
-#[allow(clippy::too_many_arguments)]
-fn em<P: ChordalInit<D>, const D: usize>(
+/// EM from the map in the session's graph (the job's initial guess):
+/// annealing, decisions by innovation, and the χ² search; the outcome's
+/// weights are not yet filled in.
+fn annealed_start<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
-    chordal: bool,
     weights: &mut [f64],
-    candidates: &[Candidate],
-    c: f64,
-    layers: &Layers,
-    test: &Test<'_, P, D>,
-    out: &mut Outcome,
-) -> Result<(), SolveError> {
+    job: &Job<'_, P, D>,
+) -> Result<Outcome, SolveError> {
+    let mut out = Outcome::new(job.candidates.len());
     if session.exhausted() {
         // No budget at all: the initial guess stands (a run of no
         // iteration records it).
         session.run(weights, 0)?;
         out.cut_short = true;
-        return Ok(());
+        return Ok(out);
     }
-    let annealed = match (layers.annealing, chordal) {
+    let annealed = match (job.layers.annealing, job.chordal) {
         (false, _) => schedule::Annealed::default(),
-        (true, true) => schedule::anneal_chordal(session, weights, candidates, c)?,
-        (true, false) => schedule::anneal(session, weights, candidates, c)?,
+        (true, true) => schedule::anneal_chordal(session, weights, job.candidates, job.c)?,
+        (true, false) => schedule::anneal(session, weights, job.candidates, job.c)?,
     };
     out.rounds = annealed.steps;
     out.relaxations = annealed.relaxations;
@@ -393,18 +417,16 @@ fn em<P: ChordalInit<D>, const D: usize>(
         // The annealed map so far stands (a run of no iteration records it).
         session.run(weights, 0)?;
         out.cut_short = true;
-        return Ok(());
+        return Ok(out);
     }
     settle(
         session,
-        chordal,
-        Swing::Continue,
         weights,
-        candidates,
-        layers,
-        test,
-        out,
-    )
+        job,
+        (job.chordal, Swing::Continue),
+        &mut out,
+    )?;
+    Ok(out)
 }
 
 /// Re-decides every candidate from an earlier solution: the decisions by
@@ -417,20 +439,20 @@ fn em<P: ChordalInit<D>, const D: usize>(
 /// against the map as it is ([`schedule::propose`]). EM gives up when its
 /// decisions swing ([`schedule::Swing`], [`Outcome::swung`]).
 /// Returns the outcome and whether it was that full re-weighing.
-#[allow(clippy::too_many_arguments)]
 pub fn resume<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
-    candidates: &[Candidate],
-    method: RobustMethod,
-    c: f64,
-    layers: &Layers,
-    test: &Test<'_, P, D>,
+    job: &Job<'_, P, D>,
     proposal: Option<&Proposal<'_>>,
 ) -> Result<(Outcome, bool), SolveError> {
-    if method != RobustMethod::Em || candidates.len() < MIN_CANDIDATES {
-        let out = solve(session, false, weights, candidates, method, c, layers, test)?;
-        return Ok((out, method != RobustMethod::None));
+    let candidates = job.candidates;
+    if job.method != RobustMethod::Em || candidates.len() < MIN_CANDIDATES {
+        let job = Job {
+            chordal: false,
+            ..*job
+        };
+        let out = solve(session, weights, &job)?;
+        return Ok((out, job.method != RobustMethod::None));
     }
     let mut out = Outcome::new(candidates.len());
     if session.exhausted() {
@@ -438,18 +460,9 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
         out.cut_short = true;
     } else {
         if let Some(proposal) = proposal {
-            schedule::propose(session, weights, candidates, proposal, layers)?;
+            schedule::propose(session, weights, candidates, proposal, job.layers)?;
         }
-        settle(
-            session,
-            false,
-            Swing::GiveUp,
-            weights,
-            candidates,
-            layers,
-            test,
-            &mut out,
-        )?;
+        settle(session, weights, job, (false, Swing::GiveUp), &mut out)?;
         if out.swung {
             return Ok((out, false));
         }
@@ -463,25 +476,24 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
 
 /// EM from an accepted set: decisions by innovation until the set repeats
 /// (or, as `swing` says, swings), the χ² search, and each candidate's
-/// posterior and reason.
-#[allow(clippy::too_many_arguments)]
+/// posterior and reason. `chordal`: whether each accepted set may be
+/// solved from its chordal relaxation.
 fn settle<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
-    chordal: bool,
-    swing: Swing,
     weights: &mut [f64],
-    candidates: &[Candidate],
-    layers: &Layers,
-    test: &Test<'_, P, D>,
+    job: &Job<'_, P, D>,
+    (chordal, swing): (bool, Swing),
     out: &mut Outcome,
 ) -> Result<(), SolveError> {
-    let (mut decided, mut search) = decide_and_explain(
-        session,
-        (weights, candidates),
-        (chordal, swing),
+    let (candidates, layers, test) = (job.candidates, job.layers, job.test);
+    let how = schedule::Deciding {
+        scale: Scale::Learned,
         layers,
-        test,
-    )?;
+        relax: chordal,
+        swing,
+        c: job.c,
+    };
+    let (mut decided, mut search) = decide_and_explain(session, (weights, candidates), &how, test)?;
     if decided.swung {
         out.swung = true;
         out.decisions = decided.decisions;
@@ -502,8 +514,14 @@ fn settle<P: ChordalInit<D>, const D: usize>(
             &mut decided,
             test,
             |session, weights| {
-                let swing = Swing::Continue;
-                schedule::decide(session, weights, candidates, scale, layers, chordal, swing)
+                let how = schedule::Deciding {
+                    scale,
+                    layers,
+                    relax: chordal,
+                    swing: Swing::Continue,
+                    c: job.c,
+                };
+                schedule::decide(session, weights, candidates, &how)
             },
         )?;
         if restarted {
@@ -526,23 +544,15 @@ fn settle<P: ChordalInit<D>, const D: usize>(
 fn decide_and_explain<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     (weights, candidates): (&mut [f64], &[Candidate]),
-    (chordal, swing): (bool, Swing),
-    layers: &Layers,
+    how: &schedule::Deciding<'_>,
     test: &Test<'_, P, D>,
 ) -> Result<(schedule::Decided, Option<Search>), SolveError> {
+    let layers = how.layers;
     let mut judged = candidates.to_vec();
     let mut removed: Vec<Suspect> = Vec::new();
     let mut before: Option<schedule::Decided> = None;
     loop {
-        let mut decided = schedule::decide(
-            session,
-            weights,
-            &judged,
-            Scale::Learned,
-            layers,
-            chordal,
-            swing,
-        )?;
+        let mut decided = schedule::decide(session, weights, &judged, how)?;
         if let Some(b) = &before {
             decided.count_work_of(b);
         }
@@ -604,6 +614,8 @@ fn record(
             Reason::ExplainsChi2
         } else if e.is_none() {
             Reason::Unchecked
+        } else if consistent != decided.accepted[k] && decided.vetoed {
+            Reason::WorseFit
         } else if consistent != decided.accepted[k] {
             Reason::Unsettled
         } else if consistent {

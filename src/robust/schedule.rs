@@ -240,6 +240,10 @@ pub struct Decided {
     pub cut_short: bool,
     /// Whether they gave up swinging ([`Swing::GiveUp`]).
     pub swung: bool,
+    /// Whether they ended because the next set's map raised the
+    /// [`objective`]: the set kept is the one before, which the last
+    /// evaluation's posteriors would have changed.
+    pub vetoed: bool,
 }
 
 /// What [`decide`] does when its set swings: a round flips back decisions
@@ -299,6 +303,7 @@ impl Decided {
             relaxed_starts: 0,
             cut_short: false,
             swung: false,
+            vetoed: false,
         }
     }
 
@@ -315,28 +320,47 @@ fn evidence(candidates: &[Candidate], innov: &Innovations, k: usize) -> Option<E
     })
 }
 
+/// How [`decide`] decides.
+#[derive(Clone, Copy)]
+pub struct Deciding<'a> {
+    /// Where the true loops' innovations are centred.
+    pub scale: Scale,
+    /// EM's layers.
+    pub layers: &'a Layers,
+    /// Whether each accepted set is solved from the better fitting of the
+    /// map before and its chordal relaxation ([`relaxed_start`]; a job on
+    /// the chordal guess).
+    pub relax: bool,
+    /// Whether to stop at the second swing ([`Swing`]).
+    pub swing: Swing,
+    /// EM's kernel width `c`: the objective's price of a kept candidate
+    /// left out ([`objective`]).
+    pub c: f64,
+}
+
 /// The decisions by innovation (step 2 of the module doc), starting from
 /// the candidates of weight ≥ ½ in `weights`; leaves the final weights (1
 /// accepted, 0 not) in `weights` and the least-squares map of the accepted
-/// set in the session's graph. With `relax` (a job on the chordal guess and
-/// the layer on), each accepted set is solved from the better fitting of
-/// the map before and its chordal relaxation ([`relaxed_start`]). `swing`:
-/// whether to stop at the second swing ([`Swing`]).
-#[allow(clippy::too_many_arguments)]
+/// set in the session's graph. Each set the model accepts is kept only if
+/// its map lowers the [`objective`] (at the misfit scale of the first
+/// map): the decisions descend it, and a set that would raise it ends
+/// them at the set before.
 pub fn decide<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
     candidates: &[Candidate],
-    scale: Scale,
-    layers: &Layers,
-    relax: bool,
-    swing: Swing,
+    how: &Deciding<'_>,
 ) -> Result<Decided, SolveError> {
+    let (scale, layers, swing) = (how.scale, how.layers, how.swing);
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     let mut out = Decided::start(session.graph, &edges, weights, layers);
-    // The sets solved, each with its map's fit ([`excess`]).
+    // The sets solved, each with its map's objective.
     let mut seen: Vec<(Vec<bool>, f64)> = Vec::new();
     let mut swings = Swings::new(edges.len());
+    // The price of a candidate left out, on the first map's scale; the best
+    // set so far, its objective and map.
+    let mut price: Option<f64> = None;
+    let mut best: Option<(f64, Vec<bool>, Vec<P>)> = None;
     // Whether the map in the graph met the job's own tolerance, and whether
     // the set repeats on a map that did not (it is then solved again).
     let (mut converged, mut again) = (false, false);
@@ -349,7 +373,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             session.converge(weights)?;
             true
         } else {
-            if relax && layers.relaxation {
+            if how.relax && layers.relaxation {
                 out.relaxations += 1;
                 out.relaxed_starts += usize::from(relaxed_start(session, weights)?);
             }
@@ -360,6 +384,23 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             out.cut_short = true;
             break;
         }
+        let price = *price.get_or_insert_with(|| {
+            misfit_scale(session.graph, weights).unwrap_or(1.0) * how.c * how.c
+        });
+        let j = objective(session.graph, weights, candidates, price);
+        if let Some((b, set, poses)) = best.as_ref().filter(|(b, _, _)| j > *b) {
+            // Higher than a set before: back to it, and the descent ends.
+            out.accepted.clone_from(set);
+            session.graph.poses.clone_from(poses);
+            for (&k, &a) in edges.iter().zip(set) {
+                weights[k] = if a { 1.0 } else { 0.0 };
+            }
+            debug_assert!(*b < j);
+            out.vetoed = true;
+            converged = false;
+            break;
+        }
+        best = Some((j, out.accepted.clone(), session.graph.poses.clone()));
         let next = evaluate(
             session, weights, candidates, &edges, &mut out, scale, layers,
         )?;
@@ -383,8 +424,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             out.swung = true;
             break;
         }
-        let fit = excess(session.graph, weights, &out.accepted);
-        seen.push((std::mem::replace(&mut out.accepted, next), fit));
+        seen.push((std::mem::replace(&mut out.accepted, next), j));
         if let Some(first) = seen.iter().position(|(s, _)| *s == out.accepted) {
             // Settled (a cycle of one set), or cycling.
             if keep_best(&seen[first..], &edges, weights) {
@@ -406,7 +446,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
 }
 
 /// Of the sets of a cycle (each map of which judges the next set), each
-/// with its map's [`excess`], puts the one whose map fits its measurements
+/// with its map's [`objective`], puts the one whose map fits its measurements
 /// best, as the χ² test measures it, in `weights` (for candidates
 /// `edges`); returns whether that changed them.
 fn keep_best(cycle: &[(Vec<bool>, f64)], edges: &[usize], weights: &mut [f64]) -> bool {
@@ -423,18 +463,43 @@ fn keep_best(cycle: &[(Vec<bool>, f64)], edges: &[usize], weights: &mut [f64]) -
     changed
 }
 
-/// How much more `Σ eᵀΩe` the least-squares map of the accepted set in
-/// `weights` (`accepted` of the candidates) has than its measurements'
-/// information expects: each accepted loop adds `D` degrees of freedom to
-/// the χ² test, so between sets that differ in a few loops this ranks
-/// their maps as the test does.
-fn excess<P: Pose<D>, const D: usize>(
+/// The loop model's objective of the map in `graph` with `weights`: `Σ
+/// eᵀΩe` over the edges it was solved with, plus `price` for each
+/// candidate left out (those the gate dropped too: the model may rescue
+/// them, and a set that does must not pay for it) — the truncated least squares whose one-candidate
+/// moves are the decisions by innovation (adding a candidate raises the
+/// least-squares minimum by its `ν²`, to first order). The price is `s²·c²`:
+/// EM's kernel width `c`, at which a true loop is left out once in a
+/// million, on the scale `s²` of the file's information that a map shows
+/// ([`misfit_scale`]: information 100 times too loose leaves residuals 100
+/// times too small, and leaving a loop out would otherwise cost a
+/// hundredfold).
+pub(super) fn objective<P: Pose<D>, const D: usize>(
     graph: &PoseGraph<P, D>,
     weights: &[f64],
-    accepted: &[bool],
+    candidates: &[Candidate],
+    price: f64,
 ) -> f64 {
-    let loops = accepted.iter().filter(|&&a| a).count();
-    graph.chi2_where(|k| weights[k] > 0.0) - (loops * D) as f64
+    let left_out = (candidates.iter())
+        .filter(|c| weights[c.edge] < 0.5)
+        .count();
+    graph.chi2_where(|k| weights[k] > 0.0) + price * left_out as f64
+}
+
+/// The misfit per residual degree of freedom of the map in `graph` with
+/// `weights`, `Σ eᵀΩe / (Σ edge dimensions − free pose parameters)` — the
+/// χ² test's `D²/K`: the scale of the file's information that the map
+/// shows (1 where it is calibrated). `None` without residual degrees of
+/// freedom.
+pub(super) fn misfit_scale<P: Pose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    weights: &[f64],
+) -> Option<f64> {
+    let used = weights.iter().filter(|&&w| w > 0.0).count();
+    let free = graph.num_vertices() - graph.gauge().len();
+    let dof = used.saturating_sub(free) * D;
+    let scale = graph.chi2_where(|k| weights[k] > 0.0) / dof as f64;
+    (dof > 0 && scale.is_finite() && scale > 0.0).then_some(scale)
 }
 
 /// One evaluation of the map in the session's graph (the least-squares map

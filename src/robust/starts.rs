@@ -1,0 +1,218 @@
+//! EM's starts, and the choice among where they end.
+//!
+//! EM's decisions by innovation are local moves: from the set they start
+//! with they reach a set that no single candidate's innovation would change,
+//! and the χ² search then takes out what explains a failed test. Which such
+//! set they reach depends on the map they start from. The annealed start
+//! ([`super::annealed_start`]) builds its first map on the chordal
+//! relaxation of the trusted edges and the candidates at their annealing
+//! weights; a stretch of the map that aliases claim to be another place can
+//! pull that relaxation, and the decisions then start inside the wrong
+//! basin. So EM has a second start that shares nothing with the first: a
+//! plain robust kernel — Cauchy at the peers' width, `√χ²_D(0.95)` — solved
+//! by iteratively reweighted LM from the caller's own poses (a g2o file's
+//! vertices), as GTSAM's LM with a Cauchy loss does; EM decides from the
+//! candidates that kernel leaves at weight ≥ ½.
+//!
+//! Each start ends at an accepted set `S` and its least-squares map `X_S`.
+//! The job keeps
+//!
+//! 1. an end whose map passes the χ² test over one whose map fails it: a
+//!    failed test is resolved when any start resolves it;
+//! 2. among ends alike in that, the one of the lower objective
+//!
+//!    ```text
+//!    J(S) = Σ_{trusted ∪ S} eᵀΩe(X_S) + s²·c² · |candidates ∉ S|,
+//!    ```
+//!
+//!    the truncated least squares of the loop model: `c` EM's kernel
+//!    width, at which a true loop is left out once in a million, on the
+//!    scale `s²` of the file's information that the best-fitting end
+//!    shows — the least `D²/K` (the χ² test's misfit per residual degree of
+//!    freedom) among the ends, one scale for all (a file whose information
+//!    is 100 times too loose has residuals 100 times too small, and would
+//!    otherwise pay for leaving a loop out a hundredfold). For a linear problem,
+//!    adding a candidate to `S` raises the least-squares minimum by exactly
+//!    its squared innovation `ν²`, and taking one out lowers it by its
+//!    deleted residual's: EM's decisions move by the same innovations, so
+//!    an end they cannot improve one candidate at a time is a local minimum
+//!    of `J`, and `J` ranks the local minima the starts found.
+//!
+//! Ties keep the annealed start's end.
+
+use super::schedule::{misfit_scale, objective};
+use super::{Candidate, Job, Outcome, RobustMethod, Swing, annealed_start, kernels, settle};
+use crate::geometry::Pose;
+use crate::graph::PoseGraph;
+use crate::solve::init::ChordalInit;
+use crate::solve::{Session, SolveError};
+use serde::Serialize;
+
+/// Which start an end came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Start {
+    /// The annealing on the job's initial guess.
+    Annealed,
+    /// A plain Cauchy kernel from the caller's own poses.
+    Kernel,
+}
+
+/// Where one start ended, as the report shows it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StartEnd {
+    /// The start.
+    pub start: Start,
+    /// Candidates accepted at its end.
+    pub accepted: usize,
+    /// Its objective `J` (module doc).
+    pub objective: f64,
+    /// Whether its map passed the χ² test (`None`: no test).
+    pub passed: Option<bool>,
+    /// Whether the job kept it.
+    pub chosen: bool,
+}
+
+/// Where a start ended: its map, weights and outcome, and how it ranks.
+struct End<P> {
+    poses: Vec<P>,
+    weights: Vec<f64>,
+    out: Outcome,
+    summary: StartEnd,
+    /// Its [`objective`] at a price of 0 and of 1 per candidate left out.
+    fit: (f64, f64),
+    /// Its map's misfit scale ([`misfit_scale`]).
+    scale: Option<f64>,
+}
+
+impl<P: Clone> End<P> {
+    /// The end in the session's graph and `weights`, from `start`.
+    fn take<const D: usize>(
+        graph: &PoseGraph<P, D>,
+        weights: &[f64],
+        job: &Job<'_, P, D>,
+        (start, out): (Start, Outcome),
+    ) -> Self
+    where
+        P: Pose<D>,
+    {
+        let test = (job.test)(graph, weights);
+        let summary = StartEnd {
+            start,
+            accepted: (job.candidates.iter())
+                .filter(|c| weights[c.edge] >= 0.5)
+                .count(),
+            objective: f64::NAN,
+            passed: test.as_ref().map(|t| t.passed),
+            chosen: false,
+        };
+        Self {
+            poses: graph.poses.clone(),
+            weights: weights.to_vec(),
+            out,
+            summary,
+            fit: (
+                objective(graph, weights, job.candidates, 0.0),
+                objective(graph, weights, job.candidates, 1.0),
+            ),
+            scale: misfit_scale(graph, weights),
+        }
+    }
+
+    /// Its objective `J` at the scale `s2` with kernel width `c` (module
+    /// doc).
+    fn rank(&mut self, s2: f64, c: f64) {
+        let (fit, with_one) = self.fit;
+        self.summary.objective = fit + s2 * c * c * (with_one - fit);
+    }
+
+    /// Whether this end is to be kept over `other` (module doc).
+    fn better_than(&self, other: &Self) -> bool {
+        match (self.summary.passed, other.summary.passed) {
+            (Some(true), Some(false)) => true,
+            (Some(false), Some(true)) => false,
+            _ => self.summary.objective < other.summary.objective,
+        }
+    }
+}
+
+/// EM: the annealed start, then the kernel start from the caller's poses
+/// when there are any and budget is left, and the better end (module doc)
+/// left in the session's graph and `weights`.
+pub fn em<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    job: &Job<'_, P, D>,
+) -> Result<Outcome, SolveError> {
+    let annealed = annealed_start(session, weights, job)?;
+    let Some(given) = job
+        .given
+        .filter(|_| !annealed.cut_short && !session.exhausted())
+    else {
+        return Ok(annealed);
+    };
+    let first = End::take(session.graph, weights, job, (Start::Annealed, annealed));
+    session.graph.poses.copy_from_slice(given);
+    let kernel = kernel_start(session, weights, job)?;
+    let mut second = End::take(session.graph, weights, job, (Start::Kernel, kernel));
+    let mut first = first;
+    let s2 = [first.scale, second.scale]
+        .into_iter()
+        .flatten()
+        .filter(|s| s.is_finite() && *s > 0.0)
+        .fold(None, |m: Option<f64>, s| Some(m.map_or(s, |m| m.min(s))))
+        .unwrap_or(1.0);
+    first.rank(s2, job.c);
+    second.rank(s2, job.c);
+    let cut_short = second.out.cut_short;
+    let (mut kept, other) = if !cut_short && second.better_than(&first) {
+        (second, first)
+    } else {
+        (first, second)
+    };
+    session.graph.poses.copy_from_slice(&kept.poses);
+    weights.copy_from_slice(&kept.weights);
+    kept.summary.chosen = true;
+    let mut out = kept.out;
+    out.rounds += other.out.rounds;
+    out.relaxations += other.out.relaxations;
+    out.decisions += other.out.decisions;
+    out.relaxed_starts += other.out.relaxed_starts;
+    out.cut_short |= cut_short;
+    let mut ends = vec![kept.summary, other.summary];
+    ends.sort_by_key(|e| e.start != Start::Annealed);
+    out.starts = ends;
+    Ok(out)
+}
+
+/// The kernel start from the map in the session's graph: the Cauchy
+/// kernel at the peers' width over the kept candidates, then EM's
+/// decisions from those it leaves at weight ≥ ½.
+fn kernel_start<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    job: &Job<'_, P, D>,
+) -> Result<Outcome, SolveError> {
+    let mut out = Outcome::new(job.candidates.len());
+    let kept: Vec<usize> = (job.candidates.iter())
+        .filter(|c| c.kept)
+        .map(|c: &Candidate| c.edge)
+        .collect();
+    for c in job.candidates {
+        weights[c.edge] = if c.kept { 1.0 } else { 0.0 };
+    }
+    let width = super::default_c(RobustMethod::Cauchy, D);
+    (out.rounds, out.cut_short) =
+        kernels::reweight(session, weights, &kept, RobustMethod::Cauchy, width)?;
+    if out.cut_short {
+        return Ok(out);
+    }
+    settle(
+        session,
+        weights,
+        job,
+        (job.chordal, Swing::Continue),
+        &mut out,
+    )?;
+    Ok(out)
+}
