@@ -51,6 +51,7 @@ pub use nalgebra;
 pub mod geometry;
 pub mod report;
 
+mod covariance;
 mod error;
 #[cfg(test)]
 mod internal_examples;
@@ -128,6 +129,7 @@ mod plot;
 #[path = "plot_disabled.rs"]
 mod plot;
 
+pub use covariance::{AnyCovariances, Covariances};
 pub use error::{Error, InformationProblem, PoseProblem};
 pub use gate::{DegeneratePolicy, GateMode};
 pub use geometry::{Pose, Se2, Se3};

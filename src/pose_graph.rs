@@ -465,7 +465,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         for w in &report.warnings {
             log::warn!("{w}");
         }
-        Ok(Solution::new(&graph, report))
+        Ok(Solution::new(&graph, report).keeping(graph, options.solver.threads))
     }
 
     /// The job again after poses, edges or loop candidates were added, for
@@ -578,7 +578,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         for w in &report.warnings {
             log::warn!("{w}");
         }
-        Ok(Solution::new(&graph, report))
+        Ok(Solution::new(&graph, report).keeping(graph, options.solver.threads))
     }
 
     /// Drops what [`PoseGraph::update`] keeps: the next update runs the
