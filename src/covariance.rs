@@ -52,10 +52,12 @@
 //! unbounded covariance: asking for it is [`Error::Unbounded`].
 
 mod any;
+mod csv;
 #[cfg(test)]
 mod tests;
 
 pub use any::AnyCovariances;
+pub(crate) use csv::{CsvError, write_csv};
 
 use crate::error::Error;
 use crate::geometry::{NormalBlocks, Pose};

@@ -3,6 +3,7 @@
 
 mod cli;
 mod common;
+mod covariance;
 mod datasets;
 mod faults;
 mod gating;
