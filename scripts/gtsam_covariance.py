@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """GTSAM's `Marginals` beside pgo's covariances on one g2o file, on pgo's map.
 
-usage: /work/main/.venv/bin/python scripts/gtsam_covariance.py FILE
+usage: .venv/bin/python scripts/gtsam_covariance.py FILE
            [--model pgo|gtsam] [--pgo-json P.json] [--pairs 100 1000] [--dump 12]
            [--budget SECONDS] [--no-all] [--reference OUT.json] [--out OUT.json]
 

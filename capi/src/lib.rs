@@ -13,12 +13,14 @@
 //! owned by the API.
 
 mod cancel;
+mod covariance;
 mod graph;
 mod options;
 mod result;
 mod status;
 
 pub use cancel::*;
+pub use covariance::*;
 pub use graph::*;
 pub use options::*;
 pub use result::*;

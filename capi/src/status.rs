@@ -46,7 +46,8 @@ pub enum PgoStatus {
     PgoErrParse,
     /// A graph without poses cannot be optimised.
     PgoErrEmptyGraph,
-    /// Some poses are tied to the fixed ones by no chain of edges.
+    /// Some poses are tied to the fixed ones by no chain of edges (for a
+    /// covariance: of the edges in the map).
     PgoErrUnconstrained,
     /// The optimisation is numerically impossible: a pose its edges do
     /// not determine, or numbers too large for floating point.
@@ -123,7 +124,7 @@ pub(crate) fn status_of(error: &pgo::Error) -> PgoStatus {
         Error::Read(ReadError::Io { .. }) | Error::Write { .. } => PgoErrIo,
         Error::Read(_) => PgoErrParse,
         Error::EmptyGraph => PgoErrEmptyGraph,
-        Error::Unconstrained { .. } => PgoErrUnconstrained,
+        Error::Unconstrained { .. } | Error::Unbounded { .. } => PgoErrUnconstrained,
         Error::Undetermined { .. } | Error::NonFiniteEdge { .. } | Error::NonFinite => {
             PgoErrNumerical
         }

@@ -7,6 +7,7 @@
 
 mod cancel;
 mod convert;
+mod covariance;
 mod graph;
 mod solution;
 

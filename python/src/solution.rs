@@ -5,6 +5,7 @@
 
 use crate::Error;
 use crate::convert::error;
+use crate::covariance;
 use numpy::{PyArray1, PyArray2};
 use pgo::{AnySolution, DecisionChange, LoopDecision, Reason};
 use pyo3::prelude::*;
@@ -24,6 +25,8 @@ pub struct Solution {
     /// Numbers per pose: 3 (2D) or 7 (3D).
     width: usize,
     solution: AnySolution,
+    /// The map's covariances, computed at the first request.
+    covariances: covariance::Cache,
 }
 
 impl Solution {
@@ -35,6 +38,7 @@ impl Solution {
             ids,
             width,
             solution,
+            covariances: covariance::Cache::default(),
         }
     }
 
@@ -175,6 +179,56 @@ impl Solution {
     #[getter]
     fn cancelled(&self) -> bool {
         self.solution.cancelled()
+    }
+
+    /// The marginal covariance of pose `id`: a float64 array 3×3 in 2D
+    /// (x, y, θ), 6×6 in 3D (x, y, z, rx, ry, rz) — perturbations on the
+    /// right (in the pose's own frame), translation first, in the graph's
+    /// units and radians — from the normal matrix of the map's edges
+    /// (trusted edges and accepted loops) at the optimised poses, with the
+    /// fixed poses as the gauge (their covariance is zero). The first of
+    /// the covariance methods factorises that matrix (about three
+    /// factorisations' time, with the GIL released); the result keeps it
+    /// for the others. Raises `pgo.Error` for an unknown id, or a pose no
+    /// edge in the map ties to the fixed ones (unbounded).
+    fn covariance<'py>(&self, py: Python<'py>, id: u64) -> PyResult<Bound<'py, PyAny>> {
+        covariance::pose(py, &self.covariances, &self.solution, id)
+    }
+
+    /// The covariances of the poses `ids` (an iterable of ids; `None`:
+    /// every pose, in the graph's order) as `(ids, covariances)`: a uint64
+    /// array of N and a float64 array N×D×D, `covariances[k]` that of
+    /// `ids[k]` (as `covariance`).
+    #[pyo3(signature = (ids = None))]
+    fn covariances<'py>(
+        &self,
+        py: Python<'py>,
+        ids: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<(Bound<'py, PyArray1<u64>>, Bound<'py, PyAny>)> {
+        covariance::poses(py, &self.covariances, &self.solution, ids)
+    }
+
+    /// The joint covariance of poses `a` and `b`: a float64 array 2D×2D,
+    /// `[[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]]` (as `covariance`).
+    fn joint_covariance<'py>(
+        &self,
+        py: Python<'py>,
+        a: u64,
+        b: u64,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        covariance::joint(py, &self.covariances, &self.solution, a, b)
+    }
+
+    /// The covariance of pose `b` relative to pose `a` (of `Xa⁻¹·Xb`, in
+    /// its own tangent space as `covariance`): `b`'s uncertainty as seen
+    /// from `a`, whichever poses are fixed. A float64 array D×D.
+    fn relative_covariance<'py>(
+        &self,
+        py: Python<'py>,
+        a: u64,
+        b: u64,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        covariance::relative(py, &self.covariances, &self.solution, a, b)
     }
 
     /// `Result(poses=…, loops=…, accepted=…, chi2=…, verdict=…)`.
