@@ -67,7 +67,7 @@ use crate::solve::SolveError;
 #[cfg(test)]
 use nalgebra::SVector;
 use nalgebra::{DMatrix, SMatrix};
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Mutex, TryLockError};
 
 /// Edges linearised per parallel batch (their normal blocks are held until
 /// added: 512 × ~1 kB in 3D).
@@ -333,8 +333,16 @@ impl<P: Pose<D>, const D: usize> Covariances<P, D> {
     /// at most), by the cheaper of the selected inverse's recurrence and
     /// the sparse solve.
     fn gram(&self, rows: &[crate::linear::EdgeJacobian<D>]) -> DMatrix<f64> {
-        let mut scratch = self.scratch.lock().unwrap_or_else(PoisonError::into_inner);
-        (self.system).propagate_group_cheaper(&self.inverse, rows, &mut scratch)
+        // The kept scratch, or (another thread is using it) one of this
+        // call's own: queries from several threads do not wait.
+        let mut own = GroupScratch::default();
+        let mut kept = match self.scratch.try_lock() {
+            Ok(guard) => Some(guard),
+            Err(TryLockError::Poisoned(poisoned)) => Some(poisoned.into_inner()),
+            Err(TryLockError::WouldBlock) => None,
+        };
+        let scratch = kept.as_deref_mut().unwrap_or(&mut own);
+        (self.system).propagate_group_cheaper(&self.inverse, rows, scratch)
     }
 }
 

@@ -383,3 +383,68 @@ fn the_solution_leaves_rejected_loops_out() {
         Err(Error::UnknownVertex { id: 77 })
     ));
 }
+
+#[test]
+fn updates_and_non_sequential_candidates_have_covariances_too() {
+    use crate::{Options, PoseGraph2};
+    // A loop of 12 poses, its closing edge trusted but non-sequential: a
+    // candidate under `--candidates non-sequential`.
+    let step = Se2::new(1.0, 0.0, std::f64::consts::TAU / 12.0);
+    let info = SMatrix::from_diagonal(&[100.0, 100.0, 400.0].into());
+    let mut graph = PoseGraph2::new();
+    let mut pose = Se2::new(0.0, 0.0, 0.0);
+    for k in 0..12 {
+        graph.add_pose(k, pose).unwrap();
+        pose = pose.compose(&step);
+        if k > 0 {
+            graph.add_edge(k - 1, k, step, info).unwrap();
+        }
+    }
+    graph.add_edge(11, 0, step, info).unwrap();
+    let mut options = Options::default();
+    options.set("candidates", "non-sequential").unwrap();
+    let batch = graph.optimize(&options).unwrap();
+    assert_eq!(batch.loops().len(), 1);
+    let first = graph.update(&options).unwrap();
+    // Odometry added: the update composes it (no solve).
+    graph.add_pose(12, pose).unwrap();
+    graph.add_edge(11, 12, step, info).unwrap();
+    let second = graph.update(&options).unwrap();
+    assert_eq!(
+        second.incremental().unwrap().solve,
+        crate::UpdateSolve::Extended
+    );
+    let (b, f, s) = (
+        batch.covariances().unwrap(),
+        first.covariances().unwrap(),
+        second.covariances().unwrap(),
+    );
+    for id in [3, 6, 11] {
+        let want = b.pose(id).unwrap();
+        assert!((f.pose(id).unwrap() - want).abs().max() < 1e-9 * want.abs().max());
+        assert!((s.pose(id).unwrap() - want).abs().max() < 1e-9 * want.abs().max());
+    }
+    // The new pose hangs on 11 by one step.
+    let hung = s.relative(11, 12).unwrap();
+    assert!((hung - info.try_inverse().unwrap()).abs().max() < 1e-12);
+}
+
+#[test]
+fn queries_from_several_threads_agree() {
+    let graph = Arc::new(random_graph::<Se3, 6>(5, 60, 30, random_se3));
+    let in_map = vec![true; graph.edges.len()];
+    let c = Covariances::new(graph.clone(), &in_map, 1).unwrap();
+    let pairs: Vec<(u64, u64)> = (0..40)
+        .map(|k| (graph.id(k), graph.id((k * 7 + 13) % 60)))
+        .collect();
+    let alone: Vec<DMatrix<f64>> = pairs.iter().map(|&(a, b)| c.joint(a, b).unwrap()).collect();
+    std::thread::scope(|scope| {
+        for _ in 0..4 {
+            scope.spawn(|| {
+                for (k, &(a, b)) in pairs.iter().enumerate() {
+                    assert_eq!(c.joint(a, b).unwrap(), alone[k]);
+                }
+            });
+        }
+    });
+}
