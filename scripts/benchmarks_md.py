@@ -594,7 +594,8 @@ def covariance_section(path):
     out = ["## Marginal covariances against GTSAM's Marginals", "",
            "Every pose's covariance, and the joint covariance of 100 and 1000 random pairs of poses, "
            "at pgo's map of each graph (one thread). pgo: `Solution::covariances()` (the factorisation "
-           "of H and its selected inverse), then each pose's block, then the pairs. GTSAM 4.3 in a "
+           "of H and its selected inverse), then each pose's block, then the pairs (each time the "
+           "median of three runs). GTSAM 4.3 in a "
            "fresh process on the same poses and edges, with its own BetweenFactors and a prior of "
            "σ 10⁻⁹ on pgo's fixed pose: `Marginals`, `marginalCovariance` of every pose, "
            "`jointMarginalCovariance` of the same pairs. Ratios are pgo / GTSAM in the same run "

@@ -1,55 +1,7 @@
-//! Marginal covariances of the map: how well the edges in the map pin each
-//! pose down, in the linearised (Laplace) approximation at the map.
-//!
-//! # What is computed
-//!
-//! `H = Σ JₖᵀΩₖJₖ` is the normal matrix of the edges *in the map* — every
-//! trusted edge and every accepted loop candidate, each at weight 1;
-//! rejected and gated-out candidates are left out — at the poses
-//! [`crate::PoseGraph::optimize`] or [`crate::PoseGraph::update`] returned,
-//! undamped (λ = 0), with the Jacobians of the optimiser
-//! ([`crate::geometry`]). The poses held fixed (the gauge: those
-//! [`crate::PoseGraph::fix`] or a `FIX` line named, else the first pose)
-//! are not variables of `H`. The covariance of the free poses is `H⁻¹`:
-//!
-//! * a pose's `D×D` covariance is its diagonal block of `H⁻¹`, read from the
-//!   *selected inverse* (every block of `H⁻¹` on the pattern of the
-//!   Cholesky factor of `H`, by Takahashi's recurrence, at about the cost of
-//!   the factorisation);
-//! * the joint `2D×2D` covariance of two poses also needs their
-//!   off-diagonal block: read from the selected inverse when it is on the
-//!   factor's pattern, else continued from it by the same recurrence or, if
-//!   that would cost more, by a sparse solve with the factor over the two
-//!   poses' paths to the root of the elimination tree (`2D` right-hand
-//!   sides), whichever is cheaper;
-//! * the covariance of the relative pose `Xₐ⁻¹X_b` is `M·Σ_ab·Mᵀ` with
-//!   `M = [−Ad(A⁻¹), I]`, `A = Xₐ⁻¹X_b`: to first order `(Xₐ·Δ(δₐ))⁻¹·X_b·Δ(δ_b)
-//!   = A·Δ(δ_b − Ad(A⁻¹)·δₐ)`.
-//!
-//! # Conventions
-//!
-//! A covariance is over pgo's tangent space at the pose: a perturbed pose
-//! is `X·Δ(δ)`, the perturbation on the *right* (in the pose's own frame),
-//! `Δ(δ)` the pose with translation `δ_t` and rotation `Exp(δ_r)`, and `δ`
-//! orders translation before rotation: `(x, y, θ)` in 2D, `(x, y, z, rx,
-//! ry, rz)` in 3D. Units are the graph's (metres, say) for translation and
-//! radians for rotation. To first order this is GTSAM's `Pose2` and
-//! `Pose3` convention (also a right perturbation), but GTSAM's `Pose3`
-//! orders rotation first: swap the two 3×3 halves. A covariance in the
-//! world frame (a left perturbation, `Δ·X`) is `Ad(X)·Σ·Ad(X)ᵀ`.
-//!
-//! The gauge: a fixed pose has zero covariance, and every other covariance
-//! is relative to the fixed poses (the uncertainty of pose `k` is that of
-//! `k` as seen from the first pose, when that is the one fixed). GTSAM
-//! usually fixes the gauge with a prior factor instead; with a prior of
-//! covariance `Σ₀` on the same pose its marginals are larger by the
-//! propagation of `Σ₀` (`Ad(Xₖ⁻¹X₀)·Σ₀·Ad(Xₖ⁻¹X₀)ᵀ` to first order), and
-//! they tend to pgo's as `Σ₀ → 0`. Relative covariances do not depend on
-//! the gauge.
-//!
-//! A pose that no chain of edges in the map ties to the fixed ones (joined
-//! only by rejected loops: the optimiser held it where it was) has an
-//! unbounded covariance: asking for it is [`Error::Unbounded`].
+//! Marginal covariances of the map ([`Covariances`], whose documentation
+//! says exactly what is computed and in which convention), their numbers
+//! for bindings ([`AnyCovariances`]) and the CSV of `pgo optimize
+//! --covariances` (`csv`).
 
 mod any;
 mod csv;
@@ -63,19 +15,11 @@ use crate::error::Error;
 use crate::geometry::{NormalBlocks, Pose};
 use crate::graph::{PoseGraph, VertexId};
 use crate::linear::{BlockSystem, GroupScratch, LinearError, Parallelism, SelectedInverse};
-use crate::solve::SolveError;
+use crate::solve::{EDGES_PER_TASK, LINEARIZE_CHUNK, SolveError};
 #[cfg(test)]
 use nalgebra::SVector;
 use nalgebra::{DMatrix, SMatrix};
 use std::sync::{Arc, Mutex, TryLockError};
-
-/// Edges linearised per parallel batch (their normal blocks are held until
-/// added: 512 × ~1 kB in 3D).
-const LINEARIZE_CHUNK: usize = 1 << 9;
-
-/// Edges per task when a batch is linearised on several threads: about
-/// 10 µs of work each.
-const EDGES_PER_TASK: usize = 64;
 
 /// What a pose's covariance is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -89,11 +33,62 @@ enum Place {
 }
 
 /// The marginal covariances of a map ([`crate::Solution::covariances`]):
-/// the factorisation of its normal matrix `H` and the selected inverse of
-/// `H`, from which each query reads (module documentation: what exactly,
-/// and in which convention). Holds the factor, the selected inverse (as
-/// large as the factor) and the solved graph. Queries take `&self` and may
-/// come from several threads.
+/// how well the edges in the map pin each pose down, in the linearised
+/// (Laplace) approximation at the map. Holds the factorisation of the
+/// normal matrix `H`, its selected inverse (as large as the factor) and the
+/// solved graph; queries take `&self` and may come from several threads.
+///
+/// # What is computed
+///
+/// `H = Σ JₖᵀΩₖJₖ` is the normal matrix of the edges *in the map* — every
+/// trusted edge and every accepted loop candidate, each at weight 1;
+/// rejected and gated-out candidates are left out — at the poses
+/// [`crate::PoseGraph::optimize`] or [`crate::PoseGraph::update`] returned,
+/// undamped (λ = 0), with the Jacobians of the optimiser
+/// ([`crate::geometry`]). The poses held fixed (the gauge: those
+/// [`crate::PoseGraph::fix`] or a `FIX` line named, else the first pose)
+/// are not variables of `H`. The covariance of the free poses is `H⁻¹`:
+///
+/// * a pose's `D×D` covariance is its diagonal block of `H⁻¹`, read from the
+///   *selected inverse* (every block of `H⁻¹` on the pattern of the
+///   Cholesky factor of `H`, by Takahashi's recurrence, at about twice the
+///   cost of the factorisation and as much memory);
+/// * the joint `2D×2D` covariance of two poses also needs their
+///   off-diagonal block: read from the selected inverse when it is on the
+///   factor's pattern, else continued from it by the same recurrence or, if
+///   that would cost more, by a sparse solve with the factor over the two
+///   poses' paths to the root of the elimination tree (`2D` right-hand
+///   sides), whichever is cheaper;
+/// * the covariance of the relative pose `Xₐ⁻¹X_b` is `M·Σ_ab·Mᵀ` with
+///   `M = [−Ad(A⁻¹), I]`, `A = Xₐ⁻¹X_b`: to first order `(Xₐ·Δ(δₐ))⁻¹·X_b·Δ(δ_b)
+///   = A·Δ(δ_b − Ad(A⁻¹)·δₐ)`.
+///
+/// # Conventions
+///
+/// A covariance is over pgo's tangent space at the pose: a perturbed pose
+/// is `X·Δ(δ)`, the perturbation on the *right* (in the pose's own frame),
+/// `Δ(δ)` the pose with translation `δ_t` and rotation `Exp(δ_r)`, and `δ`
+/// orders translation before rotation: `(x, y, θ)` in 2D, `(x, y, z, rx,
+/// ry, rz)` in 3D. Units are the graph's (metres, say) for translation and
+/// radians for rotation. To first order this is GTSAM's `Pose2` and
+/// `Pose3` convention (also a right perturbation), but GTSAM's `Pose3`
+/// orders rotation first: swap the two 3×3 halves. A covariance in the
+/// world frame (a left perturbation, `Δ·X`) is `Ad(X)·Σ·Ad(X)ᵀ`.
+///
+/// The gauge: a fixed pose has zero covariance, and every other covariance
+/// is relative to the fixed poses (the uncertainty of pose `k` is that of
+/// `k` as seen from the first pose, when that is the one fixed). GTSAM
+/// usually fixes the gauge with a prior factor instead; with a prior of
+/// covariance `Σ₀` on the same pose its marginals are larger by the
+/// propagation of `Σ₀` (`Ad(Xₖ⁻¹X₀)·Σ₀·Ad(Xₖ⁻¹X₀)ᵀ` to first order), and
+/// they tend to pgo's as `Σ₀ → 0`. Relative covariances do not depend on
+/// the gauge.
+///
+/// A pose that no chain of edges in the map ties to the fixed ones (joined
+/// only by rejected loops: the optimiser held it where it was) has an
+/// unbounded covariance: asking for it is [`Error::Unbounded`].
+///
+/// docs/method.md §10 has the equations and how they were checked.
 ///
 /// ```
 /// use pgo::nalgebra::Matrix3;

@@ -37,16 +37,22 @@ fn the_command_line_writes_the_library_s_covariances() {
             "id,x_x,x_y,x_z,x_rx,"
         }));
         let rows = read_csv(&text);
-        // The same job in memory gives the same covariances, to the bit.
+        // The same job in memory gives the same covariances (to round-off:
+        // as two runs of the command line, two optima may differ in the
+        // last bits).
         let graph = pgo::AnyPoseGraph::read_g2o(&input).unwrap();
-        let covariances = graph
-            .optimize(&pgo::Options::default())
-            .unwrap()
-            .covariances()
-            .unwrap();
+        let solution = graph.optimize(&pgo::Options::default()).unwrap();
+        let covariances = solution.covariances().unwrap();
         assert_eq!(rows.len(), graph.len());
         for (id, numbers) in &rows {
-            assert_eq!(numbers, &covariances.pose(*id).unwrap(), "{file} pose {id}");
+            let want = covariances.pose(*id).unwrap();
+            for r in 0..d {
+                for c in 0..d {
+                    let scale = (want[r * d + r] * want[c * d + c]).sqrt();
+                    let diff = (numbers[r * d + c] - want[r * d + c]).abs();
+                    assert!(diff <= 1e-9 * scale, "{file} pose {id} ({r}, {c})");
+                }
+            }
         }
         // The first pose is the gauge.
         assert!(rows[0].1.iter().all(|&v| v == 0.0));
