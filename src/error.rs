@@ -148,6 +148,18 @@ pub enum Error {
         /// The vertex id.
         vertex: VertexId,
     },
+    /// A covariance was asked of a pose that no chain of edges in the map
+    /// (trusted edges and accepted loops) ties to the fixed poses: the map
+    /// held it where it was, and its covariance is unbounded
+    /// ([`crate::Covariances`]).
+    #[error(
+        "vertex {id}: no chain of trusted edges and accepted loops ties it to the fixed poses, \
+         so its covariance is unbounded"
+    )]
+    Unbounded {
+        /// The vertex id.
+        id: VertexId,
+    },
     /// An edge's cost is not finite at the initial guess: its measurement,
     /// information or poses are too large for floating point.
     #[error(
@@ -357,7 +369,7 @@ impl Error {
             Self::Read(ReadError::Io { .. }) | Self::Write { .. } => K::Io,
             Self::Read(_) => K::Parse,
             Self::EmptyGraph => K::EmptyGraph,
-            Self::Unconstrained { .. } => K::Unconstrained,
+            Self::Unconstrained { .. } | Self::Unbounded { .. } => K::Unconstrained,
             Self::Undetermined { .. } | Self::NonFiniteEdge { .. } | Self::NonFinite => {
                 K::Numerical
             }

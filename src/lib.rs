@@ -53,6 +53,7 @@ pub mod report;
 
 mod certify;
 
+mod covariance;
 mod error;
 #[cfg(test)]
 mod internal_examples;
@@ -134,6 +135,7 @@ pub use certify::{
     Certificate, CertificateTime, CertifyError, ETA_RELATIVE as CERTIFICATE_ETA_RELATIVE,
     EigenvectorPose,
 };
+pub use covariance::{AnyCovariances, Covariances};
 pub use error::{Error, ErrorKind, InformationProblem, PoseProblem, Setting};
 pub use gate::{DegeneratePolicy, GateMode};
 pub use geometry::{Pose, Se2, Se3};

@@ -315,6 +315,14 @@ struct OptimizeArgs {
     /// after, loops coloured by final weight).
     #[arg(long, value_name = "DIR")]
     plot: Option<PathBuf>,
+    /// Write every pose's marginal covariance here as CSV (atomically; `-`
+    /// writes stdout): a header, then per pose its id and its D×D
+    /// covariance row by row, D = 3 (x, y, theta) or 6 (x, y, z, rx, ry,
+    /// rz), perturbed on the right (in the pose's frame), from the map's
+    /// edges at the optimum with the fixed poses as the gauge (zeros). A
+    /// pose no edge in the map ties to them is left out, with a warning.
+    #[arg(long, value_name = "FILE.csv")]
+    covariances: Option<PathBuf>,
     /// Everything the job itself can be told (the library's `Options`).
     #[command(flatten)]
     options: pgo::Options,
@@ -630,6 +638,7 @@ fn optimize(args: OptimizeArgs) -> ExitCode {
     config.fix_information = args.fix_information;
     config.plot = args.plot.clone();
     config.certify = args.certify;
+    config.covariances = args.covariances.clone();
     let verbose = args.verbose && !args.quiet;
     // Ctrl-C stops the optimisation between iterations; the best map so far
     // is written and the exit status says it was interrupted.
@@ -717,5 +726,26 @@ fn check_optimize_files(args: &OptimizeArgs) -> Result<(), String> {
             None => check_files(&inputs, &[]),
         }
     };
-    checked.map_err(|e| e.to_string())
+    checked.map_err(|e| e.to_string())?;
+    check_covariances_file(args, &inputs)
+}
+
+/// [`check_files`] for `--covariances`: an output of its own, beside `-o`
+/// (or the input, `--in-place`) and `--json` on stdout.
+fn check_covariances_file(args: &OptimizeArgs, inputs: &[&std::path::Path]) -> Result<(), String> {
+    let Some(path) = &args.covariances else {
+        return Ok(());
+    };
+    let mut outputs = vec![("--covariances", path.as_path())];
+    outputs.extend(args.output.as_deref().map(|o| ("-o", o)));
+    let inputs = if args.in_place {
+        outputs.push(("--in-place", args.input.as_path()));
+        &inputs[1..]
+    } else {
+        inputs
+    };
+    if args.json {
+        outputs.push(("--json", std::path::Path::new("-")));
+    }
+    check_files(inputs, &outputs).map_err(|e| e.to_string())
 }

@@ -469,7 +469,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
             log::warn!("{w}");
         }
         report.time.total_s = start.elapsed().as_secs_f64();
-        Ok(Solution::new(&graph, report))
+        Ok(Solution::new(&graph, report).keeping(graph, options.solver.threads))
     }
 
     /// The job again after poses, edges or loop candidates were added, for
@@ -584,7 +584,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
             log::warn!("{w}");
         }
         report.time.total_s = start.elapsed().as_secs_f64();
-        Ok(Solution::new(&graph, report))
+        Ok(Solution::new(&graph, report).keeping(graph, options.solver.threads))
     }
 
     /// Drops what [`PoseGraph::update`] keeps: the next update runs the

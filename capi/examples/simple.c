@@ -7,9 +7,13 @@
  * the map. Also shows how a failed call reads (an edge to a vertex that
  * was never added).
  *
+ * Then reads the map's covariances: how well pose 8 is known, alone and
+ * as seen from pose 4.
+ *
  * Checks its own expectations — the right loop accepted, the wrong one
- * rejected, the test passed, the deliberate error reported — and exits 1
- * otherwise, so CI runs it as a test.
+ * rejected, the test passed, the deliberate error reported, the fixed
+ * pose certain and pose 8 relative to it as uncertain as pose 8 — and
+ * exits 1 otherwise, so CI runs it as a test.
  *
  * Build (see capi/README.md):
  *   cargo build --release -p pgo-capi
@@ -112,6 +116,30 @@ static int report(const PgoResult *result, size_t right, size_t wrong) {
     return failures + (loops == 2 ? 0 : 1) + (verdict == 1 ? 0 : 1);
 }
 
+/* Prints pose 8's standard deviations, alone and relative to pose 4; the
+ * number of failed expectations. */
+static int covariances(const PgoResult *result) {
+    double c0[9], c8[9], rel[9], from0[9], joint[36];
+    check(pgo_result_covariance(result, 0, c0, 9), "pgo_result_covariance");
+    check(pgo_result_covariance(result, 8, c8, 9), "pgo_result_covariance");
+    check(pgo_result_relative_covariance(result, 4, 8, rel, 9), "pgo_result_relative_covariance");
+    check(pgo_result_relative_covariance(result, 0, 8, from0, 9), "pgo_result_relative_covariance");
+    check(pgo_result_joint_covariance(result, 4, 8, joint, 36), "pgo_result_joint_covariance");
+    printf("pose 8: sigma x %.4f y %.4f theta %.4f; from pose 4: %.4f %.4f %.4f\n", sqrt(c8[0]),
+           sqrt(c8[4]), sqrt(c8[8]), sqrt(rel[0]), sqrt(rel[4]), sqrt(rel[8]));
+    int failures = 0;
+    for (int k = 0; k < 9; k++) {
+        /* The fixed pose is certain; pose 8 from it is pose 8. */
+        failures += c0[k] != 0.0;
+        failures += fabs(from0[k] - c8[k]) > 1e-9 * sqrt(c8[4 * (k / 3)] * c8[4 * (k % 3)]);
+        /* The joint's last block is pose 8's covariance. */
+        failures += fabs(joint[6 * (3 + k / 3) + 3 + k % 3] - c8[k]) > 1e-9 * c8[0];
+    }
+    /* A buffer of the wrong length is refused. */
+    failures += pgo_result_covariance(result, 8, c8, 6) != PGO_ERR_LENGTH;
+    return failures + !(c8[0] > 0.0 && rel[0] > 0.0);
+}
+
 int main(void) {
     printf("pgo %s\n", pgo_version());
     PgoGraph *graph = NULL;
@@ -126,6 +154,7 @@ int main(void) {
     check(pgo_options_set(options, "alpha", "0.05"), "pgo_options_set");
     check(pgo_graph_optimize(graph, options, &result), "pgo_graph_optimize");
     failures += report(result, right, wrong);
+    failures += covariances(result);
     const char *json = pgo_result_report_json(result);
     printf("report: %zu bytes of JSON\n", json ? strlen(json) : 0);
     failures += json == NULL;

@@ -86,7 +86,8 @@ typedef enum PgoStatus {
    */
   PGO_ERR_EMPTY_GRAPH,
   /**
-   * Some poses are tied to the fixed ones by no chain of edges.
+   * Some poses are tied to the fixed ones by no chain of edges (for a
+   * covariance: of the edges in the map).
    */
   PGO_ERR_UNCONSTRAINED,
   /**
@@ -434,6 +435,83 @@ void pgo_cancel_free(struct PgoCancel *cancel);
  * `result` is NULL or a live result; `out` is NULL or writable.
  */
 enum PgoStatus pgo_result_certificate(const struct PgoResult *result, struct PgoCertificate *out);
+ * Copies the marginal covariance of pose `id` into the `len` numbers at
+ * `out`, row by row: D×D, `len` = 9 in 2D (x, y, θ), 36 in 3D (x, y, z,
+ * rx, ry, rz). Perturbations are on the right (in the pose's own frame),
+ * translation first, in the graph's units and radians; the normal matrix
+ * is that of the map's edges (trusted edges and accepted loops) at the
+ * optimised poses, and the fixed poses are the gauge (their covariance is
+ * zero). The first covariance asked of a result factorises that matrix
+ * (about three factorisations' time); the result keeps it, so later calls
+ * are fast. Thread-safe.
+ *
+ * Errors: `PGO_ERR_UNKNOWN_VERTEX`, `PGO_ERR_UNCONSTRAINED` (no trusted
+ * edge or accepted loop ties the pose to the fixed ones: its covariance
+ * is unbounded), `PGO_ERR_LENGTH`, `PGO_ERR_NUMERICAL`,
+ * `PGO_ERR_INVALID_ARGUMENT`.
+ *
+ * # Safety
+ * `result` is NULL or a live result; `out` is NULL or points to `len`
+ * writable numbers.
+ */
+enum PgoStatus pgo_result_covariance(const struct PgoResult *result,
+                                     uint64_t id,
+                                     double *out,
+                                     size_t len);
+
+/**
+ * Copies the covariances of the `n` poses `ids` into the `len` numbers at
+ * `out`, one D×D matrix after the other (`len` = `n`·9 in 2D, `n`·36 in
+ * 3D), each as `pgo_result_covariance` writes it.
+ *
+ * Errors: those of `pgo_result_covariance`, for the first id that has
+ * none (nothing is written then).
+ *
+ * # Safety
+ * `result` is NULL or a live result; `ids` is NULL or points to `n` ids;
+ * `out` is NULL or points to `len` writable numbers.
+ */
+enum PgoStatus pgo_result_covariances(const struct PgoResult *result,
+                                      const uint64_t *ids,
+                                      size_t n,
+                                      double *out,
+                                      size_t len);
+
+/**
+ * Copies the joint covariance of poses `a` and `b` into the `len` numbers
+ * at `out`, row by row: 2D×2D (`len` = 36 in 2D, 144 in 3D), the blocks
+ * `[[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]]` in the convention of
+ * `pgo_result_covariance`.
+ *
+ * Errors: those of `pgo_result_covariance`.
+ *
+ * # Safety
+ * `result` is NULL or a live result; `out` is NULL or points to `len`
+ * writable numbers.
+ */
+enum PgoStatus pgo_result_joint_covariance(const struct PgoResult *result,
+                                           uint64_t a,
+                                           uint64_t b,
+                                           double *out,
+                                           size_t len);
+
+/**
+ * Copies the covariance of pose `b` relative to pose `a` — of `Xa⁻¹·Xb`,
+ * perturbed on the right as every pose here: `b`'s uncertainty as seen
+ * from `a`, whichever poses are fixed — into the `len` numbers at `out`,
+ * row by row (D×D as `pgo_result_covariance`).
+ *
+ * Errors: those of `pgo_result_covariance`.
+ *
+ * # Safety
+ * `result` is NULL or a live result; `out` is NULL or points to `len`
+ * writable numbers.
+ */
+enum PgoStatus pgo_result_relative_covariance(const struct PgoResult *result,
+                                              uint64_t a,
+                                              uint64_t b,
+                                              double *out,
+                                              size_t len);
 
 /**
  * Makes an empty graph of poses in `dim` dimensions (2 or 3) and stores

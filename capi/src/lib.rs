@@ -14,6 +14,7 @@
 
 mod cancel;
 mod certificate;
+mod covariance;
 mod graph;
 mod options;
 mod result;
@@ -21,6 +22,7 @@ mod status;
 
 pub use cancel::*;
 pub use certificate::*;
+pub use covariance::*;
 pub use graph::*;
 pub use options::*;
 pub use result::*;

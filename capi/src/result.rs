@@ -20,7 +20,10 @@ use std::sync::{Mutex, OnceLock};
 /// Owned by the caller, freed by `pgo_result_free`; the strings it hands
 /// out live as long as it. It may be read by several threads at once.
 pub struct PgoResult {
-    solution: AnySolution,
+    pub(crate) solution: AnySolution,
+    /// The map's covariances, computed at the first request
+    /// (`pgo_result_covariance`).
+    pub(crate) covariances: OnceLock<pgo::AnyCovariances>,
     report_json: OnceLock<CString>,
     /// An update's reason, as `pgo_result_update_reason` hands it out.
     update_reason: Option<CString>,
@@ -40,6 +43,7 @@ impl PgoResult {
             .map(|i| CString::new(i.reason.replace('\0', "\\0")).unwrap_or_default());
         Box::new(Self {
             solution,
+            covariances: OnceLock::new(),
             report_json: OnceLock::new(),
             update_reason,
         })

@@ -47,7 +47,8 @@ pub enum PgoStatus {
     PgoErrParse,
     /// A graph without poses cannot be optimised.
     PgoErrEmptyGraph,
-    /// Some poses are tied to the fixed ones by no chain of edges.
+    /// Some poses are tied to the fixed ones by no chain of edges (for a
+    /// covariance: of the edges in the map).
     PgoErrUnconstrained,
     /// The optimisation is numerically impossible: a pose its edges do
     /// not determine, or numbers too large for floating point.

@@ -1,7 +1,7 @@
 """Type stubs of the extension module ``pgo._pgo`` (re-exported by ``pgo``)."""
 
 import os
-from typing import Any, Dict, List, Literal, Optional, Sequence, Tuple, TypedDict, Union
+from typing import Any, Dict, Iterable, List, Literal, Optional, Sequence, Tuple, TypedDict, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -202,6 +202,16 @@ class Result:
         """Whether a Cancel token stopped the job (the best map so far)."""
     def certificate(self) -> Dict[str, Any]:
         """Certificate of global optimality of the map (certified, eta, cost, map_cost, gap_bound, max_translation_change, max_rotation_change, lambda_min, lambda_min_bounds, eigenvector_poses, time)."""
+    def covariance(self, id: VertexId) -> npt.NDArray[np.float64]:
+        """Pose ``id``'s marginal covariance, D×D (3: x y θ; 6: x y z rx ry rz; right perturbation)."""
+    def covariances(
+        self, ids: Optional[Iterable[VertexId]] = None
+    ) -> Tuple[npt.NDArray[np.uint64], npt.NDArray[np.float64]]:
+        """(ids, covariances): N ids (all poses for None) and an N×D×D array."""
+    def joint_covariance(self, a: VertexId, b: VertexId) -> npt.NDArray[np.float64]:
+        """The joint covariance of poses ``a`` and ``b``, 2D×2D."""
+    def relative_covariance(self, a: VertexId, b: VertexId) -> npt.NDArray[np.float64]:
+        """The covariance of ``b`` relative to ``a`` (of Xa⁻¹·Xb), D×D."""
     def __repr__(self) -> str: ...
 
 def read_g2o(

@@ -8,6 +8,7 @@
 
 mod cancel;
 mod convert;
+mod covariance;
 mod errors;
 mod graph;
 mod solution;

@@ -4,6 +4,7 @@
 //! [`AnySolution`].
 
 use crate::convert::{self, error};
+use crate::covariance;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pgo::{AnySolution, DecisionChange, LoopDecision};
 use pyo3::prelude::*;
@@ -19,12 +20,17 @@ type PosesArrays<'py> = (Bound<'py, PyArray1<u64>>, Bound<'py, PyArray2<f64>>);
 #[pyclass(name = "Result", module = "pgo", frozen)]
 pub struct Solution {
     solution: AnySolution,
+    /// The map's covariances, computed at the first request.
+    covariances: covariance::Cache,
 }
 
 impl Solution {
     /// The result holding `solution`.
     pub fn new(solution: AnySolution) -> Self {
-        Self { solution }
+        Self {
+            solution,
+            covariances: covariance::Cache::default(),
+        }
     }
 
     /// The optimised pose `id`'s numbers (every id of the graph has one).
@@ -172,6 +178,60 @@ impl Solution {
         let certificate = py.detach(|| self.solution.certificate()).map_err(error)?;
         let text = certificate.to_json().map_err(error)?;
         py.import("json")?.call_method1("loads", (text,))
+    }
+
+    /// The marginal covariance of pose `id`: a float64 array 3×3 in 2D
+    /// (x, y, θ), 6×6 in 3D (x, y, z, rx, ry, rz) — perturbations on the
+    /// right (in the pose's own frame), translation first, in the graph's
+    /// units and radians — from the normal matrix of the map's edges
+    /// (trusted edges and accepted loops) at the optimised poses, with the
+    /// fixed poses as the gauge (their covariance is zero). The first of
+    /// the covariance methods factorises that matrix (about three
+    /// factorisations' time, with the GIL released); the result keeps it
+    /// for the others. Raises `pgo.Error` for an unknown id, or a pose no
+    /// edge in the map ties to the fixed ones (unbounded).
+    fn covariance<'py>(
+        &self,
+        py: Python<'py>,
+        id: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        covariance::pose(py, &self.covariances, &self.solution, id)
+    }
+
+    /// The covariances of the poses `ids` (an iterable of ids; `None`:
+    /// every pose, in the graph's order) as `(ids, covariances)`: a uint64
+    /// array of N and a float64 array N×D×D, `covariances[k]` that of
+    /// `ids[k]` (as `covariance`).
+    #[pyo3(signature = (ids = None))]
+    fn covariances<'py>(
+        &self,
+        py: Python<'py>,
+        ids: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<(Bound<'py, PyArray1<u64>>, Bound<'py, PyAny>)> {
+        covariance::poses(py, &self.covariances, &self.solution, ids)
+    }
+
+    /// The joint covariance of poses `a` and `b`: a float64 array 2D×2D,
+    /// `[[Σ_aa, Σ_ab], [Σ_ba, Σ_bb]]` (as `covariance`).
+    fn joint_covariance<'py>(
+        &self,
+        py: Python<'py>,
+        a: &Bound<'py, PyAny>,
+        b: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        covariance::joint(py, &self.covariances, &self.solution, (a, b))
+    }
+
+    /// The covariance of pose `b` relative to pose `a` (of `Xa⁻¹·Xb`, in
+    /// its own tangent space as `covariance`): `b`'s uncertainty as seen
+    /// from `a`, whichever poses are fixed. A float64 array D×D.
+    fn relative_covariance<'py>(
+        &self,
+        py: Python<'py>,
+        a: &Bound<'py, PyAny>,
+        b: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        covariance::relative(py, &self.covariances, &self.solution, (a, b))
     }
 
     /// `Result(poses=…, loops=…, accepted=…, chi2=…, verdict=…)`.

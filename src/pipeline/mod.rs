@@ -70,6 +70,9 @@ pub struct OptimizeConfig {
     /// Add the map's certificate of global optimality to the report
     /// (`--certify`).
     pub certify: bool,
+    /// Write every pose's marginal covariance here (CSV, after the output;
+    /// [`crate::Covariances`]).
+    pub covariances: Option<PathBuf>,
 }
 
 /// Which edges are loop-closure candidates.
@@ -124,6 +127,7 @@ impl OptimizeConfig {
             update_iterations: options.solver.update_iterations,
             plot: None,
             certify: false,
+            covariances: None,
         }
     }
 }
@@ -264,6 +268,9 @@ pub fn run(config: &OptimizeConfig, observer: &mut dyn Observer) -> Result<Repor
         report.output = Some(out.display().to_string());
         report.time.write_s = writing.elapsed().as_secs_f64();
     }
+    if let Some(path) = &config.covariances {
+        write_covariances(file.graph, config, path, &mut report)?;
+    }
     report.time.total_s = start.elapsed().as_secs_f64();
     Ok(report)
 }
@@ -368,6 +375,43 @@ pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     report.time.solve_s = solving.elapsed().as_secs_f64();
     if let (Some(dir), Some(before)) = (&config.plot, before) {
         finish::plot(dir, graph, &before, &weights, config, report)?;
+    }
+    Ok(())
+}
+
+/// Writes the covariances of the map `graph` (`--covariances`): a warning
+/// names the poses left out.
+fn write_covariances(
+    graph: AnyPoseGraph,
+    config: &OptimizeConfig,
+    path: &Path,
+    report: &mut Report,
+) -> Result<(), PipelineError> {
+    use crate::covariance::{CsvError, write_csv};
+    let accepted = report.loops.iter().map(|l| l.accepted);
+    let threads = config.solver.threads;
+    let written = match graph {
+        AnyPoseGraph::Planar(g) => write_csv(g, accepted, threads, path),
+        AnyPoseGraph::Spatial(g) => write_csv(g, accepted, threads, path),
+    };
+    let unbounded = written.map_err(|e| match e {
+        CsvError::Solve(source) => PipelineError::Solve {
+            path: config.input.clone(),
+            source,
+        },
+        CsvError::Write(source) => PipelineError::Write {
+            path: path.to_owned(),
+            source,
+        },
+    })?;
+    if let Some(first) = unbounded.first() {
+        let warning = format!(
+            "--covariances: {} poses left out (no trusted edge or accepted loop ties them to the \
+             fixed poses: their covariance is unbounded), e.g. {first}",
+            unbounded.len()
+        );
+        log::warn!("{warning}");
+        report.warnings.push(warning);
     }
     Ok(())
 }

@@ -27,6 +27,8 @@ use crate::graph::{PoseGraph, VertexId};
 use crate::linear::{BlockSystem, LinearError, Parallelism};
 use lm::Damping;
 use normal::EdgeTerms;
+// The batches of a linearisation, also for the covariances' (`crate::covariance`).
+pub(crate) use normal::{EDGES_PER_TASK, LINEARIZE_CHUNK};
 pub use pattern::Ordering;
 pub use progress::{Cancel, Cancellable, Observer};
 use serde::Serialize;

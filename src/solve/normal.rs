@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
 /// Edges linearised per parallel batch (512 × ~1 kB of terms in 3D: the
 /// buffer is memory held for the whole run, and larger batches were not
 /// faster).
-const LINEARIZE_CHUNK: usize = 1 << 9;
+pub(crate) const LINEARIZE_CHUNK: usize = 1 << 9;
 
 /// One edge's contribution to the normal equations (`active`: its weight
 /// is not 0).
@@ -284,7 +284,7 @@ fn prepare<P: Pose<D>, const D: usize>(
 /// The least edges (linearisations or χ² terms) a parallel task gets: a
 /// few tens of microseconds of work, well above the cost of handing it to
 /// another thread.
-const EDGES_PER_TASK: usize = 256;
+pub(crate) const EDGES_PER_TASK: usize = 256;
 
 /// The least poses a parallel task prepares (a sine and cosine, or a
 /// rotation matrix, each: a sixteenth of an edge's linearisation).

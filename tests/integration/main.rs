@@ -4,6 +4,7 @@
 mod certify;
 mod cli;
 mod common;
+mod covariance;
 mod datasets;
 mod faults;
 mod gating;
