@@ -76,8 +76,11 @@ pub fn reweight<P: Pose<D>, const D: usize>(
 ) -> Result<(usize, bool), SolveError> {
     let mut mu = None;
     for round in 0..MAX_ROUNDS {
-        // GNC's μ₀ comes from the initial guess's residuals.
-        if method != RobustMethod::Gnc || round > 0 {
+        // The first weights come from the initial guess's residuals (GNC's
+        // μ₀ too), as a robust LM weighs its first linearisation: a first
+        // solve with every candidate at weight 1 would let the wrong ones
+        // bend the map before any is weighed down.
+        if round > 0 {
             session.run(weights, PARTIAL_ITERATIONS)?;
         }
         if session.exhausted() {
