@@ -435,6 +435,8 @@ void pgo_cancel_free(struct PgoCancel *cancel);
  * `result` is NULL or a live result; `out` is NULL or writable.
  */
 enum PgoStatus pgo_result_certificate(const struct PgoResult *result, struct PgoCertificate *out);
+
+/**
  * Copies the marginal covariance of pose `id` into the `len` numbers at
  * `out`, row by row: D×D, `len` = 9 in 2D (x, y, θ), 36 in 3D (x, y, z,
  * rx, ry, rz). Perturbations are on the right (in the pose's own frame),

@@ -65,12 +65,20 @@ pub struct StartEnd {
     pub start: Start,
     /// Candidates accepted at its end.
     pub accepted: usize,
-    /// Its objective `J` (module doc).
-    pub objective: f64,
+    /// Its objective `J` (module doc); `None` for a start that did not
+    /// settle.
+    pub objective: Option<f64>,
     /// Whether its map passed the χ² test (`None`: no test).
     pub passed: Option<bool>,
     /// Whether the job kept it.
     pub chosen: bool,
+    /// LM iterations the start took (the kernel start: at most as many as
+    /// the annealed start).
+    pub iterations: usize,
+    /// Whether it reached an end: the kernel start's weights settled
+    /// within the annealed start's iterations (else it has no end to
+    /// compare, and the annealed end stands).
+    pub settled: bool,
 }
 
 /// Where a start ended: its map, weights and outcome, and how it ranks.
@@ -102,9 +110,11 @@ impl<P: Clone> End<P> {
             accepted: (job.candidates.iter())
                 .filter(|c| weights[c.edge] >= 0.5)
                 .count(),
-            objective: f64::NAN,
+            objective: None,
             passed: test.as_ref().map(|t| t.passed),
             chosen: false,
+            iterations: 0,
+            settled: true,
         };
         Self {
             poses: graph.poses.clone(),
@@ -123,7 +133,7 @@ impl<P: Clone> End<P> {
     /// doc).
     fn rank(&mut self, s2: f64, c: f64) {
         let (fit, with_one) = self.fit;
-        self.summary.objective = fit + s2 * c * c * (with_one - fit);
+        self.summary.objective = Some(fit + s2 * c * c * (with_one - fit));
     }
 
     /// Whether this end is to be kept over `other` (module doc).
@@ -131,7 +141,10 @@ impl<P: Clone> End<P> {
         match (self.summary.passed, other.summary.passed) {
             (Some(true), Some(false)) => true,
             (Some(false), Some(true)) => false,
-            _ => self.summary.objective < other.summary.objective,
+            _ => {
+                self.summary.objective.unwrap_or(f64::INFINITY)
+                    < other.summary.objective.unwrap_or(f64::INFINITY)
+            }
         }
     }
 }
@@ -144,18 +157,26 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     weights: &mut [f64],
     job: &Job<'_, P, D>,
 ) -> Result<Outcome, SolveError> {
+    let before = session.iterations();
     let annealed = annealed_start(session, weights, job)?;
+    let share = session.iterations() - before;
     let Some(given) = job
         .given
         .filter(|_| !annealed.cut_short && !session.exhausted())
     else {
         return Ok(annealed);
     };
-    let first = End::take(session.graph, weights, job, (Start::Annealed, annealed));
+    let mut first = End::take(session.graph, weights, job, (Start::Annealed, annealed));
+    first.summary.iterations = share;
     session.graph.poses.copy_from_slice(given);
-    let kernel = kernel_start(session, weights, job)?;
+    let before = session.iterations();
+    let kernel = kernel_start(session, weights, job, share)?;
+    let used = session.iterations() - before;
+    let Some(kernel) = kernel else {
+        return unsettled(session, weights, first, used);
+    };
     let mut second = End::take(session.graph, weights, job, (Start::Kernel, kernel));
-    let mut first = first;
+    second.summary.iterations = used;
     let s2 = [first.scale, second.scale]
         .into_iter()
         .flatten()
@@ -172,6 +193,12 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     };
     session.graph.poses.copy_from_slice(&kept.poses);
     weights.copy_from_slice(&kept.weights);
+    if kept.summary.start == Start::Annealed && !session.exhausted() {
+        // Its map was solved to the job's tolerance before the other start
+        // ran: one more run from it says so in the report (and costs an
+        // iteration or two).
+        session.converge(weights)?;
+    }
     kept.summary.chosen = true;
     let mut out = kept.out;
     out.rounds += other.out.rounds;
@@ -185,6 +212,35 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     Ok(out)
 }
 
+/// The annealed end `first` back in the session's graph and `weights`,
+/// when the kernel start did not settle within `used` iterations.
+fn unsettled<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    mut first: End<P>,
+    used: usize,
+) -> Result<Outcome, SolveError> {
+    session.graph.poses.copy_from_slice(&first.poses);
+    weights.copy_from_slice(&first.weights);
+    if !session.exhausted() {
+        // As for an annealed end kept over a kernel end (above).
+        session.converge(weights)?;
+    }
+    first.summary.chosen = true;
+    let kernel = StartEnd {
+        start: Start::Kernel,
+        accepted: 0,
+        objective: None,
+        passed: None,
+        chosen: false,
+        iterations: used,
+        settled: false,
+    };
+    let mut out = first.out;
+    out.starts = vec![first.summary, kernel];
+    Ok(out)
+}
+
 /// The kernel start from the map in the session's graph: the Cauchy
 /// kernel at the peers' width over the kept candidates, then EM's
 /// decisions from those it leaves at weight ≥ ½.
@@ -192,7 +248,8 @@ fn kernel_start<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
     job: &Job<'_, P, D>,
-) -> Result<Outcome, SolveError> {
+    cap: usize,
+) -> Result<Option<Outcome>, SolveError> {
     let mut out = Outcome::new(job.candidates.len());
     let kept: Vec<usize> = (job.candidates.iter())
         .filter(|c| c.kept)
@@ -202,10 +259,17 @@ fn kernel_start<P: ChordalInit<D>, const D: usize>(
         weights[c.edge] = if c.kept { 1.0 } else { 0.0 };
     }
     let width = super::default_c(RobustMethod::Cauchy, D);
-    (out.rounds, out.cut_short) =
-        kernels::reweight(session, weights, &kept, RobustMethod::Cauchy, width)?;
+    let (reweighted, capped) = session.capped(cap, |s| {
+        kernels::reweight(s, weights, &kept, RobustMethod::Cauchy, width)
+    });
+    (out.rounds, out.cut_short) = reweighted?;
+    if out.cut_short && capped && !session.exhausted() {
+        // Its share of iterations spent before the weights settled (not
+        // the job's budget).
+        return Ok(None);
+    }
     if out.cut_short {
-        return Ok(out);
+        return Ok(Some(out));
     }
     settle(
         session,
@@ -214,5 +278,5 @@ fn kernel_start<P: ChordalInit<D>, const D: usize>(
         (job.chordal, Swing::Continue),
         &mut out,
     )?;
-    Ok(out)
+    Ok(Some(out))
 }

@@ -104,6 +104,17 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
         self.summary.as_ref().map_or(0, |s| s.iterations)
     }
 
+    /// Runs `f` on this session with at most `cap` more iterations (within
+    /// the budget); returns its result and whether it used all of them.
+    pub fn capped<R>(&mut self, cap: usize, f: impl FnOnce(&mut Self) -> R) -> (R, bool) {
+        let full = self.budget.iterations;
+        self.budget.iterations = full.min(self.iterations().saturating_add(cap));
+        let result = f(self);
+        let used = self.iterations() >= self.budget.iterations;
+        self.budget.iterations = full;
+        (result, used)
+    }
+
     /// Whether the budget is spent (or the observer stopped a run).
     pub fn exhausted(&self) -> bool {
         self.cancelled
