@@ -394,9 +394,13 @@ def sweep_section(folder, ablated):
 
 
 PLACES_CMDS = [
-    "SWEEP_SEEDS=1 SWEEP_DATASETS=\"MIT intel parking-garage manhattan\" "
+    "SWEEP_SEEDS=1 SWEEP_DATASETS=\"MIT intel parking-garage\" "
     "scripts/bench_aliasing_sweep.sh bench/results/aliasing_places",
-    "SWEEP_SEEDS=\"1 2\" SWEEP_GROUPS=10 SWEEP_DATASETS=\"sphere2500 MIT\" "
+    "SWEEP_SEEDS=1 SWEEP_GROUPS=10 SWEEP_DATASETS=manhattan "
+    "scripts/bench_aliasing_sweep.sh bench/results/aliasing_places",
+    "SWEEP_SEEDS=\"2 1\" SWEEP_GROUPS=10 SWEEP_DATASETS=sphere2500 "
+    "scripts/bench_aliasing_sweep.sh bench/results/aliasing_places",
+    "SWEEP_SEEDS=2 SWEEP_GROUPS=10 SWEEP_DATASETS=MIT "
     "scripts/bench_aliasing_sweep.sh bench/results/aliasing_places",
 ]
 PEERS = ["GTSAM cauchy", "GTSAM gnc", "GTSAM cauchy+gate", "GTSAM gnc+gate"]

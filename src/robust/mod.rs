@@ -126,6 +126,14 @@ pub struct Layers {
     /// it better than the map before ([`schedule::decide`]; with the
     /// chordal guess only).
     pub relaxation: bool,
+    /// Let the decisions accept a candidate the gate dropped when its
+    /// innovation convinces the model (`rescued_loops` in the report); off:
+    /// a dropped candidate stays out (reason `gated`).
+    pub rescue: bool,
+    /// Start EM a second time from a plain Cauchy kernel on the caller's
+    /// poses and keep the better end ([`starts`]); off: the annealed start
+    /// only.
+    pub starts: bool,
 }
 
 impl Default for Layers {
@@ -139,13 +147,15 @@ impl Default for Layers {
             populations: true,
             search: true,
             relaxation: true,
+            rescue: true,
+            starts: true,
         }
     }
 }
 
 impl Layers {
     /// The layer names, as `--expert` takes them (with `no-`).
-    pub const NAMES: [&'static str; 8] = [
+    pub const NAMES: [&'static str; 10] = [
         "annealing",
         "decisions",
         "clusters",
@@ -154,6 +164,8 @@ impl Layers {
         "populations",
         "search",
         "relaxation",
+        "rescue",
+        "starts",
     ];
 
     /// Parses `no-LAYER[,no-LAYER…]` (empty: every layer on).
@@ -175,6 +187,8 @@ impl Layers {
                 "no-populations" => &mut layers.populations,
                 "no-search" => &mut layers.search,
                 "no-relaxation" => &mut layers.relaxation,
+                "no-rescue" => &mut layers.rescue,
+                "no-starts" => &mut layers.starts,
                 _ => {
                     return Err(format!(
                         "unknown layer '{item}': expected no-LAYER with LAYER one of {}",
@@ -224,7 +238,8 @@ pub enum Reason {
     WorseFit,
     /// Weighted by a kernel (weight ≥ ½ or not).
     Kernel,
-    /// Dropped by the gate, and the method weighs only the kept ones.
+    /// Dropped by the gate, and the method weighs only the kept ones (a
+    /// kernel, or EM with the layer `rescue` off).
     Gated,
     /// Kept with weight 1 (no robust method).
     Trusted,
@@ -612,6 +627,8 @@ fn record(
         let consistent = out.posteriors[k].is_some_and(|p| p >= 0.5);
         out.reasons[k] = if removed.contains(&k) {
             Reason::ExplainsChi2
+        } else if !candidates[k].kept && !decided.rescue {
+            Reason::Gated
         } else if e.is_none() {
             Reason::Unchecked
         } else if consistent != decided.accepted[k] && decided.vetoed {

@@ -240,6 +240,9 @@ pub struct Decided {
     pub cut_short: bool,
     /// Whether they gave up swinging ([`Swing::GiveUp`]).
     pub swung: bool,
+    /// Whether a candidate the gate dropped may be accepted
+    /// ([`Layers::rescue`]).
+    pub rescue: bool,
     /// Whether they ended because the next set's map raised the
     /// [`objective`]: the set kept is the one before, which the last
     /// evaluation's posteriors would have changed.
@@ -304,6 +307,7 @@ impl Decided {
             cut_short: false,
             swung: false,
             vetoed: false,
+            rescue: layers.rescue,
         }
     }
 
@@ -698,9 +702,12 @@ fn judge(
     let next = all
         .iter()
         .zip(candidates)
-        .map(|(e, c)| match e {
-            Some(e) => model.posterior(e) >= 0.5,
-            None => model.prior(c.count_posterior) >= 0.5,
+        .map(|(e, c)| {
+            (c.kept || layers.rescue)
+                && match e {
+                    Some(e) => model.posterior(e) >= 0.5,
+                    None => model.prior(c.count_posterior) >= 0.5,
+                }
         })
         .collect();
     (model, next)

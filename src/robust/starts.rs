@@ -162,7 +162,7 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     let share = session.iterations() - before;
     let Some(given) = job
         .given
-        .filter(|_| !annealed.cut_short && !session.exhausted())
+        .filter(|_| job.layers.starts && !annealed.cut_short && !session.exhausted())
     else {
         return Ok(annealed);
     };

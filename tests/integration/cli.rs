@@ -509,3 +509,34 @@ fn the_report_says_where_the_time_went() {
     assert!(optimiser + relax + eval <= t("solve_s"));
     assert!(stderr(&o).contains("time: read "), "{}", stderr(&o));
 }
+
+#[test]
+fn the_rescue_and_the_second_start_can_be_switched_off() {
+    // grid2d: 7 true loops below T_GV are taken back by their innovation;
+    // with `no-rescue` every candidate the gate dropped stays out, as in
+    // the paper. With `no-starts` EM has one start and reports none.
+    let grid = sample("grid2d.g2o");
+    let run = |expert: &[&str]| {
+        let mut args = vec!["optimize", grid.as_str(), "--json", "-q"];
+        args.extend_from_slice(expert);
+        let out = pgo(&args);
+        assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+    };
+    let rescued = |r: &serde_json::Value| r["robust"]["rescued_loops"].as_u64().unwrap();
+    let full = run(&[]);
+    assert!(rescued(&full) > 0);
+    assert_eq!(full["robust"]["starts"].as_array().unwrap().len(), 2);
+    let no_rescue = run(&["--expert", "no-rescue"]);
+    assert_eq!(rescued(&no_rescue), 0);
+    for l in no_rescue["loops"].as_array().unwrap() {
+        if l["kept"] == false {
+            assert_eq!(
+                (&l["accepted"], &l["reason"]),
+                (&false.into(), &"gated".into())
+            );
+        }
+    }
+    let one_start = run(&["--expert", "no-starts"]);
+    assert!(one_start["robust"].get("starts").is_none());
+}
