@@ -270,6 +270,33 @@ fn odometry_alone_is_composed_without_a_factorisation() {
 }
 
 #[test]
+fn a_loop_candidate_on_a_line_settles_at_the_first_update() {
+    // Six poses guessed at the origin, odometry 1 m along x, one candidate
+    // from the first to the last 2 cm short (the Python tests' walk): the
+    // first update's map is solved to its minimum, where rounding rejects
+    // LM's last step; that is convergence, so the next update has nothing
+    // to do.
+    let info = |s: [f64; 3]| {
+        Matrix3::from_diagonal(&nalgebra::Vector3::from_fn(|i, _| 1.0 / (s[i] * s[i])))
+    };
+    let mut g = PoseGraph::<Se2, 3>::new();
+    for k in 0..6u64 {
+        g.add_pose(k, Se2::new(0.0, 0.0, 0.0)).unwrap();
+        if k > 0 {
+            let odometry = info([0.03, 0.03, 0.01]);
+            (g.add_edge(k - 1, k, Se2::new(1.0, 0.0, 0.0), odometry)).unwrap();
+        }
+    }
+    let z = Se2::new(4.98, 0.01, 0.0);
+    (g.add_loop_candidate(0, 5, z, info([0.05, 0.05, 0.02]), Some(90))).unwrap();
+    let options = Options::default();
+    let a = g.update(&options).unwrap();
+    assert!(a.report().optimizer.converged, "{:?}", a.report().optimizer);
+    let b = g.update(&options).unwrap();
+    assert_eq!(b.incremental().unwrap().solve, UpdateSolve::None);
+}
+
+#[test]
 fn nothing_added_returns_the_last_solution() {
     let options = Options::default();
     let mut g = walk(6);

@@ -123,6 +123,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                     rejected,
                 }));
             }
+            if self.lightly_damped() && predicted <= self.options.relative_tolerance * objective {
+                return Ok(StepOutcome::AtMinimum);
+            }
             damping.raise(initial);
             rejected += 1;
             if damping.lambda > MAX_LAMBDA {

@@ -601,6 +601,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 StepOutcome::Taken(step) => step,
                 StepOutcome::Negligible if self.lightly_damped() => break StopReason::SmallStep,
                 StepOutcome::Negligible => break StopReason::Stalled,
+                StepOutcome::AtMinimum => break StopReason::RelativeDecrease,
                 StepOutcome::Failed => break StopReason::NoDecrease,
                 StepOutcome::Cancelled => break StopReason::Cancelled,
             };
@@ -712,6 +713,10 @@ enum StepOutcome {
     Taken(Step),
     /// The step's largest component is below the step tolerance.
     Negligible,
+    /// A lightly damped step was rejected whose model foresaw a decrease
+    /// below the relative tolerance: the map is at its minimum to that
+    /// tolerance, and the rejection is rounding.
+    AtMinimum,
     /// No step with a finite (for LM: lower) objective.
     Failed,
     /// The observer asked to stop between two LM trials.
