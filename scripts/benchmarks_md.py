@@ -403,7 +403,7 @@ PLACES_CMDS = [
     "SWEEP_SEEDS=2 SWEEP_GROUPS=10 SWEEP_DATASETS=MIT "
     "scripts/bench_aliasing_sweep.sh bench/results/aliasing_places",
 ]
-PEERS = ["GTSAM cauchy", "GTSAM gnc", "GTSAM cauchy+gate", "GTSAM gnc+gate"]
+PLACE_PEERS = ["GTSAM cauchy", "GTSAM gnc", "GTSAM cauchy+gate", "GTSAM gnc+gate"]
 # Never worse than a plain kernel: pgo's map error at most the best peer's
 # plus this much (% of the map's extent), its precision at least the best
 # peer's.
@@ -428,7 +428,7 @@ def places_runs(folder):
 
 def best_peer(r):
     """The peer of the smallest map error on case `r`, by name, or None."""
-    ok = [(t, r["tools"][t]) for t in PEERS if "f1" in r["tools"].get(t, {})]
+    ok = [(t, r["tools"][t]) for t in PLACE_PEERS if "f1" in r["tools"].get(t, {})]
     return min(ok, key=lambda tr: tr[1]["ate_pct"], default=None)
 
 

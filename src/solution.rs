@@ -70,7 +70,7 @@ pub struct LoopDecision {
 impl Reason {
     /// Its name as the JSON report spells it (snake case): `consistent`,
     /// `inconsistent`, `unchecked`, `explains_chi2`, `unsettled`,
-    /// `worse_fit`, `kernel`, `gated` or `trusted` (for bindings).
+    /// `kernel`, `gated` or `trusted` (for bindings).
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Consistent => "consistent",
@@ -78,7 +78,6 @@ impl Reason {
             Self::Unchecked => "unchecked",
             Self::ExplainsChi2 => "explains_chi2",
             Self::Unsettled => "unsettled",
-            Self::WorseFit => "worse_fit",
             Self::Kernel => "kernel",
             Self::Gated => "gated",
             Self::Trusted => "trusted",

@@ -78,7 +78,7 @@ impl Solution {
     /// (EM's probability that it is a true loop) and `innovation` (its ν²
     /// against the map without its cluster), each None where the method
     /// gives none, and `reason` (why it ended where it did: "consistent",
-    /// "inconsistent", "unchecked", "explains_chi2", "unsettled", "worse_fit", "kernel",
+    /// "inconsistent", "unchecked", "explains_chi2", "unsettled", "kernel",
     /// "gated" or "trusted").
     #[getter]
     fn loops<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {

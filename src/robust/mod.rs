@@ -231,11 +231,6 @@ pub enum Reason {
     /// some maps of a cycle of sets and rejected on others, and the set
     /// kept is the cycle's best-fitting one).
     Unsettled,
-    /// The loop model's posterior and the set kept disagree because the
-    /// set the posterior chose fitted worse: its map raised the objective
-    /// `J` (docs/method.md §5), so the decisions ended at the set before
-    /// (accepted: leaving it out fitted worse; rejected: taking it in did).
-    WorseFit,
     /// Weighted by a kernel (weight ≥ ½ or not).
     Kernel,
     /// Dropped by the gate, and the method weighs only the kept ones (a
@@ -506,7 +501,6 @@ fn settle<P: ChordalInit<D>, const D: usize>(
         layers,
         relax: chordal,
         swing,
-        c: job.c,
     };
     let (mut decided, mut search) = decide_and_explain(session, (weights, candidates), &how, test)?;
     if decided.swung {
@@ -534,7 +528,6 @@ fn settle<P: ChordalInit<D>, const D: usize>(
                     layers,
                     relax: chordal,
                     swing: Swing::Continue,
-                    c: job.c,
                 };
                 schedule::decide(session, weights, candidates, &how)
             },
@@ -631,8 +624,6 @@ fn record(
             Reason::Gated
         } else if e.is_none() {
             Reason::Unchecked
-        } else if consistent != decided.accepted[k] && decided.vetoed {
-            Reason::WorseFit
         } else if consistent != decided.accepted[k] {
             Reason::Unsettled
         } else if consistent {

@@ -243,10 +243,6 @@ pub struct Decided {
     /// Whether a candidate the gate dropped may be accepted
     /// ([`Layers::rescue`]).
     pub rescue: bool,
-    /// Whether they ended because the next set's map raised the
-    /// [`objective`]: the set kept is the one before, which the last
-    /// evaluation's posteriors would have changed.
-    pub vetoed: bool,
 }
 
 /// What [`decide`] does when its set swings: a round flips back decisions
@@ -306,7 +302,6 @@ impl Decided {
             relaxed_starts: 0,
             cut_short: false,
             swung: false,
-            vetoed: false,
             rescue: layers.rescue,
         }
     }
@@ -337,18 +332,12 @@ pub struct Deciding<'a> {
     pub relax: bool,
     /// Whether to stop at the second swing ([`Swing`]).
     pub swing: Swing,
-    /// EM's kernel width `c`: the objective's price of a kept candidate
-    /// left out ([`objective`]).
-    pub c: f64,
 }
 
 /// The decisions by innovation (step 2 of the module doc), starting from
 /// the candidates of weight ≥ ½ in `weights`; leaves the final weights (1
 /// accepted, 0 not) in `weights` and the least-squares map of the accepted
-/// set in the session's graph. Each set the model accepts is kept only if
-/// its map lowers the [`objective`] (at the misfit scale of the first
-/// map): the decisions descend it, and a set that would raise it ends
-/// them at the set before.
+/// set in the session's graph.
 pub fn decide<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -358,13 +347,9 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
     let (scale, layers, swing) = (how.scale, how.layers, how.swing);
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     let mut out = Decided::start(session.graph, &edges, weights, layers);
-    // The sets solved, each with its map's objective.
+    // The sets solved, each with its map's fit ([`excess`]).
     let mut seen: Vec<(Vec<bool>, f64)> = Vec::new();
     let mut swings = Swings::new(edges.len());
-    // The price of a candidate left out, on the first map's scale; the best
-    // set so far, its objective and map.
-    let mut price: Option<f64> = None;
-    let mut best: Option<(f64, Vec<bool>, Vec<P>)> = None;
     // Whether the map in the graph met the job's own tolerance, and whether
     // the set repeats on a map that did not (it is then solved again).
     let (mut converged, mut again) = (false, false);
@@ -388,23 +373,6 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             out.cut_short = true;
             break;
         }
-        let price = *price.get_or_insert_with(|| {
-            misfit_scale(session.graph, weights).unwrap_or(1.0) * how.c * how.c
-        });
-        let j = objective(session.graph, weights, candidates, price);
-        if let Some((b, set, poses)) = best.as_ref().filter(|(b, _, _)| j > *b) {
-            // Higher than a set before: back to it, and the descent ends.
-            out.accepted.clone_from(set);
-            session.graph.poses.clone_from(poses);
-            for (&k, &a) in edges.iter().zip(set) {
-                weights[k] = if a { 1.0 } else { 0.0 };
-            }
-            debug_assert!(*b < j);
-            out.vetoed = true;
-            converged = false;
-            break;
-        }
-        best = Some((j, out.accepted.clone(), session.graph.poses.clone()));
         let next = evaluate(
             session, weights, candidates, &edges, &mut out, scale, layers,
         )?;
@@ -428,7 +396,8 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             out.swung = true;
             break;
         }
-        seen.push((std::mem::replace(&mut out.accepted, next), j));
+        let fit = excess(session.graph, weights, &out.accepted);
+        seen.push((std::mem::replace(&mut out.accepted, next), fit));
         if let Some(first) = seen.iter().position(|(s, _)| *s == out.accepted) {
             // Settled (a cycle of one set), or cycling.
             if keep_best(&seen[first..], &edges, weights) {
@@ -450,7 +419,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
 }
 
 /// Of the sets of a cycle (each map of which judges the next set), each
-/// with its map's [`objective`], puts the one whose map fits its measurements
+/// with its map's [`excess`], puts the one whose map fits its measurements
 /// best, as the χ² test measures it, in `weights` (for candidates
 /// `edges`); returns whether that changed them.
 fn keep_best(cycle: &[(Vec<bool>, f64)], edges: &[usize], weights: &mut [f64]) -> bool {
@@ -465,6 +434,20 @@ fn keep_best(cycle: &[(Vec<bool>, f64)], edges: &[usize], weights: &mut [f64]) -
         weights[e] = if a { 1.0 } else { 0.0 };
     }
     changed
+}
+
+/// How much more `Σ eᵀΩe` the least-squares map of the accepted set in
+/// `weights` (`accepted` of the candidates) has than its measurements'
+/// information expects: each accepted loop adds `D` degrees of freedom to
+/// the χ² test, so between sets that differ in a few loops this ranks
+/// their maps as the test does.
+fn excess<P: Pose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    weights: &[f64],
+    accepted: &[bool],
+) -> f64 {
+    let loops = accepted.iter().filter(|&&a| a).count();
+    graph.chi2_where(|k| weights[k] > 0.0) - (loops * D) as f64
 }
 
 /// The loop model's objective of the map in `graph` with `weights`: `Σ

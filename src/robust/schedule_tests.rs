@@ -231,7 +231,7 @@ fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
     // it labels a stall rather than convergence); a crawl would have left
     // steps of 10⁻³.
     let last = summary.history.last().unwrap();
-    assert!(summary.converged() || last.step_max < 1e-8, "{summary:?}");
+    assert!(summary.converged() || last.step_max < 1e-6, "{summary:?}");
     assert!(decided.decisions >= 2, "{:?}", decided.decisions);
 }
 
@@ -612,6 +612,5 @@ fn deciding(layers: &Layers, relax: bool, swing: Swing) -> Deciding<'_> {
         layers,
         relax,
         swing,
-        c: crate::robust::default_c(crate::robust::RobustMethod::Em, 3),
     }
 }

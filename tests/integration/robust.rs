@@ -420,11 +420,7 @@ fn true_loops_far_beyond_the_others_spread_are_rejected_as_aliases_would_be() {
     // by a second population far out); the other true loops are kept, no
     // wrong loop is.
     use statrs::distribution::{ChiSquared, ContinuousCDF};
-    // Contradicted: beyond EM's width c² = χ²₃(1 − 10⁻⁶), the price at
-    // which the decisions' objective leaves a loop out (method §5); a loop
-    // between χ²₃(0.999) and c² may stay when the set without it fits
-    // worse.
-    let contradicted_above = ChiSquared::new(3.0).unwrap().inverse_cdf(1.0 - 1e-6);
+    let contradicted_above = ChiSquared::new(3.0).unwrap().inverse_cdf(0.999);
     let mut sim = simulate_planar(&options(OutlierPolicy::Random, 60, 7)).expect("simulate");
     let mut bent = Vec::new();
     for (k, e) in sim.noisy.edges.iter_mut().enumerate() {
@@ -445,7 +441,7 @@ fn true_loops_far_beyond_the_others_spread_are_rejected_as_aliases_would_be() {
             (true, _) => fp += usize::from(l.accepted),
             (false, true) => {
                 bent_kept += usize::from(l.accepted);
-                // One the rest of the graph contradicts.
+                // One the rest of the graph contradicts: beyond χ²₃(0.999).
                 let contradicted = l.innovation.is_some_and(|v| v > contradicted_above);
                 assert!(!(contradicted && l.accepted), "{l:?}");
             }
@@ -458,8 +454,8 @@ fn true_loops_far_beyond_the_others_spread_are_rejected_as_aliases_would_be() {
     assert_eq!(fp, 0);
     assert!(kept as f64 >= 0.97 * unbent as f64, "{kept} of {unbent}");
     // Against the map without them their ν² is 8 to 75: every one beyond
-    // c² is out (above), and most are; those kept the graph cannot
-    // contradict (ν² 8–22 with this seed).
+    // χ²₃(0.999) is out (above), and most are; those kept the graph cannot
+    // contradict (ν² 8–12 with this seed).
     assert!(bent_kept <= 5, "{bent_kept} of the bent loops kept");
 }
 
