@@ -496,6 +496,46 @@ def places_section(folder):
     return out
 
 
+PLACES_ABLATED = ["rescue", "starts"]
+
+
+def places_ablation(results):
+    """The places sweep again with one layer off (pgo alone; the peers'
+    results are the sweep's): what each layer earns on these cases."""
+    out = ["### The same cases with a layer of EM off", "",
+           "Each case of the sweep above again with `--expert no-LAYER` (the peers' results are "
+           "those above). Made by:", "", "```sh",
+           "scripts/bench_places_ablation.sh rescue",
+           "scripts/bench_places_ablation.sh starts", "```", "",
+           "| layers | cases | wrong loops accepted | true loops rejected | largest map error (ATE, %) "
+           "| cases behind the best peer |", "|---|---|---|---|---|---|"]
+    full = places_runs(os.path.join(results, "aliasing_places"))
+    keys = {(pl, sd, g, n, sc) for pl, sd, g, n, sc, _ in full}
+
+    def row(label, runs):
+        ok = [r["tools"]["pgo"] for *_, r in runs if "f1" in r["tools"].get("pgo", {})]
+        late = sum(1 for *_, r in runs if best_peer(r) and behind(r["tools"].get("pgo", {}), best_peer(r)[1]))
+        return "| %s | %d | %d | %d | %s | %d |" % (
+            label, len(runs), sum(p["fp"] for p in ok), sum(p["true"] - p["tp"] for p in ok),
+            "%.3g" % max((p["ate_pct"] for p in ok), default=float("nan")), late)
+
+    for layer in PLACES_ABLATED:
+        ablated = places_runs(os.path.join(results, "aliasing_places_no_" + layer))
+        if not ablated:
+            continue
+        have = {(pl, sd, g, n, sc) for pl, sd, g, n, sc, _ in ablated} & keys
+        # The peers of each case are the full sweep's.
+        peers = {(pl, sd, g, n, sc): r for pl, sd, g, n, sc, r in full}
+        merged = []
+        for pl, sd, g, n, sc, r in ablated:
+            if (pl, sd, g, n, sc) in have:
+                r = dict(r, tools=dict(peers[(pl, sd, g, n, sc)]["tools"], pgo=r["tools"]["pgo"]))
+                merged.append((pl, sd, g, n, sc, r))
+        out.append(row("all", [x for x in full if x[:5] in have]))
+        out.append(row("no-" + layer, merged))
+    return out + [""]
+
+
 ABLATION_CMD = ("scripts/bench_ablation.sh bench/results/ablation  "
                 "# one bench_robust.py run per layer switched off")
 
@@ -805,6 +845,7 @@ def main():
     for spec in SECTIONS:
         out += robust_section(os.path.join(args.results, spec["file"]), spec)
     out += places_section(os.path.join(args.results, "aliasing_places"))
+    out += places_ablation(args.results)
     out += sweep_section(os.path.join(args.results, "aliasing_sweep"),
                          os.path.join(args.results, "aliasing_sweep_no_agreement"))
     out += ablation_section(os.path.join(args.results, "ablation"))
