@@ -333,14 +333,17 @@ def replay(name, every=50):
         if (k + 1) % every != 0 and k + 1 != len(steps):
             continue
         result = graph.update()
-        kinds.append(result.incremental["solve"])
+        kinds.append((result.incremental["solve"], result.incremental["reason"]))
         assert result.incremental == result.report["incremental"]
         if previous is not None:
             assert_changed_lists_the_flips(result, previous)
         changes += len(result.incremental["changed"])
         previous = result
-    assert kinds[0] == "batch" and "batch" not in kinds[1:], kinds
-    assert "warm" in kinds, kinds
+    # A later whole job only where EM's decisions from the last ones swung
+    # (the documented fall-back; on grid2d at 100 poses).
+    assert kinds[0][0] == "batch", kinds
+    assert all(s != "batch" or "swung" in why for s, why in kinds[1:]), kinds
+    assert "warm" in [s for s, _ in kinds], kinds
     return graph, previous, changes
 
 
