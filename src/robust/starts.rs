@@ -136,6 +136,26 @@ impl<P: Clone> End<P> {
         self.summary.objective = Some(fit + s2 * c * c * (with_one - fit));
     }
 
+    /// Puts this end's map and weights back in the session's graph and
+    /// `weights`. The annealed end was solved before the other start ran:
+    /// one more run from it (an iteration or two) makes the report's last
+    /// run its own.
+    fn restore<const D: usize>(
+        &self,
+        session: &mut Session<'_, P, D>,
+        weights: &mut [f64],
+    ) -> Result<(), SolveError>
+    where
+        P: Pose<D>,
+    {
+        session.graph.poses.copy_from_slice(&self.poses);
+        weights.copy_from_slice(&self.weights);
+        if self.summary.start == Start::Annealed && !session.exhausted() {
+            session.converge(weights)?;
+        }
+        Ok(())
+    }
+
     /// Whether this end is to be kept over `other` (module doc).
     fn better_than(&self, other: &Self) -> bool {
         match (self.summary.passed, other.summary.passed) {
@@ -177,11 +197,11 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     };
     let mut second = End::take(session.graph, weights, job, (Start::Kernel, kernel));
     second.summary.iterations = used;
+    // `misfit_scale` is finite and positive where it is `Some`.
     let s2 = [first.scale, second.scale]
         .into_iter()
         .flatten()
-        .filter(|s| s.is_finite() && *s > 0.0)
-        .fold(None, |m: Option<f64>, s| Some(m.map_or(s, |m| m.min(s))))
+        .reduce(f64::min)
         .unwrap_or(1.0);
     first.rank(s2, job.c);
     second.rank(s2, job.c);
@@ -191,14 +211,7 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     } else {
         (first, second)
     };
-    session.graph.poses.copy_from_slice(&kept.poses);
-    weights.copy_from_slice(&kept.weights);
-    if kept.summary.start == Start::Annealed && !session.exhausted() {
-        // Its map was solved to the job's tolerance before the other start
-        // ran: one more run from it says so in the report (and costs an
-        // iteration or two).
-        session.converge(weights)?;
-    }
+    kept.restore(session, weights)?;
     kept.summary.chosen = true;
     let mut out = kept.out;
     out.rounds += other.out.rounds;
@@ -220,12 +233,7 @@ fn unsettled<P: Pose<D>, const D: usize>(
     mut first: End<P>,
     used: usize,
 ) -> Result<Outcome, SolveError> {
-    session.graph.poses.copy_from_slice(&first.poses);
-    weights.copy_from_slice(&first.weights);
-    if !session.exhausted() {
-        // As for an annealed end kept over a kernel end (above).
-        session.converge(weights)?;
-    }
+    first.restore(session, weights)?;
     first.summary.chosen = true;
     let kernel = StartEnd {
         start: Start::Kernel,
