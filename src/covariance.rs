@@ -13,7 +13,7 @@ pub(crate) use csv::{CsvError, write_csv};
 
 use crate::error::Error;
 use crate::geometry::{NormalBlocks, Pose};
-use crate::graph::{PoseGraph, VertexId};
+use crate::graph::{Graph, VertexId};
 use crate::linear::{BlockSystem, GroupScratch, LinearError, Parallelism, SelectedInverse};
 use crate::solve::{EDGES_PER_TASK, LINEARIZE_CHUNK, SolveError};
 #[cfg(test)]
@@ -95,7 +95,7 @@ enum Place {
 /// use pgo::{Options, PoseGraph2, Se2};
 ///
 /// // Three poses 1 m apart, each step measured with σ = 0.1 m and 0.01 rad.
-/// let mut graph = PoseGraph2::new();
+/// let mut graph = Graph2::new();
 /// for k in 0..3 {
 ///     graph.add_pose(k, Se2::new(k as f64, 0.0, 0.0))?;
 /// }
@@ -117,7 +117,7 @@ enum Place {
 /// # Ok::<(), pgo::Error>(())
 /// ```
 pub struct Covariances<P: Pose<D>, const D: usize> {
-    graph: Arc<PoseGraph<P, D>>,
+    graph: Arc<Graph<P, D>>,
     place: Vec<Place>,
     system: BlockSystem<D>,
     inverse: SelectedInverse,
@@ -139,7 +139,7 @@ impl<P: Pose<D>, const D: usize> std::fmt::Debug for Covariances<P, D> {
 /// candidates as `accepted` says, one flag per candidate in edge order.
 /// `None` if the flags are not one per candidate.
 pub(crate) fn edges_in_map<P: Pose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     accepted: impl IntoIterator<Item = bool>,
 ) -> Option<Vec<bool>> {
     let mut accepted = accepted.into_iter();
@@ -164,7 +164,7 @@ impl<P: Pose<D>, const D: usize> Covariances<P, D> {
     /// edges at a pose do not determine it, to rounding),
     /// [`SolveError::Linear`] (threads, memory).
     pub(crate) fn new(
-        graph: Arc<PoseGraph<P, D>>,
+        graph: Arc<Graph<P, D>>,
         in_map: &[bool],
         threads: usize,
     ) -> Result<Self, SolveError> {
@@ -359,7 +359,7 @@ fn inverse_adjoint<P: Pose<D>, const D: usize>(xa: &P, xb: &P) -> SMatrix<f64, D
 /// `system`, a batch of edges at a time, each batch linearised on the
 /// threads of `parallelism`.
 fn assemble<P: Pose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     in_map: &[bool],
     system: &mut BlockSystem<D>,
     parallelism: &Parallelism,

@@ -58,16 +58,16 @@ pub enum GraphError {
 ///
 /// ```ignore
 /// use pgo::geometry::{Pose, Se2};
-/// use pgo::graph::PoseGraph;
+/// use pgo::graph::Graph;
 /// use nalgebra::Matrix3;
-/// let mut g = PoseGraph::<Se2, 3>::new();
+/// let mut g = Graph::<Se2, 3>::new();
 /// g.add_vertex(0, Se2::identity()).unwrap();
 /// g.add_vertex(1, Se2::new(1.0, 0.0, 0.0)).unwrap();
 /// g.add_edge(0, 1, Se2::new(1.0, 0.0, 0.0), Matrix3::identity(), None).unwrap();
 /// assert_eq!(g.chi2(), 0.0);
 /// ```
 #[derive(Clone, Debug, Default)]
-pub struct PoseGraph<P, const D: usize> {
+pub struct Graph<P, const D: usize> {
     ids: Vec<VertexId>,
     /// The current estimate of every vertex, by index.
     pub poses: Vec<P>,
@@ -78,11 +78,11 @@ pub struct PoseGraph<P, const D: usize> {
 }
 
 /// A planar pose graph.
-pub type PoseGraph2 = PoseGraph<Se2, 3>;
+pub type Graph2 = Graph<Se2, 3>;
 /// A spatial pose graph.
-pub type PoseGraph3 = PoseGraph<Se3, 6>;
+pub type Graph3 = Graph<Se3, 6>;
 
-impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
+impl<P: Pose<D>, const D: usize> Graph<P, D> {
     /// An empty graph.
     pub fn new() -> Self {
         Self {
@@ -307,14 +307,14 @@ impl<P: Pose<D>, const D: usize> PoseGraph<P, D> {
 
 /// A pose graph of either dimension, as read from a file.
 #[derive(Clone, Debug)]
-pub enum AnyPoseGraph {
+pub enum AnyGraph {
     /// SE(2).
-    Planar(PoseGraph2),
+    Planar(Graph2),
     /// SE(3).
-    Spatial(PoseGraph3),
+    Spatial(Graph3),
 }
 
-impl AnyPoseGraph {
+impl AnyGraph {
     /// 2 or 3.
     pub fn dimension(&self) -> usize {
         match self {
@@ -424,8 +424,8 @@ mod tests {
     use super::*;
     use nalgebra::Matrix3;
 
-    fn line_graph(n: u64) -> PoseGraph2 {
-        let mut g = PoseGraph2::new();
+    fn line_graph(n: u64) -> Graph2 {
+        let mut g = Graph2::new();
         for k in 0..n {
             g.add_vertex(k, Se2::new(k as f64, 0.0, 0.0)).unwrap();
         }

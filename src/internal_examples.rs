@@ -172,10 +172,10 @@ fn gate_gate() {
 #[test]
 fn solve_optimize() {
     use crate::geometry::{Pose, Se2};
-    use crate::graph::PoseGraph;
+    use crate::graph::Graph;
     use crate::solve::{SolverOptions, optimize};
     use nalgebra::Matrix3;
-    let mut g = PoseGraph::<Se2, 3>::new();
+    let mut g = Graph::<Se2, 3>::new();
     for k in 0..3 {
         g.add_vertex(k, Se2::new(0.3 * k as f64, 0.0, 0.0)).unwrap();
     }
@@ -187,13 +187,13 @@ fn solve_optimize() {
     assert!((g.poses[2].x - 2.0).abs() < 1e-9);
 }
 
-/// src/graph.rs: `PoseGraph`.
+/// src/graph.rs: `Graph`.
 #[test]
 fn graph_pose_graph() {
     use crate::geometry::{Pose, Se2};
-    use crate::graph::PoseGraph;
+    use crate::graph::Graph;
     use nalgebra::Matrix3;
-    let mut g = PoseGraph::<Se2, 3>::new();
+    let mut g = Graph::<Se2, 3>::new();
     g.add_vertex(0, Se2::identity()).unwrap();
     g.add_vertex(1, Se2::new(1.0, 0.0, 0.0)).unwrap();
     g.add_edge(0, 1, Se2::new(1.0, 0.0, 0.0), Matrix3::identity(), None)

@@ -160,7 +160,7 @@ pub use stats::{Chi2Test, DofConvention};
 #[cfg(feature = "internals")]
 #[doc(hidden)]
 pub mod internals {
-    pub use crate::graph::{AnyPoseGraph as AnyGraph, PoseGraph as Graph};
+    pub use crate::graph::{AnyGraph, Graph};
     pub use crate::io::g2o::{G2oPose, ReadOptions, read, write_graph};
     #[cfg(feature = "simulate")]
     pub use crate::simulate::{AnySimulation, SimulationOptions, World, simulate};

@@ -378,7 +378,7 @@ fn print_result(text: &str) -> Result<(), ExitCode> {
 }
 
 fn corrupt(args: CorruptArgs) -> ExitCode {
-    use pgo::graph::AnyPoseGraph;
+    use pgo::graph::AnyGraph;
     use pgo::simulate::CorruptionOptions;
     let mut outputs = vec![("-o", args.output.as_path())];
     outputs.extend(args.labels.as_deref().map(|l| ("--labels", l)));
@@ -406,8 +406,8 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
         ..CorruptionOptions::default()
     };
     let result = match &mut file.graph {
-        AnyPoseGraph::Planar(g) => corrupt_graph(g, &file.missing, &options, &args),
-        AnyPoseGraph::Spatial(g) => corrupt_graph(g, &file.missing, &options, &args),
+        AnyGraph::Planar(g) => corrupt_graph(g, &file.missing, &options, &args),
+        AnyGraph::Spatial(g) => corrupt_graph(g, &file.missing, &options, &args),
     };
     match result {
         Ok(message) => {
@@ -429,7 +429,7 @@ enum CorruptFailure {
 }
 
 fn corrupt_graph<P, const D: usize>(
-    g: &mut pgo::graph::PoseGraph<P, D>,
+    g: &mut pgo::graph::Graph<P, D>,
     missing: &[usize],
     options: &pgo::simulate::CorruptionOptions,
     args: &CorruptArgs,
@@ -582,7 +582,7 @@ fn gate(args: GateArgs) -> ExitCode {
 
 /// Counts from a g2o file (its candidates), a CSV or plain list, or stdin.
 fn read_counts(path: Option<&std::path::Path>) -> Result<Vec<u64>, String> {
-    use pgo::graph::AnyPoseGraph;
+    use pgo::graph::AnyGraph;
     match path {
         None => {
             pgo::io::inliers::read_counts(std::io::stdin().lock(), std::path::Path::new("<stdin>"))
@@ -595,12 +595,12 @@ fn read_counts(path: Option<&std::path::Path>) -> Result<Vec<u64>, String> {
         Some(p) if p.extension().is_some_and(|e| e == "g2o") => {
             let file = pgo::io::g2o::read(p, Default::default()).map_err(|e| e.to_string())?;
             let counts: Vec<u64> = match &file.graph {
-                AnyPoseGraph::Planar(g) => g
+                AnyGraph::Planar(g) => g
                     .edges
                     .iter()
                     .filter_map(|e| e.candidate.and_then(|c| c.inliers))
                     .collect(),
-                AnyPoseGraph::Spatial(g) => g
+                AnyGraph::Spatial(g) => g
                     .edges
                     .iter()
                     .filter_map(|e| e.candidate.and_then(|c| c.inliers))

@@ -43,7 +43,7 @@ pub(crate) mod sealed {
         /// Its g2o numbers.
         fn numbers(&self) -> Vec<f64>;
         /// The reader's graph, if it is of this pose type.
-        fn unwrap(graph: crate::graph::AnyPoseGraph) -> Option<crate::graph::PoseGraph<Self, D>>;
+        fn unwrap(graph: crate::graph::AnyGraph) -> Option<crate::graph::Graph<Self, D>>;
     }
 }
 
@@ -68,10 +68,10 @@ impl sealed::Sealed<3> for Se2 {
     fn numbers(&self) -> Vec<f64> {
         vec![self.x, self.y, self.theta]
     }
-    fn unwrap(graph: graph::AnyPoseGraph) -> Option<graph::PoseGraph<Self, 3>> {
+    fn unwrap(graph: graph::AnyGraph) -> Option<graph::Graph<Self, 3>> {
         match graph {
-            graph::AnyPoseGraph::Planar(g) => Some(g),
-            graph::AnyPoseGraph::Spatial(_) => None,
+            graph::AnyGraph::Planar(g) => Some(g),
+            graph::AnyGraph::Spatial(_) => None,
         }
     }
 }
@@ -92,10 +92,10 @@ impl sealed::Sealed<6> for Se3 {
         let t = self.translation;
         [&[t.x, t.y, t.z][..], &self.quaternion_xyzw()].concat()
     }
-    fn unwrap(graph: graph::AnyPoseGraph) -> Option<graph::PoseGraph<Self, 6>> {
+    fn unwrap(graph: graph::AnyGraph) -> Option<graph::Graph<Self, 6>> {
         match graph {
-            graph::AnyPoseGraph::Spatial(g) => Some(g),
-            graph::AnyPoseGraph::Planar(_) => None,
+            graph::AnyGraph::Spatial(g) => Some(g),
+            graph::AnyGraph::Planar(_) => None,
         }
     }
 }
@@ -148,7 +148,7 @@ impl sealed::Sealed<6> for Se3 {
 /// ```
 #[derive(Clone, Debug)]
 pub struct PoseGraph<P: GraphPose<D>, const D: usize> {
-    graph: graph::PoseGraph<P, D>,
+    graph: graph::Graph<P, D>,
     /// Indices of the vertices a file's edges named without a vertex line
     /// (their poses are placeholders until the job initialises them).
     missing: Vec<usize>,
@@ -178,7 +178,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// positive definite.
     pub fn new() -> Self {
         Self {
-            graph: graph::PoseGraph::new(),
+            graph: graph::Graph::new(),
             missing: Vec::new(),
             source: None,
             repair_information: false,
@@ -653,10 +653,10 @@ fn from_pipeline(e: PipelineError) -> Error {
 
 /// Refuses a graph read from a file whose information matrices leave
 /// [`graph::INFORMATION_RANGE`] (the reader takes any finite scale).
-fn in_range(graph: &graph::AnyPoseGraph) -> Result<(), Error> {
+fn in_range(graph: &graph::AnyGraph) -> Result<(), Error> {
     let found = match graph {
-        graph::AnyPoseGraph::Planar(g) => g.information_out_of_range(),
-        graph::AnyPoseGraph::Spatial(g) => g.information_out_of_range(),
+        graph::AnyGraph::Planar(g) => g.information_out_of_range(),
+        graph::AnyGraph::Spatial(g) => g.information_out_of_range(),
     };
     match found {
         Some((from, to, index, value)) => Err(Error::InvalidInformation {
@@ -790,7 +790,7 @@ impl AnyPoseGraph {
         in_range(&file.graph)?;
         let source = Some((path.to_owned(), file.summary));
         Ok(match file.graph {
-            graph::AnyPoseGraph::Planar(graph) => Self::Planar(PoseGraph {
+            graph::AnyGraph::Planar(graph) => Self::Planar(PoseGraph {
                 graph,
                 missing: file.missing,
                 source,
@@ -798,7 +798,7 @@ impl AnyPoseGraph {
                 repaired: 0,
                 state: None,
             }),
-            graph::AnyPoseGraph::Spatial(graph) => Self::Spatial(PoseGraph {
+            graph::AnyGraph::Spatial(graph) => Self::Spatial(PoseGraph {
                 graph,
                 missing: file.missing,
                 source,

@@ -465,8 +465,8 @@ impl Report {
     /// A report of what was read, before anything ran.
     pub(crate) fn new(input: &Path, file: &G2oFile) -> Self {
         match &file.graph {
-            crate::graph::AnyPoseGraph::Planar(g) => Self::for_graph(input, g, &file.summary),
-            crate::graph::AnyPoseGraph::Spatial(g) => Self::for_graph(input, g, &file.summary),
+            crate::graph::AnyGraph::Planar(g) => Self::for_graph(input, g, &file.summary),
+            crate::graph::AnyGraph::Spatial(g) => Self::for_graph(input, g, &file.summary),
         }
     }
 
@@ -474,7 +474,7 @@ impl Report {
     /// noticed, or built in memory), before anything ran.
     pub(crate) fn for_graph<P: Pose<D>, const D: usize>(
         input: &Path,
-        graph: &crate::graph::PoseGraph<P, D>,
+        graph: &crate::graph::Graph<P, D>,
         read: &ReadSummary,
     ) -> Self {
         Self {

@@ -29,7 +29,7 @@ pub struct Solution<P> {
     /// [`Solution::certificate`].
     pub(crate) problem: certify::Problem<P>,
     /// The graph as solved (its edges, which are candidates, the gauge), a
-    /// `graph::PoseGraph<P, D>`, for [`Solution::covariances`]; clones share
+    /// `graph::Graph<P, D>`, for [`Solution::covariances`]; clones share
     /// it. `None` only for a solution made without it.
     solved: Option<Arc<dyn Any + Send + Sync>>,
     /// The job's `--threads`, for the covariances' factorisation.
@@ -87,7 +87,7 @@ impl Reason {
 
 impl<P> Solution<P> {
     /// The solution in the optimised `graph`, with the job's `report`.
-    pub(crate) fn new<const D: usize>(graph: &graph::PoseGraph<P, D>, report: Report) -> Self
+    pub(crate) fn new<const D: usize>(graph: &graph::Graph<P, D>, report: Report) -> Self
     where
         P: Pose<D>,
     {
@@ -126,7 +126,7 @@ impl<P> Solution<P> {
     /// [`Solution::covariances`], to be factorised on `threads` threads.
     pub(crate) fn keeping<const D: usize>(
         mut self,
-        graph: graph::PoseGraph<P, D>,
+        graph: graph::Graph<P, D>,
         threads: usize,
     ) -> Self
     where
@@ -151,7 +151,7 @@ impl<P> Solution<P> {
         P: Pose<D>,
     {
         let graph = (self.solved.clone())
-            .and_then(|g| g.downcast::<graph::PoseGraph<P, D>>().ok())
+            .and_then(|g| g.downcast::<graph::Graph<P, D>>().ok())
             .ok_or_else(|| Error::Internal("the solution holds no graph".into()))?;
         let in_map = covariance::edges_in_map(&graph, self.loops.iter().map(|l| l.accepted))
             .ok_or_else(|| Error::Internal("loop decisions do not match the graph".into()))?;

@@ -8,7 +8,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use pgo::geometry::Pose;
-use pgo::graph::AnyPoseGraph;
+use pgo::graph::AnyGraph;
 use pgo::io::g2o::{ReadOptions, read};
 use pgo::pipeline::{OptimizeConfig, run};
 use std::path::PathBuf;
@@ -62,12 +62,12 @@ fuzz_target!(|data: &[u8]| {
             )
             .unwrap_or_else(|e| panic!("the written graph does not read back: {e}"));
             let (vertices, edges, finite) = match &back.graph {
-                AnyPoseGraph::Planar(g) => (
+                AnyGraph::Planar(g) => (
                     g.num_vertices(),
                     g.edges.len(),
                     g.poses.iter().all(|p| p.is_finite()),
                 ),
-                AnyPoseGraph::Spatial(g) => (
+                AnyGraph::Spatial(g) => (
                     g.num_vertices(),
                     g.edges.len(),
                     g.poses.iter().all(|p| p.is_finite()),

@@ -5,7 +5,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use pgo::graph::AnyPoseGraph;
+use pgo::graph::AnyGraph;
 use pgo::io::g2o::{ReadError, ReadOptions, read_from};
 use std::path::Path;
 
@@ -29,11 +29,11 @@ fuzz_target!(|data: &[u8]| {
         let again = read_from(text.as_slice(), Path::new("again.g2o"), options)
             .unwrap_or_else(|e| panic!("written file does not read back: {e}"));
         match (&file.graph, &again.graph) {
-            (AnyPoseGraph::Planar(a), AnyPoseGraph::Planar(b)) => {
+            (AnyGraph::Planar(a), AnyGraph::Planar(b)) => {
                 assert_eq!(a.num_vertices(), b.num_vertices());
                 assert_eq!(a.edges.len(), b.edges.len());
             }
-            (AnyPoseGraph::Spatial(a), AnyPoseGraph::Spatial(b)) => {
+            (AnyGraph::Spatial(a), AnyGraph::Spatial(b)) => {
                 assert_eq!(a.num_vertices(), b.num_vertices());
                 assert_eq!(a.edges.len(), b.edges.len());
             }

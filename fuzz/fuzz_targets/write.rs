@@ -12,7 +12,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use pgo::geometry::{Pose, Se2, Se3};
-use pgo::graph::{AnyPoseGraph, PoseGraph};
+use pgo::graph::{AnyGraph, Graph};
 use pgo::io::g2o::{G2oFile, G2oPose, ReadOptions, RewriteError, read_from};
 use std::collections::HashMap;
 use std::path::Path;
@@ -48,14 +48,14 @@ impl Close for Se3 {
 }
 
 /// Poses by id.
-fn poses<P: Pose<D>, const D: usize>(g: &PoseGraph<P, D>) -> HashMap<u64, P> {
+fn poses<P: Pose<D>, const D: usize>(g: &Graph<P, D>) -> HashMap<u64, P> {
     (0..g.num_vertices())
         .map(|k| (g.id(k), g.poses[k]))
         .collect()
 }
 
 /// `a` and `b` hold the same graph: ids, poses, edges (by id), gauge.
-fn assert_same<P: Pose<D> + Close, const D: usize>(a: &PoseGraph<P, D>, b: &PoseGraph<P, D>) {
+fn assert_same<P: Pose<D> + Close, const D: usize>(a: &Graph<P, D>, b: &Graph<P, D>) {
     let (pa, pb) = (poses(a), poses(b));
     assert_eq!(pa.len(), pb.len());
     for (id, p) in &pa {
@@ -73,7 +73,7 @@ fn assert_same<P: Pose<D> + Close, const D: usize>(a: &PoseGraph<P, D>, b: &Pose
 }
 
 /// The ids of the gauge vertices, sorted.
-fn gauge<P: Pose<D>, const D: usize>(g: &PoseGraph<P, D>) -> Vec<u64> {
+fn gauge<P: Pose<D>, const D: usize>(g: &Graph<P, D>) -> Vec<u64> {
     let mut ids: Vec<u64> = g.gauge().iter().map(|&k| g.id(k)).collect();
     ids.sort_unstable();
     ids
@@ -99,8 +99,8 @@ fn other_lines<'a, P: G2oPose<D>, const D: usize>(text: &'a [u8]) -> Vec<&'a [u8
 fn check<P: G2oPose<D> + Close, const D: usize>(
     data: &[u8],
     file: &G2oFile,
-    g: &PoseGraph<P, D>,
-    graph_of: fn(&G2oFile) -> Option<&PoseGraph<P, D>>,
+    g: &Graph<P, D>,
+    graph_of: fn(&G2oFile) -> Option<&Graph<P, D>>,
     moved: fn(&P) -> P,
 ) {
     let options = ReadOptions::default();
@@ -175,22 +175,22 @@ fn check<P: G2oPose<D> + Close, const D: usize>(
 }
 
 /// `file` with its graph replaced.
-fn with_graph<P: G2oPose<D>, const D: usize>(mut file: G2oFile, g: PoseGraph<P, D>) -> G2oFile {
+fn with_graph<P: G2oPose<D>, const D: usize>(mut file: G2oFile, g: Graph<P, D>) -> G2oFile {
     file.graph = P::wrap(g);
     file
 }
 
-fn planar(f: &G2oFile) -> Option<&PoseGraph<Se2, 3>> {
+fn planar(f: &G2oFile) -> Option<&Graph<Se2, 3>> {
     match &f.graph {
-        AnyPoseGraph::Planar(g) => Some(g),
-        AnyPoseGraph::Spatial(_) => None,
+        AnyGraph::Planar(g) => Some(g),
+        AnyGraph::Spatial(_) => None,
     }
 }
 
-fn spatial(f: &G2oFile) -> Option<&PoseGraph<Se3, 6>> {
+fn spatial(f: &G2oFile) -> Option<&Graph<Se3, 6>> {
     match &f.graph {
-        AnyPoseGraph::Spatial(g) => Some(g),
-        AnyPoseGraph::Planar(_) => None,
+        AnyGraph::Spatial(g) => Some(g),
+        AnyGraph::Planar(_) => None,
     }
 }
 
@@ -199,10 +199,10 @@ fuzz_target!(|data: &[u8]| {
         return;
     };
     match &file.graph {
-        AnyPoseGraph::Planar(g) => check(data, &file, g, planar, |p| {
+        AnyGraph::Planar(g) => check(data, &file, g, planar, |p| {
             Se2::new(p.x + 1.0, p.y - 0.5, p.theta * 0.5)
         }),
-        AnyPoseGraph::Spatial(g) => check(data, &file, g, spatial, |p| {
+        AnyGraph::Spatial(g) => check(data, &file, g, spatial, |p| {
             Se3::new(p.rotation, p.translation.add_scalar(1.0))
         }),
     }

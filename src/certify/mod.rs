@@ -186,7 +186,7 @@ pub(crate) struct Problem<P> {
 impl<P: Copy> Problem<P> {
     /// The edges of `graph`'s map — trusted edges and the candidates whose
     /// entry in `report.loops` (in candidate order) is accepted.
-    pub fn of_graph<const D: usize>(graph: &graph::PoseGraph<P, D>, report: &Report) -> Self
+    pub fn of_graph<const D: usize>(graph: &graph::Graph<P, D>, report: &Report) -> Self
     where
         P: crate::geometry::Pose<D>,
     {
@@ -304,7 +304,7 @@ pub(crate) fn of_graph<
     const DOF: usize,
     const D: usize,
 >(
-    graph: &graph::PoseGraph<P, D>,
+    graph: &graph::Graph<P, D>,
     report: &Report,
 ) -> Result<Certificate, CertifyError> {
     let problem = Problem::of_graph(graph, report);

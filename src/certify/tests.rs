@@ -41,7 +41,7 @@ fn three_d_isotropic_cost_is_pgos_chi2() {
         Se3::exp(&v)
     };
     let info = Matrix6::from_diagonal(&Vector6::new(4.0, 4.0, 4.0, 90.0, 90.0, 90.0));
-    let mut graph = crate::graph::PoseGraph3::new();
+    let mut graph = crate::graph::Graph3::new();
     for k in 0..6 {
         graph.add_vertex(k, random_pose()).unwrap();
     }

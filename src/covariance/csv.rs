@@ -10,7 +10,7 @@
 
 use super::{Covariances, edges_in_map};
 use crate::geometry::Pose;
-use crate::graph::{PoseGraph, VertexId};
+use crate::graph::{Graph, VertexId};
 use crate::solve::SolveError;
 use std::io::{self, Write};
 use std::path::Path;
@@ -39,7 +39,7 @@ fn components(d: usize) -> &'static [&'static str] {
 /// on `threads` threads. Returns the poses left out, whose covariance is
 /// unbounded.
 pub(crate) fn write_csv<P: Pose<D>, const D: usize>(
-    graph: PoseGraph<P, D>,
+    graph: Graph<P, D>,
     accepted: impl IntoIterator<Item = bool>,
     threads: usize,
     path: &Path,
@@ -102,7 +102,7 @@ mod tests {
 
     #[test]
     fn one_line_per_bounded_pose_row_by_row() {
-        let mut graph = PoseGraph::<Se2, 3>::new();
+        let mut graph = Graph::<Se2, 3>::new();
         for k in 0..4 {
             graph
                 .add_vertex(k + 10, Se2::new(k as f64, 0.0, 0.0))
@@ -144,7 +144,7 @@ mod tests {
         );
         assert_eq!(lines.len(), 4);
         // A candidate flag short: refused, nothing written.
-        let graph = PoseGraph::<Se2, 3>::new();
+        let graph = Graph::<Se2, 3>::new();
         assert!(write_csv(graph, [true], 1, &dir.path().join("no.csv")).is_err());
         assert!(!dir.path().join("no.csv").exists());
     }

@@ -43,9 +43,9 @@ fn random_graph<P: Pose<D>, const D: usize>(
     n: usize,
     loops: usize,
     random_pose: fn(&mut StdRng, f64) -> P,
-) -> PoseGraph<P, D> {
+) -> Graph<P, D> {
     let mut rng = StdRng::seed_from_u64(seed);
-    let mut graph = PoseGraph::<P, D>::new();
+    let mut graph = Graph::<P, D>::new();
     for k in 0..n {
         graph
             .add_vertex(k as u64 * 10 + 3, random_pose(&mut rng, 5.0))
@@ -74,7 +74,7 @@ fn random_graph<P: Pose<D>, const D: usize>(
 /// Jacobians ([`Pose::error_and_jacobians`], not the normal blocks the
 /// covariances use).
 fn dense_inverse<P: Pose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     in_map: &[bool],
 ) -> (DMatrix<f64>, Vec<Option<usize>>) {
     let gauge = graph.gauge();
@@ -274,7 +274,7 @@ fn fixed_poses_have_zero_covariance_and_several_may_be_fixed() {
 #[test]
 fn a_pose_tied_only_by_edges_out_of_the_map_is_unbounded() {
     // 0 – 1 – 2 by odometry; 3 joined to 2 by a loop out of the map.
-    let mut graph = PoseGraph::<Se2, 3>::new();
+    let mut graph = Graph::<Se2, 3>::new();
     for k in 0..4 {
         graph.add_vertex(k, Se2::new(k as f64, 0.0, 0.0)).unwrap();
     }
@@ -307,7 +307,7 @@ fn a_pose_tied_only_by_edges_out_of_the_map_is_unbounded() {
 
 #[test]
 fn a_graph_of_one_pose_has_only_the_fixed_one() {
-    let mut graph = PoseGraph::<Se3, 6>::new();
+    let mut graph = Graph::<Se3, 6>::new();
     graph.add_vertex(5, Se3::identity()).unwrap();
     let c = Covariances::new(Arc::new(graph), &[], 1).unwrap();
     assert_eq!(c.pose(5).unwrap(), SMatrix::<f64, 6, 6>::zeros());
@@ -319,7 +319,7 @@ fn a_graph_of_one_pose_has_only_the_fixed_one() {
 fn the_solution_leaves_rejected_loops_out() {
     use crate::{Options, PoseGraph2};
     // A square driven twice, two true loops and a wrong one (the example
-    // of `PoseGraph`).
+    // of `Graph`).
     let mut graph = PoseGraph2::new();
     let step = Se2::new(1.0, 0.0, std::f64::consts::FRAC_PI_2);
     let mut pose = Se2::new(0.0, 0.0, 0.0);
@@ -348,7 +348,7 @@ fn the_solution_leaves_rejected_loops_out() {
     assert_eq!(accepted, [true, true, false]);
     let c = solution.covariances().unwrap();
     // The dense inverse of the map's edges at the solution's poses.
-    let mut solved = PoseGraph::<Se2, 3>::new();
+    let mut solved = Graph::<Se2, 3>::new();
     for (id, p) in solution.poses() {
         solved.add_vertex(id, *p).unwrap();
     }

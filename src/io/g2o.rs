@@ -42,7 +42,7 @@ use super::source::{Fingerprint, Fingerprinter, Input, Original};
 use super::{LineError, LineReader};
 use crate::geometry::{Pose, Se2, Se3};
 use crate::graph::{
-    AnyPoseGraph, GraphError, LoopCandidate, PoseGraph, VertexId, is_positive_definite,
+    AnyGraph, Graph, GraphError, LoopCandidate, VertexId, is_positive_definite,
     nearest_positive_definite,
 };
 use nalgebra::SMatrix;
@@ -255,7 +255,7 @@ enum Record {
 #[derive(Clone, Debug)]
 pub struct G2oFile {
     /// The pose graph.
-    pub graph: AnyPoseGraph,
+    pub graph: AnyGraph,
     /// Indices of the vertices that edges name but no vertex line defines;
     /// their poses are placeholders (identity) until initialised.
     pub missing: Vec<usize>,
@@ -288,7 +288,7 @@ pub trait G2oPose<const D: usize>: Pose<D> {
     /// Appends the pose's numbers, space-separated, shortest round-trip form.
     fn write_numbers(&self, out: &mut String);
     /// Wraps the graph into [`AnyPoseGraph`].
-    fn wrap(graph: PoseGraph<Self, D>) -> AnyPoseGraph;
+    fn wrap(graph: Graph<Self, D>) -> AnyGraph;
 }
 
 impl G2oPose<3> for Se2 {
@@ -302,8 +302,8 @@ impl G2oPose<3> for Se2 {
     fn write_numbers(&self, out: &mut String) {
         push_numbers(out, &[self.x, self.y, self.theta]);
     }
-    fn wrap(graph: PoseGraph<Self, 3>) -> AnyPoseGraph {
-        AnyPoseGraph::Planar(graph)
+    fn wrap(graph: Graph<Self, 3>) -> AnyGraph {
+        AnyGraph::Planar(graph)
     }
 }
 
@@ -321,8 +321,8 @@ impl G2oPose<6> for Se3 {
         let q = self.quaternion_xyzw();
         push_numbers(out, &[t.x, t.y, t.z, q[0], q[1], q[2], q[3]]);
     }
-    fn wrap(graph: PoseGraph<Self, 6>) -> AnyPoseGraph {
-        AnyPoseGraph::Spatial(graph)
+    fn wrap(graph: Graph<Self, 6>) -> AnyGraph {
+        AnyGraph::Spatial(graph)
     }
 }
 
@@ -555,7 +555,7 @@ impl Parser<'_> {
 /// Builds the graph of one pose type, line by line.
 struct Builder<P, const D: usize> {
     options: ReadOptions,
-    graph: PoseGraph<P, D>,
+    graph: Graph<P, D>,
     /// The line that defined each vertex (by index), if any.
     defined_on: Vec<Option<usize>>,
     records: Vec<Record>,
@@ -568,7 +568,7 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
     fn new(options: ReadOptions, fixes: Vec<(usize, Vec<VertexId>)>) -> Self {
         Self {
             options,
-            graph: PoseGraph::new(),
+            graph: Graph::new(),
             defined_on: Vec::new(),
             records: Vec::new(),
             mixture_lines: HashMap::new(),
@@ -851,14 +851,14 @@ impl G2oFile {
     /// read gives the same graph.
     pub fn write(&self, out: &mut impl Write) -> io::Result<()> {
         match &self.graph {
-            AnyPoseGraph::Planar(g) => self.write_graph(g, out),
-            AnyPoseGraph::Spatial(g) => self.write_graph(g, out),
+            AnyGraph::Planar(g) => self.write_graph(g, out),
+            AnyGraph::Spatial(g) => self.write_graph(g, out),
         }
     }
 
     fn write_graph<P: G2oPose<D>, const D: usize>(
         &self,
-        g: &PoseGraph<P, D>,
+        g: &Graph<P, D>,
         out: &mut impl Write,
     ) -> io::Result<()> {
         let mut line = String::with_capacity(512);
@@ -895,13 +895,13 @@ impl G2oFile {
     }
 }
 
-fn vertex_line<P: G2oPose<D>, const D: usize>(g: &PoseGraph<P, D>, k: usize, line: &mut String) {
+fn vertex_line<P: G2oPose<D>, const D: usize>(g: &Graph<P, D>, k: usize, line: &mut String) {
     let _ = write!(line, "{} {}", P::VERTEX_TAG, g.id(k));
     g.poses[k].write_numbers(line);
     line.push('\n');
 }
 
-fn edge_line<P: G2oPose<D>, const D: usize>(g: &PoseGraph<P, D>, k: usize, line: &mut String) {
+fn edge_line<P: G2oPose<D>, const D: usize>(g: &Graph<P, D>, k: usize, line: &mut String) {
     let e = &g.edges[k];
     let _ = write!(line, "{} {} {}", P::EDGE_TAG, g.id(e.from), g.id(e.to));
     e.measurement.write_numbers(line);
@@ -922,7 +922,7 @@ fn edge_line<P: G2oPose<D>, const D: usize>(g: &PoseGraph<P, D>, k: usize, line:
 /// vertices in index order, then edges, then a `FIX` line for explicitly
 /// fixed vertices.
 pub fn write_graph<P: G2oPose<D>, const D: usize>(
-    g: &PoseGraph<P, D>,
+    g: &Graph<P, D>,
     out: &mut impl Write,
 ) -> io::Result<()> {
     let mut line = String::with_capacity(512);
@@ -958,10 +958,10 @@ mod tests {
         )
     }
 
-    fn planar(f: &G2oFile) -> &PoseGraph<Se2, 3> {
+    fn planar(f: &G2oFile) -> &Graph<Se2, 3> {
         match &f.graph {
-            AnyPoseGraph::Planar(g) => g,
-            AnyPoseGraph::Spatial(_) => panic!("expected SE(2)"),
+            AnyGraph::Planar(g) => g,
+            AnyGraph::Spatial(_) => panic!("expected SE(2)"),
         }
     }
 
@@ -1017,7 +1017,7 @@ mod tests {
         b.write(&mut out2).unwrap();
         assert_eq!(out, out2);
         match (&a.graph, &b.graph) {
-            (AnyPoseGraph::Spatial(x), AnyPoseGraph::Spatial(y)) => {
+            (AnyGraph::Spatial(x), AnyGraph::Spatial(y)) => {
                 assert_eq!(x.poses, y.poses);
                 assert_eq!(x.edges, y.edges);
                 assert_eq!(x.gauge(), y.gauge());

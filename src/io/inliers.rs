@@ -9,7 +9,7 @@
 use super::g2o::MAX_LINE_BYTES;
 use super::{LineError, LineReader};
 use crate::geometry::Pose;
-use crate::graph::{LoopCandidate, PoseGraph, VertexId};
+use crate::graph::{Graph, LoopCandidate, VertexId};
 use std::collections::HashMap;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -170,7 +170,7 @@ pub fn read_counts<R: std::io::Read>(reader: R, path: &Path) -> Result<Vec<u64>,
 /// Gives each row's count to its edge (see the module documentation).
 /// Returns how many edges already had a count that the CSV replaced.
 pub fn apply<P: Pose<D>, const D: usize>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     rows: &[InlierRow],
     path: &Path,
 ) -> Result<usize, InlierCsvError> {
@@ -222,8 +222,8 @@ mod tests {
         p
     }
 
-    fn graph() -> PoseGraph<Se2, 3> {
-        let mut g = PoseGraph::new();
+    fn graph() -> Graph<Se2, 3> {
+        let mut g = Graph::new();
         for k in 0..4 {
             g.add_vertex(k, Se2::identity()).unwrap();
         }

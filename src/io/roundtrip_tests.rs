@@ -5,7 +5,7 @@
 
 use super::g2o::{G2oFile, G2oPose, ReadOptions, read_from, write_graph};
 use crate::geometry::{Pose, Se2, Se3};
-use crate::graph::{AnyPoseGraph, LoopCandidate, PoseGraph};
+use crate::graph::{AnyGraph, Graph, LoopCandidate};
 use nalgebra::{SMatrix, UnitQuaternion, Vector3};
 use proptest::prelude::*;
 use std::path::Path;
@@ -64,8 +64,8 @@ fn build<P: G2oPose<D>, const D: usize>(
     measurements: Vec<P>,
     infos: Vec<SMatrix<f64, D, D>>,
     fixed: &[bool],
-) -> PoseGraph<P, D> {
-    let mut g = PoseGraph::new();
+) -> Graph<P, D> {
+    let mut g = Graph::new();
     for (id, p) in ids.iter().zip(poses) {
         g.add_vertex(*id, p).expect("distinct ids");
     }
@@ -82,7 +82,7 @@ fn build<P: G2oPose<D>, const D: usize>(
     g
 }
 
-fn text_of<P: G2oPose<D>, const D: usize>(g: &PoseGraph<P, D>) -> Vec<u8> {
+fn text_of<P: G2oPose<D>, const D: usize>(g: &Graph<P, D>) -> Vec<u8> {
     let mut out = Vec::new();
     write_graph(g, &mut out).expect("write to memory");
     out
@@ -100,7 +100,7 @@ fn file_text(f: &G2oFile) -> Vec<u8> {
 }
 
 /// Same ids, edges (ends, measurements, information, counts) and gauge.
-fn assert_same_structure<P: Pose<D>, const D: usize>(a: &PoseGraph<P, D>, b: &PoseGraph<P, D>) {
+fn assert_same_structure<P: Pose<D>, const D: usize>(a: &Graph<P, D>, b: &Graph<P, D>) {
     assert_eq!(a.ids(), b.ids());
     assert_eq!(a.gauge(), b.gauge());
     assert_eq!(a.edges.len(), b.edges.len());
@@ -127,7 +127,7 @@ fn se3_pose() -> impl Strategy<Value = Se3> {
         })
 }
 
-fn se2_graph() -> impl Strategy<Value = PoseGraph<Se2, 3>> {
+fn se2_graph() -> impl Strategy<Value = Graph<Se2, 3>> {
     (2usize..10).prop_flat_map(|n| {
         (
             ids(n),
@@ -148,7 +148,7 @@ fn se2_graph() -> impl Strategy<Value = PoseGraph<Se2, 3>> {
     })
 }
 
-fn se3_graph() -> impl Strategy<Value = PoseGraph<Se3, 6>> {
+fn se3_graph() -> impl Strategy<Value = Graph<Se3, 6>> {
     (2usize..8).prop_flat_map(|n| {
         (
             ids(n),
@@ -176,7 +176,7 @@ proptest! {
     fn se2_graphs_round_trip_bit_for_bit(g in se2_graph()) {
         let text = text_of(&g);
         let f = read_text(&text);
-        let AnyPoseGraph::Planar(back) = &f.graph else {
+        let AnyGraph::Planar(back) = &f.graph else {
             panic!("dimension changed");
         };
         assert_same_structure(&g, back);
@@ -192,7 +192,7 @@ proptest! {
     fn se3_graphs_round_trip_exactly_after_one_normalisation(g in se3_graph()) {
         let text = text_of(&g);
         let f = read_text(&text);
-        let AnyPoseGraph::Spatial(once) = &f.graph else {
+        let AnyGraph::Spatial(once) = &f.graph else {
             panic!("dimension changed");
         };
         assert_same_structure(&g, once);
@@ -202,7 +202,7 @@ proptest! {
         }
         let text2 = file_text(&f);
         let f2 = read_text(&text2);
-        let AnyPoseGraph::Spatial(twice) = &f2.graph else {
+        let AnyGraph::Spatial(twice) = &f2.graph else {
             panic!("dimension changed");
         };
         assert_same_structure(once, twice);

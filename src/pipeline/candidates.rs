@@ -4,14 +4,14 @@
 use super::{CandidateRule, OptimizeConfig, PipelineError};
 use crate::gate::{self, DegeneratePolicy, GateMode, ThresholdFit};
 use crate::geometry::Pose;
-use crate::graph::{LoopCandidate, PoseGraph};
+use crate::graph::{Graph, LoopCandidate};
 use crate::io::inliers;
 use crate::report::{GateReport, Report};
 use crate::robust::Candidate;
 
 /// Replaces the inlier counts of the edges the `--inliers` CSV names.
 pub fn apply_inlier_csv<P: Pose<D>, const D: usize>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     config: &OptimizeConfig,
     report: &mut Report,
 ) -> Result<(), PipelineError> {
@@ -30,7 +30,7 @@ pub fn apply_inlier_csv<P: Pose<D>, const D: usize>(
 
 /// Under [`CandidateRule::NonSequential`], makes every edge between
 /// non-consecutive ids a candidate (without a count unless it has one).
-pub fn mark<P: Pose<D>, const D: usize>(graph: &mut PoseGraph<P, D>, rule: CandidateRule) {
+pub fn mark<P: Pose<D>, const D: usize>(graph: &mut Graph<P, D>, rule: CandidateRule) {
     if rule == CandidateRule::NonSequential {
         let ids: Vec<u64> = graph.ids().to_vec();
         for e in graph.edges.iter_mut() {
@@ -47,7 +47,7 @@ pub fn mark<P: Pose<D>, const D: usize>(graph: &mut PoseGraph<P, D>, rule: Candi
 /// uses them). `previous`: the fit of the last update of the same growing
 /// graph, if any ([`gate::learn_threshold_from`]).
 pub fn gate<P: Pose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     config: &OptimizeConfig,
     report: &mut Report,
     previous: Option<&ThresholdFit>,
@@ -120,7 +120,7 @@ fn degenerate_warning(reason: &impl std::fmt::Display, policy: DegeneratePolicy)
 /// candidate joining each part (the highest count posterior, then file
 /// order) has weight 1, so that every part starts where its loops put it.
 pub fn initial_weights<P: Pose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     candidates: &[Candidate],
     trusted: bool,
 ) -> Vec<f64> {

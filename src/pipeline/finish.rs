@@ -2,7 +2,7 @@
 //! report and the pictures.
 
 use super::{OptimizeConfig, PipelineError};
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 use crate::io::g2o::G2oPose;
 use crate::report::{InitializationReport, LoopReport, OptimizerReport, Report, RobustReport};
 use crate::robust::{self, Candidate, Outcome, RobustMethod, Test};
@@ -19,7 +19,7 @@ use std::time::Instant;
 /// weight 1 has a finite cost there. Returns the file's own guess (the
 /// vertices without a line composed along a spanning tree).
 pub fn initialize<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     missing: &[usize],
     config: &OptimizeConfig,
     weights: &[f64],
@@ -73,7 +73,7 @@ pub fn initialize<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
 /// returns and the report (`initial_chi2`: the objective it started from).
 #[allow(clippy::too_many_arguments)]
 pub fn solve_and_test<P: G2oPose<D>, const D: usize, M>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     optimizer: &mut Optimizer<P, D>,
     solver: SolverOptions,
     weights: &mut [f64],
@@ -99,7 +99,7 @@ where
         deadline: config.solver.time_limit.map(|t| Instant::now() + t),
     };
     let c = (config.robust_c).unwrap_or_else(|| robust::default_c(kind, D));
-    let test = |g: &PoseGraph<P, D>, w: &[f64]| chi2_test(g, w, config).ok();
+    let test = |g: &Graph<P, D>, w: &[f64]| chi2_test(g, w, config).ok();
     let mut session = Session::new(optimizer, graph, solver, budget, observer);
     let outcome =
         method(&mut session, weights, c, &test).map_err(|source| PipelineError::Solve {
@@ -148,7 +148,7 @@ where
 /// The χ² test over the edges the map was solved with (weight ≥ ½), each at
 /// its plain cost (paper §II-C).
 pub fn chi2_test<P: G2oPose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     weights: &[f64],
     config: &OptimizeConfig,
 ) -> Result<Chi2Test, StatsError> {
@@ -158,7 +158,7 @@ pub fn chi2_test<P: G2oPose<D>, const D: usize>(
 /// [`chi2_test`] from each edge's χ² at the map (`edge_chi2`).
 fn test_of<P: G2oPose<D>, const D: usize>(
     edge_chi2: &[f64],
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     weights: &[f64],
     config: &OptimizeConfig,
 ) -> Result<Chi2Test, StatsError> {
@@ -177,7 +177,7 @@ fn test_of<P: G2oPose<D>, const D: usize>(
 /// start and at the map).
 #[allow(clippy::too_many_arguments)]
 pub fn report<P: G2oPose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     optimizer: &Optimizer<P, D>,
     summary: Option<Summary>,
     (initial_chi2, final_chi2): (f64, f64),
@@ -253,7 +253,7 @@ pub fn report<P: G2oPose<D>, const D: usize>(
 /// the report.
 pub fn plot<P: G2oPose<D>, const D: usize>(
     dir: &Path,
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     before: &[[f64; 2]],
     weights: &[f64],
     config: &OptimizeConfig,
@@ -328,7 +328,7 @@ fn loop_points(report: &Report) -> Vec<crate::plot::LoopPoint> {
         .collect()
 }
 
-/// A sum in the order given, from +0 ([`PoseGraph::chi2_where`]'s bits).
+/// A sum in the order given, from +0 ([`Graph::chi2_where`]'s bits).
 fn sum(values: impl Iterator<Item = f64>) -> f64 {
     values.fold(0.0, |a, b| a + b)
 }

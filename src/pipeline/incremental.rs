@@ -21,7 +21,7 @@
 
 use super::{OptimizeConfig, PipelineError, candidates, finish};
 use crate::geometry::Pose;
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 use crate::io::g2o::G2oPose;
 use crate::report::{
     DecisionChange, IncrementalReport, InitializationReport, OptimizerReport, Report, UpdateSolve,
@@ -88,7 +88,7 @@ pub(crate) struct Warm<P: Pose<D>, const D: usize> {
 
 impl<P: Pose<D>, const D: usize> Warm<P, D> {
     /// The state after a job on `graph` that made `report`.
-    pub(crate) fn after(graph: &PoseGraph<P, D>, report: &Report, ordering: Ordering) -> Self {
+    pub(crate) fn after(graph: &Graph<P, D>, report: &Report, ordering: Ordering) -> Self {
         let mut accepted = vec![None; graph.edges.len()];
         let candidates = (0..graph.edges.len()).filter(|&k| graph.edges[k].is_candidate());
         for (k, l) in candidates.zip(&report.loops) {
@@ -112,7 +112,7 @@ impl<P: Pose<D>, const D: usize> Warm<P, D> {
 /// Returns the state to keep, or `None` when EM's decisions swung
 /// ([`robust::Outcome::swung`]): the caller then runs the whole job.
 pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     warm: &mut Warm<P, D>,
     config: &OptimizeConfig,
     report: &mut Report,
@@ -204,7 +204,7 @@ fn solve_reason(full: bool, closing: bool, robust: RobustMethod, report: &Report
 
 /// The earlier decisions (`previous`, by edge) that `report`'s differ from.
 fn changes<P: G2oPose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     previous: &[Option<bool>],
     report: &Report,
 ) -> Vec<DecisionChange> {
@@ -232,7 +232,7 @@ fn changes<P: G2oPose<D>, const D: usize>(
 /// `warm`, swung: what was added since and which earlier decisions the job
 /// changed.
 pub(crate) fn after_swing<P: G2oPose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     warm: &Warm<P, D>,
     report: &Report,
 ) -> IncrementalReport {
@@ -262,7 +262,7 @@ struct Placed {
 /// Puts the last solution's poses back and composes every new pose along
 /// trusted edges from them (a pose no trusted edge reaches keeps the
 /// caller's).
-fn place<P: G2oPose<D>, const D: usize>(graph: &mut PoseGraph<P, D>, warm: &Warm<P, D>) -> Placed {
+fn place<P: G2oPose<D>, const D: usize>(graph: &mut Graph<P, D>, warm: &Warm<P, D>) -> Placed {
     let old = warm.poses.len();
     graph.poses[..old].clone_from_slice(&warm.poses);
     // Old edges join old poses only: the new trusted edges reach every
@@ -285,7 +285,7 @@ fn place<P: G2oPose<D>, const D: usize>(graph: &mut PoseGraph<P, D>, warm: &Warm
 /// and constraints added; the degrees of freedom of the residual do not
 /// change, as each new edge brings one new pose.
 fn extended<P: G2oPose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     warm: &Warm<P, D>,
     config: &OptimizeConfig,
     report: &mut Report,
@@ -341,7 +341,7 @@ fn extended<P: G2oPose<D>, const D: usize>(
 /// and what joins new parts to it — and each edge's earlier decision
 /// (`None` for a trusted or new edge).
 fn start_weights<P: G2oPose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     warm: &Warm<P, D>,
     candidates: &[robust::Candidate],
     method: RobustMethod,
@@ -416,7 +416,7 @@ fn update_solver(
 /// poses are the last map's ([`place`]), so their edges' χ² is the last
 /// report's and only the new edges are evaluated.
 fn report_start<P: G2oPose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     warm: &Warm<P, D>,
     report: &mut Report,
     start: Instant,
@@ -455,7 +455,7 @@ struct Resolved<P: Pose<D>, const D: usize> {
 /// tolerance; `spare`: what the last update's optimiser spared this one.
 /// Returns [`Resolved`], or `None` when EM's decisions swung.
 fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     (warm, optimal, closing, spare): (&Warm<P, D>, bool, bool, Spare<P, D>),
     config: &OptimizeConfig,
     report: &mut Report,

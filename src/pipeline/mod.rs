@@ -11,7 +11,7 @@ mod incremental;
 pub(crate) use incremental::{Warm, after_swing, update_graph};
 
 use crate::gate::{DegeneratePolicy, GateMode, MixtureOptions};
-use crate::graph::{AnyPoseGraph, PoseGraph};
+use crate::graph::{AnyGraph, Graph};
 use crate::io::g2o::{self, G2oFile, G2oPose, ReadError, ReadOptions};
 use crate::io::inliers::InlierCsvError;
 use crate::options::Options;
@@ -251,10 +251,8 @@ pub fn run(config: &OptimizeConfig, observer: &mut dyn Observer) -> Result<Repor
     let mut report = Report::new(&config.input, &file);
     report.time.read_s = start.elapsed().as_secs_f64();
     match &mut file.graph {
-        AnyPoseGraph::Planar(g) => optimize_graph(g, &file.missing, config, &mut report, observer)?,
-        AnyPoseGraph::Spatial(g) => {
-            optimize_graph(g, &file.missing, config, &mut report, observer)?
-        }
+        AnyGraph::Planar(g) => optimize_graph(g, &file.missing, config, &mut report, observer)?,
+        AnyGraph::Spatial(g) => optimize_graph(g, &file.missing, config, &mut report, observer)?,
     }
     if config.certify {
         certify_into(&file.graph, &mut report);
@@ -277,10 +275,10 @@ pub fn run(config: &OptimizeConfig, observer: &mut dyn Observer) -> Result<Repor
 
 /// Adds the certificate of the optimised `graph`'s map to `report` (or a
 /// warning saying why there is none).
-fn certify_into(graph: &AnyPoseGraph, report: &mut Report) {
+fn certify_into(graph: &AnyGraph, report: &mut Report) {
     let certificate = match graph {
-        AnyPoseGraph::Planar(g) => crate::certify::of_graph::<_, 2, 3, 3, 3>(g, report),
-        AnyPoseGraph::Spatial(g) => crate::certify::of_graph::<_, 3, 4, 6, 6>(g, report),
+        AnyGraph::Planar(g) => crate::certify::of_graph::<_, 2, 3, 3, 3>(g, report),
+        AnyGraph::Spatial(g) => crate::certify::of_graph::<_, 3, 4, 6, 6>(g, report),
     };
     match certificate {
         Ok(c) => report.certificate = Some(c),
@@ -290,10 +288,10 @@ fn certify_into(graph: &AnyPoseGraph, report: &mut Report) {
 
 /// Refuses a graph whose information matrices leave
 /// [`crate::graph::INFORMATION_RANGE`], naming the first such edge.
-fn check_information_range(graph: &AnyPoseGraph, path: &Path) -> Result<(), PipelineError> {
+fn check_information_range(graph: &AnyGraph, path: &Path) -> Result<(), PipelineError> {
     let found = match graph {
-        AnyPoseGraph::Planar(g) => g.information_out_of_range(),
-        AnyPoseGraph::Spatial(g) => g.information_out_of_range(),
+        AnyGraph::Planar(g) => g.information_out_of_range(),
+        AnyGraph::Spatial(g) => g.information_out_of_range(),
     };
     match found {
         Some((from, to, index, value)) => Err(PipelineError::Information {
@@ -309,7 +307,7 @@ fn check_information_range(graph: &AnyPoseGraph, path: &Path) -> Result<(), Pipe
 /// The job on a graph in memory: gate → initial guess → robust solve → χ²
 /// test → report. `missing` lists the vertices the file did not define.
 pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     missing: &[usize],
     config: &OptimizeConfig,
     report: &mut Report,
@@ -382,7 +380,7 @@ pub(crate) fn optimize_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
 /// Writes the covariances of the map `graph` (`--covariances`): a warning
 /// names the poses left out.
 fn write_covariances(
-    graph: AnyPoseGraph,
+    graph: AnyGraph,
     config: &OptimizeConfig,
     path: &Path,
     report: &mut Report,
@@ -391,8 +389,8 @@ fn write_covariances(
     let accepted = report.loops.iter().map(|l| l.accepted);
     let threads = config.solver.threads;
     let written = match graph {
-        AnyPoseGraph::Planar(g) => write_csv(g, accepted, threads, path),
-        AnyPoseGraph::Spatial(g) => write_csv(g, accepted, threads, path),
+        AnyGraph::Planar(g) => write_csv(g, accepted, threads, path),
+        AnyGraph::Spatial(g) => write_csv(g, accepted, threads, path),
     };
     let unbounded = written.map_err(|e| match e {
         CsvError::Solve(source) => PipelineError::Solve {

@@ -27,7 +27,7 @@
 //! [`BlockSystem::propagate_group`]: crate::linear::BlockSystem::propagate_group
 
 use crate::geometry::Pose;
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 use crate::linear::{EdgeJacobian, GroupScratch, Parallelism, SelectedInverse};
 use crate::solve::{Optimizer, SolveError};
 use faer::Par;
@@ -72,7 +72,7 @@ pub struct Innovations {
 /// of its candidates.
 pub struct Evaluation<'a, P: Pose<D>, const D: usize> {
     optimizer: &'a mut Optimizer<P, D>,
-    graph: &'a PoseGraph<P, D>,
+    graph: &'a Graph<P, D>,
     block: Vec<Option<usize>>,
     /// The selected inverse, unless every cluster is solved for
     /// ([`Evaluation::for_clusters`]).
@@ -90,7 +90,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     /// selected inverse.
     pub fn new(
         optimizer: &'a mut Optimizer<P, D>,
-        graph: &'a PoseGraph<P, D>,
+        graph: &'a Graph<P, D>,
         weights: &[f64],
     ) -> Result<Self, SolveError> {
         let mut eval = Self::factored(optimizer, graph, weights)?;
@@ -101,7 +101,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     /// The factorisation of the map, without the selected inverse.
     fn factored(
         optimizer: &'a mut Optimizer<P, D>,
-        graph: &'a PoseGraph<P, D>,
+        graph: &'a Graph<P, D>,
         weights: &[f64],
     ) -> Result<Self, SolveError> {
         let block = optimizer.factor_at(graph, weights)?;
@@ -130,7 +130,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     /// candidates touch.
     pub fn for_clusters(
         optimizer: &'a mut Optimizer<P, D>,
-        graph: &'a PoseGraph<P, D>,
+        graph: &'a Graph<P, D>,
         weights: &[f64],
         (edges, clusters): (&[usize], &[Vec<usize>]),
     ) -> Result<Self, SolveError> {

@@ -25,7 +25,7 @@ use super::kernels::{GNC_MU_STEP, cauchy_weight};
 use super::model::{Evidence, LoopModel, Scale};
 use super::{Candidate, Layers};
 use crate::geometry::Pose;
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 use crate::linear::Parallelism;
 use crate::solve::init::ChordalInit;
 use crate::solve::{Session, SolveError};
@@ -117,7 +117,7 @@ impl Annealing {
     /// 89 999 of the 90 000 true loops.
     fn e_step<P: Pose<D>, const D: usize>(
         &mut self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: &mut [f64],
     ) -> bool {
         let r2: Vec<f64> = (self.kept.iter())
@@ -275,7 +275,7 @@ impl Decided {
     /// Nothing decided yet: the candidates `edges` of weight ≥ ½ accepted,
     /// and their clusters (each its own with the layer off).
     fn start<P: Pose<D>, const D: usize>(
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         edges: &[usize],
         weights: &[f64],
         layers: &Layers,
@@ -442,7 +442,7 @@ fn keep_best(cycle: &[(Vec<bool>, f64)], edges: &[usize], weights: &mut [f64]) -
 /// the χ² test, so between sets that differ in a few loops this ranks
 /// their maps as the test does.
 fn excess<P: Pose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     weights: &[f64],
     accepted: &[bool],
 ) -> f64 {
@@ -462,7 +462,7 @@ fn excess<P: Pose<D>, const D: usize>(
 /// times too small, and leaving a loop out would otherwise cost a
 /// hundredfold).
 pub(super) fn objective<P: Pose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     weights: &[f64],
     candidates: &[Candidate],
     price: f64,
@@ -479,7 +479,7 @@ pub(super) fn objective<P: Pose<D>, const D: usize>(
 /// shows (1 where it is calibrated). `None` without residual degrees of
 /// freedom.
 pub(super) fn misfit_scale<P: Pose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     weights: &[f64],
 ) -> Option<f64> {
     let used = weights.iter().filter(|&&w| w > 0.0).count();
@@ -643,7 +643,7 @@ fn relaxed_start<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &[f64],
 ) -> Result<bool, SolveError> {
-    let fit = |g: &PoseGraph<P, D>| g.chi2_where(|k| weights[k] > 0.0);
+    let fit = |g: &Graph<P, D>| g.chi2_where(|k| weights[k] > 0.0);
     let before = session.graph.poses.clone();
     let at = fit(session.graph);
     let start = Instant::now();

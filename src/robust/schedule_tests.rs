@@ -7,7 +7,7 @@ use nalgebra::Matrix3;
 
 /// A square walk of 16 poses with odometry, four true loops between the
 /// walk's laps and one wrong loop, all candidates; odometry file poses.
-fn walk() -> (PoseGraph<Se2, 3>, Vec<Candidate>) {
+fn walk() -> (Graph<Se2, 3>, Vec<Candidate>) {
     walk_with(&[
         (0, 15, false),
         (1, 14, false),
@@ -19,7 +19,7 @@ fn walk() -> (PoseGraph<Se2, 3>, Vec<Candidate>) {
 
 /// [`walk`] with the candidates `loops` (`(i, j, wrong)`; a wrong one's
 /// measurement is off by (3, −2, 1)).
-fn walk_with(loops: &[(usize, usize, bool)]) -> (PoseGraph<Se2, 3>, Vec<Candidate>) {
+fn walk_with(loops: &[(usize, usize, bool)]) -> (Graph<Se2, 3>, Vec<Candidate>) {
     let side = 4;
     let mut truth = Vec::new();
     for k in 0..4 * side {
@@ -32,7 +32,7 @@ fn walk_with(loops: &[(usize, usize, bool)]) -> (PoseGraph<Se2, 3>, Vec<Candidat
             th,
         ));
     }
-    let mut g = PoseGraph::new();
+    let mut g = Graph::new();
     let mut pose = truth[0];
     for (k, t) in truth.iter().enumerate() {
         if k > 0 {
@@ -75,7 +75,7 @@ fn walk_with(loops: &[(usize, usize, bool)]) -> (PoseGraph<Se2, 3>, Vec<Candidat
 
 /// Winds the headings of `g`'s poses a full extra turn along the walk: LM
 /// from there settles in a twisted local minimum.
-fn twist(g: &mut PoseGraph<Se2, 3>) {
+fn twist(g: &mut Graph<Se2, 3>) {
     let n = g.poses.len();
     for (k, p) in g.poses.iter_mut().enumerate() {
         let turn = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
@@ -86,7 +86,7 @@ fn twist(g: &mut PoseGraph<Se2, 3>) {
 /// Runs `f` on a session of `g` (no budget, never cancelled) whose
 /// optimiser starts with `weights`, which `f` gets to change.
 fn with_session<R>(
-    g: &mut PoseGraph<Se2, 3>,
+    g: &mut Graph<Se2, 3>,
     weights: &mut [f64],
     options: SolverOptions,
     f: impl FnOnce(Session<'_, Se2, 3>, &mut [f64]) -> R,
@@ -155,7 +155,7 @@ fn a_solve_that_would_end_in_a_local_minimum_starts_from_the_relaxation() {
         |mut s, w| {
             let twisted = s.graph.poses.clone();
             s.converge(w).unwrap();
-            let fit = |g: &PoseGraph<Se2, 3>| g.chi2_where(|k| w[k] > 0.0);
+            let fit = |g: &Graph<Se2, 3>| g.chi2_where(|k| w[k] > 0.0);
             let local = fit(s.graph);
             // From the twisted map, the relaxation fits better: the solve
             // starts there and ends far lower.
@@ -357,7 +357,7 @@ fn a_few_clusters_are_judged_by_their_solves_alone_to_the_same_innovations() {
 /// candidate its own cluster: (2, 10) is beside the true (3, 9)) and the
 /// χ² test of a map; `tight` scales every information matrix by 10⁴ and
 /// puts the true loops a little off, so that no set of loops passes.
-fn search_case(tight: bool) -> (PoseGraph<Se2, 3>, Vec<Candidate>) {
+fn search_case(tight: bool) -> (Graph<Se2, 3>, Vec<Candidate>) {
     let (mut g, candidates) = walk();
     if tight {
         for (k, c) in candidates[..4].iter().enumerate() {
@@ -373,7 +373,7 @@ fn search_case(tight: bool) -> (PoseGraph<Se2, 3>, Vec<Candidate>) {
 }
 
 /// The χ² test a job with the default options makes.
-fn chi2_test(g: &PoseGraph<Se2, 3>, w: &[f64]) -> Option<crate::stats::Chi2Test> {
+fn chi2_test(g: &Graph<Se2, 3>, w: &[f64]) -> Option<crate::stats::Chi2Test> {
     let config = crate::pipeline::OptimizeConfig::new("walk.g2o");
     crate::pipeline::chi2_test(g, w, &config).ok()
 }
@@ -391,7 +391,7 @@ fn on_search_case<R>(
 /// candidate its own) and the decisions; returns what `f` returns and the
 /// weights it left.
 fn on_graph<R>(
-    (mut g, candidates): (PoseGraph<Se2, 3>, Vec<Candidate>),
+    (mut g, candidates): (Graph<Se2, 3>, Vec<Candidate>),
     f: impl FnOnce(Session<'_, Se2, 3>, &mut [f64], &[Candidate], &Layers, Decided) -> R,
 ) -> (R, Vec<f64>) {
     let mut weights = vec![1.0; g.edges.len()];

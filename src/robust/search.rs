@@ -43,7 +43,7 @@ use super::Candidate;
 use super::innovation::Evaluation;
 use super::schedule::Decided;
 use crate::geometry::Pose;
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 use crate::solve::{Session, SolveError};
 use crate::stats::{Chi2Test, chi2_critical};
 use serde::Serialize;
@@ -84,7 +84,7 @@ pub struct Search {
 }
 
 /// The test of the map in the session's graph with `weights`.
-pub type Test<'t, P, const D: usize> = dyn Fn(&PoseGraph<P, D>, &[f64]) -> Option<Chi2Test> + 't;
+pub type Test<'t, P, const D: usize> = dyn Fn(&Graph<P, D>, &[f64]) -> Option<Chi2Test> + 't;
 
 /// The search of the module doc, from the decisions `decided`; updates
 /// them (and `weights`, and the map) for every cluster it removes.

@@ -43,7 +43,7 @@
 use super::schedule::{misfit_scale, objective};
 use super::{Candidate, Job, Outcome, RobustMethod, Swing, annealed_start, kernels, settle};
 use crate::geometry::Pose;
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 use crate::solve::init::ChordalInit;
 use crate::solve::{Session, SolveError};
 use serde::Serialize;
@@ -96,7 +96,7 @@ struct End<P> {
 impl<P: Clone> End<P> {
     /// The end in the session's graph and `weights`, from `start`.
     fn take<const D: usize>(
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: &[f64],
         job: &Job<'_, P, D>,
         (start, out): (Start, Outcome),

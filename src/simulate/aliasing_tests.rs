@@ -61,7 +61,7 @@ fn check_aliases<P: Pose<D>, const D: usize>(
     assert_eq!(sizes, expected);
 }
 
-fn wrong_edges<P, const D: usize>(graph: &PoseGraph<P, D>, wrong: &[bool]) -> Vec<Edge<P, D>>
+fn wrong_edges<P, const D: usize>(graph: &Graph<P, D>, wrong: &[bool]) -> Vec<Edge<P, D>>
 where
     P: Clone,
 {
@@ -305,7 +305,7 @@ fn corrupt_aliases_measure_the_graphs_poses_with_the_copied_information() {
 
 #[test]
 fn corrupt_refuses_information_that_cannot_draw_noise() {
-    let mut graph = PoseGraph::<Se2, 3>::new();
+    let mut graph = Graph::<Se2, 3>::new();
     for k in 0..60u64 {
         graph.add_vertex(k, Se2::new(k as f64, 0.0, 0.0)).unwrap();
     }

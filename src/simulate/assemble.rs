@@ -10,7 +10,7 @@ use super::wrong::{
 };
 use super::{Simulation, SimulationError, SimulationOptions};
 use crate::geometry::Pose;
-use crate::graph::{LoopCandidate, PoseGraph, VertexId};
+use crate::graph::{Graph, LoopCandidate, VertexId};
 use nalgebra::{SMatrix, Vector3};
 use rand::Rng;
 
@@ -172,8 +172,8 @@ fn assemble<P: Pose<D>, const D: usize>(
     edges: &[PlannedEdge<P>],
     information: SMatrix<f64, D, D>,
 ) -> Result<Simulation<P, D>, SimulationError> {
-    let mut noisy = PoseGraph::new();
-    let mut truth = PoseGraph::new();
+    let mut noisy = Graph::new();
+    let mut truth = Graph::new();
     for (k, (t, g)) in truth_poses.iter().zip(guess).enumerate() {
         let id = k as VertexId;
         noisy.add_vertex(id, *g)?;

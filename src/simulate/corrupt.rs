@@ -6,7 +6,7 @@ use super::noise::{ErrorCoordinates, perturb, sample_with_information};
 use super::wrong::{WrongGroup, WrongLoopPlan, random_measurement, wrong_groups};
 use super::{CorruptionOptions, SimulationError};
 use crate::geometry::Pose;
-use crate::graph::{LoopCandidate, PoseGraph};
+use crate::graph::{Graph, LoopCandidate};
 use nalgebra::SMatrix;
 use rand::Rng;
 
@@ -34,7 +34,7 @@ pub(super) fn plan(options: &CorruptionOptions) -> WrongLoopPlan {
 /// stands in for than the median length of the sequential edges (one
 /// typical step, on the graph's poses): nearer, it would be the same place.
 pub(super) fn place<P: Pose<D>, const D: usize, R: Rng + ?Sized>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     plan: &WrongLoopPlan,
     sequential: &[bool],
     revisits: &[(usize, usize)],
@@ -59,7 +59,7 @@ pub(super) fn place<P: Pose<D>, const D: usize, R: Rng + ?Sized>(
 /// poses from `i` to the aliased vertex with noise drawn from that
 /// information, per candidate.
 pub(super) fn measure<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     plan: &WrongLoopPlan,
     groups: &[WrongGroup],
     sources: &[usize],
@@ -101,7 +101,7 @@ pub(super) fn measure<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
 /// candidates, when there is a model; keeping its count (or giving none)
 /// otherwise. Returns the number of candidates not known to be wrong.
 pub(super) fn mark_candidates<P, const D: usize, R: Rng + ?Sized>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     options: &CorruptionOptions,
     sequential: &[bool],
     wrong: &[bool],
@@ -132,7 +132,7 @@ pub(super) fn mark_candidates<P, const D: usize, R: Rng + ?Sized>(
 /// candidates with counts drawn for wrong candidates (none without a
 /// model), group by group.
 pub(super) fn append<P: Pose<D>, const D: usize, R: Rng + ?Sized>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     planned: Vec<PlannedWrong<P, D>>,
     groups: &[WrongGroup],
     options: &CorruptionOptions,

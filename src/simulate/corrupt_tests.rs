@@ -4,12 +4,12 @@
 use super::tests::{check_grouped, is_odometry};
 use super::*;
 use crate::geometry::{Pose, Se2};
-use crate::graph::{LoopCandidate, PoseGraph};
+use crate::graph::{Graph, LoopCandidate};
 use nalgebra::{Matrix3, Vector3};
 use rand::{SeedableRng, rngs::StdRng};
 
-fn line_graph(n: u64, information: Matrix3<f64>) -> PoseGraph<Se2, 3> {
-    let mut g = PoseGraph::new();
+fn line_graph(n: u64, information: Matrix3<f64>) -> Graph<Se2, 3> {
+    let mut g = Graph::new();
     for k in 0..n {
         g.add_vertex(k, Se2::new(k as f64, 0.0, 0.0)).unwrap();
     }
@@ -161,7 +161,7 @@ fn corrupt_copies_odometry_information_when_there_are_no_loops() {
 fn corrupt_avoids_pairs_consecutive_in_id() {
     // Ids 0, 10, 11, 20, 21, …: index neighbours are not id neighbours
     // and some index-distance-2 pairs are id neighbours.
-    let mut graph = PoseGraph::<Se2, 3>::new();
+    let mut graph = Graph::<Se2, 3>::new();
     let ids: Vec<u64> = (0..60u64).map(|k| k / 2 * 10 + k % 2).collect();
     for &id in &ids {
         graph.add_vertex(id, Se2::identity()).unwrap();
@@ -259,7 +259,7 @@ fn corrupt_fails_without_changing_the_graph() {
     );
     assert_eq!(tiny.edges, before);
 
-    let mut edgeless = PoseGraph::<Se2, 3>::new();
+    let mut edgeless = Graph::<Se2, 3>::new();
     for k in 0..5 {
         edgeless.add_vertex(k, Se2::identity()).unwrap();
     }

@@ -4,7 +4,7 @@
 //! as the CLI does and compare bytes.
 
 use super::*;
-use crate::graph::AnyPoseGraph;
+use crate::graph::AnyGraph;
 use crate::io::g2o::{G2oPose, read, write_graph};
 use crate::solve::init::{ChordalInit, Initialization, initialize};
 use rand::{SeedableRng, rngs::StdRng};
@@ -16,13 +16,13 @@ fn sample(name: &str) -> PathBuf {
         .join(name)
 }
 
-fn g2o_text<P: G2oPose<D>, const D: usize>(g: &PoseGraph<P, D>) -> Vec<u8> {
+fn g2o_text<P: G2oPose<D>, const D: usize>(g: &Graph<P, D>) -> Vec<u8> {
     let mut text = Vec::new();
     write_graph(g, &mut text).unwrap();
     text
 }
 
-fn labels_text<P: G2oPose<D>, const D: usize>(g: &PoseGraph<P, D>, wrong: &[bool]) -> Vec<u8> {
+fn labels_text<P: G2oPose<D>, const D: usize>(g: &Graph<P, D>, wrong: &[bool]) -> Vec<u8> {
     let mut text = Vec::new();
     write_labels(g, wrong, &mut text).unwrap();
     text
@@ -125,7 +125,7 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 /// graph and the labels.
 fn corrupt_sample(name: &str, options: &CorruptionOptions, seed: u64) -> (u64, u64) {
     fn run<P, const D: usize>(
-        g: &mut PoseGraph<P, D>,
+        g: &mut Graph<P, D>,
         missing: &[usize],
         options: &CorruptionOptions,
         seed: u64,
@@ -142,8 +142,8 @@ fn corrupt_sample(name: &str, options: &CorruptionOptions, seed: u64) -> (u64, u
     }
     let mut file = read(&sample(name), Default::default()).unwrap();
     match &mut file.graph {
-        AnyPoseGraph::Planar(g) => run(g, &file.missing, options, seed),
-        AnyPoseGraph::Spatial(g) => run(g, &file.missing, options, seed),
+        AnyGraph::Planar(g) => run(g, &file.missing, options, seed),
+        AnyGraph::Spatial(g) => run(g, &file.missing, options, seed),
     }
 }
 

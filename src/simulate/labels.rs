@@ -1,7 +1,7 @@
 //! The labels CSV: which edges of a graph are wrong loop candidates.
 
 use crate::geometry::Pose;
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 
 /// Writes which edges are wrong as CSV, `edge,from,to,wrong` (edge index in
 /// file order, the vertex ids, 1 for wrong and 0 otherwise), the labels of
@@ -17,7 +17,7 @@ use crate::graph::PoseGraph;
 /// assert_eq!(text.lines().filter(|l| l.ends_with(",1")).count(), 2);
 /// ```
 pub fn write_labels<P: Pose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    graph: &Graph<P, D>,
     wrong: &[bool],
     w: &mut impl std::io::Write,
 ) -> std::io::Result<()> {

@@ -103,7 +103,7 @@ pub use wrong::{
 };
 
 use crate::geometry::{Se2, Se3};
-use crate::graph::{GraphError, PoseGraph};
+use crate::graph::{Graph, GraphError};
 use assemble::simulate_on;
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use world::{grid_trajectory, sphere_trajectory, torus_trajectory};
@@ -211,11 +211,11 @@ pub struct Simulation<P, const D: usize> {
     /// Noisy measurements, starting from the dead-reckoning guess. Edges are
     /// ordered by their later vertex, odometry first, as in the public
     /// datasets.
-    pub noisy: PoseGraph<P, D>,
+    pub noisy: Graph<P, D>,
     /// True poses, and every edge of `noisy` that is not wrong (same order,
     /// same information and candidate flag) with its noise-free
     /// measurement, so that its χ² is zero.
-    pub truth: PoseGraph<P, D>,
+    pub truth: Graph<P, D>,
     /// `wrong[k]`: whether edge `k` of `noisy` is a planted wrong loop.
     pub wrong: Vec<bool>,
 }
@@ -346,12 +346,12 @@ pub struct Corruption {
 ///
 /// ```
 /// use pgo::geometry::{Pose, Se2};
-/// use pgo::graph::PoseGraph;
+/// use pgo::graph::Graph;
 /// use pgo::simulate::{CorruptionOptions, corrupt};
 /// use nalgebra::Matrix3;
 /// use rand::{SeedableRng, rngs::StdRng};
 ///
-/// let mut graph = PoseGraph::<Se2, 3>::new();
+/// let mut graph = Graph::<Se2, 3>::new();
 /// for k in 0..50u64 {
 ///     graph.add_vertex(k, Se2::new(k as f64, 0.0, 0.0))?;
 /// }
@@ -369,7 +369,7 @@ pub struct Corruption {
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub fn corrupt<P: ErrorCoordinates<D>, const D: usize>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     options: &CorruptionOptions,
     rng: &mut impl Rng,
 ) -> Result<Corruption, SimulationError> {

@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::geometry::Se2;
-use crate::graph::AnyPoseGraph;
+use crate::graph::AnyGraph;
 use crate::io::g2o::{G2oPose, read_from, write_graph};
 use nalgebra::Matrix3;
 use rand::{SeedableRng, rngs::StdRng};
@@ -13,7 +13,7 @@ use std::path::Path;
 
 /// Writes a graph as g2o text and reads it back: the edges' information
 /// matrices, as read, and their number.
-fn read_back<P: G2oPose<D>, const D: usize>(g: &PoseGraph<P, D>) -> AnyPoseGraph {
+fn read_back<P: G2oPose<D>, const D: usize>(g: &Graph<P, D>) -> AnyGraph {
     let mut text = Vec::new();
     write_graph(g, &mut text).unwrap();
     let file = read_from(
@@ -28,8 +28,8 @@ fn read_back<P: G2oPose<D>, const D: usize>(g: &PoseGraph<P, D>) -> AnyPoseGraph
 fn check_reads_back<P: G2oPose<D>, const D: usize>(sim: &Simulation<P, D>) {
     for g in [&sim.noisy, &sim.truth] {
         let edges = match read_back(g) {
-            AnyPoseGraph::Planar(r) => r.edges.len(),
-            AnyPoseGraph::Spatial(r) => r.edges.len(),
+            AnyGraph::Planar(r) => r.edges.len(),
+            AnyGraph::Spatial(r) => r.edges.len(),
         };
         assert_eq!(edges, g.edges.len());
         for e in &g.edges {
@@ -359,7 +359,7 @@ fn corruption_options_beyond_their_ranges_are_errors() {
 
 #[test]
 fn corruption_at_the_largest_scales_reads_back() {
-    let mut graph = PoseGraph::<Se2, 3>::new();
+    let mut graph = Graph::<Se2, 3>::new();
     for k in 0..40u64 {
         graph.add_vertex(k, Se2::new(k as f64, 0.0, 0.0)).unwrap();
     }
@@ -377,7 +377,7 @@ fn corruption_at_the_largest_scales_reads_back() {
     };
     corrupt(&mut graph, &options, &mut StdRng::seed_from_u64(3)).unwrap();
     match read_back(&graph) {
-        AnyPoseGraph::Planar(r) => assert_eq!(r.edges.len(), 39 + 30),
-        AnyPoseGraph::Spatial(_) => panic!("an SE(2) graph read back as SE(3)"),
+        AnyGraph::Planar(r) => assert_eq!(r.edges.len(), 39 + 30),
+        AnyGraph::Spatial(_) => panic!("an SE(2) graph read back as SE(3)"),
     }
 }

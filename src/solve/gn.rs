@@ -4,14 +4,14 @@
 use super::normal::Solved;
 use super::{Optimizer, Progress, SolveError, Step, StepOutcome};
 use crate::geometry::Pose;
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 
 impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// Gauss–Newton's step from the current linearisation. A normal matrix
     /// that is not positive definite is an error: nothing regularises it.
     pub(super) fn gauss_newton_step(
         &mut self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: Option<&[f64]>,
         progress: &mut Progress,
     ) -> Result<StepOutcome, SolveError> {

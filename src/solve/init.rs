@@ -16,7 +16,7 @@
 
 use super::SolveError;
 use crate::geometry::{NormalBlocks, Pose, Se2, Se3};
-use crate::graph::{Edge, PoseGraph};
+use crate::graph::{Edge, Graph};
 use crate::linear::{BlockSystem, LinearError, Parallelism};
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, UnitQuaternion, Vector2, Vector3};
 use serde::Serialize;
@@ -48,7 +48,7 @@ pub trait ChordalInit<const D: usize>: Pose<D> {
 
     /// Replaces every non-gauge pose by the chordal estimate, using the
     /// edges whose weight is positive.
-    fn chordal(graph: &mut PoseGraph<Self, D>, weights: Option<&[f64]>) -> Result<(), SolveError> {
+    fn chordal(graph: &mut Graph<Self, D>, weights: Option<&[f64]>) -> Result<(), SolveError> {
         Self::chordal_reusing(graph, weights, &mut Self::Reuse::default())
     }
 
@@ -57,7 +57,7 @@ pub trait ChordalInit<const D: usize>: Pose<D> {
     /// whose set of positive weights does not (an annealing): `reuse` is
     /// rebuilt when that set changed.
     fn chordal_reusing(
-        graph: &mut PoseGraph<Self, D>,
+        graph: &mut Graph<Self, D>,
         weights: Option<&[f64]>,
         reuse: &mut Self::Reuse,
     ) -> Result<(), SolveError>;
@@ -91,7 +91,7 @@ impl<const D: usize> ChordalReuse<D> {
     /// each edge's rotation precision (the rotation at `rot` of its error).
     fn problem<P: Pose<D2>, const D2: usize>(
         &mut self,
-        graph: &PoseGraph<P, D2>,
+        graph: &Graph<P, D2>,
         weights: Option<&[f64]>,
         rot: std::ops::Range<usize>,
     ) -> Result<(&mut LinearProblem<D>, &[f64]), SolveError> {
@@ -119,7 +119,7 @@ impl<const D: usize> ChordalReuse<D> {
 /// file did not define; `weights` (per edge) exclude edges with weight 0
 /// (e.g. loop candidates dropped by the gate) from the chordal problem.
 pub fn initialize<P: ChordalInit<D>, const D: usize>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     missing: &[usize],
     mode: Initialization,
     weights: Option<&[f64]>,
@@ -151,7 +151,7 @@ pub fn initialize<P: ChordalInit<D>, const D: usize>(
 }
 
 /// Whether an edge is odometry: trusted and between consecutive ids.
-fn is_odometry<P: Pose<D>, const D: usize>(graph: &PoseGraph<P, D>, e: &Edge<P, D>) -> bool {
+fn is_odometry<P: Pose<D>, const D: usize>(graph: &Graph<P, D>, e: &Edge<P, D>) -> bool {
     e.candidate.is_none() && graph.id(e.from).abs_diff(graph.id(e.to)) == 1
 }
 
@@ -160,7 +160,7 @@ fn is_odometry<P: Pose<D>, const D: usize>(graph: &PoseGraph<P, D>, e: &Edge<P, 
 /// only, then over all edges (with positive weight). Unreachable vertices
 /// keep their poses.
 pub fn spanning_tree<P: Pose<D>, const D: usize>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     known: &mut [bool],
     weights: Option<&[f64]>,
 ) {
@@ -174,7 +174,7 @@ pub fn spanning_tree<P: Pose<D>, const D: usize>(
 /// cost follows their number, not the graph's size, so that poses added to
 /// a solved map are placed in time proportional to what was added.
 pub fn grow_tree<P: Pose<D>, const D: usize>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     known: &mut [bool],
     edges: &[usize],
 ) {
@@ -213,7 +213,7 @@ pub fn grow_tree<P: Pose<D>, const D: usize>(
 }
 
 /// Variable block of each vertex (`None` for the gauge) and the count.
-fn variables<P: Pose<D>, const D: usize>(graph: &PoseGraph<P, D>) -> (Vec<Option<usize>>, usize) {
+fn variables<P: Pose<D>, const D: usize>(graph: &Graph<P, D>) -> (Vec<Option<usize>>, usize) {
     let mut variable = vec![Some(0); graph.num_vertices()];
     for g in graph.gauge() {
         variable[g] = None;
@@ -236,7 +236,7 @@ struct LinearProblem<const D: usize> {
 
 impl<const D: usize> LinearProblem<D> {
     fn new<P: Pose<D2>, const D2: usize>(
-        graph: &PoseGraph<P, D2>,
+        graph: &Graph<P, D2>,
         weights: Option<&[f64]>,
         parallelism: Parallelism,
     ) -> Result<Self, SolveError> {
@@ -305,7 +305,7 @@ impl<const D: usize> LinearProblem<D> {
     /// Factorises the assembled matrix.
     fn factorize<P: Pose<D2>, const D2: usize>(
         &mut self,
-        graph: &PoseGraph<P, D2>,
+        graph: &Graph<P, D2>,
     ) -> Result<(), SolveError> {
         match self.system.factorize(0.0) {
             Ok(()) => Ok(()),
@@ -326,7 +326,7 @@ impl<const D: usize> LinearProblem<D> {
     /// variable block.
     fn solve<P: Pose<D2>, const D2: usize>(
         &mut self,
-        graph: &PoseGraph<P, D2>,
+        graph: &Graph<P, D2>,
     ) -> Result<Vec<f64>, SolveError> {
         self.factorize(graph)?;
         let mut x = vec![0.0; self.n_free * D];
@@ -434,7 +434,7 @@ impl ChordalInit<3> for Se2 {
     type Reuse = ChordalReuse<2>;
 
     fn chordal_reusing(
-        graph: &mut PoseGraph<Self, 3>,
+        graph: &mut Graph<Self, 3>,
         weights: Option<&[f64]>,
         reuse: &mut ChordalReuse<2>,
     ) -> Result<(), SolveError> {
@@ -503,7 +503,7 @@ impl ChordalInit<6> for Se3 {
     type Reuse = ChordalReuse<3>;
 
     fn chordal_reusing(
-        graph: &mut PoseGraph<Self, 6>,
+        graph: &mut Graph<Self, 6>,
         weights: Option<&[f64]>,
         reuse: &mut ChordalReuse<3>,
     ) -> Result<(), SolveError> {
@@ -552,7 +552,7 @@ impl ChordalInit<6> for Se3 {
 /// vectors `ρ`. The matrix is the same for the three rows: factorised once,
 /// the three right-hand sides solved together.
 fn spatial_rotation_rows(
-    graph: &PoseGraph<Se3, 6>,
+    graph: &Graph<Se3, 6>,
     weights: Option<&[f64]>,
     lp: &mut LinearProblem<3>,
     precision: &[f64],
@@ -757,9 +757,9 @@ mod tests {
         poses
     }
 
-    fn planar_graph(truth: &[Se2], noise: f64, seed: u64) -> PoseGraph<Se2, 3> {
+    fn planar_graph(truth: &[Se2], noise: f64, seed: u64) -> Graph<Se2, 3> {
         let mut rng = StdRng::seed_from_u64(seed);
-        let mut g = PoseGraph::new();
+        let mut g = Graph::new();
         for (k, _) in truth.iter().enumerate() {
             g.add_vertex(
                 k as u64,
@@ -772,7 +772,7 @@ mod tests {
             .unwrap();
         }
         g.poses[0] = truth[0];
-        let mut add = |g: &mut PoseGraph<Se2, 3>, i: usize, j: usize| {
+        let mut add = |g: &mut Graph<Se2, 3>, i: usize, j: usize| {
             let z = truth[i].inverse().compose(&truth[j]);
             let z = Se2::new(
                 z.x + noise * rng.random_range(-1.0..1.0),
@@ -865,7 +865,7 @@ mod tests {
         // rotations, must give the sequential solve's poses exactly.
         let mut rng = StdRng::seed_from_u64(9);
         let n = 9000u64;
-        let mut g = PoseGraph::<Se3, 6>::new();
+        let mut g = Graph::<Se3, 6>::new();
         let noisy = |rng: &mut StdRng, scale: f64| {
             Se3::exp(&Vector6::from_fn(|_, _| rng.random_range(-scale..scale)))
         };
@@ -906,7 +906,7 @@ mod tests {
             let step = Se3::exp(&Vector6::new(1.0, 0.2, 0.1, 0.3, -0.2, 0.4));
             truth.push(truth[k - 1].compose(&step));
         }
-        let mut g = PoseGraph::<Se3, 6>::new();
+        let mut g = Graph::<Se3, 6>::new();
         for k in 0..30u64 {
             let p = Se3::exp(&Vector6::from_fn(|_, _| rng.random_range(-2.0..2.0)));
             g.add_vertex(k, if k == 0 { truth[0] } else { p }).unwrap();

@@ -5,7 +5,7 @@
 
 use super::{Optimizer, SolveError};
 use crate::geometry::Pose;
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 use crate::linear::{LinearError, SelectedInverse};
 use nalgebra::SMatrix;
 
@@ -21,7 +21,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// knows nothing of that vertex to add).
     pub fn innovation_chi2(
         &mut self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: &[f64],
         edges: &[usize],
     ) -> Result<Vec<f64>, SolveError> {
@@ -46,7 +46,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// `I − Ω^½·J·H⁻¹·Jᵀ·Ω^½` has an eigenvalue below `1e-9`).
     pub fn leave_one_out_chi2(
         &mut self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: &[f64],
         edges: &[usize],
     ) -> Result<Vec<Option<f64>>, SolveError> {
@@ -72,7 +72,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// [`Optimizer::factor_undamped`] (`block`) with the graph's `gauge`.
     fn left_out_chi2(
         &mut self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         block: &[Option<usize>],
         gauge: &[usize],
         k: usize,
@@ -103,7 +103,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// `inverse`.
     fn deleted_chi2(
         &self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         block: &[Option<usize>],
         inverse: &SelectedInverse,
         k: usize,
@@ -143,7 +143,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// vertex held fixed).
     pub(crate) fn factor_at(
         &mut self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: &[f64],
     ) -> Result<Vec<Option<usize>>, SolveError> {
         self.factor_undamped(graph, weights)
@@ -154,7 +154,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// for a vertex held fixed).
     fn factor_undamped(
         &mut self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: &[f64],
     ) -> Result<Vec<Option<usize>>, SolveError> {
         if weights.len() != graph.edges.len() {

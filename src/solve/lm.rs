@@ -4,7 +4,7 @@
 use super::normal::Solved;
 use super::{Observer, Optimizer, Progress, SolveError, Step, StepOutcome};
 use crate::geometry::Pose;
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 
 /// Damping beyond which LM gives up: `λ·diag H` then exceeds `diag H` by
 /// more than the inverse of the machine epsilon (2.2·10⁻¹⁶), so the damped
@@ -74,7 +74,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// before each trial after a rejected one whether to stop.
     pub(super) fn levenberg_marquardt_step(
         &mut self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: Option<&[f64]>,
         objective: f64,
         damping: &mut Damping,

@@ -23,7 +23,7 @@ mod session;
 mod tests;
 
 use crate::geometry::Pose;
-use crate::graph::{PoseGraph, VertexId};
+use crate::graph::{Graph, VertexId};
 use crate::linear::{BlockSystem, LinearError, Parallelism};
 use lm::Damping;
 use normal::EdgeTerms;
@@ -427,7 +427,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// Fails if some vertex is not connected to the gauge by edges of
     /// non-zero weight (`weights`: one per edge, default 1).
     pub fn new(
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: Option<&[f64]>,
         options: SolverOptions,
     ) -> Result<Self, SolveError> {
@@ -439,7 +439,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// keeps the order it uses there ([`Optimizer::ordering`]): the same
     /// graph grown by a few poses is then not ordered afresh.
     pub fn with_ordering(
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: Option<&[f64]>,
         options: SolverOptions,
         ordering: Option<Ordering>,
@@ -557,7 +557,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// best poses found in the graph. `weights` (one per edge) default to 1.
     pub fn run(
         &mut self,
-        graph: &mut PoseGraph<P, D>,
+        graph: &mut Graph<P, D>,
         weights: Option<&[f64]>,
         observer: &mut dyn Observer,
     ) -> Result<Summary, SolveError> {
@@ -656,7 +656,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// edge of `graph`.
     fn check_edge_count(
         &self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: Option<&[f64]>,
     ) -> Result<(), SolveError> {
         let edges = graph.edges.len();
@@ -700,7 +700,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
 
     /// The error for a normal matrix that is not positive definite at
     /// variable block `block`.
-    fn not_positive_definite(&self, graph: &PoseGraph<P, D>, block: usize) -> SolveError {
+    fn not_positive_definite(&self, graph: &Graph<P, D>, block: usize) -> SolveError {
         SolveError::NotPositiveDefinite {
             vertex: graph.id(self.vertex_of[block]),
         }
@@ -756,9 +756,9 @@ impl Step {
 /// ```ignore
 /// use nalgebra::Matrix3;
 /// use pgo::geometry::{Pose, Se2};
-/// use pgo::graph::PoseGraph;
+/// use pgo::graph::Graph;
 /// use pgo::solve::{optimize, SolverOptions};
-/// let mut g = PoseGraph::<Se2, 3>::new();
+/// let mut g = Graph::<Se2, 3>::new();
 /// for k in 0..3 {
 ///     g.add_vertex(k, Se2::new(0.3 * k as f64, 0.0, 0.0)).unwrap();
 /// }
@@ -770,7 +770,7 @@ impl Step {
 /// assert!((g.poses[2].x - 2.0).abs() < 1e-9);
 /// ```
 pub fn optimize<P: Pose<D>, const D: usize>(
-    graph: &mut PoseGraph<P, D>,
+    graph: &mut Graph<P, D>,
     options: &SolverOptions,
 ) -> Result<Summary, SolveError> {
     let mut optimizer = Optimizer::new(graph, None, options.clone())?;

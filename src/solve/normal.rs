@@ -4,7 +4,7 @@
 
 use super::{Optimizer, Progress, SolveError};
 use crate::geometry::{NormalBlocks, Pose};
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 use crate::linear::LinearError;
 use nalgebra::SMatrix;
 use rayon::prelude::*;
@@ -70,13 +70,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// (public for benchmarks; [`Optimizer::run`] does this itself). Edges
     /// left out of the pattern ([`Optimizer::new`]) count in the objective
     /// but not in `H`.
-    pub fn linearize(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
+    pub fn linearize(&mut self, graph: &Graph<P, D>, weights: Option<&[f64]>) -> f64 {
         let parallelism = self.parallelism.clone();
         parallelism.install(|| self.assemble(graph, weights))
     }
 
     /// [`Self::linearize`] where the parallel work belongs.
-    fn assemble(&mut self, graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
+    fn assemble(&mut self, graph: &Graph<P, D>, weights: Option<&[f64]>) -> f64 {
         self.system.clear();
         let parallel = self.parallelism.is_parallel();
         if prepare(&graph.poses, &mut self.prepared, parallel) {
@@ -113,7 +113,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     pub(super) fn objective(
         &mut self,
         poses: &[P],
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: Option<&[f64]>,
     ) -> f64 {
         let parallelism = self.parallelism.clone();
@@ -121,7 +121,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// [`Self::objective`] where the parallel work belongs.
-    fn sum_chi2(&mut self, poses: &[P], graph: &PoseGraph<P, D>, weights: Option<&[f64]>) -> f64 {
+    fn sum_chi2(&mut self, poses: &[P], graph: &Graph<P, D>, weights: Option<&[f64]>) -> f64 {
         let parallel = self.parallelism.is_parallel();
         prepare(poses, &mut self.prepared, parallel);
         self.prepare_measurements(graph);
@@ -153,9 +153,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// Each edge's plain `eᵀΩe` at the graph's poses if the optimiser's last
-    /// evaluation was there (the same bits as [`PoseGraph::edge_chi2s`]),
+    /// evaluation was there (the same bits as [`Graph::edge_chi2s`]),
     /// which it usually was after [`Optimizer::run`].
-    pub fn edge_chi2s_at(&self, graph: &PoseGraph<P, D>) -> Option<&[f64]> {
+    pub fn edge_chi2s_at(&self, graph: &Graph<P, D>) -> Option<&[f64]> {
         let at_poses = self.prepared.len() == graph.poses.len()
             && (self.prepared.iter().zip(&graph.poses)).all(|((p, _), q)| p == q);
         (self.chi2_at_prepared && at_poses && self.edge_chi2.len() == graph.edges.len())
@@ -190,7 +190,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// The objective at `poses ⊞ step` (left in `self.trial`).
     pub(super) fn evaluate_step(
         &mut self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: Option<&[f64]>,
         progress: &mut Progress,
     ) -> f64 {
@@ -234,14 +234,14 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// Prepares the measurements of the edges not prepared yet (those
     /// appended since, when `measurements` came from an optimiser of the
     /// graph before it grew: [`Optimizer::reuse_spare`]).
-    fn prepare_measurements(&mut self, graph: &PoseGraph<P, D>) {
+    fn prepare_measurements(&mut self, graph: &Graph<P, D>) {
         let done = self.measurements.len().min(graph.edges.len());
         self.measurements.truncate(done);
         (self.measurements).extend(graph.edges[done..].iter().map(|e| e.measurement.prepare()));
     }
 
     /// `trial = poses ⊞ step`.
-    fn apply_step(&mut self, graph: &PoseGraph<P, D>) {
+    fn apply_step(&mut self, graph: &Graph<P, D>) {
         self.trial.clone_from(&graph.poses);
         for (block, &v) in self.vertex_of.iter().enumerate() {
             let delta = nalgebra::SVector::<f64, D>::from_column_slice(

@@ -4,7 +4,7 @@
 
 use super::{Optimizer, SolveError};
 use crate::geometry::Pose;
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 use crate::linear::{BlockSystem, LinearError, Parallelism, Structure};
 use std::sync::Arc;
 
@@ -114,7 +114,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// follows), else in a fill-reducing order.
     pub(super) fn pattern(
         &mut self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         variable: &[Option<usize>],
     ) -> Result<BlockSystem<D>, SolveError> {
         let pairs: Vec<(Option<usize>, Option<usize>)> = graph
@@ -168,7 +168,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// at their poses until an edge joins them again.
     pub(super) fn update_pattern(
         &mut self,
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         weights: Option<&[f64]>,
     ) -> Result<(), SolveError> {
         let needed = |k: usize| weights.is_none_or(|w| w[k] != 0.0);
@@ -202,10 +202,10 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
 
     /// The variable block of each vertex: every vertex but the gauge and
     /// `cut_off` (those the edges of non-zero weight do not connect to it,
-    /// [`PoseGraph::unconstrained_vertices`]). Fills `vertex_of` with the
+    /// [`Graph::unconstrained_vertices`]). Fills `vertex_of` with the
     /// vertex of each block.
     pub(super) fn variables(
-        graph: &PoseGraph<P, D>,
+        graph: &Graph<P, D>,
         cut_off: &[usize],
         vertex_of: &mut Vec<usize>,
     ) -> Vec<Option<usize>> {

@@ -4,7 +4,7 @@
 
 use super::{Observer, Optimizer, SolveError, SolverOptions, StopReason, Summary};
 use crate::geometry::Pose;
-use crate::graph::PoseGraph;
+use crate::graph::Graph;
 use std::time::{Duration, Instant};
 
 /// Iterations and time left for all the runs of a session.
@@ -32,7 +32,7 @@ pub struct Session<'a, P: Pose<D>, const D: usize> {
     /// The optimiser (its sparsity pattern follows the weights).
     pub optimizer: &'a mut Optimizer<P, D>,
     /// The graph; its poses are the current map.
-    pub graph: &'a mut PoseGraph<P, D>,
+    pub graph: &'a mut Graph<P, D>,
     /// Options of a run to convergence.
     pub options: SolverOptions,
     budget: Budget,
@@ -56,7 +56,7 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
     /// A session of runs with `options` within `budget`.
     pub fn new(
         optimizer: &'a mut Optimizer<P, D>,
-        graph: &'a mut PoseGraph<P, D>,
+        graph: &'a mut Graph<P, D>,
         options: SolverOptions,
         budget: Budget,
         observer: &'a mut dyn Observer,

@@ -9,7 +9,7 @@ use std::f64::consts::{FRAC_PI_2, PI};
 
 /// A square loop of 4 poses with one loop closure whose measurements are
 /// consistent: the optimum has zero error.
-fn square(noise: f64, seed: u64) -> PoseGraph<Se2, 3> {
+fn square(noise: f64, seed: u64) -> Graph<Se2, 3> {
     let mut rng = StdRng::seed_from_u64(seed);
     let truth = [
         Se2::new(0.0, 0.0, 0.0),
@@ -17,7 +17,7 @@ fn square(noise: f64, seed: u64) -> PoseGraph<Se2, 3> {
         Se2::new(1.0, 1.0, PI),
         Se2::new(0.0, 1.0, -FRAC_PI_2),
     ];
-    let mut g = PoseGraph::new();
+    let mut g = Graph::new();
     for (k, t) in truth.iter().enumerate() {
         let p = if k == 0 {
             *t
@@ -63,8 +63,8 @@ fn lm_and_gn_reach_the_exact_optimum_of_a_consistent_loop() {
 /// Four collinear-free translations around a loop that does not close
 /// by 0.4 in x, all rotations zero, and the information of its edges
 /// (rotations pinned by a huge information: the problem is linear).
-fn open_loop() -> (PoseGraph<Se2, 3>, Matrix3<f64>) {
-    let mut g = PoseGraph::<Se2, 3>::new();
+fn open_loop() -> (Graph<Se2, 3>, Matrix3<f64>) {
+    let mut g = Graph::<Se2, 3>::new();
     for k in 0..4 {
         g.add_vertex(k, Se2::identity()).unwrap();
     }
@@ -172,7 +172,7 @@ fn spatial_chain_with_loop_converges() {
         let prev: Se3 = truth[k - 1];
         truth.push(prev.compose(&step));
     }
-    let mut g = PoseGraph::<Se3, 6>::new();
+    let mut g = Graph::<Se3, 6>::new();
     for (k, t) in truth.iter().enumerate() {
         let noise = Se3::new(
             UnitQuaternion::from_scaled_axis(Vector3::new(
@@ -288,7 +288,7 @@ fn disconnected_vertices_are_named() {
 fn rank_deficient_edges_are_a_named_error() {
     // Vertex 1 is tied to the gauge only through an edge whose
     // information ignores rotation: its heading is undetermined.
-    let mut g = PoseGraph::<Se2, 3>::new();
+    let mut g = Graph::<Se2, 3>::new();
     g.add_vertex(0, Se2::identity()).unwrap();
     g.add_vertex(1, Se2::new(1.0, 0.0, 0.0)).unwrap();
     let info = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 0.0));
@@ -433,8 +433,8 @@ mod simulated {
     use super::*;
 
     /// The first `n` poses of `g` and the edges among them.
-    fn prefix(g: &PoseGraph<Se2, 3>, n: usize) -> PoseGraph<Se2, 3> {
-        let mut h = PoseGraph::new();
+    fn prefix(g: &Graph<Se2, 3>, n: usize) -> Graph<Se2, 3> {
+        let mut h = Graph::new();
         for v in 0..n {
             h.add_vertex(g.id(v), g.poses[v]).unwrap();
         }
@@ -491,7 +491,7 @@ mod simulated {
 
     /// A simulated grid of 4000 poses with 40 wrong loops, and weights that
     /// switch half of them off and halve the others (as a robust round would).
-    fn simulated_grid() -> (PoseGraph<Se2, 3>, Vec<f64>) {
+    fn simulated_grid() -> (Graph<Se2, 3>, Vec<f64>) {
         let options = crate::simulate::SimulationOptions {
             poses: 4000,
             loops: 400,
@@ -550,7 +550,7 @@ mod simulated {
 
     /// A simulated grid of `poses` poses from its dead-reckoning guess, which LM
     /// takes many iterations to solve.
-    fn dead_reckoned_grid(poses: usize) -> PoseGraph<Se2, 3> {
+    fn dead_reckoned_grid(poses: usize) -> Graph<Se2, 3> {
         let options = crate::simulate::SimulationOptions {
             poses,
             seed: 3,
@@ -679,14 +679,14 @@ mod simulated {
     }
 
     /// [`optimize`] with an observer.
-    fn optimize_observed(g: &mut PoseGraph<Se2, 3>, observer: &mut dyn Observer) -> Summary {
+    fn optimize_observed(g: &mut Graph<Se2, 3>, observer: &mut dyn Observer) -> Summary {
         let mut opt = Optimizer::new(g, None, SolverOptions::default()).unwrap();
         opt.run(g, None, observer).unwrap()
     }
 
     /// [`dead_reckoned_grid`] of 300 poses with every pose but the gauge moved
     /// up to `reach` metres and given a random heading.
-    fn far_start(seed: u64, reach: f64) -> PoseGraph<Se2, 3> {
+    fn far_start(seed: u64, reach: f64) -> Graph<Se2, 3> {
         let mut g = dead_reckoned_grid(300);
         let mut rng = StdRng::seed_from_u64(seed);
         for p in g.poses.iter_mut().skip(1) {
@@ -701,7 +701,7 @@ mod simulated {
 
     /// The decrease of χ² that the undamped Gauss–Newton model foresees from
     /// the graph's poses, relative to χ² there.
-    fn newton_decrement(g: &PoseGraph<Se2, 3>) -> f64 {
+    fn newton_decrement(g: &Graph<Se2, 3>) -> f64 {
         let mut opt = Optimizer::new(g, None, SolverOptions::default()).unwrap();
         let chi2 = opt.linearize(g, None);
         opt.system_mut().factorize(0.0).unwrap();

@@ -32,7 +32,7 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
 }
 
 /// Writes a 2D graph as g2o to `path`.
-pub fn write_graph(graph: &pgo::graph::PoseGraph<pgo::geometry::Se2, 3>, path: &Path) {
+pub fn write_graph(graph: &pgo::graph::Graph<pgo::geometry::Se2, 3>, path: &Path) {
     let mut f = std::io::BufWriter::new(std::fs::File::create(path).expect("create"));
     pgo::io::g2o::write_graph(graph, &mut f).expect("write");
 }

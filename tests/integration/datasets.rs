@@ -3,7 +3,7 @@
 //! Each test prints a reason and passes when the datasets are absent.
 
 use crate::common::{candidate_wrong, datasets, pgo, stderr, write_graph};
-use pgo::graph::AnyPoseGraph;
+use pgo::graph::AnyGraph;
 use pgo::io::g2o::{self, ReadError, ReadOptions};
 use pgo::pipeline::{self, OptimizeConfig};
 use pgo::solve::init::Initialization;
@@ -156,7 +156,7 @@ fn q5_unusual_tags_fix_mixture_edges_and_skipped_tags() {
     let f = f.unwrap();
     // 3499 odometry + 3099 mixture edges, FIX 0.
     assert_eq!(f.graph.num_edges(), 6598);
-    let AnyPoseGraph::Planar(g) = &f.graph else {
+    let AnyGraph::Planar(g) = &f.graph else {
         panic!("2D")
     };
     assert!(g.is_fixed(g.index_of(0).unwrap()));
@@ -193,7 +193,7 @@ fn q7_interleaved_vertices_and_edges() {
     let f = f.unwrap();
     assert_eq!((f.graph.num_vertices(), f.graph.num_edges()), (943, 1837));
     assert!(f.missing.is_empty());
-    let AnyPoseGraph::Planar(g) = &f.graph else {
+    let AnyGraph::Planar(g) = &f.graph else {
         panic!("2D")
     };
     // The first edge of the file is 441 → 442.
@@ -203,7 +203,7 @@ fn q7_interleaved_vertices_and_edges() {
 #[test]
 fn q8_reversed_and_repeated_edges() {
     let Some(f) = read("MIT.g2o") else { return };
-    let AnyPoseGraph::Planar(g) = &f.unwrap().graph else {
+    let AnyGraph::Planar(g) = &f.unwrap().graph else {
         panic!("2D")
     };
     let reversed = g.edges.iter().filter(|e| g.id(e.from) > g.id(e.to)).count();
@@ -219,7 +219,7 @@ fn q9_graphs_missing_some_odometry_links_stay_connected() {
     let Some(f) = read("ais2klinik.g2o") else {
         return;
     };
-    let AnyPoseGraph::Planar(g) = &f.unwrap().graph else {
+    let AnyGraph::Planar(g) = &f.unwrap().graph else {
         panic!("2D")
     };
     assert!(g.unconstrained_vertices(None).is_empty());
@@ -235,7 +235,7 @@ fn q10_unwrapped_angles_give_wrapped_errors() {
     let Some(f) = read("manhattanOlson3500-olson.g2o") else {
         return;
     };
-    let AnyPoseGraph::Planar(g) = &f.unwrap().graph else {
+    let AnyGraph::Planar(g) = &f.unwrap().graph else {
         panic!("2D")
     };
     assert!(g.edges.iter().any(|e| e.measurement.theta.abs() > 4.0));
@@ -262,7 +262,7 @@ fn q12_ring_loop_closures_are_exact_at_the_ground_truth() {
     let Some(f) = read("ring-groundtruth.g2o") else {
         return;
     };
-    let AnyPoseGraph::Planar(g) = &f.unwrap().graph else {
+    let AnyGraph::Planar(g) = &f.unwrap().graph else {
         panic!("2D")
     };
     for e in g
@@ -444,7 +444,7 @@ fn corrupted_and_decided(
             .expect("clean");
             let t = clean.chi2_test.expect("test");
             let factor = times * t.dof_residual as f64 / t.d2;
-            let AnyPoseGraph::Planar(mut g) = g2o::read(&corrupted, ReadOptions::default())
+            let AnyGraph::Planar(mut g) = g2o::read(&corrupted, ReadOptions::default())
                 .expect("read")
                 .graph
             else {

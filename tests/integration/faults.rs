@@ -9,7 +9,7 @@
 use crate::common::{pgo, sample, stderr, temp_dir, verdict_status, write};
 use nalgebra::Matrix3;
 use pgo::geometry::{Pose, Se2};
-use pgo::graph::PoseGraph;
+use pgo::graph::Graph;
 use pgo::solve::{Method, SolveError, SolverOptions, optimize};
 use proptest::prelude::*;
 use std::path::Path;
@@ -243,10 +243,10 @@ fn extreme_graph(
     pos_exp: i32,
     info_exp: i32,
     seeds: &[(f64, f64, f64)],
-) -> PoseGraph<Se2, 3> {
+) -> Graph<Se2, 3> {
     let scale = 10f64.powi(pos_exp);
     let info = Matrix3::identity() * 10f64.powi(info_exp);
-    let mut g = PoseGraph::new();
+    let mut g = Graph::new();
     for k in 0..n {
         let (a, b, c) = seeds[k % seeds.len()];
         g.add_vertex(k as u64, Se2::new(a * scale * k as f64, b * scale, c * 3.0))

@@ -6,14 +6,14 @@
 
 use crate::common::{pgo, stderr, temp_dir, verdict_status};
 use pgo::gate::{DegeneratePolicy, GateMode, MixtureOptions, gate};
-use pgo::graph::PoseGraph;
+use pgo::graph::Graph;
 use pgo::simulate::{
     AnySimulation, InlierModel, OutlierPolicy, Simulation, SimulationOptions, World, simulate,
 };
 
 /// Kept true loops / true loops and kept wrong candidates / wrong ones.
 fn gate_rates<P, const D: usize>(sim: &Simulation<P, D>) -> (f64, f64, f64) {
-    let g: &PoseGraph<P, D> = &sim.noisy;
+    let g: &Graph<P, D> = &sim.noisy;
     let candidates: Vec<usize> = (0..g.edges.len())
         .filter(|&k| g.edges[k].candidate.is_some())
         .collect();

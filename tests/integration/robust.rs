@@ -4,7 +4,7 @@
 use crate::common::{candidate_wrong, sample, temp_dir, write_graph};
 use pgo::gate::{DegeneratePolicy, GateMode};
 use pgo::geometry::Se2;
-use pgo::graph::{AnyPoseGraph, PoseGraph};
+use pgo::graph::{AnyGraph, Graph};
 use pgo::io::g2o;
 use pgo::pipeline::{self, OptimizeConfig};
 use pgo::report::Report;
@@ -46,7 +46,7 @@ fn case(dir: &Path, name: &str, options: SimulationOptions) -> Case {
 
 /// For every loop candidate in file order, whether it is wrong (`wrong` is
 /// per edge).
-fn candidate_labels(graph: &PoseGraph<Se2, 3>, wrong: &[bool]) -> Vec<bool> {
+fn candidate_labels(graph: &Graph<Se2, 3>, wrong: &[bool]) -> Vec<bool> {
     graph
         .edges
         .iter()
@@ -110,8 +110,8 @@ fn counts(report: &Report, wrong: &[bool]) -> (usize, usize, usize) {
 /// gauge, and the diagonal of the bounding box of the second.
 fn position_rmse(a: &Path, b: &Path) -> (f64, f64) {
     let positions = |p: &Path| match g2o::read(p, Default::default()).expect("read").graph {
-        AnyPoseGraph::Planar(g) => g.poses.iter().map(|x| x.translation()).collect::<Vec<_>>(),
-        AnyPoseGraph::Spatial(_) => unreachable!("2D"),
+        AnyGraph::Planar(g) => g.poses.iter().map(|x| x.translation()).collect::<Vec<_>>(),
+        AnyGraph::Spatial(_) => unreachable!("2D"),
     };
     let (a, b) = (positions(a), positions(b));
     let mse = a

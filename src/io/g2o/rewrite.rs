@@ -24,7 +24,7 @@
 //!   ran), the rewrite fails, and a file output is not replaced.
 
 use super::{G2oFile, G2oPose, MAX_LINE_BYTES, parse_id, parse_numbers};
-use crate::graph::{AnyPoseGraph, PoseGraph};
+use crate::graph::{AnyGraph, Graph};
 use crate::io::source::Fingerprinter;
 use crate::io::{LineError, LineReader, RawLine};
 use std::io::{self, Read, Write};
@@ -103,8 +103,8 @@ impl G2oFile {
     /// be the text this file was read from).
     pub fn rewrite_from<R: Read>(&self, text: R, out: &mut impl Write) -> Result<(), RewriteError> {
         match &self.graph {
-            AnyPoseGraph::Planar(g) => Rewriter::new(self, g).run(text, out),
-            AnyPoseGraph::Spatial(g) => Rewriter::new(self, g).run(text, out),
+            AnyGraph::Planar(g) => Rewriter::new(self, g).run(text, out),
+            AnyGraph::Spatial(g) => Rewriter::new(self, g).run(text, out),
         }
     }
 }
@@ -112,7 +112,7 @@ impl G2oFile {
 /// The state of one rewrite.
 struct Rewriter<'a, P, const D: usize> {
     file: &'a G2oFile,
-    graph: &'a PoseGraph<P, D>,
+    graph: &'a Graph<P, D>,
     /// Vertices defined by a line: indices `0..defined`, in line order.
     defined: usize,
     /// Vertex lines seen so far.
@@ -125,7 +125,7 @@ struct Rewriter<'a, P, const D: usize> {
 }
 
 impl<'a, P: G2oPose<D>, const D: usize> Rewriter<'a, P, D> {
-    fn new(file: &'a G2oFile, graph: &'a PoseGraph<P, D>) -> Self {
+    fn new(file: &'a G2oFile, graph: &'a Graph<P, D>) -> Self {
         Self {
             file,
             graph,

@@ -16,10 +16,10 @@ fn rewritten(file: &G2oFile, text: &[u8]) -> Vec<u8> {
     out
 }
 
-fn planar(file: &mut G2oFile) -> &mut PoseGraph<Se2, 3> {
+fn planar(file: &mut G2oFile) -> &mut Graph<Se2, 3> {
     match &mut file.graph {
-        AnyPoseGraph::Planar(g) => g,
-        AnyPoseGraph::Spatial(_) => panic!("expected SE(2)"),
+        AnyGraph::Planar(g) => g,
+        AnyGraph::Spatial(_) => panic!("expected SE(2)"),
     }
 }
 
@@ -112,7 +112,7 @@ fn se3_vertex_lines_keep_their_text_unless_the_pose_moved() {
     let text = b"VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\nVERTEX_SE3:QUAT 1 1 0 0 0 0 0.7071067811865476 0.7071067811865476\n# end\n";
     let mut file = parse(text);
     assert_eq!(rewritten(&file, text), text);
-    let AnyPoseGraph::Spatial(g) = &mut file.graph else {
+    let AnyGraph::Spatial(g) = &mut file.graph else {
         panic!("expected SE(3)");
     };
     g.poses[1] = Se3::from_translation_quaternion([2.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]).unwrap();
