@@ -9,6 +9,7 @@ mod datasets;
 mod faults;
 mod gating;
 mod hostile;
+mod library;
 mod replays;
 mod robust;
 // SIGKILL, and /proc to tell which leftover temporaries are stale.

@@ -3,6 +3,11 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// The repository's root (the command line's crate is `cli/` in it).
+pub fn repository() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
 /// Runs the `pgo` binary with `args`.
 pub fn pgo(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_pgo"))
@@ -58,7 +63,7 @@ pub fn candidate_wrong(labels_csv: &str) -> Vec<bool> {
 pub fn datasets() -> Option<PathBuf> {
     let dir = std::env::var_os("PGO_DATASETS")
         .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets"));
+        .unwrap_or_else(|| repository().join("../shared/datasets"));
     if dir.join("intel.g2o").is_file() {
         Some(dir)
     } else {
@@ -72,7 +77,7 @@ pub fn datasets() -> Option<PathBuf> {
 
 /// A bundled sample file.
 pub fn sample(name: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
+    repository()
         .join("g2o_samples")
         .join(name)
         .to_string_lossy()

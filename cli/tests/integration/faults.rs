@@ -7,9 +7,9 @@
 //! (the old output kept, the error naming it): never a panic.
 
 use crate::common::{pgo, sample, stderr, temp_dir, verdict_status, write};
-use nalgebra::Matrix3;
 use pgo::geometry::{Pose, Se2};
 use pgo::graph::Graph;
+use pgo::nalgebra::Matrix3;
 use pgo::solve::{Method, SolveError, SolverOptions, optimize};
 use proptest::prelude::*;
 use std::path::Path;

@@ -425,7 +425,7 @@ fn true_loops_far_beyond_the_others_spread_are_rejected_as_aliases_would_be() {
     let mut bent = Vec::new();
     for (k, e) in sim.noisy.edges.iter_mut().enumerate() {
         if e.is_candidate() && !sim.wrong[k] && bent.len() < 10 {
-            let d = nalgebra::Vector3::from_fn(|i, _| (40.0 / e.information[(i, i)]).sqrt());
+            let d = pgo::nalgebra::Vector3::from_fn(|i, _| (40.0 / e.information[(i, i)]).sqrt());
             e.measurement = e.measurement.compose(&Se2::exp(&d));
             bent.push(k);
         }
