@@ -9,7 +9,6 @@ mod csv;
 mod tests;
 
 pub use any::AnyCovariances;
-pub(crate) use csv::{CsvError, write_csv};
 
 use crate::error::Error;
 use crate::geometry::{NormalBlocks, Pose};

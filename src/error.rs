@@ -38,6 +38,17 @@ pub enum Error {
         /// The id.
         id: VertexId,
     },
+    /// An entry of [`crate::PoseGraph::set_inlier_counts`] names a vertex
+    /// pair with no (further) edge between them.
+    #[error("no (further) edge between vertices {from} and {to}")]
+    NoEdge {
+        /// Its first vertex id.
+        from: VertexId,
+        /// Its second vertex id.
+        to: VertexId,
+        /// Its position in the list, from 0.
+        entry: usize,
+    },
     /// An edge from a vertex to itself.
     #[error("edge from vertex {id} to itself")]
     SelfLoop {
@@ -276,7 +287,8 @@ pub enum ErrorKind {
     /// ([`Error::DuplicateVertex`]).
     DuplicateVertex,
     /// An edge, a fix or a look-up names an id the graph does not have
-    /// ([`Error::UnknownVertex`]).
+    /// ([`Error::UnknownVertex`]), or a pair of ids no (further) edge joins
+    /// ([`Error::NoEdge`]).
     UnknownVertex,
     /// An edge from a vertex to itself ([`Error::SelfLoop`]).
     SelfLoop,
@@ -358,7 +370,7 @@ impl Error {
         use ErrorKind as K;
         match self {
             Self::DuplicateVertex { .. } => K::DuplicateVertex,
-            Self::UnknownVertex { .. } => K::UnknownVertex,
+            Self::UnknownVertex { .. } | Self::NoEdge { .. } => K::UnknownVertex,
             Self::SelfLoop { .. } => K::SelfLoop,
             Self::InvalidPose { .. } | Self::InvalidMeasurement { .. } => K::InvalidPose,
             Self::InvalidInformation { .. } => K::InvalidInformation,

@@ -175,6 +175,24 @@ impl<P: Pose<D>, const D: usize> Graph<P, D> {
         Ok(self.edges.len() - 1)
     }
 
+    /// For each vertex pair `(a, b)` in turn, the next edge between them —
+    /// from `a` to `b`, else from `b` to `a` — in the order edges were
+    /// added, each edge given once. `Err(k)`: pair `k` has no (further)
+    /// edge.
+    pub fn edges_of_pairs(
+        &self,
+        pairs: impl IntoIterator<Item = (VertexId, VertexId)>,
+    ) -> Result<Vec<usize>, usize> {
+        let mut by_pair: HashMap<(VertexId, VertexId), Vec<usize>> = HashMap::new();
+        for (k, e) in self.edges.iter().enumerate().rev() {
+            (by_pair.entry((self.id(e.from), self.id(e.to))).or_default()).push(k);
+        }
+        let mut next = |a, b| by_pair.get_mut(&(a, b)).and_then(Vec::pop);
+        (pairs.into_iter().enumerate())
+            .map(|(k, (a, b))| next(a, b).or_else(|| next(b, a)).ok_or(k))
+            .collect()
+    }
+
     /// Number of vertices.
     pub fn num_vertices(&self) -> usize {
         self.ids.len()

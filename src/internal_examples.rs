@@ -234,14 +234,14 @@ fn io_write_atomically_with_tempfile() {
 fn io_output_write() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("out.txt");
-    crate::io::output::write(&path, |w| {
+    crate::output::write(&path, |w| {
         use std::io::Write;
         writeln!(w, "hello")
     })
     .unwrap();
     assert_eq!(std::fs::read_to_string(&path).unwrap(), "hello\n");
     // A directory is no output.
-    let err = crate::io::output::write(dir.path(), |_| Ok(())).unwrap_err();
+    let err = crate::output::write(dir.path(), |_| Ok(())).unwrap_err();
     assert!(
         err.to_string()
             .ends_with("is a directory; pgo writes only regular files (use - for stdout)")

@@ -49,87 +49,29 @@
 pub use nalgebra;
 
 pub mod geometry;
+pub mod output;
 pub mod report;
 
 mod certify;
-
 mod covariance;
 mod error;
+mod gate;
+mod graph;
 #[cfg(test)]
 mod internal_examples;
+mod io;
+mod job;
+mod linear;
 mod options;
 mod pose_graph;
-mod solution;
-
-// The modules below are the library's inside. The `pgo` binary
-// (src/main.rs, a crate of its own) still reaches into those it uses until
-// its arguments are derived from [`Options`], and the simulator's graphs are
-// the inside's: with the `cli` or `simulate` feature they are public but
-// hidden from the documentation (so their links into the private ones go
-// nowhere, and are allowed to) and carry no stability promise; without
-// them they are private.
-#[cfg(any(feature = "cli", feature = "simulate"))]
-#[doc(hidden)]
-#[allow(rustdoc::private_intra_doc_links)]
-pub mod gate;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
-#[allow(dead_code, unused_imports)]
-mod gate;
-#[cfg(any(feature = "cli", feature = "simulate"))]
-#[doc(hidden)]
-#[allow(rustdoc::private_intra_doc_links)]
-pub mod graph;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
-#[allow(dead_code, unused_imports)]
-mod graph;
-#[cfg(any(feature = "cli", feature = "simulate"))]
-#[doc(hidden)]
-#[allow(rustdoc::private_intra_doc_links)]
-pub mod io;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
-#[allow(dead_code, unused_imports)]
-mod io;
-#[cfg(any(feature = "cli", feature = "simulate"))]
-#[doc(hidden)]
-#[allow(rustdoc::private_intra_doc_links)]
-pub mod pipeline;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
-#[allow(dead_code, unused_imports)]
-mod pipeline;
-#[cfg(any(feature = "cli", feature = "simulate"))]
-#[doc(hidden)]
-#[allow(rustdoc::private_intra_doc_links)]
-pub mod robust;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
-#[allow(dead_code, unused_imports)]
 mod robust;
 #[cfg(feature = "simulate")]
 #[doc(hidden)]
 #[allow(rustdoc::private_intra_doc_links)]
 pub mod simulate;
-#[cfg(any(feature = "cli", feature = "simulate"))]
-#[doc(hidden)]
-#[allow(rustdoc::private_intra_doc_links)]
-pub mod solve;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
-#[allow(dead_code, unused_imports)]
+mod solution;
 mod solve;
-#[cfg(any(feature = "cli", feature = "simulate"))]
-#[doc(hidden)]
-#[allow(rustdoc::private_intra_doc_links)]
-pub mod stats;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
-#[allow(dead_code, unused_imports)]
 mod stats;
-
-#[allow(dead_code, unused_imports)]
-mod linear;
-#[cfg(feature = "plot")]
-#[cfg_attr(not(feature = "cli"), allow(dead_code))]
-mod plot;
-#[cfg(not(feature = "plot"))]
-#[path = "plot_disabled.rs"]
-mod plot;
 
 pub use certify::{
     Certificate, CertificateTime, CertifyError, ETA_RELATIVE as CERTIFICATE_ETA_RELATIVE,
@@ -137,18 +79,20 @@ pub use certify::{
 };
 pub use covariance::{AnyCovariances, Covariances};
 pub use error::{Error, ErrorKind, InformationProblem, PoseProblem, Setting};
-pub use gate::{DegeneratePolicy, GateMode};
+pub use gate::{
+    Component, DegeneratePolicy, Degeneracy, GateMode, LogNormalMixture, MixtureOptions, Threshold,
+    ThresholdFit, learn_threshold,
+};
 pub use geometry::{Pose, Se2, Se3};
 pub use graph::{INFORMATION_RANGE, VertexId};
 pub use io::g2o::{LineProblem, ReadError};
 pub use options::{
-    ExpertOptions, GateOptions, MAX_THREADS, MAX_TIME_LIMIT_S, Options, ROBUST_C_RANGE,
+    CandidateRule, ExpertOptions, GateOptions, MAX_THREADS, MAX_TIME_LIMIT_S, Options, ROBUST_C_RANGE,
     RobustOptions, SolverOptions, TestOptions,
 };
-pub use pipeline::CandidateRule;
-pub use pose_graph::{AnyPoseGraph, GraphPose, PoseGraph, PoseGraph2, PoseGraph3};
+pub use pose_graph::{AnyPoseGraph, Edge, GraphPose, PoseGraph, PoseGraph2, PoseGraph3};
 pub use report::{DecisionChange, IncrementalReport, UpdateSolve};
-pub use robust::RobustMethod;
+pub use robust::{LoopModel, RobustMethod};
 pub use solution::{AnySolution, LoopDecision, Reason, Solution};
 pub use solve::Method as SolverMethod;
 pub use solve::init::Initialization;

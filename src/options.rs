@@ -8,7 +8,6 @@
 
 use crate::error::Error;
 use crate::gate::{DegeneratePolicy, GateMode};
-use crate::pipeline::CandidateRule;
 use crate::robust::{Layers, RobustMethod};
 use crate::solve::Method;
 use crate::solve::init::Initialization;
@@ -49,29 +48,29 @@ pub const ROBUST_C_RANGE: std::ops::RangeInclusive<f64> = 1e-100..=1e100;
 /// # Ok::<(), pgo::Error>(())
 /// ```
 #[derive(Clone, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "cli", derive(clap::Args))]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct Options {
     /// The geometric-verification gate.
-    #[cfg_attr(feature = "cli", command(flatten))]
+    #[cfg_attr(feature = "clap", command(flatten))]
     pub gate: GateOptions,
     /// The robust weighting of the loop candidates the gate passes.
-    #[cfg_attr(feature = "cli", command(flatten))]
+    #[cfg_attr(feature = "clap", command(flatten))]
     pub robust: RobustOptions,
     /// The nonlinear least-squares solver.
-    #[cfg_attr(feature = "cli", command(flatten))]
+    #[cfg_attr(feature = "clap", command(flatten))]
     pub solver: SolverOptions,
     /// The χ² test of the result.
-    #[cfg_attr(feature = "cli", command(flatten))]
+    #[cfg_attr(feature = "clap", command(flatten))]
     pub test: TestOptions,
     /// Switches of the robust layers under review; no stability promise.
     #[doc(hidden)]
-    #[cfg_attr(feature = "cli", command(flatten))]
+    #[cfg_attr(feature = "clap", command(flatten))]
     pub expert: ExpertOptions,
 }
 
 /// How loop candidates are gated by their inlier counts.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "cli", derive(clap::Args))]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct GateOptions {
     /// Loop-candidate gate: `auto` learns T_GV from the inlier counts and
     /// drops candidates below it; `soft` drops nothing but gives each
@@ -79,7 +78,7 @@ pub struct GateOptions {
     /// `off` keeps every candidate; a number N keeps candidates with
     /// count ≥ N.
     #[cfg_attr(
-        feature = "cli",
+        feature = "clap",
         arg(id = "gate", long = "gate", value_name = "auto|soft|off|N", default_value = "auto",
             value_parser = parse_gate)
     )]
@@ -87,14 +86,14 @@ pub struct GateOptions {
     /// What the learned gate does when the counts do not show two
     /// components.
     #[cfg_attr(
-        feature = "cli",
+        feature = "clap",
         arg(long, default_value = "keep-all", value_parser = clap_choice::<DegeneratePolicy>())
     )]
     pub degenerate: DegeneratePolicy,
     /// Which edges are loop candidates: those with an inlier count, or also
     /// every edge between non-consecutive ids.
     #[cfg_attr(
-        feature = "cli",
+        feature = "clap",
         arg(long, default_value = "counted", value_parser = clap_choice::<CandidateRule>())
     )]
     pub candidates: CandidateRule,
@@ -102,11 +101,11 @@ pub struct GateOptions {
 
 /// The robust weighting of the loop candidates that pass the gate.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "cli", derive(clap::Args))]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct RobustOptions {
     /// Robust weighting of the loop candidates that pass the gate.
     #[cfg_attr(
-        feature = "cli",
+        feature = "clap",
         arg(id = "robust", long = "robust", default_value = "em", value_parser = clap_choice::<RobustMethod>())
     )]
     pub method: RobustMethod,
@@ -115,7 +114,7 @@ pub struct RobustOptions {
     /// √χ²_D(0.99) (3.368 / 4.100); huber and cauchy √χ²_D(0.95) (2.796 /
     /// 3.548); dcs 1 (Φ = 1).
     #[cfg_attr(
-        feature = "cli",
+        feature = "clap",
         arg(id = "robust-c", long = "robust-c", value_name = "C", value_parser = parse_robust_c)
     )]
     pub c: Option<f64>,
@@ -123,18 +122,18 @@ pub struct RobustOptions {
 
 /// The nonlinear least-squares solver.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "cli", derive(clap::Args))]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct SolverOptions {
     /// Nonlinear least-squares method: lm (Levenberg–Marquardt) or gn
     /// (Gauss–Newton).
     #[cfg_attr(
-        feature = "cli",
+        feature = "clap",
         arg(id = "solver", long = "solver", default_value = "lm", value_parser = clap_choice::<Method>())
     )]
     pub method: Method,
     /// Initial guess.
     #[cfg_attr(
-        feature = "cli",
+        feature = "clap",
         arg(long, default_value = "chordal", value_parser = clap_choice::<Initialization>())
     )]
     pub init: Initialization,
@@ -142,7 +141,7 @@ pub struct SolverOptions {
     /// Without it, each solve stops after 100 and the robust rounds are
     /// bounded by their own limits.
     #[cfg_attr(
-        feature = "cli",
+        feature = "clap",
         arg(id = "max-iters", long = "max-iters", value_name = "N", value_parser = parse_max_iters)
     )]
     pub max_iterations: Option<usize>,
@@ -150,14 +149,14 @@ pub struct SolverOptions {
     /// between iterations; initialisation not counted) and return the best
     /// estimate so far.
     #[cfg_attr(
-        feature = "cli",
+        feature = "clap",
         arg(id = "time-limit", long = "time-limit", value_name = "SECONDS", value_parser = parse_time_limit)
     )]
     pub time_limit: Option<Duration>,
     /// Threads: 0 (the default) and 1 optimise in one thread, which was the
     /// fastest on a 2-core machine shared with other work; N > 1 (at most
     /// 256) uses N.
-    #[cfg_attr(feature = "cli", arg(long, default_value = "0", value_parser = parse_threads))]
+    #[cfg_attr(feature = "clap", arg(long, default_value = "0", value_parser = parse_threads))]
     pub threads: usize,
     /// Most iterations of each solve in an incremental update
     /// ([`crate::PoseGraph::update`]), at least 1, for a bounded time per
@@ -173,22 +172,22 @@ pub struct SolverOptions {
     /// judges each by its innovation at the optimum). Without it every
     /// update converges to the map a batch job would find. `pgo optimize`
     /// has no use for it.
-    #[cfg_attr(feature = "cli", arg(skip))]
+    #[cfg_attr(feature = "clap", arg(skip))]
     pub update_iterations: Option<usize>,
 }
 
 /// The χ² goodness-of-fit test of the result.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "cli", derive(clap::Args))]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct TestOptions {
     /// Significance level of the χ² test of the result, in (0, 1).
-    #[cfg_attr(feature = "cli", arg(long, default_value = "0.05", value_parser = parse_alpha))]
+    #[cfg_attr(feature = "clap", arg(long, default_value = "0.05", value_parser = parse_alpha))]
     pub alpha: f64,
     /// Degrees of freedom of the χ² test: residual (Σ edge dimensions −
     /// free pose parameters) or constraints (number of edges, as in the
     /// paper).
     #[cfg_attr(
-        feature = "cli",
+        feature = "clap",
         arg(long, default_value = "residual", value_parser = clap_choice::<DofConvention>())
     )]
     pub dof: DofConvention,
@@ -207,12 +206,12 @@ impl Default for TestOptions {
 /// hidden from the documentation, no stability promise.
 #[doc(hidden)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "cli", derive(clap::Args))]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct ExpertOptions {
     /// EM: switch layers off, `no-LAYER,…` with LAYER one of annealing,
     /// decisions, clusters, aliasing, populations, search.
     #[cfg_attr(
-        feature = "cli",
+        feature = "clap",
         arg(id = "expert", long = "expert", value_name = "no-LAYER,…", hide = true, default_value = "", value_parser = Layers::parse)
     )]
     pub layers: Layers,
@@ -325,6 +324,19 @@ const SETTERS: &[Setter] = &[
         },
     },
 ];
+
+/// Which edges are loop-closure candidates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CandidateRule {
+    /// Edges with an inlier count (in the file or the `--inliers` CSV).
+    #[default]
+    Counted,
+    /// Also every edge between non-consecutive ids (|i − j| ≠ 1), with or
+    /// without a count: robust weighting applies to them, gating only to
+    /// those with a count.
+    NonSequential,
+}
 
 impl Options {
     /// Sets one option by the long flag `pgo optimize` spells it with,
@@ -508,7 +520,7 @@ fn choice<T: Choice>(text: &str) -> Result<T, String> {
 
 /// clap's parser of an enum option: its possible values with their help
 /// (listed by `--help`), each mapped by [`choice`].
-#[cfg(feature = "cli")]
+#[cfg(feature = "clap")]
 fn clap_choice<T: Choice>() -> impl clap::builder::TypedValueParser<Value = T> {
     use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
     let values = T::CHOICES

@@ -4,19 +4,23 @@
 //! that was built is a graph the job can run on.
 
 use crate::error::{Error, InformationProblem, PoseProblem};
-use crate::geometry::{Pose, Se2, Se3};
+use crate::geometry::{Pose, Se2, Se3, dimension};
 use crate::graph::{self, LoopCandidate, VertexId};
-use crate::io::g2o::{self, ReadOptions, ReadSummary};
+use crate::io::g2o::{self, FileText, ReadOptions, ReadSummary};
 use crate::options::Options;
-use crate::pipeline::{self, OptimizeConfig, PipelineError, Warm};
+use crate::io::g2o::G2oPose;
+use crate::job::{self, Settings, Warm};
 use crate::report::{IncrementalReport, Report, UpdateSolve};
 use crate::solution::{AnySolution, Solution};
 use crate::solve::{IterationRecord, Observer, StopReason};
 use nalgebra::SMatrix;
-use sealed::Sealed;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
+
+mod edges;
+pub use edges::Edge;
 
 /// What [`Report::input`] says of a graph that was not read from a file.
 pub(crate) const IN_MEMORY: &str = "(in memory)";
@@ -40,8 +44,6 @@ pub(crate) mod sealed {
         fn checked(&self) -> Result<Self, crate::error::PoseProblem>;
         /// The pose from its g2o numbers (`x y θ` or `x y z qx qy qz qw`).
         fn from_numbers_checked(numbers: &[f64]) -> Result<Self, crate::error::PoseProblem>;
-        /// Its g2o numbers.
-        fn numbers(&self) -> Vec<f64>;
         /// The reader's graph, if it is of this pose type.
         fn unwrap(graph: crate::graph::AnyGraph) -> Option<crate::graph::Graph<Self, D>>;
     }
@@ -65,9 +67,6 @@ impl sealed::Sealed<3> for Se2 {
     fn from_numbers_checked(v: &[f64]) -> Result<Self, PoseProblem> {
         Se2::new(v[0], v[1], v[2]).checked()
     }
-    fn numbers(&self) -> Vec<f64> {
-        vec![self.x, self.y, self.theta]
-    }
     fn unwrap(graph: graph::AnyGraph) -> Option<graph::Graph<Self, 3>> {
         match graph {
             graph::AnyGraph::Planar(g) => Some(g),
@@ -87,10 +86,6 @@ impl sealed::Sealed<6> for Se3 {
         }
         Se3::from_translation_quaternion([v[0], v[1], v[2]], [v[3], v[4], v[5], v[6]])
             .ok_or(PoseProblem::ZeroQuaternion)
-    }
-    fn numbers(&self) -> Vec<f64> {
-        let t = self.translation;
-        [&[t.x, t.y, t.z][..], &self.quaternion_xyzw()].concat()
     }
     fn unwrap(graph: graph::AnyGraph) -> Option<graph::Graph<Self, 6>> {
         match graph {
@@ -154,6 +149,10 @@ pub struct PoseGraph<P: GraphPose<D>, const D: usize> {
     missing: Vec<usize>,
     /// The file it was read from, and what the reader noticed.
     source: Option<(PathBuf, ReadSummary)>,
+    /// The file's text, for writing the optimised map back line by line
+    /// ([`Solution::write_g2o`]); dropped when a pose, an edge or a fixed
+    /// pose is added.
+    text: Option<Arc<FileText>>,
     repair_information: bool,
     /// Information matrices repaired when edges were added.
     repaired: usize,
@@ -181,6 +180,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
             graph: graph::Graph::new(),
             missing: Vec::new(),
             source: None,
+            text: None,
             repair_information: false,
             repaired: 0,
             state: None,
@@ -207,6 +207,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     fn read(path: &Path, fix_information: bool) -> Result<Self, Error> {
         let file = g2o::read(path, ReadOptions { fix_information })?;
         in_range(&file.graph)?;
+        let text = Some(Arc::new(file.text().clone()));
         let found = file.graph.dimension();
         let graph = P::unwrap(file.graph).ok_or(Error::Dimension {
             expected: dimension::<D>(),
@@ -214,6 +215,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         })?;
         Ok(Self {
             graph,
+            text,
             missing: file.missing,
             source: Some((path.to_owned(), file.summary)),
             repair_information: fix_information,
@@ -299,8 +301,9 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
             .map_err(|problem| Error::InvalidPose { id, problem })?;
         self.graph
             .add_vertex(id, pose)
-            .map(|_| ())
-            .map_err(|_| Error::DuplicateVertex { id })
+            .map_err(|_| Error::DuplicateVertex { id })?;
+        self.text = None;
+        Ok(())
     }
 
     /// Adds a trusted edge (odometry, a prior, a verified loop): the pose of
@@ -360,9 +363,43 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         let (information, repaired) = checked_information(&information, self.repair_information)
             .map_err(|problem| Error::InvalidInformation { from, to, problem })?;
         self.repaired += usize::from(repaired);
-        self.graph
+        let index = (self.graph)
             .add_edge(from, to, measurement, information, candidate)
-            .map_err(|_| Error::UnknownVertex { id: from })
+            .map_err(|_| Error::UnknownVertex { id: from })?;
+        self.text = None;
+        Ok(index)
+    }
+
+    /// Gives loop candidates their inlier counts from a list kept apart
+    /// from the graph (`pgo optimize --inliers`): each `(from, to, count)`
+    /// goes to the next edge between `from` and `to` — in that direction,
+    /// else the other — in the order edges were added, which becomes a loop
+    /// candidate with that count. Returns how many of those edges already
+    /// had a count. A graph read from a file still writes the file's own
+    /// counts ([`Solution::write_g2o`]): the counts change the job, not the
+    /// file. Errors: [`Error::NoEdge`] naming the first entry without a
+    /// (further) edge, before any count is given.
+    pub fn set_inlier_counts(
+        &mut self,
+        counts: &[(VertexId, VertexId, u64)],
+    ) -> Result<usize, Error> {
+        let edges = self.graph.edges_of_pairs(counts.iter().map(|&(a, b, _)| (a, b)));
+        let edges = edges.map_err(|entry| Error::NoEdge {
+            from: counts[entry].0,
+            to: counts[entry].1,
+            entry,
+        })?;
+        let mut replaced = 0;
+        for (&k, &(_, _, inliers)) in edges.iter().zip(counts) {
+            let e = &mut self.graph.edges[k];
+            replaced += usize::from(e.candidate.is_some_and(|c| c.inliers.is_some()));
+            e.candidate = Some(LoopCandidate {
+                inliers: Some(inliers),
+            });
+        }
+        // Another job: the last solution is no start for the next.
+        self.state = None;
+        Ok(replaced)
     }
 
     /// Holds a pose fixed (part of the gauge). Without any, the first pose
@@ -371,6 +408,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         self.graph
             .fix(id)
             .map_err(|_| Error::UnknownVertex { id })?;
+        self.text = None;
         // Another gauge: the last solution is no start for the next.
         self.state = None;
         Ok(())
@@ -461,15 +499,18 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     ) -> Result<Solution<P>, Error> {
         let start = Instant::now();
         options.validate()?;
-        let (mut report, config) = self.start(options)?;
+        let mut report = self.start()?;
+        let config = Settings::new(options);
         let mut graph = self.graph.clone();
-        pipeline::optimize_graph(&mut graph, &self.missing, &config, &mut report, observer)
-            .map_err(from_pipeline)?;
+        let initial = job::run(&mut graph, &self.missing, &config, &mut report, observer)?;
         for w in &report.warnings {
             log::warn!("{w}");
         }
         report.time.total_s = start.elapsed().as_secs_f64();
-        Ok(Solution::new(&graph, report).keeping(graph, options.solver.threads))
+        Ok(Solution::new(&graph, report)
+            .with_text(self.text.clone())
+            .starting_from(initial)
+            .keeping(graph, options.solver.threads))
     }
 
     /// The job again after poses, edges or loop candidates were added, for
@@ -532,35 +573,39 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     ) -> Result<Solution<P>, Error> {
         let start = Instant::now();
         options.validate()?;
-        let (mut report, config) = self.start(options)?;
+        let mut report = self.start()?;
+        let config = Settings::new(options);
         let blank = report.clone();
+        let mut initial = None;
         let mut graph = self.graph.clone();
         let warm = match self.state.as_deref_mut() {
             Some((last, warm)) if last.same_job(options) => {
-                match pipeline::update_graph(&mut graph, warm, &config, &mut report, observer)
-                    .map_err(from_pipeline)?
-                {
+                match job::update_graph(&mut graph, warm, &config, &mut report, observer)? {
                     Some(next) => next,
                     None => {
                         // EM's decisions swung: the whole job instead.
                         graph = self.graph.clone();
                         report = blank;
-                        pipeline::optimize_graph(
+                        initial = Some(job::run(
                             &mut graph,
                             &self.missing,
                             &config,
                             &mut report,
                             observer,
-                        )
-                        .map_err(from_pipeline)?;
-                        report.incremental = Some(pipeline::after_swing(&graph, warm, &report));
+                        )?);
+                        report.incremental = Some(job::after_swing(&graph, warm, &report));
                         Warm::after(&graph, &report, Default::default())
                     }
                 }
             }
             last => {
-                pipeline::optimize_graph(&mut graph, &self.missing, &config, &mut report, observer)
-                    .map_err(from_pipeline)?;
+                initial = Some(job::run(
+                    &mut graph,
+                    &self.missing,
+                    &config,
+                    &mut report,
+                    observer,
+                )?);
                 report.incremental = Some(IncrementalReport {
                     solve: UpdateSolve::Batch,
                     reason: if last.is_some() {
@@ -584,7 +629,11 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
             log::warn!("{w}");
         }
         report.time.total_s = start.elapsed().as_secs_f64();
-        Ok(Solution::new(&graph, report).keeping(graph, options.solver.threads))
+        let mut solution = Solution::new(&graph, report).with_text(self.text.clone());
+        if let Some(initial) = initial {
+            solution = solution.starting_from(initial);
+        }
+        Ok(solution.keeping(graph, options.solver.threads))
     }
 
     /// Drops what [`PoseGraph::update`] keeps: the next update runs the
@@ -593,8 +642,8 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         self.state = None;
     }
 
-    /// The report before the job, and the job's configuration.
-    fn start(&self, options: &Options) -> Result<(Report, OptimizeConfig), Error> {
+    /// The report before the job.
+    fn start(&self) -> Result<Report, Error> {
         if self.is_empty() {
             return Err(Error::EmptyGraph);
         }
@@ -610,7 +659,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
                 self.repaired
             ));
         }
-        Ok((report, OptimizeConfig::from_options(input, options)))
+        Ok(report)
     }
 }
 
@@ -626,30 +675,6 @@ fn trace(r: &IterationRecord) {
     )
 }
 
-/// The dimension (2 or 3) of poses with `D` degrees of freedom.
-pub(crate) const fn dimension<const D: usize>() -> usize {
-    if D == 3 { 2 } else { 3 }
-}
-
-/// The error of the in-memory job for one of the file job's.
-fn from_pipeline(e: PipelineError) -> Error {
-    match e {
-        PipelineError::Read(e) => Error::Read(e),
-        PipelineError::Solve { source, .. } => source.into(),
-        PipelineError::NonFiniteEdge { edge, from, to, .. } => Error::NonFiniteEdge {
-            edge: edge.saturating_sub(1),
-            from,
-            to,
-        },
-        PipelineError::NonFiniteResult { .. } => Error::NonFinite,
-        PipelineError::Information {
-            from, to, problem, ..
-        } => Error::InvalidInformation { from, to, problem },
-        PipelineError::Write { path, source } => Error::Write { path, source },
-        // No inlier CSV and no pictures in memory: not reached.
-        other => Error::Internal(other.to_string()),
-    }
-}
 
 /// Refuses a graph read from a file whose information matrices leave
 /// [`graph::INFORMATION_RANGE`] (the reader takes any finite scale).
@@ -788,12 +813,14 @@ impl AnyPoseGraph {
             },
         )?;
         in_range(&file.graph)?;
+        let text = Some(Arc::new(file.text().clone()));
         let source = Some((path.to_owned(), file.summary));
         Ok(match file.graph {
             graph::AnyGraph::Planar(graph) => Self::Planar(PoseGraph {
                 graph,
                 missing: file.missing,
                 source,
+                text,
                 repair_information: fix,
                 repaired: 0,
                 state: None,
@@ -802,6 +829,7 @@ impl AnyPoseGraph {
                 graph,
                 missing: file.missing,
                 source,
+                text,
                 repair_information: fix,
                 repaired: 0,
                 state: None,
@@ -978,6 +1006,14 @@ impl AnyPoseGraph {
     /// See [`PoseGraph::forget`].
     pub fn forget(&mut self) {
         either!(self, |g| g.forget())
+    }
+
+    /// See [`PoseGraph::set_inlier_counts`].
+    pub fn set_inlier_counts(
+        &mut self,
+        counts: &[(VertexId, VertexId, u64)],
+    ) -> Result<usize, Error> {
+        either!(self, |g| g.set_inlier_counts(counts))
     }
 }
 

@@ -5,7 +5,7 @@
 use crate::gate::GateDecision;
 use crate::geometry::Pose;
 use crate::graph::VertexId;
-use crate::io::g2o::{G2oFile, ReadSummary};
+use crate::io::g2o::ReadSummary;
 use crate::linear::BlockSystem;
 use crate::solve::{Method, Summary};
 use serde::Serialize;
@@ -189,7 +189,7 @@ pub struct GateReport {
     /// The whole fit, for pictures (not serialised: `mixture` and
     /// `separation` carry its numbers).
     #[serde(skip)]
-    pub(crate) fit: Option<crate::gate::ThresholdFit>,
+    pub fit: Option<crate::gate::ThresholdFit>,
     /// BIC, Ashman's D and the loop component's size.
     pub separation: Option<Separation>,
     /// Candidates kept.
@@ -461,15 +461,8 @@ impl Default for OptimizerReport {
     }
 }
 
-impl Report {
-    /// A report of what was read, before anything ran.
-    pub(crate) fn new(input: &Path, file: &G2oFile) -> Self {
-        match &file.graph {
-            crate::graph::AnyGraph::Planar(g) => Self::for_graph(input, g, &file.summary),
-            crate::graph::AnyGraph::Spatial(g) => Self::for_graph(input, g, &file.summary),
-        }
-    }
 
+impl Report {
     /// A report of a graph (read from `input`, with what the reader
     /// noticed, or built in memory), before anything ran.
     pub(crate) fn for_graph<P: Pose<D>, const D: usize>(
@@ -480,7 +473,7 @@ impl Report {
         Self {
             input: input.display().to_string(),
             output: None,
-            dimension: crate::pose_graph::dimension::<D>(),
+            dimension: crate::geometry::dimension::<D>(),
             poses: graph.num_vertices(),
             edges: graph.edges.len(),
             loop_candidates: graph.num_candidates(),

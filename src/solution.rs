@@ -6,13 +6,15 @@ use crate::covariance::{self, AnyCovariances, Covariances};
 use crate::error::Error;
 use crate::geometry::{Pose, Se2, Se3};
 use crate::graph::{self, VertexId};
-use crate::pose_graph::sealed::Sealed;
+use crate::io::g2o::{self, FileText, G2oPose};
 use crate::report::{IncrementalReport, Report};
 pub use crate::robust::Reason;
 use crate::solve::StopReason;
 use crate::stats::Chi2Test;
 use std::any::Any;
 use std::collections::HashMap;
+use std::io::{self, Write};
+use std::path::Path;
 use std::sync::Arc;
 
 /// The result of [`crate::PoseGraph::optimize`].
@@ -34,6 +36,11 @@ pub struct Solution<P> {
     solved: Option<Arc<dyn Any + Send + Sync>>,
     /// The job's `--threads`, for the covariances' factorisation.
     threads: usize,
+    /// The poses the solve started from, when the whole job ran.
+    initial: Option<Vec<P>>,
+    /// The text of the file the graph was read from, for
+    /// [`Solution::write_g2o`].
+    text: Option<Arc<FileText>>,
 }
 
 /// How the job decided one loop candidate. Serialised (with the `json`
@@ -119,7 +126,51 @@ impl<P> Solution<P> {
             report,
             solved: None,
             threads: 0,
+            initial: None,
+            text: None,
         }
+    }
+
+    /// This solution, written back into the text of the file its graph was
+    /// read from (when there is one) by [`Solution::write_g2o`].
+    pub(crate) fn with_text(mut self, text: Option<Arc<FileText>>) -> Self {
+        self.text = text;
+        self
+    }
+
+    /// The optimised map as g2o text on `out`: the file's own text with
+    /// the new poses, or the graph's lines ([`Solution::write_g2o`]).
+    fn write_lines<const D: usize>(&self, out: &mut impl Write) -> io::Result<()>
+    where
+        P: G2oPose<D>,
+    {
+        let graph = (self.solved.clone())
+            .and_then(|g| g.downcast::<graph::Graph<P, D>>().ok())
+            .ok_or_else(|| io::Error::other("the solution holds no graph"))?;
+        match &self.text {
+            Some(text) => Ok(text.rewrite(&graph, out)?),
+            None => g2o::write_graph(&graph, out),
+        }
+    }
+
+    /// [`Solution::write_g2o`] for either pose type.
+    fn write_file<const D: usize>(&self, path: &Path) -> Result<(), Error>
+    where
+        P: G2oPose<D>,
+    {
+        crate::io::write_atomically(path, |w| self.write_lines(w)).map_err(|source| {
+            Error::Write {
+                path: path.to_owned(),
+                source,
+            }
+        })
+    }
+
+    /// This solution, with the poses its solve started from (`initial`,
+    /// in the graph's order).
+    pub(crate) fn starting_from(mut self, initial: Vec<P>) -> Self {
+        self.initial = Some(initial);
+        self
     }
 
     /// This solution, keeping the solved `graph` (moved, not copied) for
@@ -223,6 +274,15 @@ impl<P> Solution<P> {
         self.report.optimizer.stop_reason == StopReason::Cancelled
     }
 
+    /// The initial guess the solve started from ([`crate::Initialization`]),
+    /// each pose with its id, in the order the poses were added. `None`
+    /// for an update ([`crate::PoseGraph::update`]) that resumed from the
+    /// last map instead of running the whole job.
+    pub fn initial_guess(&self) -> Option<impl ExactSizeIterator<Item = (VertexId, &P)>> {
+        let initial = self.initial.as_ref()?;
+        Some(self.ids.iter().copied().zip(initial))
+    }
+
     /// The report `pgo optimize --json` prints.
     pub fn report(&self) -> &Report {
         &self.report
@@ -235,6 +295,39 @@ impl<P> Solution<P> {
 }
 
 impl Solution<Se2> {
+    /// Writes the optimised map as a g2o file, atomically (a temporary file
+    /// renamed over `path`; `-` is the standard output). A graph read from
+    /// a file, with no pose, edge or fixed pose added since, is written as
+    /// that file's own text with the new poses — every other line byte for
+    /// byte, a vertex line added for each vertex no line defined: what
+    /// `pgo optimize -o` writes. Any other graph is written as
+    /// [`crate::PoseGraph::write_g2o`] writes it, with the optimised poses.
+    /// Errors: [`Error::Write`] (the file cannot be written, or the input
+    /// file changed on disk since it was read; nothing is replaced then).
+    ///
+    /// ```
+    /// use pgo::nalgebra::Matrix3;
+    /// use pgo::{Options, PoseGraph2, Se2};
+    ///
+    /// let mut graph = PoseGraph2::new();
+    /// for k in 0..3 {
+    ///     graph.add_pose(k, Se2::new(0.0, 0.0, 0.0))?;
+    /// }
+    /// for k in 1..3 {
+    ///     graph.add_edge(k - 1, k, Se2::new(1.0, 0.0, 0.0), Matrix3::identity())?;
+    /// }
+    /// let solution = graph.optimize(&Options::default())?;
+    /// let path = std::env::temp_dir().join(format!("pgo-doc-{}.g2o", std::process::id()));
+    /// solution.write_g2o(&path)?;
+    /// let map = PoseGraph2::read_g2o(&path)?;
+    /// assert!((map.pose(2).unwrap().x - 2.0).abs() < 1e-9);
+    /// # std::fs::remove_file(&path).unwrap();
+    /// # Ok::<(), pgo::Error>(())
+    /// ```
+    pub fn write_g2o(&self, path: impl AsRef<Path>) -> Result<(), Error> {
+        self.write_file(path.as_ref())
+    }
+
     /// A certificate of global optimality of the map over its edges
     /// (trusted edges and accepted loops): the map refined on SE-Sync's
     /// isotropic problem (one rotation and one translation weight per edge
@@ -273,6 +366,12 @@ impl Solution<Se2> {
 }
 
 impl Solution<Se3> {
+    /// Writes the optimised map as a g2o file; see
+    /// [`Solution::<Se2>::write_g2o`](Solution#method.write_g2o).
+    pub fn write_g2o(&self, path: impl AsRef<Path>) -> Result<(), Error> {
+        self.write_file(path.as_ref())
+    }
+
     /// A certificate of global optimality of the map over its edges; see
     /// [`Solution::<Se2>::certificate`](Solution#method.certificate).
     pub fn certificate(&self) -> Result<Certificate, Error> {
@@ -307,7 +406,7 @@ impl AnySolution {
     /// The g2o numbers of the optimised pose with this id (`x y θ` or
     /// `x y z qx qy qz qw`).
     pub fn pose(&self, id: VertexId) -> Option<Vec<f64>> {
-        either!(self, |s| s.pose(id).map(Sealed::numbers))
+        either!(self, |s| s.pose(id).map(G2oPose::numbers))
     }
 
     /// 2 or 3.
@@ -349,7 +448,7 @@ impl AnySolution {
     /// # Ok::<(), pgo::Error>(())
     /// ```
     pub fn poses_flat(&self) -> Vec<f64> {
-        either!(self, |s| s.poses.iter().flat_map(Sealed::numbers).collect())
+        either!(self, |s| s.poses.iter().flat_map(G2oPose::numbers).collect())
     }
 
     /// See [`Solution::loops`].
@@ -390,6 +489,11 @@ impl AnySolution {
     /// See [`Solution::certificate`](Solution#method.certificate).
     pub fn certificate(&self) -> Result<Certificate, Error> {
         either!(self, |s| s.certificate())
+    }
+
+    /// Writes the optimised map as a g2o file ([`Solution::write_g2o`]).
+    pub fn write_g2o(&self, path: impl AsRef<Path>) -> Result<(), Error> {
+        either!(self, |s| s.write_g2o(path))
     }
 
     /// See [`Solution::incremental`].

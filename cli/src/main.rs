@@ -3,21 +3,24 @@
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
 use clap::{Parser, Subcommand, ValueEnum};
-use pgo::io::console;
-use pgo::io::output::{CheckError, OutputError, check_files};
-use pgo::pipeline::{self, OptimizeConfig};
-use pgo::solve::IterationRecord;
-use pgo::solve::init::Initialization;
+use optimize::OptimizeArgs;
+use pgo::output::OutputError;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 /// A line on stderr, best effort: printing never panics (see
-/// [`pgo::io::console`]).
+/// [`console`]).
 macro_rules! say {
     ($($arg:tt)*) => {
-        console::err_line(format_args!($($arg)*))
+        $crate::console::err_line(format_args!($($arg)*))
     };
 }
+pub(crate) use say;
+
+mod console;
+mod inliers;
+mod optimize;
+mod plot;
 
 /// Pose-graph optimisation with unsupervised loop-closure gating.
 #[derive(Parser, Debug)]
@@ -288,58 +291,6 @@ struct GateArgs {
     json: bool,
 }
 
-#[derive(clap::Args, Debug)]
-struct OptimizeArgs {
-    /// Input g2o file (VERTEX_SE2/EDGE_SE2 or VERTEX_SE3:QUAT/EDGE_SE3:QUAT;
-    /// `-` reads stdin).
-    input: PathBuf,
-    /// Write the optimised graph here (atomically: temporary file, then
-    /// rename; `-` writes stdout).
-    #[arg(short, long, value_name = "OUT.g2o")]
-    output: Option<PathBuf>,
-    /// Write the optimised graph over the input file (every line it does not
-    /// change kept as it was).
-    #[arg(long, conflicts_with = "output")]
-    in_place: bool,
-    /// Inlier counts of loop candidates from a CSV file (from,to,inliers).
-    #[arg(long, value_name = "FILE")]
-    inliers: Option<PathBuf>,
-    /// Project information matrices that are not positive definite to the
-    /// nearest positive-definite ones instead of failing.
-    #[arg(long)]
-    fix_information: bool,
-    /// Write SVG pictures into this directory: counts.svg (histogram of the
-    /// normalised inlier counts with the fitted mixture and T_GV), loops.svg
-    /// (each candidate's innovation and prior against the loop model, with
-    /// the line where its posterior is ½) and trajectory.svg (before and
-    /// after, loops coloured by final weight).
-    #[arg(long, value_name = "DIR")]
-    plot: Option<PathBuf>,
-    /// Write every pose's marginal covariance here as CSV (atomically; `-`
-    /// writes stdout): a header, then per pose its id and its D×D
-    /// covariance row by row, D = 3 (x, y, theta) or 6 (x, y, z, rx, ry,
-    /// rz), perturbed on the right (in the pose's frame), from the map's
-    /// edges at the optimum with the fixed poses as the gauge (zeros). A
-    /// pose no edge in the map ties to them is left out, with a warning.
-    #[arg(long, value_name = "FILE.csv")]
-    covariances: Option<PathBuf>,
-    /// Everything the job itself can be told (the library's `Options`).
-    #[command(flatten)]
-    options: pgo::Options,
-    /// Print the JSON report on stdout.
-    #[arg(long)]
-    json: bool,
-    /// Certify the map: prove it the global optimum of SE-Sync's isotropic
-    /// problem over its edges (the report's "certificate"), or say why not.
-    #[arg(long)]
-    certify: bool,
-    /// Print nothing on stderr but errors.
-    #[arg(short, long)]
-    quiet: bool,
-    /// Print every iteration on stderr.
-    #[arg(short, long)]
-    verbose: bool,
-}
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -354,7 +305,7 @@ fn main() -> ExitCode {
         }
     };
     match cli.command {
-        Command::Optimize(args) => optimize(args),
+        Command::Optimize(args) => optimize::command(args),
         Command::Gate(args) => gate(args),
         Command::Simulate(args) => simulate(args),
         Command::Corrupt(args) => corrupt(args),
@@ -538,7 +489,7 @@ fn gate(args: GateArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let fit = pgo::gate::learn_threshold(&counts, &pgo::gate::MixtureOptions::default());
+    let fit = pgo::learn_threshold(&counts, &pgo::MixtureOptions::default());
     if args.json {
         match serde_json::to_string_pretty(&fit) {
             Ok(text) => {
@@ -582,170 +533,23 @@ fn gate(args: GateArgs) -> ExitCode {
 
 /// Counts from a g2o file (its candidates), a CSV or plain list, or stdin.
 fn read_counts(path: Option<&std::path::Path>) -> Result<Vec<u64>, String> {
-    use pgo::graph::AnyGraph;
+    let stdin = || {
+        inliers::read_counts(std::io::stdin().lock(), std::path::Path::new("<stdin>"))
+            .map_err(|e| e.to_string())
+    };
     match path {
-        None => {
-            pgo::io::inliers::read_counts(std::io::stdin().lock(), std::path::Path::new("<stdin>"))
-                .map_err(|e| e.to_string())
-        }
-        Some(p) if p.as_os_str() == "-" => {
-            pgo::io::inliers::read_counts(std::io::stdin().lock(), std::path::Path::new("<stdin>"))
-                .map_err(|e| e.to_string())
-        }
+        None => stdin(),
+        Some(p) if p.as_os_str() == "-" => stdin(),
         Some(p) if p.extension().is_some_and(|e| e == "g2o") => {
-            let file = pgo::io::g2o::read(p, Default::default()).map_err(|e| e.to_string())?;
-            let counts: Vec<u64> = match &file.graph {
-                AnyGraph::Planar(g) => g
-                    .edges
-                    .iter()
-                    .filter_map(|e| e.candidate.and_then(|c| c.inliers))
-                    .collect(),
-                AnyGraph::Spatial(g) => g
-                    .edges
-                    .iter()
-                    .filter_map(|e| e.candidate.and_then(|c| c.inliers))
-                    .collect(),
-            };
-            Ok(counts)
+            let graph = pgo::AnyPoseGraph::read_g2o(p).map_err(|e| e.to_string())?;
+            Ok(match &graph {
+                pgo::AnyPoseGraph::Planar(g) => g.edges().filter_map(|e| e.inliers).collect(),
+                pgo::AnyPoseGraph::Spatial(g) => g.edges().filter_map(|e| e.inliers).collect(),
+            })
         }
         Some(p) => {
             let f = std::fs::File::open(p).map_err(|e| format!("{}: {e}", p.display()))?;
-            pgo::io::inliers::read_counts(f, p).map_err(|e| e.to_string())
+            inliers::read_counts(f, p).map_err(|e| e.to_string())
         }
     }
-}
-
-/// The exit status of `pgo optimize` when the result fails its χ² test
-/// (the outputs are still written).
-const CHI2_FAILED_STATUS: u8 = 3;
-
-/// The exit status of `pgo optimize` stopped by Ctrl-C (128 + SIGINT, as
-/// shells report it; the outputs are still written).
-const INTERRUPTED_STATUS: u8 = 130;
-
-fn optimize(args: OptimizeArgs) -> ExitCode {
-    if let Err(message) = check_optimize_files(&args) {
-        say!("error: {message}");
-        return ExitCode::from(2);
-    }
-    let mut config = OptimizeConfig::from_options(&args.input, &args.options);
-    config.output = if args.in_place {
-        Some(args.input.clone())
-    } else {
-        args.output.clone()
-    };
-    config.inliers = args.inliers.clone();
-    config.fix_information = args.fix_information;
-    config.plot = args.plot.clone();
-    config.certify = args.certify;
-    config.covariances = args.covariances.clone();
-    let verbose = args.verbose && !args.quiet;
-    // Ctrl-C stops the optimisation between iterations; the best map so far
-    // is written and the exit status says it was interrupted.
-    let cancel = pgo::Cancel::new();
-    let on_interrupt = cancel.clone();
-    let _ = ctrlc::set_handler(move || on_interrupt.cancel());
-    let progress = |r: &IterationRecord| {
-        if verbose {
-            say!(
-                "iteration {:>3}: χ² {:.10e}  λ {:.1e}  rejected {}  |δ|∞ {:.2e}",
-                r.iteration,
-                r.objective,
-                r.lambda,
-                r.rejected,
-                r.step_max
-            );
-        }
-    };
-    let mut observer = pgo::Cancellable::new(cancel, progress);
-    match pipeline::run(&config, &mut observer) {
-        Ok(report) => {
-            if !args.quiet {
-                console::err(format_args!("{}", report.human_summary()));
-                if verbose {
-                    console::err(format_args!("{}\n", report.time_summary()));
-                }
-            }
-            if args.json {
-                match serde_json::to_string_pretty(&report) {
-                    Ok(text) => {
-                        if let Err(code) = print_result(&text) {
-                            return code;
-                        }
-                    }
-                    Err(e) => {
-                        say!("error: cannot serialise the report: {e}");
-                        return ExitCode::from(1);
-                    }
-                }
-            }
-            if report.optimizer.stop_reason == pgo::StopReason::Cancelled {
-                say!(
-                    "pgo: interrupted: the best map so far was written (exit status {INTERRUPTED_STATUS})"
-                );
-                return ExitCode::from(INTERRUPTED_STATUS);
-            }
-            if report.chi2_test.as_ref().is_some_and(|t| !t.passed) {
-                say!(
-                    "pgo: the χ² test FAILED: the map does not fit its measurements (exit status {CHI2_FAILED_STATUS})"
-                );
-                return ExitCode::from(CHI2_FAILED_STATUS);
-            }
-            ExitCode::SUCCESS
-        }
-        // `-o -`: a reader that went away (141, quietly), or a full stdout.
-        Err(pipeline::PipelineError::Write { path, source }) if path.as_os_str() == "-" => {
-            ExitCode::from(console::stdout_failure(&source))
-        }
-        Err(e) => {
-            say!("error: {e}");
-            ExitCode::from(e.exit_code() as u8)
-        }
-    }
-}
-
-/// [`check_files`] for `pgo optimize`: the input (`-`: stdin) and
-/// `--inliers` are read; `-o` is written, or with `--in-place` the input
-/// itself (which must then be a file), and `-o -` leaves stdout to the
-/// graph (no `--json`).
-fn check_optimize_files(args: &OptimizeArgs) -> Result<(), String> {
-    let mut inputs = vec![args.input.as_path()];
-    inputs.extend(args.inliers.as_deref());
-    let checked: Result<(), CheckError> = if args.in_place {
-        if args.input.as_os_str() == "-" {
-            return Err("--in-place needs an input file, not stdin (-)".into());
-        }
-        check_files(&inputs[1..], &[("--in-place", &args.input)])
-            .and_then(|_| check_files(&inputs, &[]))
-    } else {
-        match &args.output {
-            Some(o) if args.json && o.as_os_str() == "-" => {
-                return Err("-o - and --json both write to stdout: give -o a file".into());
-            }
-            Some(o) => check_files(&inputs, &[("-o", o)]),
-            None => check_files(&inputs, &[]),
-        }
-    };
-    checked.map_err(|e| e.to_string())?;
-    check_covariances_file(args, &inputs)
-}
-
-/// [`check_files`] for `--covariances`: an output of its own, beside `-o`
-/// (or the input, `--in-place`) and `--json` on stdout.
-fn check_covariances_file(args: &OptimizeArgs, inputs: &[&std::path::Path]) -> Result<(), String> {
-    let Some(path) = &args.covariances else {
-        return Ok(());
-    };
-    let mut outputs = vec![("--covariances", path.as_path())];
-    outputs.extend(args.output.as_deref().map(|o| ("-o", o)));
-    let inputs = if args.in_place {
-        outputs.push(("--in-place", args.input.as_path()));
-        &inputs[1..]
-    } else {
-        inputs
-    };
-    if args.json {
-        outputs.push(("--json", std::path::Path::new("-")));
-    }
-    check_files(inputs, &outputs).map_err(|e| e.to_string())
 }

@@ -295,22 +295,6 @@ pub(crate) fn certify<P: Lift<DIM>, const DIM: usize, const B: usize, const DOF:
     Ok(out)
 }
 
-/// The certificate of an optimised `graph`'s map, whose job's `report`
-/// says which loops were accepted.
-pub(crate) fn of_graph<
-    P: Lift<DIM> + crate::geometry::Pose<D>,
-    const DIM: usize,
-    const B: usize,
-    const DOF: usize,
-    const D: usize,
->(
-    graph: &graph::Graph<P, D>,
-    report: &Report,
-) -> Result<Certificate, CertifyError> {
-    let problem = Problem::of_graph(graph, report);
-    certify::<P, DIM, B, DOF>(&problem, &graph.poses, graph.ids())
-}
-
 /// Most poses [`Certificate::eigenvector_poses`] lists.
 const EIGENVECTOR_POSES: usize = 10;
 

@@ -8,22 +8,10 @@
 //! ones has no line (its covariance is unbounded) and is named in a
 //! warning. Numbers are written to round-trip exactly.
 
-use super::{Covariances, edges_in_map};
+use super::{AnyCovariances, Covariances};
 use crate::geometry::Pose;
-use crate::graph::{Graph, VertexId};
-use crate::solve::SolveError;
+use crate::graph::VertexId;
 use std::io::{self, Write};
-use std::path::Path;
-use std::sync::Arc;
-
-/// Why the covariances could not be written.
-#[derive(Debug)]
-pub(crate) enum CsvError {
-    /// `H` could not be factorised ([`Covariances::new`]).
-    Solve(SolveError),
-    /// The file could not be written.
-    Write(io::Error),
-}
 
 /// The names of the tangent's components, translation first.
 fn components(d: usize) -> &'static [&'static str] {
@@ -34,30 +22,27 @@ fn components(d: usize) -> &'static [&'static str] {
     }
 }
 
-/// Writes the covariances of the map `graph` (solved, with one `accepted`
-/// flag per loop candidate) to `path` atomically (`-`: stdout), factorised
-/// on `threads` threads. Returns the poses left out, whose covariance is
-/// unbounded.
-pub(crate) fn write_csv<P: Pose<D>, const D: usize>(
-    graph: Graph<P, D>,
-    accepted: impl IntoIterator<Item = bool>,
-    threads: usize,
-    path: &Path,
-) -> Result<Vec<VertexId>, CsvError> {
-    let in_map =
-        edges_in_map(&graph, accepted).ok_or(CsvError::Solve(SolveError::WeightCount {
-            weights: 0,
-            edges: graph.edges.len(),
-        }))?;
-    let covariances =
-        Covariances::new(Arc::new(graph), &in_map, threads).map_err(CsvError::Solve)?;
-    let mut unbounded = Vec::new();
-    crate::io::write_atomically(path, |w| {
-        unbounded = write_lines(&covariances, w)?;
-        Ok(())
-    })
-    .map_err(CsvError::Write)?;
-    Ok(unbounded)
+impl<P: Pose<D>, const D: usize> Covariances<P, D> {
+    /// Writes every pose's covariance as CSV to `out` (`pgo optimize
+    /// --covariances`): a header, then one line per pose in the graph's
+    /// order, its id and its `D×D` covariance row by row (columns
+    /// `id,x_x,x_y,x_theta,…` in 2D, `id,x_x,…,rz_rz` in 3D), numbers that
+    /// read back to the same bits. Returns the ids of the poses left out:
+    /// those no edge in the map ties to the fixed ones (their covariance
+    /// is unbounded).
+    pub fn write_csv(&self, out: &mut impl Write) -> io::Result<Vec<VertexId>> {
+        write_lines(self, out)
+    }
+}
+
+impl AnyCovariances {
+    /// See [`Covariances::write_csv`].
+    pub fn write_csv(&self, out: &mut impl Write) -> io::Result<Vec<VertexId>> {
+        match self {
+            Self::Planar(c) => c.write_csv(out),
+            Self::Spatial(c) => c.write_csv(out),
+        }
+    }
 }
 
 /// The header and one line per pose with a bounded covariance; returns the
@@ -97,8 +82,21 @@ fn write_lines<P: Pose<D>, const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::covariance::edges_in_map;
     use crate::geometry::Se2;
+    use crate::graph::Graph;
     use nalgebra::Matrix3;
+    use std::sync::Arc;
+
+    /// The CSV of the covariances of `graph` with one `accepted` flag per
+    /// loop candidate, and the poses left out.
+    fn csv(graph: Graph<Se2, 3>, accepted: &[bool]) -> (String, Vec<VertexId>) {
+        let in_map = edges_in_map(&graph, accepted.iter().copied()).unwrap();
+        let covariances = Covariances::new(Arc::new(graph), &in_map, 1).unwrap();
+        let mut out = Vec::new();
+        let unbounded = covariances.write_csv(&mut out).unwrap();
+        (String::from_utf8(out).unwrap(), unbounded)
+    }
 
     #[test]
     fn one_line_per_bounded_pose_row_by_row() {
@@ -114,11 +112,8 @@ mod tests {
         graph.add_edge(11, 12, step, info, None).unwrap();
         let candidate = Some(crate::graph::LoopCandidate { inliers: Some(3) });
         graph.add_edge(12, 13, step, info, candidate).unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("cov.csv");
-        let unbounded = write_csv(graph, [false], 1, &path).unwrap();
+        let (text, unbounded) = csv(graph, &[false]);
         assert_eq!(unbounded, [13]);
-        let text = std::fs::read_to_string(&path).unwrap();
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(
             lines[0],
@@ -143,9 +138,5 @@ mod tests {
             [12.0, 0.5, 0.0, 0.0, 0.0, 0.51, 0.01, 0.0, 0.01, 0.02],
         );
         assert_eq!(lines.len(), 4);
-        // A candidate flag short: refused, nothing written.
-        let graph = Graph::<Se2, 3>::new();
-        assert!(write_csv(graph, [true], 1, &dir.path().join("no.csv")).is_err());
-        assert!(!dir.path().join("no.csv").exists());
     }
 }

@@ -338,3 +338,8 @@ mod tests {
         assert!((skew(&a) * b - a.cross(&b)).norm() < 1e-15);
     }
 }
+
+/// The dimension (2 or 3) of poses with `D` degrees of freedom.
+pub(crate) const fn dimension<const D: usize>() -> usize {
+    if D == 3 { 2 } else { 3 }
+}

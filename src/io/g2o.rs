@@ -264,13 +264,25 @@ pub struct G2oFile {
     records: Vec<Record>,
     /// Original text of mixture edges, by edge index (written back as read).
     mixture_lines: HashMap<usize, String>,
+    /// What the rewrite needs of the text.
+    text: FileText,
+}
+
+/// What the line-preserving rewrite ([`FileText::rewrite`]) needs of the
+/// file a graph was read from: its name, a fingerprint of the text that was
+/// parsed, the text itself (to be read again), and which vertices no line
+/// defined.
+#[derive(Clone, Debug, Default)]
+pub struct FileText {
     /// The input's name in messages.
     name: PathBuf,
     /// What the text that was parsed looked like.
     fingerprint: Fingerprint,
-    /// The text, to be read again for [`G2oFile::rewrite`] (`None` when it
-    /// was read from memory by [`read_from`]).
+    /// The text, to be read again (`None` when it was read from memory by
+    /// [`read_from`]).
     original: Option<Arc<Original>>,
+    /// Indices of the vertices that no line defined.
+    missing: Vec<usize>,
 }
 
 /// The g2o tags and pose syntax of one pose type.
@@ -285,8 +297,13 @@ pub trait G2oPose<const D: usize>: Pose<D> {
     const POSE_NUMBERS: usize;
     /// A pose from its numbers.
     fn from_numbers(v: &[f64]) -> Result<Self, LineProblem>;
+    /// The pose's numbers as a g2o line has them (`x y θ` or `x y z qx qy
+    /// qz qw`).
+    fn numbers(&self) -> Vec<f64>;
     /// Appends the pose's numbers, space-separated, shortest round-trip form.
-    fn write_numbers(&self, out: &mut String);
+    fn write_numbers(&self, out: &mut String) {
+        push_numbers(out, &self.numbers());
+    }
     /// Wraps the graph into [`AnyPoseGraph`].
     fn wrap(graph: Graph<Self, D>) -> AnyGraph;
 }
@@ -299,8 +316,8 @@ impl G2oPose<3> for Se2 {
     fn from_numbers(v: &[f64]) -> Result<Self, LineProblem> {
         Ok(Se2::new(v[0], v[1], v[2]))
     }
-    fn write_numbers(&self, out: &mut String) {
-        push_numbers(out, &[self.x, self.y, self.theta]);
+    fn numbers(&self) -> Vec<f64> {
+        vec![self.x, self.y, self.theta]
     }
     fn wrap(graph: Graph<Self, 3>) -> AnyGraph {
         AnyGraph::Planar(graph)
@@ -316,10 +333,10 @@ impl G2oPose<6> for Se3 {
         Se3::from_translation_quaternion([v[0], v[1], v[2]], [v[3], v[4], v[5], v[6]])
             .ok_or(LineProblem::ZeroQuaternion)
     }
-    fn write_numbers(&self, out: &mut String) {
+    fn numbers(&self) -> Vec<f64> {
         let t = self.translation;
         let q = self.quaternion_xyzw();
-        push_numbers(out, &[t.x, t.y, t.z, q[0], q[1], q[2], q[3]]);
+        vec![t.x, t.y, t.z, q[0], q[1], q[2], q[3]]
     }
     fn wrap(graph: Graph<Self, 6>) -> AnyGraph {
         AnyGraph::Spatial(graph)
@@ -346,7 +363,7 @@ pub fn read(path: &Path, options: ReadOptions) -> Result<G2oFile, ReadError> {
     let name = input.name().to_owned();
     let mut lines = LineReader::new(input, MAX_LINE_BYTES);
     let mut file = parse(&mut lines, &name, options)?;
-    file.original = Some(Arc::new(lines.into_inner().into_original()));
+    file.text.original = Some(Arc::new(lines.into_inner().into_original()));
     Ok(file)
 }
 
@@ -394,8 +411,8 @@ fn parse<R: Read>(
         parser.line(line_no, line.text)?;
     }
     let mut file = parser.finish()?;
-    file.name = path.to_owned();
-    file.fingerprint = fingerprint.finish();
+    file.text.name = path.to_owned();
+    file.text.fingerprint = fingerprint.finish();
     Ok(file)
 }
 
@@ -769,13 +786,14 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
         self.records.shrink_to_fit();
         Ok(G2oFile {
             graph: P::wrap(self.graph),
+            text: FileText {
+                missing: missing.clone(),
+                ..FileText::default()
+            },
             missing,
             summary,
             records: self.records,
             mixture_lines: self.mixture_lines,
-            name: PathBuf::new(),
-            fingerprint: Fingerprint::default(),
-            original: None,
         })
     }
 }

@@ -4,14 +4,15 @@
 //! opens output files ([`output`]), and fallible printing for the command
 //! line ([`console`]).
 
-pub mod console;
+
 pub mod g2o;
-pub mod inliers;
-pub mod output;
+
+
 #[cfg(test)]
 mod roundtrip_tests;
 pub mod source;
 
+use crate::output;
 use std::fs;
 use std::io::{self, BufRead, BufReader, Read};
 use std::path::Path;
@@ -109,28 +110,7 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
-/// Writes an output file by the rules of [`output`] (atomic replacement of
-/// a regular file, `-` for stdout, links followed, devices refused): the
-/// same as [`output::write`], with the problem as an [`io::Error`] of the
-/// same kind that does not repeat the path (callers that name the path
-/// themselves use this one).
-///
-/// ```ignore
-/// let dir = tempfile::tempdir().unwrap();
-/// let path = dir.path().join("out.txt");
-/// pgo::io::write_atomically(&path, |w| {
-///     use std::io::Write;
-///     writeln!(w, "hello")
-/// })
-/// .unwrap();
-/// assert_eq!(std::fs::read_to_string(&path).unwrap(), "hello\n");
-/// ```
-pub fn write_atomically<F>(path: &Path, write: F) -> io::Result<()>
-where
-    F: FnOnce(&mut output::Sink<'_>) -> io::Result<()>,
-{
-    output::write(path, write).map_err(output::OutputError::into_io)
-}
+pub use crate::output::write_atomically;
 
 #[cfg(test)]
 mod tests {

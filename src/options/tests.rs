@@ -1,5 +1,5 @@
 use super::*;
-use crate::pipeline::OptimizeConfig;
+use crate::job::Settings;
 
 /// An option's name, a value other than its default, and how to see it
 /// was set.
@@ -287,39 +287,31 @@ fn validate_names_each_field_out_of_range() {
 }
 
 #[test]
-fn the_file_job_takes_its_defaults_from_options() {
-    // pgo optimize without flags, as it was before Options existed.
-    let c = OptimizeConfig::new("in.g2o");
-    assert_eq!(c.alpha, 0.05);
-    assert_eq!(c.gate, GateMode::Auto);
-    assert_eq!(c.degenerate, DegeneratePolicy::KeepAll);
-    assert_eq!(c.candidates, CandidateRule::Counted);
-    assert_eq!(c.robust, RobustMethod::Em);
-    assert_eq!(c.robust_c, None);
-    assert_eq!(c.initialization, Initialization::Chordal);
-    assert_eq!(c.dof, DofConvention::Residual);
-    assert_eq!(c.iteration_budget, None);
+fn the_solver_takes_its_settings_from_options() {
+    // The defaults: each solve bounded by 100 iterations, no time limit.
+    let o = Options::default();
+    let c = Settings::new(&o);
     assert_eq!(c.solver.max_iterations, 100);
     assert_eq!(c.solver.time_limit, None);
     assert_eq!(c.solver.threads, 0);
-    assert_eq!(c.layers, Layers::default());
-    assert!(!c.fix_information);
-    assert!(c.output.is_none() && c.inliers.is_none() && c.plot.is_none());
-    // --max-iters bounds each solve and the whole run, as the CLI sets it.
+    assert_eq!(c.solver.method, Method::LevenbergMarquardt);
+    // --max-iters bounds each solve (and the whole run), --time-limit each.
     let mut o = Options::default();
     o.set("max-iters", "7").unwrap();
     o.set("time-limit", "3").unwrap();
-    o.set("expert", "no-aliasing").unwrap();
-    let c = OptimizeConfig::from_options("in.g2o", &o);
-    assert_eq!((c.solver.max_iterations, c.iteration_budget), (7, Some(7)));
+    o.set("solver", "gn").unwrap();
+    o.set("threads", "2").unwrap();
+    let c = Settings::new(&o);
+    assert_eq!(c.solver.max_iterations, 7);
     assert_eq!(c.solver.time_limit, Some(Duration::from_secs(3)));
-    assert!(!c.layers.aliasing && c.layers.search);
+    assert_eq!(c.solver.method, Method::GaussNewton);
+    assert_eq!(c.solver.threads, 2);
 }
 
 /// With the `cli` feature the option structs are clap arguments: parsing
 /// the flags gives what `set` gives, flag by flag, and no flags give the
 /// defaults.
-#[cfg(feature = "cli")]
+#[cfg(feature = "clap")]
 mod cli {
     use super::*;
     use clap::Parser;

@@ -374,8 +374,8 @@ fn search_case(tight: bool) -> (Graph<Se2, 3>, Vec<Candidate>) {
 
 /// The χ² test a job with the default options makes.
 fn chi2_test(g: &Graph<Se2, 3>, w: &[f64]) -> Option<crate::stats::Chi2Test> {
-    let config = crate::pipeline::OptimizeConfig::new("walk.g2o");
-    crate::pipeline::chi2_test(g, w, &config).ok()
+    let options = crate::Options::default();
+    crate::job::chi2_test(g, w, &crate::job::Settings::new(&options)).ok()
 }
 
 /// [`on_graph`] of [`search_case`].

@@ -23,7 +23,7 @@
 //!   text that was parsed; if it is not (the file changed on disk while pgo
 //!   ran), the rewrite fails, and a file output is not replaced.
 
-use super::{G2oFile, G2oPose, MAX_LINE_BYTES, parse_id, parse_numbers};
+use super::{FileText, G2oFile, G2oPose, MAX_LINE_BYTES, parse_id, parse_numbers};
 use crate::graph::{AnyGraph, Graph};
 use crate::io::source::Fingerprinter;
 use crate::io::{LineError, LineReader, RawLine};
@@ -78,15 +78,44 @@ impl From<RewriteError> for io::Error {
 }
 
 impl G2oFile {
-    /// Writes the input's own text to `out` with the graph's current poses,
-    /// by the rules of [`self`](crate::io::g2o::rewrite): every line kept
-    /// byte for byte but the pose values of vertex lines whose pose
-    /// changed, and vertex lines added for the vertices no line defined.
-    /// Fails, before writing anything, when the text is not available
-    /// (read from memory by [`super::read_from`], or a stream that could not
-    /// be copied), and at the end when the text read again is not the text
-    /// parsed.
+    /// Writes the input's own text to `out` with the graph's current poses
+    /// ([`FileText::rewrite`]).
     pub fn rewrite(&self, out: &mut impl Write) -> Result<(), RewriteError> {
+        match &self.graph {
+            AnyGraph::Planar(g) => self.text.rewrite(g, out),
+            AnyGraph::Spatial(g) => self.text.rewrite(g, out),
+        }
+    }
+
+    /// [`G2oFile::rewrite`] with the text given again as `text` (which must
+    /// be the text this file was read from).
+    pub fn rewrite_from<R: Read>(&self, text: R, out: &mut impl Write) -> Result<(), RewriteError> {
+        match &self.graph {
+            AnyGraph::Planar(g) => Rewriter::new(&self.text, g).run(text, out),
+            AnyGraph::Spatial(g) => Rewriter::new(&self.text, g).run(text, out),
+        }
+    }
+
+    /// What the rewrite needs of the text, apart from the graph.
+    pub fn text(&self) -> &FileText {
+        &self.text
+    }
+}
+
+impl FileText {
+    /// Writes the input's own text to `out` with the poses of `graph` (the
+    /// graph read from it, optimised), by the rules of
+    /// [`self`](crate::io::g2o::rewrite): every line kept byte for byte but
+    /// the pose values of vertex lines whose pose changed, and vertex lines
+    /// added for the vertices no line defined. Fails, before writing
+    /// anything, when the text is not available (read from memory by
+    /// [`super::read_from`], or a stream that could not be copied), and at
+    /// the end when the text read again is not the text parsed.
+    pub fn rewrite<P: G2oPose<D>, const D: usize>(
+        &self,
+        graph: &Graph<P, D>,
+        out: &mut impl Write,
+    ) -> Result<(), RewriteError> {
         let no_text = |reason: String| RewriteError::NoText {
             input: self.name.clone(),
             reason,
@@ -96,22 +125,13 @@ impl G2oFile {
             .as_ref()
             .ok_or_else(|| no_text("it was read from memory".into()))?;
         let text = original.reader().map_err(no_text)?;
-        self.rewrite_from(text, out)
-    }
-
-    /// [`G2oFile::rewrite`] with the text given again as `text` (which must
-    /// be the text this file was read from).
-    pub fn rewrite_from<R: Read>(&self, text: R, out: &mut impl Write) -> Result<(), RewriteError> {
-        match &self.graph {
-            AnyGraph::Planar(g) => Rewriter::new(self, g).run(text, out),
-            AnyGraph::Spatial(g) => Rewriter::new(self, g).run(text, out),
-        }
+        Rewriter::new(self, graph).run(text, out)
     }
 }
 
 /// The state of one rewrite.
 struct Rewriter<'a, P, const D: usize> {
-    file: &'a G2oFile,
+    file: &'a FileText,
     graph: &'a Graph<P, D>,
     /// Vertices defined by a line: indices `0..defined`, in line order.
     defined: usize,
@@ -125,7 +145,7 @@ struct Rewriter<'a, P, const D: usize> {
 }
 
 impl<'a, P: G2oPose<D>, const D: usize> Rewriter<'a, P, D> {
-    fn new(file: &'a G2oFile, graph: &'a Graph<P, D>) -> Self {
+    fn new(file: &'a FileText, graph: &'a Graph<P, D>) -> Self {
         Self {
             file,
             graph,

@@ -8,7 +8,7 @@
 //!   loop model's densities and the line where its posterior is ½.
 //!
 //! All are drawn with plotters' SVG backend into a string and then written
-//! atomically ([`crate::io::write_atomically`]), so a reader never sees half
+//! atomically ([`pgo::output::write_atomically`]), so a reader never sees half
 //! a picture. Text is emitted as SVG `<text>` elements and rendered by the
 //! viewer with its own fonts: no font files are needed to draw.
 //!
@@ -17,12 +17,14 @@
 //! [`MAX_LOOP_SEGMENTS`] loops are drawn, sampled evenly; the caption says
 //! when either happened.
 
+mod job;
 mod loops;
 
+pub use job::{loop_points, pictures};
 pub use loops::{LoopPoint, plot_loops};
 
-use crate::gate::{Component, LogNormalMixture, Threshold, ThresholdFit};
-use crate::geometry::Pose;
+use pgo::{Component, LogNormalMixture, Threshold, ThresholdFit};
+use pgo::Pose;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
@@ -104,7 +106,7 @@ pub enum PlotError {
 type DrawResult<T> = Result<T, Box<dyn Error>>;
 
 fn write_svg(path: &Path, svg: &str) -> Result<(), PlotError> {
-    crate::io::write_atomically(path, |w| w.write_all(svg.as_bytes())).map_err(|source| {
+    pgo::output::write_atomically(path, |w| w.write_all(svg.as_bytes())).map_err(|source| {
         PlotError::Write {
             path: path.to_path_buf(),
             source,
@@ -153,7 +155,7 @@ fn text_style(size: u32, colour: RGBColor) -> TextStyle<'static> {
 ///   drawn alone.
 ///
 /// `counts` must be the counts `fit` was learned from
-/// ([`crate::gate::learn_threshold`]); other counts give
+/// ([`pgo::learn_threshold`]); other counts give
 /// [`PlotError::InvalidInput`].
 pub fn plot_counts(path: &Path, counts: &[u64], fit: &ThresholdFit) -> Result<(), PlotError> {
     let histogram = CountHistogram::new(counts, fit).map_err(|reason| invalid(path, reason))?;
@@ -1029,8 +1031,8 @@ fn draw_key(area: &DrawingArea<SVGBackend<'_>, Shift>) -> DrawResult<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gate::{Degeneracy, MixtureOptions, learn_threshold};
-    use crate::geometry::{Se2, Se3};
+    use pgo::{Degeneracy, MixtureOptions, learn_threshold};
+    use pgo::{Se2, Se3};
     use nalgebra::{UnitQuaternion, Vector3};
     use rand::SeedableRng;
     use rand::rngs::StdRng;

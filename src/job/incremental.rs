@@ -19,7 +19,7 @@
 //!    accepts against it ([`robust::Proposal`]), which saves the round
 //!    that would find them.
 
-use super::{OptimizeConfig, PipelineError, candidates, finish};
+use super::{Settings, Error, candidates, finish};
 use crate::geometry::Pose;
 use crate::graph::Graph;
 use crate::io::g2o::G2oPose;
@@ -114,13 +114,13 @@ impl<P: Pose<D>, const D: usize> Warm<P, D> {
 pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     graph: &mut Graph<P, D>,
     warm: &mut Warm<P, D>,
-    config: &OptimizeConfig,
+    config: &Settings<'_>,
     report: &mut Report,
     observer: &mut dyn Observer,
-) -> Result<Option<Warm<P, D>>, PipelineError> {
+) -> Result<Option<Warm<P, D>>, Error> {
     let start = Instant::now();
     let added = place(graph, warm);
-    candidates::mark(graph, config.candidates);
+    candidates::mark(graph, config.options.gate.candidates);
     let new_candidates = (warm.edges..graph.edges.len())
         .filter(|&k| graph.edges[k].is_candidate())
         .count();
@@ -177,7 +177,7 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     } else {
         UpdateSolve::Warm
     };
-    step.reason = solve_reason(full, closing, config.robust, report);
+    step.reason = solve_reason(full, closing, config.options.robust.method, report);
     step.changed = changes(graph, &previous, report);
     report.incremental = Some(step);
     let mut next = Warm::after(graph, report, ordering);
@@ -287,7 +287,7 @@ fn place<P: G2oPose<D>, const D: usize>(graph: &mut Graph<P, D>, warm: &Warm<P, 
 fn extended<P: G2oPose<D>, const D: usize>(
     graph: &Graph<P, D>,
     warm: &Warm<P, D>,
-    config: &OptimizeConfig,
+    config: &Settings<'_>,
     report: &mut Report,
     start: Instant,
 ) {
@@ -318,8 +318,8 @@ fn extended<P: G2oPose<D>, const D: usize>(
             t.d2 + added,
             t.dof_constraints + new_edges.len() as u64,
             t.dof_residual,
-            config.dof,
-            config.alpha,
+            config.options.test.dof,
+            config.options.test.alpha,
         ),
         None => {
             let weights: Vec<f64> = (0..graph.edges.len())
@@ -363,8 +363,8 @@ fn start_weights<P: G2oPose<D>, const D: usize>(
 /// swung and the replays fell back to whole jobs: the aliased manhattan
 /// replay every 100 poses took 6 whole jobs instead of 1, and 2.5 times
 /// as long).
-fn update_iterations(config: &OptimizeConfig, method: RobustMethod) -> Option<usize> {
-    match config.update_iterations {
+fn update_iterations(config: &Settings<'_>, method: RobustMethod) -> Option<usize> {
+    match config.options.solver.update_iterations {
         Some(k) if method == RobustMethod::None => Some(k.min(config.solver.max_iterations)),
         _ => None,
     }
@@ -387,7 +387,7 @@ fn update_iterations(config: &OptimizeConfig, method: RobustMethod) -> Option<us
 /// nothing added finishes it to a batch job's tolerance. Returns whether
 /// the solve is held to the strict tolerances (`false`: capped).
 fn update_solver(
-    config: &OptimizeConfig,
+    config: &Settings<'_>,
     method: RobustMethod,
     closing: bool,
 ) -> (SolverOptions, bool) {
@@ -457,18 +457,15 @@ struct Resolved<P: Pose<D>, const D: usize> {
 fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     graph: &mut Graph<P, D>,
     (warm, optimal, closing, spare): (&Warm<P, D>, bool, bool, Spare<P, D>),
-    config: &OptimizeConfig,
+    config: &Settings<'_>,
     report: &mut Report,
     observer: &mut dyn Observer,
     start: Instant,
-) -> Result<Option<Resolved<P, D>>, PipelineError> {
-    let solve_error = |source| PipelineError::Solve {
-        path: config.input.clone(),
-        source,
-    };
+) -> Result<Option<Resolved<P, D>>, Error> {
+    let solve_error = Error::from;
     let candidates = candidates::gate(graph, config, report, warm.report.gate.fit.as_ref());
     let method = if candidates.iter().any(|c| c.kept) {
-        config.robust
+        config.options.robust.method
     } else {
         RobustMethod::None
     };
@@ -495,7 +492,7 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 candidates: &candidates,
                 method,
                 c,
-                layers: &config.layers,
+                layers: &config.options.expert.layers,
                 test,
                 chordal: false,
                 given: None,
@@ -505,18 +502,13 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             swung = outcome.swung;
             Ok(outcome)
         };
-    finish::solve_and_test(
-        graph,
-        &mut optimizer,
-        solver,
-        &mut weights,
-        &candidates,
-        method,
-        weigh,
+    let run = finish::Run {
         config,
-        report,
-        observer,
-    )?;
+        solver,
+        candidates: &candidates,
+        method,
+    };
+    run.solve_and_test(graph, &mut optimizer, &mut weights, weigh, report, observer)?;
     if swung {
         return Ok(None);
     }

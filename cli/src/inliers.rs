@@ -6,13 +6,15 @@
 //! the reverse direction. When a vertex pair has several edges, the k-th row
 //! for the pair goes to the k-th such edge in file order.
 
-use super::g2o::MAX_LINE_BYTES;
-use super::{LineError, LineReader};
-use crate::geometry::Pose;
-use crate::graph::{Graph, LoopCandidate, VertexId};
-use std::collections::HashMap;
-use std::io;
+use pgo::VertexId;
+use std::io::{self, BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
+
+/// The longest line read, in bytes (as the g2o reader's).
+const MAX_LINE_BYTES: usize = 1 << 16;
+
+/// How messages name stdin.
+const STDIN_NAME: &str = "<stdin>";
 
 /// One row of the CSV.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -50,23 +52,49 @@ pub enum InlierCsvError {
     },
 }
 
-/// The error for a line that could not be read.
-fn line_error(path: &Path, line: usize, e: LineError) -> InlierCsvError {
-    let problem = match e {
-        LineError::Io(source) => {
-            return InlierCsvError::Io {
+/// Reads text one line at a time, each of at most [`MAX_LINE_BYTES`]
+/// (memory stays bounded whatever the input), calling `each` with the
+/// line's 1-based number and its text, trimmed; a UTF-8 byte-order mark
+/// opening the first line is dropped. A line that cannot be read, is too
+/// long or is not UTF-8 is an error naming `path` and the line.
+fn for_each_line<R: Read>(
+    reader: R,
+    path: &Path,
+    mut each: impl FnMut(usize, &str) -> Result<(), InlierCsvError>,
+) -> Result<(), InlierCsvError> {
+    let mut reader = BufReader::new(reader);
+    let mut buf = Vec::new();
+    for line in 1.. {
+        buf.clear();
+        let read = (&mut reader)
+            .take(MAX_LINE_BYTES as u64 + 1)
+            .read_until(b'\n', &mut buf)
+            .map_err(|source| InlierCsvError::Io {
                 path: path.to_owned(),
                 source,
-            };
+            })?;
+        if read == 0 {
+            break;
         }
-        LineError::TooLong => format!("line is longer than {MAX_LINE_BYTES} bytes"),
-        LineError::NotText => "not UTF-8 text (is this a binary file?)".to_owned(),
-    };
-    InlierCsvError::Row {
-        path: path.to_owned(),
-        line,
-        problem,
+        let problem = |problem: String| InlierCsvError::Row {
+            path: path.to_owned(),
+            line,
+            problem,
+        };
+        if buf.len() > MAX_LINE_BYTES && buf.last() != Some(&b'\n') {
+            return Err(problem(format!(
+                "line is longer than {MAX_LINE_BYTES} bytes"
+            )));
+        }
+        let bytes = match (line, buf.strip_prefix(b"\xEF\xBB\xBF")) {
+            (1, Some(rest)) => rest,
+            _ => &buf[..],
+        };
+        let text = std::str::from_utf8(bytes)
+            .map_err(|_| problem("not UTF-8 text (is this a binary file?)".into()))?;
+        each(line, text.trim())?;
     }
+    Ok(())
 }
 
 /// Reads `from,to,inliers` rows from the file `path` (`-`: stdin, named
@@ -74,7 +102,7 @@ fn line_error(path: &Path, line: usize, e: LineError) -> InlierCsvError {
 /// line that does not start with a number is taken as a header.
 pub fn read_csv(path: &Path) -> Result<Vec<InlierRow>, InlierCsvError> {
     if path.as_os_str() == "-" {
-        return read_csv_from(io::stdin().lock(), Path::new(super::source::STDIN_NAME));
+        return read_csv_from(io::stdin().lock(), Path::new(STDIN_NAME));
     }
     let file = std::fs::File::open(path).map_err(|source| InlierCsvError::Io {
         path: path.to_owned(),
@@ -88,19 +116,17 @@ pub fn read_csv_from<R: io::Read>(
     reader: R,
     path: &Path,
 ) -> Result<Vec<InlierRow>, InlierCsvError> {
-    let mut lines = LineReader::new(reader, MAX_LINE_BYTES);
     let mut rows = Vec::new();
-    while let Some((line_no, line)) = lines.next_line() {
-        let text = line.map_err(|e| line_error(path, line_no, e))?.trim();
+    for_each_line(reader, path, |line_no, text| {
         if text.is_empty() || text.starts_with('#') {
-            continue;
+            return Ok(());
         }
         let fields: Vec<&str> = text.split(',').map(str::trim).collect();
         let starts_numeric = fields
             .first()
             .is_some_and(|f| f.chars().next().is_some_and(|c| c.is_ascii_digit()));
         if line_no == 1 && !starts_numeric {
-            continue;
+            return Ok(());
         }
         let row_err = |problem: String| InlierCsvError::Row {
             path: path.to_owned(),
@@ -126,7 +152,8 @@ pub fn read_csv_from<R: io::Read>(
             inliers: int(fields[2], "inlier count")?,
             line: line_no,
         });
-    }
+        Ok(())
+    })?;
     Ok(rows)
 }
 
@@ -134,13 +161,11 @@ pub fn read_csv_from<R: io::Read>(
 /// rows whose last field is the count (e.g. `from,to,inliers`). Blank lines
 /// and `#` lines are skipped; a first line whose last field is not a number
 /// is taken as a header.
-pub fn read_counts<R: std::io::Read>(reader: R, path: &Path) -> Result<Vec<u64>, InlierCsvError> {
+pub fn read_counts<R: Read>(reader: R, path: &Path) -> Result<Vec<u64>, InlierCsvError> {
     let mut counts = Vec::new();
-    let mut lines = LineReader::new(reader, MAX_LINE_BYTES);
-    while let Some((line_no, line)) = lines.next_line() {
-        let text = line.map_err(|e| line_error(path, line_no, e))?.trim();
+    for_each_line(reader, path, |line_no, text| {
         if text.is_empty() || text.starts_with('#') {
-            continue;
+            return Ok(());
         }
         let field = text
             .rsplit([',', ' ', '\t', ';'])
@@ -163,58 +188,41 @@ pub fn read_counts<R: std::io::Read>(reader: R, path: &Path) -> Result<Vec<u64>,
                 });
             }
         }
-    }
+        Ok(())
+    })?;
     Ok(counts)
 }
 
-/// Gives each row's count to its edge (see the module documentation).
-/// Returns how many edges already had a count that the CSV replaced.
-pub fn apply<P: Pose<D>, const D: usize>(
-    graph: &mut Graph<P, D>,
+/// Gives each row's count to its edge ([`pgo::AnyPoseGraph::set_inlier_counts`]:
+/// the k-th row of a vertex pair to the k-th edge between them). Returns
+/// how many edges already had a count that the CSV replaced; a row without
+/// a (further) edge is an error naming `path` and its line.
+pub fn apply(
+    graph: &mut pgo::AnyPoseGraph,
     rows: &[InlierRow],
     path: &Path,
 ) -> Result<usize, InlierCsvError> {
-    let mut by_pair: HashMap<(VertexId, VertexId), Vec<usize>> = HashMap::new();
-    for (k, e) in graph.edges.iter().enumerate() {
-        by_pair
-            .entry((graph.id(e.from), graph.id(e.to)))
-            .or_default()
-            .push(k);
-    }
-    // Consume matches in file order.
-    for list in by_pair.values_mut() {
-        list.reverse();
-    }
-    let mut replaced = 0;
-    for row in rows {
-        let edge = by_pair
-            .get_mut(&(row.from, row.to))
-            .and_then(Vec::pop)
-            .or_else(|| by_pair.get_mut(&(row.to, row.from)).and_then(Vec::pop))
-            .ok_or_else(|| InlierCsvError::Row {
-                path: path.to_owned(),
-                line: row.line,
-                problem: format!(
-                    "no (further) edge between vertices {} and {}",
-                    row.from, row.to
-                ),
-            })?;
-        let e = &mut graph.edges[edge];
-        if e.candidate.is_some_and(|c| c.inliers.is_some()) {
-            replaced += 1;
-        }
-        e.candidate = Some(LoopCandidate {
-            inliers: Some(row.inliers),
-        });
-    }
-    Ok(replaced)
+    let counts: Vec<(VertexId, VertexId, u64)> =
+        rows.iter().map(|r| (r.from, r.to, r.inliers)).collect();
+    graph.set_inlier_counts(&counts).map_err(|e| match e {
+        pgo::Error::NoEdge { from, to, entry } => InlierCsvError::Row {
+            path: path.to_owned(),
+            line: rows[entry].line,
+            problem: format!("no (further) edge between vertices {from} and {to}"),
+        },
+        other => InlierCsvError::Row {
+            path: path.to_owned(),
+            line: 0,
+            problem: other.to_string(),
+        },
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Se2;
-    use nalgebra::Matrix3;
+    use pgo::nalgebra::Matrix3;
+    use pgo::{Pose, PoseGraph2, Se2};
 
     fn temp_csv(name: &str, text: &str) -> PathBuf {
         let p = std::env::temp_dir().join(format!("pgo-inliers-{}-{name}.csv", std::process::id()));
@@ -222,16 +230,22 @@ mod tests {
         p
     }
 
-    fn graph() -> Graph<Se2, 3> {
-        let mut g = Graph::new();
+    fn graph() -> pgo::AnyPoseGraph {
+        let mut g = PoseGraph2::new();
         for k in 0..4 {
-            g.add_vertex(k, Se2::identity()).unwrap();
+            g.add_pose(k, Se2::identity()).unwrap();
         }
         let i = Matrix3::identity();
-        g.add_edge(0, 1, Se2::identity(), i, None).unwrap();
-        g.add_edge(3, 0, Se2::identity(), i, None).unwrap();
-        g.add_edge(3, 0, Se2::identity(), i, None).unwrap();
-        g
+        for (a, b) in [(0, 1), (1, 2), (2, 3), (3, 0), (3, 0)] {
+            g.add_edge(a, b, Se2::identity(), i).unwrap();
+        }
+        pgo::AnyPoseGraph::Planar(g)
+    }
+
+    /// The loop candidates of `g` as the job sees them: edge index and count.
+    fn candidates(g: &pgo::AnyPoseGraph) -> Vec<(usize, Option<u64>)> {
+        let solution = g.optimize(&pgo::Options::default()).unwrap();
+        solution.loops().iter().map(|l| (l.index, l.inliers)).collect()
     }
 
     #[test]
@@ -241,16 +255,10 @@ mod tests {
         assert_eq!(rows.len(), 2);
         let mut g = graph();
         assert_eq!(apply(&mut g, &rows, &p).unwrap(), 0);
-        assert_eq!(g.edges[0].candidate, None);
         // The k-th row of a pair goes to the k-th edge of that pair.
-        assert_eq!(
-            g.edges[1].candidate,
-            Some(LoopCandidate { inliers: Some(61) })
-        );
-        assert_eq!(
-            g.edges[2].candidate,
-            Some(LoopCandidate { inliers: Some(7) })
-        );
+        assert_eq!(candidates(&g), [(3, Some(61)), (4, Some(7))]);
+        // Given again, the counts replace those.
+        assert_eq!(apply(&mut g, &rows, &p).unwrap(), 2);
         std::fs::remove_file(p).unwrap();
     }
 
@@ -277,11 +285,11 @@ mod tests {
 
     #[test]
     fn unmatched_rows_and_bad_fields_name_the_line() {
-        let p = temp_csv("bad", "0,1,5\n1,2,5\n");
+        let p = temp_csv("bad", "0,1,5\n1,0,5\n");
         let rows = read_csv(&p).unwrap();
         let err = apply(&mut graph(), &rows, &p).unwrap_err().to_string();
         assert!(
-            err.contains(":2:") && err.contains("vertices 1 and 2"),
+            err.contains(":2:") && err.contains("vertices 1 and 0"),
             "{err}"
         );
         let p2 = temp_csv("bad2", "0,1,-5\n");

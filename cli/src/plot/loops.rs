@@ -5,7 +5,7 @@ use super::{
     Chart, DrawResult, FONT, LOOP_COLOUR, MAX_LOOP_SEGMENTS, PlotError, draw_error, draw_mesh,
     even_indices, invalid, text_style, write_svg,
 };
-use crate::robust::LoopModel;
+use pgo::LoopModel;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -235,43 +235,15 @@ fn legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>, position: SeriesLabelPosition) 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::linear::Parallelism;
-    use crate::robust::{Evidence, Layers, Scale};
 
-    /// 200 true loops (small innovations, high counts) and 50 wrong ones
-    /// (large innovations, low counts), as the model and the picture see
-    /// them.
+    /// The loop candidates of the bundled sample as the job decided them,
+    /// and its loop model.
     fn candidates() -> (Vec<LoopPoint>, LoopModel) {
-        let mut evidence = Vec::new();
-        for k in 0..200 {
-            evidence.push(Evidence {
-                count_posterior: Some(0.9),
-                innovation: 0.5 + (k % 20) as f64 * 0.2,
-            });
-        }
-        for k in 0..50 {
-            evidence.push(Evidence {
-                count_posterior: Some(0.05),
-                innovation: 1e4 * (1.0 + (k % 10) as f64),
-            });
-        }
-        let start: Vec<bool> = (0..250).map(|k| k < 200).collect();
-        let model = LoopModel::fit(
-            &evidence,
-            &start,
-            (3, Scale::Learned),
-            &Layers::default(),
-            &Parallelism::sequential(),
-        );
-        let points = evidence
-            .iter()
-            .map(|e| LoopPoint {
-                innovation: e.innovation,
-                prior: model.prior(e.count_posterior),
-                accepted: model.posterior(e) >= 0.5,
-            })
-            .collect();
-        (points, model)
+        let sample = concat!(env!("CARGO_MANIFEST_DIR"), "/../g2o_samples/grid2d.g2o");
+        let graph = pgo::AnyPoseGraph::read_g2o(sample).unwrap();
+        let report = graph.optimize(&pgo::Options::default()).unwrap().into_report();
+        let points = crate::plot::loop_points(&report);
+        (points, report.robust.model.unwrap())
     }
 
     fn draw(name: &str, points: &[LoopPoint], model: &LoopModel) -> Result<String, PlotError> {
@@ -285,20 +257,21 @@ mod tests {
     #[test]
     fn the_picture_shows_every_candidate_the_densities_and_the_acceptance_line() {
         let (points, model) = candidates();
-        assert_eq!(points.iter().filter(|p| p.accepted).count(), 200);
+        let accepted = points.iter().filter(|p| p.accepted).count();
+        assert!(accepted > 100 && accepted < points.len(), "{accepted}");
         let svg = draw("loops.svg", &points, &model).unwrap();
         assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
         for text in [
-            "Loop decisions: 250 candidates",
-            "200 accepted, 50 rejected",
-            "true loops",
-            "wrong loops",
-            "posterior ½: accepted above",
+            format!("Loop decisions: {} candidates", points.len()),
+            format!("{accepted} accepted, {} rejected", points.len() - accepted),
+            "true loops".into(),
+            "wrong loops".into(),
+            "posterior ½: accepted above".into(),
         ] {
-            assert!(svg.contains(text), "missing {text:?}");
+            assert!(svg.contains(&text), "missing {text:?}");
         }
         // One dot per candidate, plus the two legend dots.
-        assert_eq!(svg.matches("<circle").count(), 252);
+        assert_eq!(svg.matches("<circle").count(), points.len() + 2);
         assert!(!svg.contains("evenly sampled"));
     }
 

@@ -27,7 +27,7 @@
 //! * **`-` is stdout** (and `-` as an input is stdin). Stdout is a stream,
 //!   written as it goes, not atomically; a reader that stops reading (a
 //!   broken pipe, `| head`) ends the run quietly with exit status 141
-//!   ([`super::console`]).
+//!   (the command line).
 //! * **No output is an input.** The command line refuses, before reading
 //!   anything, an output that is one of its inputs (through links, `..` and
 //!   hard links too) unless `--in-place`, and two outputs that are the same
@@ -40,7 +40,7 @@
 //!   temporary still being written, by any process in any PID namespace, is
 //!   never removed.
 //! * **Unmodelled lines** are kept by the g2o rewrite
-//!   ([`super::g2o::G2oFile::rewrite`]): `optimize -o` and `--in-place`
+//!   ([`crate::Solution::write_g2o`]): `optimize -o` and `--in-place`
 //!   write the input's text back byte for byte, changing only the pose
 //!   values of the vertex lines whose pose changed, and add the vertices no
 //!   line defined after the last vertex line. When the input's text cannot
@@ -472,4 +472,27 @@ impl FileTarget {
         }
         Ok(())
     }
+}
+
+/// Writes an output file by the rules of [this module](self) (atomic replacement of
+/// a regular file, `-` for stdout, links followed, devices refused): the
+/// same as [`write()`], with the problem as an [`io::Error`] of the
+/// same kind that does not repeat the path (callers that name the path
+/// themselves use this one).
+///
+/// ```
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("out.txt");
+/// pgo::output::write_atomically(&path, |w| {
+///     use std::io::Write;
+///     writeln!(w, "hello")
+/// })
+/// .unwrap();
+/// assert_eq!(std::fs::read_to_string(&path).unwrap(), "hello\n");
+/// ```
+pub fn write_atomically<F>(path: &Path, write: F) -> io::Result<()>
+where
+    F: FnOnce(&mut Sink<'_>) -> io::Result<()>,
+{
+    self::write(path, write).map_err(OutputError::into_io)
 }

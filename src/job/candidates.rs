@@ -1,32 +1,13 @@
 //! Which edges are loop candidates, what the gate makes of them, and which
 //! edges the initial guess trusts.
 
-use super::{CandidateRule, OptimizeConfig, PipelineError};
+use super::{Settings, Error};
+use crate::options::CandidateRule;
 use crate::gate::{self, DegeneratePolicy, GateMode, ThresholdFit};
 use crate::geometry::Pose;
 use crate::graph::{Graph, LoopCandidate};
-use crate::io::inliers;
 use crate::report::{GateReport, Report};
 use crate::robust::Candidate;
-
-/// Replaces the inlier counts of the edges the `--inliers` CSV names.
-pub fn apply_inlier_csv<P: Pose<D>, const D: usize>(
-    graph: &mut Graph<P, D>,
-    config: &OptimizeConfig,
-    report: &mut Report,
-) -> Result<(), PipelineError> {
-    if let Some(csv) = &config.inliers {
-        let rows = inliers::read_csv(csv)?;
-        let replaced = inliers::apply(graph, &rows, csv)?;
-        if replaced > 0 {
-            report.warnings.push(format!(
-                "{}: replaced the inlier counts of {replaced} edges",
-                csv.display()
-            ));
-        }
-    }
-    Ok(())
-}
 
 /// Under [`CandidateRule::NonSequential`], makes every edge between
 /// non-consecutive ids a candidate (without a count unless it has one).
@@ -48,7 +29,7 @@ pub fn mark<P: Pose<D>, const D: usize>(graph: &mut Graph<P, D>, rule: Candidate
 /// graph, if any ([`gate::learn_threshold_from`]).
 pub fn gate<P: Pose<D>, const D: usize>(
     graph: &Graph<P, D>,
-    config: &OptimizeConfig,
+    config: &Settings<'_>,
     report: &mut Report,
     previous: Option<&ThresholdFit>,
 ) -> Vec<Candidate> {
@@ -62,8 +43,8 @@ pub fn gate<P: Pose<D>, const D: usize>(
     report.loop_candidates = edges.len();
     let decision = gate::gate_from(
         &counts,
-        config.gate,
-        config.degenerate,
+        config.options.gate.mode,
+        config.options.gate.degenerate,
         &config.mixture,
         previous,
     );
@@ -72,14 +53,14 @@ pub fn gate<P: Pose<D>, const D: usize>(
         if let Some(reason) = &decision.reason {
             report
                 .warnings
-                .push(degenerate_warning(reason, config.degenerate));
+                .push(degenerate_warning(reason, config.options.gate.degenerate));
         }
     }
     // The counts speak only through a fit that separates two populations,
     // and not when the gate is off; a zero count is no loop by definition.
     let max = report.gate.max_inliers;
     let mixture = decision.count_model();
-    let drop_all = decision.degenerate && config.degenerate == DegeneratePolicy::DropAll;
+    let drop_all = decision.degenerate && config.options.gate.degenerate == DegeneratePolicy::DropAll;
     edges
         .iter()
         .zip(&counts)
@@ -92,7 +73,7 @@ pub fn gate<P: Pose<D>, const D: usize>(
                 (Some(n), Some(m)) => Some(m.posterior_true_loop(*n, max)),
                 _ => None,
             },
-            kept: kept || config.gate == GateMode::Soft,
+            kept: kept || config.options.gate.mode == GateMode::Soft,
         })
         .collect()
 }

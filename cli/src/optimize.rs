@@ -1,0 +1,333 @@
+//! `pgo optimize`: the library's job on a g2o file — read it (and an
+//! inlier CSV), optimise it, write the map, the covariances and the
+//! pictures, print the report — with the command line's exit statuses.
+
+use crate::console::{self, BROKEN_PIPE_STATUS};
+use crate::inliers::{self, InlierCsvError};
+use crate::plot::{self, PlotError};
+use crate::say;
+use pgo::output::{CheckError, check_files};
+use pgo::report::Report;
+use pgo::{AnyPoseGraph, AnySolution, Error, IterationRecord, Observer, Setting};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(clap::Args, Debug)]
+pub struct OptimizeArgs {
+    /// Input g2o file (VERTEX_SE2/EDGE_SE2 or VERTEX_SE3:QUAT/EDGE_SE3:QUAT;
+    /// `-` reads stdin).
+    pub input: PathBuf,
+    /// Write the optimised graph here (atomically: temporary file, then
+    /// rename; `-` writes stdout).
+    #[arg(short, long, value_name = "OUT.g2o")]
+    pub output: Option<PathBuf>,
+    /// Write the optimised graph over the input file (every line it does not
+    /// change kept as it was).
+    #[arg(long, conflicts_with = "output")]
+    pub in_place: bool,
+    /// Inlier counts of loop candidates from a CSV file (from,to,inliers).
+    #[arg(long, value_name = "FILE")]
+    pub inliers: Option<PathBuf>,
+    /// Project information matrices that are not positive definite to the
+    /// nearest positive-definite ones instead of failing.
+    #[arg(long)]
+    pub fix_information: bool,
+    /// Write SVG pictures into this directory: counts.svg (histogram of the
+    /// normalised inlier counts with the fitted mixture and T_GV), loops.svg
+    /// (each candidate's innovation and prior against the loop model, with
+    /// the line where its posterior is ½) and trajectory.svg (before and
+    /// after, loops coloured by final weight).
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+    /// Write every pose's marginal covariance here as CSV (atomically; `-`
+    /// writes stdout): a header, then per pose its id and its D×D
+    /// covariance row by row, D = 3 (x, y, theta) or 6 (x, y, z, rx, ry,
+    /// rz), perturbed on the right (in the pose's frame), from the map's
+    /// edges at the optimum with the fixed poses as the gauge (zeros). A
+    /// pose no edge in the map ties to them is left out, with a warning.
+    #[arg(long, value_name = "FILE.csv")]
+    pub covariances: Option<PathBuf>,
+    /// Everything the job itself can be told (the library's `Options`).
+    #[command(flatten)]
+    pub options: pgo::Options,
+    /// Print the JSON report on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Certify the map: prove it the global optimum of SE-Sync's isotropic
+    /// problem over its edges (the report's "certificate"), or say why not.
+    #[arg(long)]
+    pub certify: bool,
+    /// Print nothing on stderr but errors.
+    #[arg(short, long)]
+    pub quiet: bool,
+    /// Print every iteration on stderr.
+    #[arg(short, long)]
+    pub verbose: bool,
+}
+
+
+/// The exit status of `pgo optimize` when the result fails its χ² test
+/// (the outputs are still written).
+const CHI2_FAILED_STATUS: u8 = 3;
+
+/// The exit status of `pgo optimize` stopped by Ctrl-C (128 + SIGINT, as
+/// shells report it; the outputs are still written).
+const INTERRUPTED_STATUS: u8 = 130;
+
+/// Why `pgo optimize` failed.
+#[derive(Debug, thiserror::Error)]
+pub enum Failure {
+    /// The library refused the graph or the job failed on it.
+    #[error("{}", library_message(.input, .error))]
+    Job {
+        /// The input file.
+        input: PathBuf,
+        /// The library's error.
+        error: Error,
+    },
+    /// The inlier CSV is unreadable or malformed.
+    #[error(transparent)]
+    Inliers(#[from] InlierCsvError),
+    /// A picture could not be drawn or written.
+    #[error(transparent)]
+    Plot(#[from] PlotError),
+    /// An output could not be written.
+    #[error("{}: cannot write: {source}", path.display())]
+    Write {
+        /// The output.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+}
+
+/// The library's message for the command line: its options by their flags,
+/// and the input named where the message does not name a file itself.
+fn library_message(input: &Path, error: &Error) -> String {
+    let message = error.message_with(&|s| match s {
+        Setting::RepairAdded | Setting::RepairRead => "--fix-information".into(),
+        other => other.rust_name(),
+    });
+    if error.io_error().is_some() || matches!(error, Error::Read(_)) {
+        message
+    } else {
+        format!("{}: {message}", input.display())
+    }
+}
+
+impl Failure {
+    /// The process exit status: 2 for input the job cannot take, 1 for
+    /// other failures.
+    pub fn exit_code(&self) -> u8 {
+        use pgo::ErrorKind as K;
+        match self {
+            Self::Inliers(_) => 2,
+            Self::Job { error, .. } => match error.kind() {
+                K::Io | K::Parse | K::Dimension | K::InvalidInformation | K::InvalidPose => 2,
+                K::Unconstrained | K::EmptyGraph | K::UnknownVertex | K::InvalidOption => 2,
+                _ if matches!(error, Error::Undetermined { .. } | Error::NonFiniteEdge { .. }) => 2,
+                _ => 1,
+            },
+            Self::Plot(_) | Self::Write { .. } => 1,
+        }
+    }
+}
+
+/// Runs `pgo optimize`: returns the report after writing every output
+/// asked for. `observer` sees every solver iteration.
+pub fn run(args: &OptimizeArgs, observer: &mut dyn Observer) -> Result<Report, Failure> {
+    let start = Instant::now();
+    let job = |error| Failure::Job {
+        input: args.input.clone(),
+        error,
+    };
+    let mut graph = if args.fix_information {
+        AnyPoseGraph::read_g2o_repairing(&args.input)
+    } else {
+        AnyPoseGraph::read_g2o(&args.input)
+    }
+    .map_err(job)?;
+    let read_s = start.elapsed().as_secs_f64();
+    let mut replaced = None;
+    if let Some(csv) = &args.inliers {
+        let rows = inliers::read_csv(csv)?;
+        let n = inliers::apply(&mut graph, &rows, csv)?;
+        replaced = (n > 0).then(|| format!("{}: replaced the inlier counts of {n} edges", csv.display()));
+    }
+    let solution = graph.optimize_with(&args.options, observer).map_err(job)?;
+    let mut report = solution.report().clone();
+    report.time.read_s = read_s;
+    report.warnings.splice(0..0, replaced);
+    if let Some(dir) = &args.plot {
+        plot::pictures(dir, &graph, &solution, &args.input, &mut report)?;
+    }
+    if args.certify {
+        match solution.certificate() {
+            Ok(c) => report.certificate = Some(c),
+            Err(e) => report.warnings.push(format!("no certificate: {e}")),
+        }
+    }
+    let output = if args.in_place {
+        Some(&args.input)
+    } else {
+        args.output.as_ref()
+    };
+    if let Some(out) = output {
+        let writing = Instant::now();
+        solution.write_g2o(out).map_err(job)?;
+        report.output = Some(out.display().to_string());
+        report.time.write_s = writing.elapsed().as_secs_f64();
+    }
+    if let Some(path) = &args.covariances {
+        write_covariances(&solution, path, &mut report).map_err(job)?;
+    }
+    report.time.total_s = start.elapsed().as_secs_f64();
+    Ok(report)
+}
+
+/// Writes the covariances of the map (`--covariances`): a warning names
+/// the poses left out.
+fn write_covariances(solution: &AnySolution, path: &Path, report: &mut Report) -> Result<(), Error> {
+    let covariances = solution.covariances()?;
+    let mut unbounded = Vec::new();
+    pgo::output::write_atomically(path, |w| {
+        unbounded = covariances.write_csv(w)?;
+        Ok(())
+    })
+    .map_err(|source| Error::Write {
+        path: path.to_owned(),
+        source,
+    })?;
+    if let Some(first) = unbounded.first() {
+        let warning = format!(
+            "--covariances: {} poses left out (no trusted edge or accepted loop ties them to the \
+             fixed poses: their covariance is unbounded), e.g. {first}",
+            unbounded.len()
+        );
+        report.warnings.push(warning);
+    }
+    Ok(())
+}
+
+/// `pgo optimize`: checks the files, runs the job with Ctrl-C as its
+/// cancellation, prints the summary (and the JSON report), and ends with
+/// the exit status: 3 when the χ² test failed, 130 when interrupted.
+pub fn command(args: OptimizeArgs) -> ExitCode {
+    if let Err(message) = check_optimize_files(&args) {
+        say!("error: {message}");
+        return ExitCode::from(2);
+    }
+    let verbose = args.verbose && !args.quiet;
+    // Ctrl-C stops the optimisation between iterations; the best map so far
+    // is written and the exit status says it was interrupted.
+    let cancel = pgo::Cancel::new();
+    let on_interrupt = cancel.clone();
+    let _ = ctrlc::set_handler(move || on_interrupt.cancel());
+    let progress = |r: &IterationRecord| {
+        if verbose {
+            say!(
+                "iteration {:>3}: χ² {:.10e}  λ {:.1e}  rejected {}  |δ|∞ {:.2e}",
+                r.iteration,
+                r.objective,
+                r.lambda,
+                r.rejected,
+                r.step_max
+            );
+        }
+    };
+    let mut observer = pgo::Cancellable::new(cancel, progress);
+    match run(&args, &mut observer) {
+        Ok(report) => finish(&args, &report, verbose),
+        // `-o -`: a reader that went away (141, quietly), or a full stdout.
+        Err(Failure::Job {
+            error: Error::Write { path, source },
+            ..
+        }) if path.as_os_str() == "-" => ExitCode::from(console::stdout_failure(&source)),
+        Err(e) => {
+            say!("error: {e}");
+            ExitCode::from(e.exit_code())
+        }
+    }
+}
+
+/// Prints the summary and the report; the exit status of a job that ran.
+fn finish(args: &OptimizeArgs, report: &Report, verbose: bool) -> ExitCode {
+    if !args.quiet {
+        console::err(format_args!("{}", report.human_summary()));
+        if verbose {
+            console::err(format_args!("{}\n", report.time_summary()));
+        }
+    }
+    if args.json {
+        match serde_json::to_string_pretty(report) {
+            Ok(text) => {
+                if let Err(e) = console::out_line(&text) {
+                    return ExitCode::from(console::stdout_failure(&e));
+                }
+            }
+            Err(e) => {
+                say!("error: cannot serialise the report: {e}");
+                return ExitCode::from(1);
+            }
+        }
+    }
+    if report.optimizer.stop_reason == pgo::StopReason::Cancelled {
+        say!("pgo: interrupted: the best map so far was written (exit status {INTERRUPTED_STATUS})");
+        return ExitCode::from(INTERRUPTED_STATUS);
+    }
+    if report.chi2_test.as_ref().is_some_and(|t| !t.passed) {
+        say!(
+            "pgo: the χ² test FAILED: the map does not fit its measurements (exit status {CHI2_FAILED_STATUS})"
+        );
+        return ExitCode::from(CHI2_FAILED_STATUS);
+    }
+    let _ = BROKEN_PIPE_STATUS;
+    ExitCode::SUCCESS
+}
+
+/// [`check_files`] for `pgo optimize`: the input (`-`: stdin) and
+/// `--inliers` are read; `-o` is written, or with `--in-place` the input
+/// itself (which must then be a file), and `-o -` leaves stdout to the
+/// graph (no `--json`).
+pub fn check_optimize_files(args: &OptimizeArgs) -> Result<(), String> {
+    let mut inputs = vec![args.input.as_path()];
+    inputs.extend(args.inliers.as_deref());
+    let checked: Result<(), CheckError> = if args.in_place {
+        if args.input.as_os_str() == "-" {
+            return Err("--in-place needs an input file, not stdin (-)".into());
+        }
+        check_files(&inputs[1..], &[("--in-place", &args.input)])
+            .and_then(|_| check_files(&inputs, &[]))
+    } else {
+        match &args.output {
+            Some(o) if args.json && o.as_os_str() == "-" => {
+                return Err("-o - and --json both write to stdout: give -o a file".into());
+            }
+            Some(o) => check_files(&inputs, &[("-o", o)]),
+            None => check_files(&inputs, &[]),
+        }
+    };
+    checked.map_err(|e| e.to_string())?;
+    check_covariances_file(args, &inputs)
+}
+
+/// [`check_files`] for `--covariances`: an output of its own, beside `-o`
+/// (or the input, `--in-place`) and `--json` on stdout.
+fn check_covariances_file(args: &OptimizeArgs, inputs: &[&std::path::Path]) -> Result<(), String> {
+    let Some(path) = &args.covariances else {
+        return Ok(());
+    };
+    let mut outputs = vec![("--covariances", path.as_path())];
+    outputs.extend(args.output.as_deref().map(|o| ("-o", o)));
+    let inputs = if args.in_place {
+        outputs.push(("--in-place", args.input.as_path()));
+        &inputs[1..]
+    } else {
+        inputs
+    };
+    if args.json {
+        outputs.push(("--json", std::path::Path::new("-")));
+    }
+    check_files(inputs, &outputs).map_err(|e| e.to_string())
+}

@@ -1,0 +1,247 @@
+//! The steps around the robust solve: the initial guess, the χ² test, the
+//! report and the pictures.
+
+use super::{Settings, Error};
+use crate::graph::Graph;
+use crate::io::g2o::G2oPose;
+use crate::report::{InitializationReport, LoopReport, OptimizerReport, Report, RobustReport};
+use crate::robust::{self, Candidate, Outcome, RobustMethod, Test};
+use crate::solve::init::{ChordalInit, Initialization, initialize as init_poses};
+use crate::solve::{
+    Budget, Observer, Optimizer, PhaseTimes, Session, SolveError, SolverOptions, Summary,
+};
+use crate::stats::{Chi2Test, StatsError};
+use std::time::Instant;
+
+/// Reports the file's own guess, then makes the configured initial guess
+/// from the edges of non-zero `weights`, and checks that every edge of
+/// weight 1 has a finite cost there. Returns the file's own guess (the
+/// vertices without a line composed along a spanning tree).
+pub fn initialize<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
+    graph: &mut Graph<P, D>,
+    missing: &[usize],
+    config: &Settings<'_>,
+    weights: &[f64],
+    report: &mut Report,
+    start: Instant,
+) -> Result<Vec<P>, Error> {
+    let solve_error = Error::from;
+    // The file's own guess first (vertices without a line by spanning
+    // tree), so that its χ² can be reported whatever the initialisation.
+    init_poses(graph, missing, Initialization::File, Some(weights)).map_err(solve_error)?;
+    report.input_chi2 = graph.chi2();
+    if !report.input_chi2.is_finite() {
+        report.warnings.push(format!(
+            "the file's own guess has a non-finite χ² ({}; null in JSON)",
+            report.input_chi2
+        ));
+    }
+    let given = graph.poses.clone();
+    if config.options.solver.init != Initialization::File {
+        init_poses(graph, missing, config.options.solver.init, Some(weights)).map_err(solve_error)?;
+    }
+    // An edge whose cost overflows at the start makes the objective
+    // meaningless: name it rather than report a bare non-finite objective.
+    if let Some(k) = (0..graph.edges.len())
+        .find(|&k| weights[k] != 0.0 && !graph.edge_chi2(&graph.edges[k]).is_finite())
+    {
+        let e = &graph.edges[k];
+        return Err(Error::NonFiniteEdge {
+            edge: k,
+            from: graph.id(e.from),
+            to: graph.id(e.to),
+        });
+    }
+    report.initialization = InitializationReport {
+        method: config.options.solver.init,
+        chi2: graph.chi2(),
+        time_s: start.elapsed().as_secs_f64(),
+        vertices_without_line: missing.len(),
+    };
+    Ok(given)
+}
+
+/// One robust solve of a job: its settings, the solver's settings for this
+/// solve, the loop candidates the gate left, and how they are weighed.
+pub struct Run<'a> {
+    /// The job's settings.
+    pub config: &'a Settings<'a>,
+    /// This solve's method, bounds and tolerances.
+    pub solver: SolverOptions,
+    /// The loop candidates, with what the gate made of them.
+    pub candidates: &'a [Candidate],
+    /// How they are weighed.
+    pub method: RobustMethod,
+}
+
+impl Run<'_> {
+    /// The kernel width for poses of `D` degrees of freedom: the options',
+    /// else the method's default.
+    fn c<const D: usize>(&self) -> f64 {
+        (self.config.options.robust.c).unwrap_or_else(|| robust::default_c(self.method, D))
+    }
+
+    /// The robust solve (`weigh`: the job's robust back end on a session,
+    /// from `weights`, with kernel width `c` and the χ² test EM's search
+    /// acts on) within the job's iteration and time budget, then the χ²
+    /// test of the map it returns and the report.
+    pub fn solve_and_test<P: G2oPose<D>, const D: usize, M>(
+        &self,
+        graph: &mut Graph<P, D>,
+        optimizer: &mut Optimizer<P, D>,
+        weights: &mut [f64],
+        weigh: M,
+        report: &mut Report,
+        observer: &mut dyn Observer,
+    ) -> Result<(), Error>
+    where
+        M: FnOnce(
+            &mut Session<'_, P, D>,
+            &mut [f64],
+            f64,
+            &Test<'_, P, D>,
+        ) -> Result<Outcome, SolveError>,
+    {
+        let config = self.config;
+        let budget = Budget {
+            iterations: config.options.solver.max_iterations.unwrap_or(usize::MAX),
+            deadline: config.solver.time_limit.map(|t| Instant::now() + t),
+        };
+        let test = |g: &Graph<P, D>, w: &[f64]| chi2_test(g, w, config).ok();
+        let solver = self.solver.clone();
+        let mut session = Session::new(optimizer, graph, solver, budget, observer);
+        let outcome = weigh(&mut session, weights, self.c::<D>(), &test)?;
+        let phases = session.phases();
+        let summary = session.finish(outcome.cut_short);
+        if graph.poses.iter().any(|p| !p.is_finite()) {
+            return Err(Error::NonFinite);
+        }
+        // One pass over the edges at the final map serves the test and the
+        // report; the optimiser's last evaluation was usually that pass.
+        let edge_chi2: std::borrow::Cow<'_, [f64]> = match optimizer.edge_chi2s_at(graph) {
+            Some(chi2) => chi2.into(),
+            None => graph.edge_chi2s().into(),
+        };
+        match test_of(&edge_chi2, graph, weights, config) {
+            Ok(t) => report.chi2_test = Some(t),
+            Err(e) => report.warnings.push(format!("no χ² test: {e}")),
+        }
+        if !outcome.accepted.is_empty() && !outcome.accepted.contains(&true) {
+            report.warnings.push(format!(
+                "none of the {} loop candidates was accepted: the map is that of the trusted \
+                 edges alone",
+                outcome.accepted.len()
+            ));
+        }
+        let final_chi2 = sum(edge_chi2.iter().copied());
+        self.report(graph, optimizer, (summary, phases), final_chi2, &outcome, report);
+        Ok(())
+    }
+
+    /// Fills the optimiser's, the robust back end's and every loop's part
+    /// of the report (`final_chi2`: the χ² of every edge at the map; the
+    /// session's summary and phase times).
+    fn report<P: G2oPose<D>, const D: usize>(
+        &self,
+        graph: &Graph<P, D>,
+        optimizer: &Optimizer<P, D>,
+        (summary, phases): (Option<Summary>, PhaseTimes),
+        final_chi2: f64,
+        outcome: &Outcome,
+        report: &mut Report,
+    ) {
+    // The initialisation left the map whose χ² it reported.
+    let initial_chi2 = report.initialization.chi2;
+    let (candidates, method, c) = (self.candidates, self.method, self.c::<D>());
+    if let Some(summary) = &summary {
+        report.optimizer = OptimizerReport::new(
+            summary,
+            initial_chi2,
+            final_chi2,
+            optimizer.system(),
+            optimizer.max_nnz_factor(),
+        );
+    } else {
+        // No solver run (a budget spent before the first): the map is the
+        // one it started from.
+        report.optimizer.initial_chi2 = initial_chi2;
+        report.optimizer.final_chi2 = final_chi2;
+    }
+    let accepted = outcome.accepted.iter().filter(|&&a| a).count();
+    report.robust = RobustReport {
+        method,
+        c,
+        rounds: outcome.rounds,
+        relaxations: outcome.relaxations,
+        decisions: outcome.decisions,
+        relaxed_starts: outcome.relaxed_starts,
+        clusters: outcome.clusters,
+        accepted_loops: accepted,
+        rejected_loops: candidates.len() - accepted,
+        rescued_loops: candidates
+            .iter()
+            .zip(&outcome.accepted)
+            .filter(|(c, a)| **a && !c.kept)
+            .count(),
+        model: outcome.model.clone(),
+        search: outcome.search.clone(),
+        starts: outcome.starts.clone(),
+    };
+    report.time.relaxation_s = phases.relaxation.as_secs_f64();
+    report.time.evaluation_s = phases.evaluation.as_secs_f64();
+    report.loops = candidates
+        .iter()
+        .enumerate()
+        .map(|(k, cand)| {
+            let e = &graph.edges[cand.edge];
+            LoopReport {
+                from: graph.id(e.from),
+                to: graph.id(e.to),
+                inliers: e.candidate.and_then(|c| c.inliers),
+                kept: cand.kept,
+                accepted: outcome.accepted[k],
+                weight: outcome.weights[k],
+                prior: outcome
+                    .model
+                    .as_ref()
+                    .map(|m| m.prior(cand.count_posterior)),
+                posterior: outcome.posteriors[k],
+                innovation: outcome.innovations[k],
+                reason: outcome.reasons[k],
+            }
+        })
+        .collect();
+}
+}
+
+/// The χ² test over the edges the map was solved with (weight ≥ ½), each at
+/// its plain cost (paper §II-C).
+pub fn chi2_test<P: G2oPose<D>, const D: usize>(
+    graph: &Graph<P, D>,
+    weights: &[f64],
+    config: &Settings<'_>,
+) -> Result<Chi2Test, StatsError> {
+    test_of(&graph.edge_chi2s(), graph, weights, config)
+}
+
+/// [`chi2_test`] from each edge's χ² at the map (`edge_chi2`).
+fn test_of<P: G2oPose<D>, const D: usize>(
+    edge_chi2: &[f64],
+    graph: &Graph<P, D>,
+    weights: &[f64],
+    config: &Settings<'_>,
+) -> Result<Chi2Test, StatsError> {
+    let in_map = |k: usize| weights[k] >= 0.5;
+    let used = (0..weights.len()).filter(|&k| in_map(k)).count();
+    let d2 = sum((0..weights.len())
+        .filter(|&k| in_map(k))
+        .map(|k| edge_chi2[k]));
+    let free = graph.num_vertices() - graph.gauge().len();
+    let dof_residual = (used * D) as i64 - (free * D) as i64;
+    Chi2Test::new(d2, used as u64, dof_residual, config.options.test.dof, config.options.test.alpha)
+}
+
+/// A sum in the order given, from +0 ([`Graph::chi2_where`]'s bits).
+fn sum(values: impl Iterator<Item = f64>) -> f64 {
+    values.fold(0.0, |a, b| a + b)
+}
