@@ -13,6 +13,7 @@
 //! its derivative is `2·X M` ([`Map::gradient`]).
 
 use crate::geometry::{Se2, Se3};
+use crate::graph::UnionFind;
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector};
 
 /// A pose type whose rotation and translation the certificate reads, with
@@ -273,23 +274,15 @@ pub(crate) fn data_blocks<const DIM: usize, const B: usize>(
 /// The connected parts of the graph of `edges` over `n` vertices: the part
 /// of each vertex, numbered from 0 in order of first vertex.
 pub(crate) fn components<const DIM: usize>(n: usize, edges: &[Edge<DIM>]) -> (Vec<usize>, usize) {
-    let mut parent: Vec<usize> = (0..n).collect();
-    fn root(parent: &mut [usize], mut v: usize) -> usize {
-        while parent[v] != v {
-            parent[v] = parent[parent[v]];
-            v = parent[v];
-        }
-        v
-    }
+    let mut parts = UnionFind::new(n);
     for e in edges {
-        let (a, b) = (root(&mut parent, e.i), root(&mut parent, e.j));
-        parent[a.max(b)] = a.min(b);
+        parts.union(e.i, e.j);
     }
     let mut label = vec![usize::MAX; n];
     let mut part = vec![0; n];
     let mut count = 0;
     for v in 0..n {
-        let r = root(&mut parent, v);
+        let r = parts.find(v);
         if label[r] == usize::MAX {
             label[r] = count;
             count += 1;
