@@ -142,9 +142,10 @@ pub(crate) struct Map<const DIM: usize> {
     pub t: Vec<SVector<f64, DIM>>,
 }
 
-/// An edge in the certificate's coordinates.
+/// An edge of SE-Sync's isotropic problem, in the certificate's coordinates:
+/// its measurement and its rotation and translation weights.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Edge<const DIM: usize> {
+pub(crate) struct IsotropicEdge<const DIM: usize> {
     /// Index of the first vertex.
     pub i: usize,
     /// Index of the second vertex.
@@ -159,7 +160,7 @@ pub(crate) struct Edge<const DIM: usize> {
     pub tau: f64,
 }
 
-impl<const DIM: usize> Edge<DIM> {
+impl<const DIM: usize> IsotropicEdge<DIM> {
     /// The edge of a weighted edge.
     pub fn lift<P: Lift<DIM>>(e: &WeightedEdge<P>) -> Self {
         let (r, t) = e.measurement.rotation_translation();
@@ -191,7 +192,7 @@ impl<const DIM: usize> Map<DIM> {
     }
 
     /// `F(X)`.
-    pub fn cost(&self, edges: &[Edge<DIM>]) -> f64 {
+    pub fn cost(&self, edges: &[IsotropicEdge<DIM>]) -> f64 {
         edges
             .iter()
             .map(|e| {
@@ -205,7 +206,7 @@ impl<const DIM: usize> Map<DIM> {
     /// the rotation columns `Gᵢᴿ`.
     pub fn gradient(
         &self,
-        edges: &[Edge<DIM>],
+        edges: &[IsotropicEdge<DIM>],
     ) -> (Vec<SVector<f64, DIM>>, Vec<SMatrix<f64, DIM, DIM>>) {
         let n = self.r.len();
         let mut gt = vec![SVector::zeros(); n];
@@ -248,7 +249,7 @@ impl<const DIM: usize> Map<DIM> {
 /// 2 tr(xᵢ M_ij xⱼᵀ) + tr(xⱼ M_jj xⱼᵀ)` with `xᵢ = [tᵢ Rᵢ]`.
 #[allow(clippy::type_complexity)]
 pub(crate) fn data_blocks<const DIM: usize, const B: usize>(
-    e: &Edge<DIM>,
+    e: &IsotropicEdge<DIM>,
 ) -> (SMatrix<f64, B, B>, SMatrix<f64, B, B>, SMatrix<f64, B, B>) {
     debug_assert_eq!(B, DIM + 1);
     let (k, tau) = (e.kappa, e.tau);
@@ -273,7 +274,10 @@ pub(crate) fn data_blocks<const DIM: usize, const B: usize>(
 
 /// The connected parts of the graph of `edges` over `n` vertices: the part
 /// of each vertex, numbered from 0 in order of first vertex.
-pub(crate) fn components<const DIM: usize>(n: usize, edges: &[Edge<DIM>]) -> (Vec<usize>, usize) {
+pub(crate) fn components<const DIM: usize>(
+    n: usize,
+    edges: &[IsotropicEdge<DIM>],
+) -> (Vec<usize>, usize) {
     let mut parts = UnionFind::new(n);
     for e in edges {
         parts.union(e.i, e.j);
