@@ -294,32 +294,21 @@ impl<P: Pose<D>, const D: usize> Graph<P, D> {
     /// unique solution. Edges whose weight (one per edge) is zero do not
     /// count.
     pub fn unconstrained_vertices(&self, weights: Option<&[f64]>) -> Vec<usize> {
-        // Union–find over the edges (by index, path halving): one array,
-        // where lists of neighbours would allocate one vector per vertex.
+        // Union–find over the edges: one array, where lists of neighbours
+        // would allocate one vector per vertex.
         let n = self.ids.len();
-        let mut parent: Vec<usize> = (0..n).collect();
-        let root = |parent: &mut [usize], mut v: usize| {
-            while parent[v] != v {
-                parent[v] = parent[parent[v]];
-                v = parent[v];
-            }
-            v
-        };
+        let mut parts = UnionFind::new(n);
         for (k, e) in self.edges.iter().enumerate() {
             if weights.is_some_and(|w| w[k] == 0.0) {
                 continue;
             }
-            let (a, b) = (root(&mut parent, e.from), root(&mut parent, e.to));
-            parent[a.max(b)] = a.min(b);
+            parts.union(e.from, e.to);
         }
         let mut anchored = vec![false; n];
         for g in self.gauge() {
-            let r = root(&mut parent, g);
-            anchored[r] = true;
+            anchored[parts.find(g)] = true;
         }
-        (0..n)
-            .filter(|&k| !anchored[root(&mut parent, k)])
-            .collect()
+        (0..n).filter(|&k| !anchored[parts.find(k)]).collect()
     }
 }
 
@@ -403,6 +392,16 @@ pub fn is_positive_definite<const D: usize>(m: &SMatrix<f64, D, D>) -> bool {
     m.iter().all(|v| v.is_finite()) && m.cholesky().is_some()
 }
 
+/// The smallest eigenvalue of a symmetric matrix (NaN if the bounded
+/// eigen-solver fails), for messages about information that is not
+/// positive definite.
+pub fn min_eigenvalue<const D: usize>(m: &SMatrix<f64, D, D>) -> f64 {
+    let d = DMatrix::from_column_slice(D, D, m.as_slice());
+    SymmetricEigen::try_new(d, f64::EPSILON, 10_000).map_or(f64::NAN, |e| {
+        e.eigenvalues.iter().copied().fold(f64::INFINITY, f64::min)
+    })
+}
+
 /// The nearest positive-definite matrix in the spectral sense: eigenvalues
 /// below `1e-6 · max|λ|` are raised to it (as `repair_info.py` of the
 /// baseline does). Returns `None` when every eigenvalue is zero, or the
@@ -435,6 +434,41 @@ pub fn nearest_positive_definite<const D: usize>(
     let out = SMatrix::<f64, D, D>::from_column_slice(out.as_slice());
     let out = (out + out.transpose()) * 0.5;
     is_positive_definite(&out).then_some(out)
+}
+
+/// Disjoint sets of `0..n` (union–find with path halving), each named by
+/// its smallest member: the connected parts of a graph in one array.
+#[derive(Clone, Debug)]
+pub struct UnionFind {
+    parent: Vec<usize>,
+}
+
+impl UnionFind {
+    /// `n` singletons.
+    pub fn new(n: usize) -> Self {
+        Self {
+            parent: (0..n).collect(),
+        }
+    }
+
+    /// The smallest member of the set of `k`.
+    pub fn find(&mut self, mut k: usize) -> usize {
+        let parent = &mut self.parent;
+        while parent[k] != k {
+            parent[k] = parent[parent[k]];
+            k = parent[k];
+        }
+        k
+    }
+
+    /// Joins the sets of `a` and `b`; whether they were apart.
+    pub fn union(&mut self, a: usize, b: usize) -> bool {
+        let (ra, rb) = (self.find(a), self.find(b));
+        if ra != rb {
+            self.parent[ra.max(rb)] = ra.min(rb);
+        }
+        ra != rb
+    }
 }
 
 #[cfg(test)]

@@ -725,7 +725,7 @@ fn checked_information<const D: usize>(
         (kept, false)
     } else if !repair {
         return Err(InformationProblem::NotPositiveDefinite {
-            min_eigenvalue: min_eigenvalue(&kept),
+            min_eigenvalue: graph::min_eigenvalue(&kept),
         });
     } else {
         let repaired =
@@ -736,15 +736,6 @@ fn checked_information<const D: usize>(
         Some((index, value)) => Err(InformationProblem::OutOfRange { index, value }),
         None => Ok((kept, repaired)),
     }
-}
-
-/// The smallest eigenvalue of a symmetric matrix (NaN if the bounded
-/// eigen-solver fails), for messages.
-fn min_eigenvalue<const D: usize>(m: &SMatrix<f64, D, D>) -> f64 {
-    let d = nalgebra::DMatrix::from_column_slice(D, D, m.as_slice());
-    nalgebra::SymmetricEigen::try_new(d, f64::EPSILON, 10_000).map_or(f64::NAN, |e| {
-        e.eigenvalues.iter().copied().fold(f64::INFINITY, f64::min)
-    })
 }
 
 /// A pose graph whose dimension is chosen at run time, numbers passed in

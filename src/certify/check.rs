@@ -15,7 +15,7 @@
 //! definite exactly when SE-Sync's `Q − Λ` (the translations eliminated) has
 //! every eigenvalue above `−η`.
 
-use super::problem::{Edge, Map, data_blocks};
+use super::problem::{IsotropicEdge, Map, data_blocks};
 use crate::linear::{BlockSystem, LinearError, Parallelism};
 use nalgebra::{SMatrix, SVector};
 
@@ -60,7 +60,7 @@ impl<const B: usize> Certificate<B> {
     /// connected part (`pins`).
     pub fn new<const DIM: usize>(
         map: &Map<DIM>,
-        edges: &[Edge<DIM>],
+        edges: &[IsotropicEdge<DIM>],
         pins: &[usize],
     ) -> Result<Self, LinearError> {
         debug_assert_eq!(B, DIM + 1);
@@ -94,7 +94,11 @@ impl<const B: usize> Certificate<B> {
 
     /// Whether `S + shift·D` is positive definite (its factorisation
     /// succeeds).
-    pub fn factorize<const DIM: usize>(&mut self, edges: &[Edge<DIM>], shift: f64) -> bool {
+    pub fn factorize<const DIM: usize>(
+        &mut self,
+        edges: &[IsotropicEdge<DIM>],
+        shift: f64,
+    ) -> bool {
         self.sys.clear();
         for (k, e) in edges.iter().enumerate() {
             let (ii, ij, jj) = data_blocks::<DIM, B>(e);
@@ -114,7 +118,7 @@ impl<const B: usize> Certificate<B> {
     }
 
     /// The mean of `M`'s rotation diagonal, the scale of `S`.
-    pub fn rotation_scale<const DIM: usize>(edges: &[Edge<DIM>], n: usize) -> f64 {
+    pub fn rotation_scale<const DIM: usize>(edges: &[IsotropicEdge<DIM>], n: usize) -> f64 {
         let total: f64 = edges
             .iter()
             .map(|e| 2.0 * e.kappa * DIM as f64 + e.tau * e.t.norm_squared())
@@ -123,7 +127,7 @@ impl<const B: usize> Certificate<B> {
     }
 
     /// `S x` (without a shift), `x` and the result by vertex block.
-    fn apply<const DIM: usize>(&self, edges: &[Edge<DIM>], x: &[f64], y: &mut [f64]) {
+    fn apply<const DIM: usize>(&self, edges: &[IsotropicEdge<DIM>], x: &[f64], y: &mut [f64]) {
         let block = |v: &[f64], k: usize| SVector::<f64, B>::from_column_slice(&v[k * B..][..B]);
         for (k, d) in self.diag.iter().enumerate() {
             let r = d * block(x, k);
@@ -143,7 +147,11 @@ impl<const B: usize> Certificate<B> {
 
     /// The smallest eigenvalue of `Q − Λ` below `−eta` (where the check at
     /// `eta` failed) and its vector.
-    pub fn smallest<const DIM: usize>(&mut self, edges: &[Edge<DIM>], eta: f64) -> Option<Eigen> {
+    pub fn smallest<const DIM: usize>(
+        &mut self,
+        edges: &[IsotropicEdge<DIM>],
+        eta: f64,
+    ) -> Option<Eigen> {
         let (mut fail, mut ok) = (eta, eta * GROWTH);
         let mut factorisations = 0;
         loop {
@@ -187,7 +195,7 @@ impl<const B: usize> Certificate<B> {
     /// shift `σ`; returns the Rayleigh quotient `wᵀSw / wᵀDw` and `w`.
     fn inverse_iteration<const DIM: usize>(
         &mut self,
-        edges: &[Edge<DIM>],
+        edges: &[IsotropicEdge<DIM>],
         shift: f64,
     ) -> (f64, Vec<f64>) {
         let len = self.diag.len() * B;

@@ -27,7 +27,9 @@ mod tests;
 
 use crate::graph::{self, VertexId};
 use crate::report::Report;
-use problem::{Edge, Lift, Map, WeightedEdge, components, isotropic_weights, pose_distance};
+use problem::{
+    IsotropicEdge, Lift, Map, WeightedEdge, components, isotropic_weights, pose_distance,
+};
 use serde::Serialize;
 use std::time::Instant;
 
@@ -225,7 +227,7 @@ pub(crate) fn certify<P: Lift<DIM>, const DIM: usize, const B: usize, const DOF:
         return Err(CertifyError::SeveralFixed { ids });
     }
     let n = poses.len();
-    let edges: Vec<Edge<DIM>> = problem.edges.iter().map(Edge::lift).collect();
+    let edges: Vec<IsotropicEdge<DIM>> = problem.edges.iter().map(IsotropicEdge::lift).collect();
     let given = Map::of(poses);
     let finite = |m: &Map<DIM>| {
         (m.r.iter().all(|r| r.iter().all(|v| v.is_finite())))
@@ -314,7 +316,11 @@ fn largest_shares(share: &[f64], ids: &[VertexId]) -> Vec<EigenvectorPose> {
 
 /// One vertex per connected part of the map's graph held fixed: the fixed
 /// vertex where the part has it, else the part's first vertex.
-fn gauge_pins<const DIM: usize>(n: usize, edges: &[Edge<DIM>], fixed: &[usize]) -> Vec<usize> {
+fn gauge_pins<const DIM: usize>(
+    n: usize,
+    edges: &[IsotropicEdge<DIM>],
+    fixed: &[usize],
+) -> Vec<usize> {
     let (part, count) = components(n, edges);
     let mut pin = vec![usize::MAX; count];
     for &f in fixed {

@@ -13,6 +13,7 @@
 //! its derivative is `2·X M` ([`Map::gradient`]).
 
 use crate::geometry::{Se2, Se3};
+use crate::graph::UnionFind;
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector};
 
 /// A pose type whose rotation and translation the certificate reads, with
@@ -141,9 +142,10 @@ pub(crate) struct Map<const DIM: usize> {
     pub t: Vec<SVector<f64, DIM>>,
 }
 
-/// An edge in the certificate's coordinates.
+/// An edge of SE-Sync's isotropic problem, in the certificate's coordinates:
+/// its measurement and its rotation and translation weights.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Edge<const DIM: usize> {
+pub(crate) struct IsotropicEdge<const DIM: usize> {
     /// Index of the first vertex.
     pub i: usize,
     /// Index of the second vertex.
@@ -158,7 +160,7 @@ pub(crate) struct Edge<const DIM: usize> {
     pub tau: f64,
 }
 
-impl<const DIM: usize> Edge<DIM> {
+impl<const DIM: usize> IsotropicEdge<DIM> {
     /// The edge of a weighted edge.
     pub fn lift<P: Lift<DIM>>(e: &WeightedEdge<P>) -> Self {
         let (r, t) = e.measurement.rotation_translation();
@@ -190,7 +192,7 @@ impl<const DIM: usize> Map<DIM> {
     }
 
     /// `F(X)`.
-    pub fn cost(&self, edges: &[Edge<DIM>]) -> f64 {
+    pub fn cost(&self, edges: &[IsotropicEdge<DIM>]) -> f64 {
         edges
             .iter()
             .map(|e| {
@@ -204,7 +206,7 @@ impl<const DIM: usize> Map<DIM> {
     /// the rotation columns `Gᵢᴿ`.
     pub fn gradient(
         &self,
-        edges: &[Edge<DIM>],
+        edges: &[IsotropicEdge<DIM>],
     ) -> (Vec<SVector<f64, DIM>>, Vec<SMatrix<f64, DIM, DIM>>) {
         let n = self.r.len();
         let mut gt = vec![SVector::zeros(); n];
@@ -247,7 +249,7 @@ impl<const DIM: usize> Map<DIM> {
 /// 2 tr(xᵢ M_ij xⱼᵀ) + tr(xⱼ M_jj xⱼᵀ)` with `xᵢ = [tᵢ Rᵢ]`.
 #[allow(clippy::type_complexity)]
 pub(crate) fn data_blocks<const DIM: usize, const B: usize>(
-    e: &Edge<DIM>,
+    e: &IsotropicEdge<DIM>,
 ) -> (SMatrix<f64, B, B>, SMatrix<f64, B, B>, SMatrix<f64, B, B>) {
     debug_assert_eq!(B, DIM + 1);
     let (k, tau) = (e.kappa, e.tau);
@@ -272,24 +274,19 @@ pub(crate) fn data_blocks<const DIM: usize, const B: usize>(
 
 /// The connected parts of the graph of `edges` over `n` vertices: the part
 /// of each vertex, numbered from 0 in order of first vertex.
-pub(crate) fn components<const DIM: usize>(n: usize, edges: &[Edge<DIM>]) -> (Vec<usize>, usize) {
-    let mut parent: Vec<usize> = (0..n).collect();
-    fn root(parent: &mut [usize], mut v: usize) -> usize {
-        while parent[v] != v {
-            parent[v] = parent[parent[v]];
-            v = parent[v];
-        }
-        v
-    }
+pub(crate) fn components<const DIM: usize>(
+    n: usize,
+    edges: &[IsotropicEdge<DIM>],
+) -> (Vec<usize>, usize) {
+    let mut parts = UnionFind::new(n);
     for e in edges {
-        let (a, b) = (root(&mut parent, e.i), root(&mut parent, e.j));
-        parent[a.max(b)] = a.min(b);
+        parts.union(e.i, e.j);
     }
     let mut label = vec![usize::MAX; n];
     let mut part = vec![0; n];
     let mut count = 0;
     for v in 0..n {
-        let r = root(&mut parent, v);
+        let r = parts.find(v);
         if label[r] == usize::MAX {
             label[r] = count;
             count += 1;

@@ -16,7 +16,7 @@
 //! then factorises. Without the `Λ` term it is Gauss–Newton's
 //! (positive semi-definite: `F` is a sum of squares linear in `X`).
 
-use super::problem::{Edge, Map, exp_rotation, generator, rotation_dof};
+use super::problem::{IsotropicEdge, Map, exp_rotation, generator, rotation_dof};
 use crate::linear::{BlockSystem, LinearError, Parallelism};
 use nalgebra::{SMatrix, SVector};
 
@@ -78,7 +78,7 @@ struct Steps<const DOF: usize> {
 /// Refines `map` on `edges`, the vertices with `pinned` held fixed.
 pub(crate) fn refine<const DIM: usize, const DOF: usize>(
     mut map: Map<DIM>,
-    edges: &[Edge<DIM>],
+    edges: &[IsotropicEdge<DIM>],
     pinned: &[bool],
 ) -> Result<Refined<DIM>, LinearError> {
     debug_assert_eq!(DOF, DIM + rotation_dof(DIM));
@@ -143,7 +143,10 @@ pub(crate) fn refine<const DIM: usize, const DOF: usize>(
 }
 
 impl<const DOF: usize> Steps<DOF> {
-    fn new<const DIM: usize>(edges: &[Edge<DIM>], pinned: &[bool]) -> Result<Self, LinearError> {
+    fn new<const DIM: usize>(
+        edges: &[IsotropicEdge<DIM>],
+        pinned: &[bool],
+    ) -> Result<Self, LinearError> {
         let mut block = vec![None; pinned.len()];
         let mut free = Vec::new();
         for (v, &p) in pinned.iter().enumerate() {
@@ -165,7 +168,12 @@ impl<const DOF: usize> Steps<DOF> {
     }
 
     /// Fills `H` (Newton's with `newton`, else Gauss–Newton's) and `g`.
-    fn assemble<const DIM: usize>(&mut self, map: &Map<DIM>, edges: &[Edge<DIM>], newton: bool) {
+    fn assemble<const DIM: usize>(
+        &mut self,
+        map: &Map<DIM>,
+        edges: &[IsotropicEdge<DIM>],
+        newton: bool,
+    ) {
         self.sys.clear();
         for (k, e) in edges.iter().enumerate() {
             let (hii, hij, hjj) = hessian_blocks::<DIM, DOF>(e, map);
@@ -227,7 +235,7 @@ impl<const DOF: usize> Steps<DOF> {
     fn damped<const DIM: usize>(
         &mut self,
         map: &Map<DIM>,
-        edges: &[Edge<DIM>],
+        edges: &[IsotropicEdge<DIM>],
         cost: f64,
         step: &mut [f64],
     ) -> Result<Option<(Map<DIM>, f64, bool)>, LinearError> {
@@ -264,7 +272,7 @@ impl<const DOF: usize> Steps<DOF> {
 /// `∂/∂δᵢ = −I`, `∂/∂φᵢₐ = −Rᵢ Eₐ t̃` (translation).
 #[allow(clippy::type_complexity)]
 fn hessian_blocks<const DIM: usize, const DOF: usize>(
-    e: &Edge<DIM>,
+    e: &IsotropicEdge<DIM>,
     map: &Map<DIM>,
 ) -> (
     SMatrix<f64, DOF, DOF>,

@@ -1,4 +1,4 @@
-use super::problem::{Edge, Map, exp_rotation, isotropic_weights};
+use super::problem::{IsotropicEdge, Map, exp_rotation, isotropic_weights};
 use super::*;
 use crate::geometry::{Pose, Se2, Se3};
 use crate::{Initialization, Options, PoseGraph2, PoseGraph3};
@@ -48,7 +48,7 @@ fn three_d_isotropic_cost_is_pgos_chi2() {
     for (i, j) in [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (5, 0), (1, 4)] {
         graph.add_edge(i, j, random_pose(), info, None).unwrap();
     }
-    let edges: Vec<Edge<3>> = (graph.edges.iter())
+    let edges: Vec<IsotropicEdge<3>> = (graph.edges.iter())
         .map(|e| {
             let (kappa, tau) = isotropic_weights(&e.information);
             let w = problem::WeightedEdge {
@@ -58,7 +58,7 @@ fn three_d_isotropic_cost_is_pgos_chi2() {
                 kappa,
                 tau,
             };
-            Edge::lift(&w)
+            IsotropicEdge::lift(&w)
         })
         .collect();
     let f = Map::of(&graph.poses).cost(&edges);
@@ -310,7 +310,7 @@ fn the_refinement_reaches_a_critical_point() {
     let graph = ring2(30, 0.1, 7);
     let solution = graph.optimize(&Options::default()).unwrap();
     let problem = solution_problem(&solution);
-    let edges: Vec<Edge<2>> = problem.edges.iter().map(Edge::lift).collect();
+    let edges: Vec<IsotropicEdge<2>> = problem.edges.iter().map(IsotropicEdge::lift).collect();
     let poses: Vec<Se2> = solution.poses().map(|(_, p)| *p).collect();
     let mut pinned = vec![false; poses.len()];
     pinned[0] = true;

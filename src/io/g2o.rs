@@ -42,7 +42,7 @@ use super::source::{Fingerprint, Fingerprinter, Input, Original};
 use super::{LineError, LineReader};
 use crate::geometry::{Pose, Se2, Se3};
 use crate::graph::{
-    AnyGraph, Graph, GraphError, LoopCandidate, VertexId, is_positive_definite,
+    AnyGraph, Graph, GraphError, LoopCandidate, VertexId, is_positive_definite, min_eigenvalue,
     nearest_positive_definite,
 };
 use nalgebra::SMatrix;
@@ -847,15 +847,6 @@ fn upper_triangle_to_matrix<const D: usize>(v: &[f64]) -> SMatrix<f64, D, D> {
         }
     }
     m
-}
-
-/// The smallest eigenvalue (NaN if the bounded eigen-solver fails), for
-/// messages.
-fn min_eigenvalue<const D: usize>(m: &SMatrix<f64, D, D>) -> f64 {
-    let d = nalgebra::DMatrix::from_column_slice(D, D, m.as_slice());
-    nalgebra::SymmetricEigen::try_new(d, f64::EPSILON, 10_000).map_or(f64::NAN, |e| {
-        e.eigenvalues.iter().copied().fold(f64::INFINITY, f64::min)
-    })
 }
 
 impl G2oFile {

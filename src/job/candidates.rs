@@ -1,11 +1,11 @@
 //! Which edges are loop candidates, what the gate makes of them, and which
 //! edges the initial guess trusts.
 
-use super::{Settings, Error};
+use super::Settings;
 use crate::options::CandidateRule;
 use crate::gate::{self, DegeneratePolicy, GateMode, ThresholdFit};
 use crate::geometry::Pose;
-use crate::graph::{Graph, LoopCandidate};
+use crate::graph::{Graph, LoopCandidate, UnionFind};
 use crate::report::{GateReport, Report};
 use crate::robust::Candidate;
 
@@ -118,29 +118,15 @@ pub fn initial_weights<P: Pose<D>, const D: usize>(
     });
     // Union-find over the trusted edges, then the candidates in that order
     // join what is still apart.
-    let mut parent: Vec<usize> = (0..graph.num_vertices()).collect();
-    fn find(parent: &mut [usize], mut v: usize) -> usize {
-        while parent[v] != v {
-            parent[v] = parent[parent[v]];
-            v = parent[v];
-        }
-        v
-    }
-    let join = |parent: &mut Vec<usize>, a: usize, b: usize| {
-        let (ra, rb) = (find(parent, a), find(parent, b));
-        if ra != rb {
-            parent[ra.max(rb)] = ra.min(rb);
-        }
-        ra != rb
-    };
+    let mut parts = UnionFind::new(graph.num_vertices());
     for (k, e) in graph.edges.iter().enumerate() {
         if weights[k] > 0.0 {
-            join(&mut parent, e.from, e.to);
+            parts.union(e.from, e.to);
         }
     }
     for c in order {
         let e = &graph.edges[c.edge];
-        if c.count_posterior != Some(0.0) && join(&mut parent, e.from, e.to) {
+        if c.count_posterior != Some(0.0) && parts.union(e.from, e.to) {
             weights[c.edge] = 1.0;
         }
     }

@@ -2,7 +2,7 @@
 //! covariance, under the current factorisation, that a group of loop
 //! candidates' errors inherit from the map.
 
-use super::supernodal::OffPatternBlocks;
+use super::supernodal::OffPattern;
 use super::{BlockSystem, SelectedInverse};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatRef, Par};
@@ -195,18 +195,8 @@ impl<const D: usize> BlockSystem<D> {
         budget: usize,
     ) -> Option<DMatrix<f64>> {
         let m = edges.len();
-        let mut memo = OffPatternBlocks::default();
-        let mut budget = budget;
-        let mut inverse_block = |p: usize, q: usize| {
-            self.symbolic.inverse_block_anywhere(
-                &self.factor,
-                &z.values,
-                p,
-                q,
-                &mut memo,
-                &mut budget,
-            )
-        };
+        let mut inverse = OffPattern::new(&self.symbolic, &self.factor, &z.values, budget);
+        let mut inverse_block = |p: usize, q: usize| inverse.block(p, q);
         let mut gram = DMatrix::zeros(D * m, D * m);
         for (e, ea) in edges.iter().enumerate() {
             for (f, fa) in edges.iter().enumerate().take(e + 1) {

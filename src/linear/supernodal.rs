@@ -38,7 +38,7 @@ use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
 };
 use faer::{Accum, MatMut, MatRef, Par, Side};
-pub(super) use off_pattern::OffPatternBlocks;
+pub(super) use off_pattern::OffPattern;
 use rayon::prelude::*;
 use std::cell::RefCell;
 use std::sync::atomic::{AtomicUsize, Ordering};

@@ -7,6 +7,8 @@
 //! finds the map agreeing with it. So a candidate is judged against the map
 //! made without its whole cluster.
 
+use crate::graph::UnionFind;
+
 /// Candidates whose ends are at most this many poses apart, at both ends,
 /// are in one cluster: consecutive keyframes are 1 apart, and 2 lets a run
 /// skip one.
@@ -30,7 +32,7 @@ pub fn clusters(ends: &[(u64, u64)]) -> Vec<Vec<usize>> {
     };
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by_key(|&k| (key(k), k));
-    let mut parent: Vec<usize> = (0..n).collect();
+    let mut parts = UnionFind::new(n);
     for (x, &k) in order.iter().enumerate() {
         let (a, b) = key(k);
         for &l in &order[x + 1..] {
@@ -39,7 +41,7 @@ pub fn clusters(ends: &[(u64, u64)]) -> Vec<Vec<usize>> {
                 break;
             }
             if b2.abs_diff(b) <= NEIGHBOURHOOD {
-                union(&mut parent, k, l);
+                parts.union(k, l);
             }
         }
     }
@@ -47,8 +49,7 @@ pub fn clusters(ends: &[(u64, u64)]) -> Vec<Vec<usize>> {
     // into pieces of at most MAX_CLUSTER.
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); n];
     for &k in &order {
-        let r = find(&mut parent, k);
-        members[r].push(k);
+        members[parts.find(k)].push(k);
     }
     let mut out: Vec<Vec<usize>> = members
         .into_iter()
@@ -65,21 +66,6 @@ pub fn clusters(ends: &[(u64, u64)]) -> Vec<Vec<usize>> {
         .collect();
     out.sort_unstable_by_key(|c| c[0]);
     out
-}
-
-fn find(parent: &mut [usize], mut k: usize) -> usize {
-    while parent[k] != k {
-        parent[k] = parent[parent[k]];
-        k = parent[k];
-    }
-    k
-}
-
-fn union(parent: &mut [usize], a: usize, b: usize) {
-    let (ra, rb) = (find(parent, a), find(parent, b));
-    if ra != rb {
-        parent[ra.max(rb)] = ra.min(rb);
-    }
 }
 
 #[cfg(test)]

@@ -26,6 +26,8 @@
 //!
 //! [`BlockSystem::propagate_group`]: crate::linear::BlockSystem::propagate_group
 
+use super::Candidate;
+use super::model::Evidence;
 use crate::geometry::Pose;
 use crate::graph::Graph;
 use crate::linear::{EdgeJacobian, GroupScratch, Parallelism, SelectedInverse};
@@ -66,6 +68,18 @@ pub struct Innovations {
     /// map was solved with: by how much `Σ eᵀΩe` of the map would drop
     /// without them (0 when it has none; `None` when `S` is singular).
     pub joint: Vec<Option<f64>>,
+}
+
+impl Innovations {
+    /// The evidence the loop model weighs for candidate `k` of
+    /// `candidates`: its count posterior and `ν²`; `None` where nothing
+    /// else checks it.
+    pub fn evidence(&self, candidates: &[Candidate], k: usize) -> Option<Evidence> {
+        self.nu2.get(k).copied().flatten().map(|v| Evidence {
+            count_posterior: candidates[k].count_posterior,
+            innovation: v,
+        })
+    }
 }
 
 /// The factorisation and selected inverse of one map, for the innovations

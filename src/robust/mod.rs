@@ -384,22 +384,6 @@ pub fn solve<P: ChordalInit<D>, const D: usize>(
     Ok(out)
 }
 
-/// The χ² search from the decisions, unless the budget cut them short or
-/// the layer is off.
-fn explain<P: Pose<D>, const D: usize>(
-    session: &mut Session<'_, P, D>,
-    weights: &mut [f64],
-    candidates: &[Candidate],
-    decided: &mut schedule::Decided,
-    layers: &Layers,
-    test: &Test<'_, P, D>,
-) -> Result<Option<Search>, SolveError> {
-    if decided.cut_short || !layers.search {
-        return Ok(None);
-    }
-    search::explain(session, weights, candidates, decided, test).map(Some)
-}
-
 /// EM from the map in the session's graph (the job's initial guess):
 /// annealing, decisions by innovation, and the χ² search; the outcome's
 /// weights are not yet filled in.
@@ -533,7 +517,7 @@ fn settle<P: ChordalInit<D>, const D: usize>(
             },
         )?;
         if restarted {
-            search = explain(session, weights, candidates, &mut decided, layers, test)?;
+            search = search::explain(session, weights, candidates, &mut decided, layers, test)?;
             if let Some(s) = &mut search {
                 s.restarted = true;
             }
@@ -567,7 +551,8 @@ fn decide_and_explain<P: ChordalInit<D>, const D: usize>(
         if decided.swung {
             return Ok((decided, None));
         }
-        let Some(mut search) = explain(session, weights, &judged, &mut decided, layers, test)?
+        let Some(mut search) =
+            search::explain(session, weights, &judged, &mut decided, layers, test)?
         else {
             // Cut short: what earlier rounds took out stays reported.
             let search = (!removed.is_empty()).then(|| Search {
@@ -611,7 +596,7 @@ fn record(
         .flat_map(|s| s.removed.iter().flat_map(|r| r.loops.iter().copied()))
         .collect();
     for k in 0..candidates.len() {
-        let e = decided.evidence(candidates, k);
+        let e = decided.innovations.evidence(candidates, k);
         out.innovations[k] = decided.innovations.nu2.get(k).copied().flatten();
         out.posteriors[k] = decided.model.as_ref().map(|m| match &e {
             Some(e) => m.posterior(e),

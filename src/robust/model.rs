@@ -15,7 +15,7 @@
 //!   against the map made without it (and without the candidates of its
 //!   cluster). For true loops `y = ln ν²` is `ln(s²·χ²_D)` — Gaussian noise
 //!   at an unknown scale — made wider by a log-normal spread of the scale
-//!   from loop to loop ([`LogChi2`]): its mean `μ_in` and spread `σ_in` are
+//!   from loop to loop ([`LogChi2`]): its mean `μ_true` and spread `σ_true` are
 //!   learned, the spread never below that of `ln χ²_D`. Wrong loops come
 //!   in populations — perceptual aliasing a few poses off, random matches
 //!   across the map — so their `y` follows a mixture of `K` normals, `K`
@@ -26,9 +26,9 @@
 //!
 //! `a`, `ρ` and the distributions are estimated together by EM from every
 //! candidate's `(p_k, ν_k²)`; the posterior
-//! `P(true | n_k, ν_k) = π_k·f_in / (π_k·f_in + (1 − π_k)·f_out)` decides.
+//! `P(true | n_k, ν_k) = π_k·f_true / (π_k·f_true + (1 − π_k)·f_wrong)` decides.
 //! For the decisions the likelihood ratio is made non-increasing in `y`
-//! (its running minimum from `μ_in` up): a smaller innovation is never
+//! (its running minimum from `μ_true` up): a smaller innovation is never
 //! evidence against a loop, and one beyond a region of wrong loops is no
 //! evidence for it.
 
@@ -50,16 +50,16 @@ pub type Population = NormalComponent;
 pub struct LoopModel {
     /// The true loops' `ln ν²`: its mean and spread (its shape is
     /// [`LogChi2`]'s; `weight` is 1).
-    pub inlier: Population,
+    pub true_loops: Population,
     /// The wrong loops' populations (empty: no population stands out; a
     /// wrong loop is then equally likely anywhere in `span`).
-    pub outliers: Vec<Population>,
+    pub wrong_loops: Vec<Population>,
     /// The span of the candidates' `ln ν²`.
     pub span: f64,
     /// The rate at which a wrong loop's count looks like a true loop's.
     pub aliasing_rate: f64,
     /// The share of true loops among candidates without a count.
-    pub inlier_share: f64,
+    pub true_share: f64,
     /// The log-likelihood of the fit.
     pub ln_likelihood: f64,
     /// The innovations' dimension, which shapes the true loops' density
@@ -67,7 +67,7 @@ pub struct LoopModel {
     #[serde(skip)]
     dof: usize,
     /// Where the non-increasing likelihood ratio is tabulated: its values
-    /// every [`GRID_STEP`] from `inlier.mean`.
+    /// every [`GRID_STEP`] from `true_loops.mean`.
     #[serde(skip)]
     envelope: Vec<f64>,
 }
@@ -75,11 +75,11 @@ pub struct LoopModel {
 impl std::fmt::Debug for LoopModel {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("LoopModel")
-            .field("inlier", &self.inlier)
-            .field("outliers", &self.outliers)
+            .field("true_loops", &self.true_loops)
+            .field("wrong_loops", &self.wrong_loops)
             .field("span", &self.span)
             .field("aliasing_rate", &self.aliasing_rate)
-            .field("inlier_share", &self.inlier_share)
+            .field("true_share", &self.true_share)
             .field("ln_likelihood", &self.ln_likelihood)
             .finish()
     }
@@ -340,9 +340,9 @@ impl LoopModel {
     /// components). One closer is no population the innovations can tell
     /// from the true loops: it is their own tail.
     fn separated(&self) -> bool {
-        self.outliers
+        self.wrong_loops
             .iter()
-            .all(|o| ashman_d(&self.inlier, o) >= CLEAN_SEPARATION)
+            .all(|o| ashman_d(&self.true_loops, o) >= CLEAN_SEPARATION)
     }
 
     /// Whether the fit holds the candidates more consistent than the true
@@ -368,15 +368,15 @@ impl LoopModel {
         }
         let (mean, sigma) = sums.moments(0, floor);
         Self {
-            inlier: Population {
+            true_loops: Population {
                 weight: 1.0,
                 mean,
                 sigma,
             },
-            outliers: Vec::new(),
+            wrong_loops: Vec::new(),
             span: span(y, floor),
             aliasing_rate: 0.5,
-            inlier_share: 0.5,
+            true_share: 0.5,
             ln_likelihood: 0.0,
             dof,
             envelope: Vec::new(),
@@ -465,11 +465,11 @@ impl LoopModel {
     /// spread, each wrong population's share, mean and spread, and the two
     /// rates.
     fn parameters(&self) -> Vec<f64> {
-        let mut theta = vec![self.inlier.mean, self.inlier.sigma];
-        for o in &self.outliers {
+        let mut theta = vec![self.true_loops.mean, self.true_loops.sigma];
+        for o in &self.wrong_loops {
             theta.extend([o.weight, o.mean, o.sigma]);
         }
-        theta.extend([self.aliasing_rate, self.inlier_share]);
+        theta.extend([self.aliasing_rate, self.true_share]);
         theta
     }
 
@@ -479,27 +479,27 @@ impl LoopModel {
     /// finite.
     fn with_parameters(&self, theta: &[f64], floor: f64, aliasing: bool) -> Option<Self> {
         let (&[mean, sigma], rest) = theta.split_first_chunk::<2>()?;
-        let (populations, &[aliasing_rate, inlier_share]) = rest.split_last_chunk::<2>()?;
+        let (populations, &[aliasing_rate, true_share]) = rest.split_last_chunk::<2>()?;
         let population = |weight, mean, sigma| Population {
             weight,
             mean,
             sigma,
         };
         let model = Self {
-            inlier: population(1.0, mean, sigma),
-            outliers: (populations.chunks_exact(3))
+            true_loops: population(1.0, mean, sigma),
+            wrong_loops: (populations.chunks_exact(3))
                 .map(|p| population(p[0], p[1], p[2]))
                 .collect(),
             aliasing_rate,
-            inlier_share,
+            true_share,
             ..self.clone()
         };
         let spread = |p: &Population| p.mean.is_finite() && p.sigma >= floor && p.sigma.is_finite();
         let share = |x: f64| x > 0.0 && x < 1.0;
-        let valid = spread(&model.inlier)
-            && (model.outliers.iter()).all(|p| spread(p) && p.weight > 0.0 && p.weight <= 1.0)
+        let valid = spread(&model.true_loops)
+            && (model.wrong_loops.iter()).all(|p| spread(p) && p.weight > 0.0 && p.weight <= 1.0)
             && (share(aliasing_rate) || aliasing_rate == 0.0 && !aliasing)
-            && share(inlier_share);
+            && share(true_share);
         valid.then_some(model)
     }
 
@@ -507,12 +507,12 @@ impl LoopModel {
     /// responsibilities summed in `sums`.
     fn m_step(sums: &Sums, k: usize, (floor, dof): (f64, usize), span: f64) -> Self {
         let (mean, sigma) = sums.moments(0, floor);
-        let inlier = Population {
+        let true_loops = Population {
             weight: 1.0,
             mean,
             sigma,
         };
-        let outliers = (1..=k)
+        let wrong_loops = (1..=k)
             .map(|j| {
                 let (mean, sigma) = sums.moments(j, floor);
                 Population {
@@ -527,15 +527,15 @@ impl LoopModel {
             })
             .collect();
         Self {
-            inlier,
-            outliers,
+            true_loops,
+            wrong_loops,
             span,
             // The expected share of wrong loops among the candidates whose
             // count looks like a true loop's, and of true loops among those
             // without a count, each with a uniform (Beta(1, 1)) prior so
             // that neither is ever 0 or 1.
             aliasing_rate: (sums.fooled + 1.0) / (sums.counted + 2.0),
-            inlier_share: (sums.uncounted - sums.wrong + 1.0) / (sums.uncounted + 2.0),
+            true_share: (sums.uncounted - sums.wrong + 1.0) / (sums.uncounted + 2.0),
             ln_likelihood: 0.0,
             dof,
             envelope: Vec::new(),
@@ -561,7 +561,7 @@ impl LoopModel {
         };
         let table = LogChi2::of(self.dof);
         let truth = self.true_loops(&table);
-        let outliers: Vec<(f64, f64, f64)> = self.outliers.iter().map(constants).collect();
+        let wrong_loops: Vec<(f64, f64, f64)> = self.wrong_loops.iter().map(constants).collect();
         let mut terms = [0.0; MAX_WRONG_POPULATIONS + 1];
         // `ln π` and `ln(1 − π)` of each distinct count posterior.
         let ln_priors: Vec<(f64, f64)> = (counts.distinct.iter())
@@ -576,21 +576,21 @@ impl LoopModel {
             let (ln_in, ln_out) = ln_priors[c as usize];
             let term = |(c, h, m): (f64, f64, f64)| c - (yi - m) * (yi - m) * h;
             terms[0] = ln_in + truth.ln(yi);
-            let n = if outliers.is_empty() {
+            let n = if wrong_loops.is_empty() {
                 terms[1] = ln_out - self.span.ln();
                 2
             } else {
-                for (t, &o) in terms[1..].iter_mut().zip(&outliers) {
+                for (t, &o) in terms[1..].iter_mut().zip(&wrong_loops) {
                     *t = ln_out + term(o);
                 }
-                1 + outliers.len()
+                1 + wrong_loops.len()
             };
             // ln p(y) = top + ln(sum), the logarithms taken of products.
             let (top, sum) = normalize_log_terms(&mut terms[..n]);
             ll += top;
             sums_product.push(sum);
             sums.add(e, yi, &terms[..=k]);
-            if yi < self.inlier.mean {
+            if yi < self.true_loops.mean {
                 sums.below.0 += terms[0];
                 sums.below.1 += 1.0 - terms[0];
             }
@@ -599,34 +599,34 @@ impl LoopModel {
     }
 
     /// `ln` of the wrong loops' density of `y`.
-    fn ln_outlier_density(&self, y: f64) -> f64 {
-        if self.outliers.is_empty() {
+    fn ln_wrong_density(&self, y: f64) -> f64 {
+        if self.wrong_loops.is_empty() {
             return -self.span.ln();
         }
-        log_sum_exp(self.outliers.iter().map(|o| o.log_weighted_density(y)))
+        log_sum_exp(self.wrong_loops.iter().map(|o| o.log_weighted_density(y)))
     }
 
     /// The true loops' density of `y` from the table of their dimension.
     fn true_loops<'t>(&self, table: &'t LogChi2) -> Density<'t> {
-        table.with(self.inlier.mean, self.inlier.sigma)
+        table.with(self.true_loops.mean, self.true_loops.sigma)
     }
 
-    /// `ln f_in(y) − ln f_out(y)`, `f_in` the true loops' density `truth`.
+    /// `ln f_true(y) − ln f_wrong(y)`, `f_true` the true loops' density `truth`.
     fn raw_ratio(&self, truth: &Density<'_>, y: f64) -> f64 {
-        truth.ln(y) - self.ln_outlier_density(y)
+        truth.ln(y) - self.ln_wrong_density(y)
     }
 
     /// Tabulates the running minimum of the likelihood ratio from the true
     /// loops' mean up to the largest `y`.
     fn tabulate(&mut self, y: &[f64]) {
-        let top = y.iter().copied().fold(self.inlier.mean, f64::max);
-        let steps = ((top - self.inlier.mean) / GRID_STEP).ceil() as usize + 1;
+        let top = y.iter().copied().fold(self.true_loops.mean, f64::max);
+        let steps = ((top - self.true_loops.mean) / GRID_STEP).ceil() as usize + 1;
         let mut low = f64::INFINITY;
         let table = LogChi2::of(self.dof);
         let truth = self.true_loops(&table);
         self.envelope = (0..=steps)
             .map(|i| {
-                low = low.min(self.raw_ratio(&truth, self.inlier.mean + i as f64 * GRID_STEP));
+                low = low.min(self.raw_ratio(&truth, self.true_loops.mean + i as f64 * GRID_STEP));
                 low
             })
             .collect();
@@ -638,14 +638,14 @@ impl LoopModel {
             Some(p) => {
                 ((1.0 - self.aliasing_rate) * p).clamp(f64::MIN_POSITIVE, 1.0 - f64::EPSILON)
             }
-            None => self.inlier_share,
+            None => self.true_share,
         }
     }
 
-    /// `ln f_in(y) − ln f_out(y)`, made non-increasing: its running
+    /// `ln f_true(y) − ln f_wrong(y)`, made non-increasing: its running
     /// minimum from the true loops' mean up (the value there below it).
     pub fn ln_likelihood_ratio(&self, y: f64) -> f64 {
-        let at = ((y - self.inlier.mean) / GRID_STEP).max(0.0);
+        let at = ((y - self.true_loops.mean) / GRID_STEP).max(0.0);
         let i = at.floor() as usize;
         match self.envelope.get(i) {
             Some(&v) if i + 1 < self.envelope.len() => v,
@@ -658,19 +658,19 @@ impl LoopModel {
         }
     }
 
-    /// The true loops' density of `y = ln ν²`, `f_in(y)`.
+    /// The true loops' density of `y = ln ν²`, `f_true(y)`.
     pub fn true_density(&self, y: f64) -> f64 {
         self.true_loops(&LogChi2::of(self.dof)).ln(y).exp()
     }
 
-    /// The wrong loops' density of `y = ln ν²`, `f_out(y)` (all their
+    /// The wrong loops' density of `y = ln ν²`, `f_wrong(y)` (all their
     /// populations, or uniform over the span without one).
     pub fn wrong_density(&self, y: f64) -> f64 {
-        self.ln_outlier_density(y).exp()
+        self.ln_wrong_density(y).exp()
     }
 
     /// The least prior at which a candidate with log innovation `y` is
-    /// accepted: where its posterior is ½, `1 / (1 + f_in/f_out)` with the
+    /// accepted: where its posterior is ½, `1 / (1 + f_true/f_wrong)` with the
     /// non-increasing likelihood ratio ([`Self::ln_likelihood_ratio`]).
     pub fn acceptance_prior(&self, y: f64) -> f64 {
         1.0 / (1.0 + self.ln_likelihood_ratio(y).exp())
@@ -817,7 +817,7 @@ mod tests {
             )
         };
         let one = fit(&Parallelism::sequential());
-        assert!(!one.outliers.is_empty(), "{one:?}");
+        assert!(!one.wrong_loops.is_empty(), "{one:?}");
         for threads in [2, 3, 5] {
             assert_eq!(fit(&Parallelism::new(threads).unwrap()), one);
         }
@@ -841,7 +841,7 @@ mod tests {
         let m = fitted(&e);
         assert!(e[..400].iter().all(|x| m.posterior(x) >= 0.5), "{m:?}");
         assert!(e[400..].iter().all(|x| m.posterior(x) < 0.5), "{m:?}");
-        assert!(m.inlier.sigma > 1.5, "{m:?}");
+        assert!(m.true_loops.sigma > 1.5, "{m:?}");
     }
 
     #[test]
@@ -951,7 +951,7 @@ mod tests {
     fn without_wrong_loops_every_consistent_candidate_is_kept() {
         let e = gaussian_loops(100, 2.0, None);
         let m = fitted(&e);
-        assert!(m.outliers.is_empty(), "{m:?}");
+        assert!(m.wrong_loops.is_empty(), "{m:?}");
         assert!(e.iter().all(|x| m.posterior(x) >= 0.5));
         // A candidate far beyond them is not.
         assert!(m.posterior(&ev(None, 1e4)) < 0.5);

@@ -306,17 +306,63 @@ impl Decided {
         }
     }
 
-    /// The evidence the model weighed for candidate `k`.
-    pub fn evidence(&self, candidates: &[Candidate], k: usize) -> Option<Evidence> {
-        evidence(candidates, &self.innovations, k)
+    /// Solves the map with the accepted set in `weights` (1 accepted, 0
+    /// not), one decision more: `again`, the set settled on a map solved to
+    /// [`DECIDING_TOLERANCE`], to the job's own tolerance from that map;
+    /// otherwise from the better fitting of the map before and the set's
+    /// chordal relaxation (if `how` says so) to [`DECIDING_TOLERANCE`].
+    /// Returns whether the map met the job's tolerance.
+    fn solve<P: ChordalInit<D>, const D: usize>(
+        &mut self,
+        session: &mut Session<'_, P, D>,
+        weights: &[f64],
+        how: &Deciding<'_>,
+        again: bool,
+    ) -> Result<bool, SolveError> {
+        self.decisions += 1;
+        if again {
+            session.converge(weights)?;
+            return Ok(true);
+        }
+        if how.relax && how.layers.relaxation {
+            self.relaxations += 1;
+            self.relaxed_starts += usize::from(relaxed_start(session, weights)?);
+        }
+        session.converge_unless_crawling(weights, DECIDING_TOLERANCE)
     }
-}
 
-fn evidence(candidates: &[Candidate], innov: &Innovations, k: usize) -> Option<Evidence> {
-    innov.nu2.get(k).copied().flatten().map(|v| Evidence {
-        count_posterior: candidates[k].count_posterior,
-        innovation: v,
-    })
+    /// One evaluation of the map in the session's graph (the least-squares
+    /// map of the set in `weights`): the innovations of the `candidates`
+    /// (with their `edges`) and the loop model, kept in these decisions;
+    /// returns the set they accept.
+    fn evaluate<P: Pose<D>, const D: usize>(
+        &mut self,
+        session: &mut Session<'_, P, D>,
+        weights: &[f64],
+        (candidates, edges): (&[Candidate], &[usize]),
+        how: &Deciding<'_>,
+    ) -> Result<Vec<bool>, SolveError> {
+        let start = Instant::now();
+        let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?
+            .judging_within_clusters(self.within);
+        // Exact innovations: a lower bound (a lone candidate outside the map)
+        // is not the evidence the model describes, and a wrong loop's bound
+        // can sit among the true loops' innovations.
+        let innov = eval.innovations(edges, &self.accepted, &self.clusters, true);
+        let parallelism = eval.parallelism().clone();
+        let (model, next) = judge(
+            candidates,
+            &innov,
+            &self.accepted,
+            (D, how.scale),
+            how.layers,
+            &parallelism,
+        );
+        session.evaluated_since(start);
+        self.innovations = innov;
+        self.model = Some(model);
+        Ok(next)
+    }
 }
 
 /// How [`decide`] decides.
@@ -344,7 +390,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
     candidates: &[Candidate],
     how: &Deciding<'_>,
 ) -> Result<Decided, SolveError> {
-    let (scale, layers, swing) = (how.scale, how.layers, how.swing);
+    let (layers, swing) = (how.layers, how.swing);
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     let mut out = Decided::start(session.graph, &edges, weights, layers);
     // The sets solved, each with its map's fit ([`excess`]).
@@ -357,25 +403,12 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
         for (&k, &a) in edges.iter().zip(&out.accepted) {
             weights[k] = if a { 1.0 } else { 0.0 };
         }
-        converged = if std::mem::take(&mut again) {
-            // The same set again, from its map: to the job's tolerance.
-            session.converge(weights)?;
-            true
-        } else {
-            if how.relax && layers.relaxation {
-                out.relaxations += 1;
-                out.relaxed_starts += usize::from(relaxed_start(session, weights)?);
-            }
-            session.converge_unless_crawling(weights, DECIDING_TOLERANCE)?
-        };
-        out.decisions += 1;
+        converged = out.solve(session, weights, how, std::mem::take(&mut again))?;
         if session.exhausted() {
             out.cut_short = true;
             break;
         }
-        let next = evaluate(
-            session, weights, candidates, &edges, &mut out, scale, layers,
-        )?;
+        let next = out.evaluate(session, weights, (candidates, &edges), how)?;
         if session.exhausted() {
             // No budget left to solve another set: the set kept is the one
             // the map was solved with.
@@ -489,41 +522,6 @@ pub(super) fn misfit_scale<P: Pose<D>, const D: usize>(
     (dof > 0 && scale.is_finite() && scale > 0.0).then_some(scale)
 }
 
-/// One evaluation of the map in the session's graph (the least-squares map
-/// of the set in `weights`): the innovations and the loop model, kept in
-/// `out`; returns the set they accept.
-#[allow(clippy::too_many_arguments)]
-fn evaluate<P: Pose<D>, const D: usize>(
-    session: &mut Session<'_, P, D>,
-    weights: &[f64],
-    candidates: &[Candidate],
-    edges: &[usize],
-    out: &mut Decided,
-    scale: Scale,
-    layers: &Layers,
-) -> Result<Vec<bool>, SolveError> {
-    let start = Instant::now();
-    let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?
-        .judging_within_clusters(out.within);
-    // Exact innovations: a lower bound (a lone candidate outside the map) is
-    // not the evidence the model describes, and a wrong loop's bound can
-    // sit among the true loops' innovations.
-    let innov = eval.innovations(edges, &out.accepted, &out.clusters, true);
-    let parallelism = eval.parallelism().clone();
-    let (model, next) = judge(
-        candidates,
-        &innov,
-        &out.accepted,
-        (D, scale),
-        layers,
-        &parallelism,
-    );
-    session.evaluated_since(start);
-    out.innovations = innov;
-    out.model = Some(model);
-    Ok(next)
-}
-
 /// The swings of [`decide`]'s sets ([`Swing`]).
 struct Swings {
     /// The candidates the last round flipped.
@@ -601,7 +599,7 @@ pub fn propose<P: Pose<D>, const D: usize>(
     )?
     .judging_within_clusters(decided.within);
     let mut innov = eval.innovations(&edges, &decided.accepted, &touched, false);
-    let accepts = |innov: &Innovations, k: usize| match evidence(candidates, innov, k) {
+    let accepts = |innov: &Innovations, k: usize| match innov.evidence(candidates, k) {
         Some(e) => proposal.model.posterior(&e) >= 0.5,
         None => proposal.model.prior(candidates[k].count_posterior) >= 0.5,
     };
@@ -669,7 +667,7 @@ fn judge(
     parallelism: &Parallelism,
 ) -> (LoopModel, Vec<bool>) {
     let all: Vec<Option<Evidence>> = (0..candidates.len())
-        .map(|k| evidence(candidates, innov, k))
+        .map(|k| innov.evidence(candidates, k))
         .collect();
     // Exact zeros (a loop the map fits perfectly) have no logarithm: they
     // are consistent whatever the model, and say nothing about its spread.

@@ -435,8 +435,12 @@ fn search_from(
     decided: &mut Decided,
 ) -> (super::super::search::Search, bool) {
     evaluate_all(&mut s, w, candidates, decided);
-    let search = super::super::search::explain(&mut s, w, candidates, decided, &chi2_test);
-    (search.unwrap(), chi2_test(s.graph, w).unwrap().passed)
+    let layers = Layers::default();
+    let search = super::super::search::explain(&mut s, w, candidates, decided, &layers, &chi2_test);
+    (
+        search.unwrap().unwrap(),
+        chi2_test(s.graph, w).unwrap().passed,
+    )
 }
 
 /// The χ² search on [`search_case`] from its converged map (which fails

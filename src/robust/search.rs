@@ -39,9 +39,9 @@
 //! fewer loops always fail by less, and keeping the end that fails least
 //! would throw away true loops to shrink `D²`.
 
-use super::Candidate;
 use super::innovation::Evaluation;
 use super::schedule::Decided;
+use super::{Candidate, Layers};
 use crate::geometry::Pose;
 use crate::graph::Graph;
 use crate::solve::{Session, SolveError};
@@ -87,14 +87,19 @@ pub struct Search {
 pub type Test<'t, P, const D: usize> = dyn Fn(&Graph<P, D>, &[f64]) -> Option<Chi2Test> + 't;
 
 /// The search of the module doc, from the decisions `decided`; updates
-/// them (and `weights`, and the map) for every cluster it removes.
+/// them (and `weights`, and the map) for every cluster it removes. `None`
+/// when the budget cut the decisions short or the layer is off.
 pub fn explain<P: Pose<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
     candidates: &[Candidate],
     decided: &mut Decided,
+    layers: &Layers,
     test: &Test<'_, P, D>,
-) -> Result<Search, SolveError> {
+) -> Result<Option<Search>, SolveError> {
+    if decided.cut_short || !layers.search {
+        return Ok(None);
+    }
     let mut search = Search::default();
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     // The loops of every cluster that stood out at an earlier ranking.
@@ -103,10 +108,10 @@ pub fn explain<P: Pose<D>, const D: usize>(
     let mut before: Option<Before<P>> = None;
     loop {
         let Some(t) = test(session.graph, weights) else {
-            return Ok(search);
+            return Ok(Some(search));
         };
         if t.passed && search.removed.is_empty() {
-            return Ok(search);
+            return Ok(Some(search));
         }
         if t.passed {
             before = None;
@@ -121,7 +126,7 @@ pub fn explain<P: Pose<D>, const D: usize>(
                     None => search.suspects = ranked.into_iter().take(SUSPECTS).collect(),
                 }
             }
-            return Ok(search);
+            return Ok(Some(search));
         };
         if together && before.is_none() {
             before = Some(Before::take(session, weights, decided, (&search, &ranked)));
@@ -145,7 +150,7 @@ pub fn explain<P: Pose<D>, const D: usize>(
             if let Some(b) = before.take() {
                 b.restore(session, weights, decided, &mut search);
             }
-            return Ok(search);
+            return Ok(Some(search));
         }
         let start = Instant::now();
         decided.innovations = Evaluation::new(session.optimizer, session.graph, weights)?

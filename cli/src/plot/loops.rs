@@ -65,7 +65,7 @@ pub fn plot_loops(path: &Path, points: &[LoopPoint], model: &LoopModel) -> Resul
 /// The x range: every candidate's `y` and the true loops' bulk, with a
 /// margin.
 fn x_range(points: &[LoopPoint], model: &LoopModel) -> (f64, f64) {
-    let (mu, s) = (model.inlier.mean, model.inlier.sigma);
+    let (mu, s) = (model.true_loops.mean, model.true_loops.sigma);
     let (lo, hi) = points
         .iter()
         .map(|p| p.innovation.ln())
@@ -107,11 +107,11 @@ fn draw_header(
     model: &LoopModel,
 ) -> DrawResult<()> {
     let accepted = points.iter().filter(|p| p.accepted).count();
+    let wrong = model.wrong_loops.len();
     let mut caption = format!(
-        "{accepted} accepted, {} rejected; {} wrong-loop population{}, aliasing rate {:.3}",
+        "{accepted} accepted, {} rejected; {wrong} wrong-loop population{}, aliasing rate {:.3}",
         points.len() - accepted,
-        model.outliers.len(),
-        if model.outliers.len() == 1 { "" } else { "s" },
+        if wrong == 1 { "" } else { "s" },
         model.aliasing_rate
     );
     if drawn < points.len() {
@@ -129,7 +129,7 @@ fn draw_header(
     Ok(())
 }
 
-/// Top panel: `f_in` and `f_out` over `y`.
+/// Top panel: `f_true` and `f_wrong` over `y`.
 fn draw_densities(
     area: &DrawingArea<SVGBackend<'_>, Shift>,
     model: &LoopModel,

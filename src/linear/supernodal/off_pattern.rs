@@ -21,87 +21,105 @@ use super::Symbolic;
 use nalgebra::SMatrix;
 use rustc_hash::FxHashMap;
 
-/// Blocks of `Z` computed off the pattern, by `(row, column)` in
-/// elimination positions (row after column).
-pub(in crate::linear) type OffPatternBlocks<const D: usize> =
-    FxHashMap<(u32, u32), SMatrix<f64, D, D>>;
+/// Blocks of `Z = H⁻¹` of one factorisation, read on the factor's pattern
+/// from its selected inverse and computed off it by the recurrence of the
+/// module doc: the factor and the selected inverse, the blocks computed so
+/// far, and the budget of `D×D` products (and blocks queued) left.
+pub(in crate::linear) struct OffPattern<'a, const D: usize> {
+    symbolic: &'a Symbolic<D>,
+    /// The factor's values.
+    l: &'a [f64],
+    /// The selected inverse's values.
+    z: &'a [f64],
+    /// Blocks computed off the pattern, by `(row, column)` in elimination
+    /// positions (row after column).
+    memo: FxHashMap<(u32, u32), SMatrix<f64, D, D>>,
+    budget: usize,
+}
 
-impl<const D: usize> Symbolic<D> {
-    /// Block `(row, col)` of `Z = H⁻¹` (elimination positions) from the
-    /// factor `l` and its selected inverse `z`: on the pattern, read; off
-    /// it, by the recurrence of the module doc, each block computed kept in
-    /// `memo`. `budget`: `D×D` products (and blocks queued) still allowed;
-    /// `None` when it runs out.
-    pub(in crate::linear) fn inverse_block_anywhere(
-        &self,
-        l: &[f64],
-        z: &[f64],
+impl<'a, const D: usize> OffPattern<'a, D> {
+    /// The blocks of `Z` of the factor `l` of `symbolic` and its selected
+    /// inverse `z`, at most `budget` products off the pattern.
+    pub(in crate::linear) fn new(
+        symbolic: &'a Symbolic<D>,
+        l: &'a [f64],
+        z: &'a [f64],
+        budget: usize,
+    ) -> Self {
+        Self {
+            symbolic,
+            l,
+            z,
+            memo: FxHashMap::default(),
+            budget,
+        }
+    }
+
+    /// Block `(row, col)` of `Z` (elimination positions): on the pattern,
+    /// read; off it, by the recurrence of the module doc, each block
+    /// computed kept. `None` once the budget runs out.
+    pub(in crate::linear) fn block(
+        &mut self,
         row: usize,
         col: usize,
-        memo: &mut OffPatternBlocks<D>,
-        budget: &mut usize,
     ) -> Option<SMatrix<f64, D, D>> {
-        if let Some(block) = self.known_block(z, memo, row, col) {
+        if let Some(block) = self.known_block(row, col) {
             return Some(block);
         }
         let (hi, lo) = (row.max(col), row.min(col));
         let mut stack = vec![(hi, lo)];
         while let Some(&(r, b)) = stack.last() {
-            if memo.contains_key(&(r as u32, b as u32)) {
+            if self.memo.contains_key(&(r as u32, b as u32)) {
                 stack.pop();
                 continue;
             }
-            if let Some(block) = self.recurrence(l, z, memo, r, b, &mut stack, budget)? {
-                memo.insert((r as u32, b as u32), block);
+            if let Some(block) = self.recurrence(r, b, &mut stack)? {
+                self.memo.insert((r as u32, b as u32), block);
                 stack.pop();
             }
         }
-        self.known_block(z, memo, row, col)
+        self.known_block(row, col)
     }
 
     /// `Z_rb = −(Σ_{k ∈ s(b)} Z_rk·L_kb)·L_bb⁻¹` if every `Z_rk` is known;
     /// otherwise `Some(None)`, with the unknown ones pushed on `stack`. The
     /// budget pays one product per unknown block pushed, then one per
     /// block of the sum; `None` when it runs out.
-    #[allow(clippy::too_many_arguments)]
     fn recurrence(
-        &self,
-        l: &[f64],
-        z: &[f64],
-        memo: &OffPatternBlocks<D>,
+        &mut self,
         r: usize,
         b: usize,
         stack: &mut Vec<(usize, usize)>,
-        budget: &mut usize,
     ) -> Option<Option<SMatrix<f64, D, D>>> {
+        let (symbolic, l, z) = (self.symbolic, self.l, self.z);
         let mut sum = SMatrix::<f64, D, D>::zeros();
         let mut ready = true;
         let mut terms = 0;
         // The rows after `r` of column `r`, walked alongside `s(b)` (both
         // increase): where `Z_kr` lies for the `k > r` on the pattern.
-        let mut after_r = self.column_structure(r).peekable();
-        for (k, local) in self.column_structure(b) {
+        let mut after_r = symbolic.column_structure(r).peekable();
+        for (k, local) in symbolic.column_structure(b) {
             let z_rk = if k > r {
                 while after_r.next_if(|&(row, _)| row < k).is_some() {}
                 match after_r.peek() {
                     Some(&(row, at)) if row == k => {
-                        let (off, ld) = self.offset(r, at);
+                        let (off, ld) = symbolic.offset(r, at);
                         Some(SMatrix::<f64, D, D>::from_fn(|a, c| z[off + c * ld + a]).transpose())
                     }
-                    _ => memo.get(&(k as u32, r as u32)).map(|m| m.transpose()),
+                    _ => self.memo.get(&(k as u32, r as u32)).map(|m| m.transpose()),
                 }
             } else {
-                self.known_block(z, memo, r, k)
+                self.known_block(r, k)
             };
             match z_rk {
                 Some(z_rk) if ready => {
-                    let (off, ld) = self.offset(b, local);
+                    let (off, ld) = symbolic.offset(b, local);
                     sum += z_rk * SMatrix::<f64, D, D>::from_fn(|a, c| l[off + c * ld + a]);
                     terms += 1;
                 }
                 Some(_) => {}
                 None => {
-                    *budget = budget.checked_sub(1)?;
+                    self.budget = self.budget.checked_sub(1)?;
                     stack.push((r.max(k), r.min(k)));
                     ready = false;
                 }
@@ -110,8 +128,8 @@ impl<const D: usize> Symbolic<D> {
         if !ready {
             return Some(None);
         }
-        *budget = budget.checked_sub(terms)?;
-        let l_bb = self.factor_block(l, b, b)?.lower_triangle();
+        self.budget = self.budget.checked_sub(terms)?;
+        let l_bb = symbolic.factor_block(l, b, b)?.lower_triangle();
         // X·L_bb = −sum, as L_bbᵀ·Xᵀ = −sumᵀ.
         let xt = l_bb
             .transpose()
@@ -119,24 +137,20 @@ impl<const D: usize> Symbolic<D> {
         Some(Some(xt.transpose()))
     }
 
-    /// Block `(r, c)` of `Z` if it is on the pattern or in `memo`.
-    fn known_block(
-        &self,
-        z: &[f64],
-        memo: &OffPatternBlocks<D>,
-        r: usize,
-        c: usize,
-    ) -> Option<SMatrix<f64, D, D>> {
-        if let Some(block) = self.inverse_block(z, r, c) {
+    /// Block `(r, c)` of `Z` if it is on the pattern or computed.
+    fn known_block(&self, r: usize, c: usize) -> Option<SMatrix<f64, D, D>> {
+        if let Some(block) = self.symbolic.inverse_block(self.z, r, c) {
             return Some(block);
         }
         if r > c {
-            memo.get(&(r as u32, c as u32)).copied()
+            self.memo.get(&(r as u32, c as u32)).copied()
         } else {
-            memo.get(&(c as u32, r as u32)).map(|m| m.transpose())
+            self.memo.get(&(c as u32, r as u32)).map(|m| m.transpose())
         }
     }
+}
 
+impl<const D: usize> Symbolic<D> {
     /// Block `(row, b)` of the factor (`row` on column `b`'s pattern, at or
     /// below its diagonal).
     fn factor_block(&self, l: &[f64], row: usize, b: usize) -> Option<SMatrix<f64, D, D>> {
