@@ -28,15 +28,15 @@
 //! # Ok::<(), pgo::Error>(())
 //! ```
 //!
+//! The library is the solver and its public API. The `pgo` command line
+//! (`pgo-cli`), the simulator (`pgo-sim`) and the C and Python bindings are
+//! crates of their own built on this API.
+//!
 //! # Features
 //!
-//! * `cli` (default): the `pgo` binary; implies `json`, `plot` and
-//!   `simulate`.
-//! * `json`: `report::Report::to_json`.
-//! * `plot`: SVG pictures (`pgo optimize --plot`).
-//! * `simulate`: synthetic graphs (`pgo simulate`, `pgo corrupt`).
-//!
-//! With `default-features = false` the crate is the solver alone.
+//! * `json` (default): [`report::Report::to_json`].
+//! * `clap`: [`Options`] and its parts derive `clap::Args`, so a command
+//!   line gets every option of the job as a flag (the `pgo` binary's).
 
 // The robust and I/O modules document how they work inside; their links to
 // private items are for readers of the source.
