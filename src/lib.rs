@@ -30,11 +30,13 @@
 //!
 //! # Features
 //!
-//! * `cli` (default): the `pgo` binary; implies `json`, `plot` and
-//!   `simulate`.
+//! * `cli` (default): what the `pgo` binary needs; implies `json` and
+//!   `plot`.
 //! * `json`: `report::Report::to_json`.
 //! * `plot`: SVG pictures (`pgo optimize --plot`).
-//! * `simulate`: synthetic graphs (`pgo simulate`, `pgo corrupt`).
+//!
+//! Synthetic graphs (`pgo simulate`, `pgo corrupt`) are the `pgo-sim`
+//! crate's, built on this API.
 //!
 //! With `default-features = false` the crate is the solver alone.
 
@@ -62,63 +64,58 @@ mod pose_graph;
 mod solution;
 
 // The modules below are the library's inside. The `pgo` binary
-// (src/main.rs, a crate of its own) still reaches into those it uses until
-// its arguments are derived from [`Options`], and the simulator's graphs are
-// the inside's: with the `cli` or `simulate` feature they are public but
-// hidden from the documentation (so their links into the private ones go
-// nowhere, and are allowed to) and carry no stability promise; without
-// them they are private.
-#[cfg(any(feature = "cli", feature = "simulate"))]
+// (cli/src/main.rs, a crate of its own) still reaches into those it uses
+// until its arguments are derived from [`Options`]: with the `cli` feature
+// they are public but hidden from the documentation (so their links into
+// the private ones go nowhere, and are allowed to) and carry no stability
+// promise; without it they are private.
+#[cfg(feature = "cli")]
 #[doc(hidden)]
 #[allow(rustdoc::private_intra_doc_links)]
 pub mod gate;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[cfg(not(feature = "cli"))]
 #[allow(dead_code, unused_imports)]
 mod gate;
-#[cfg(any(feature = "cli", feature = "simulate"))]
+#[cfg(feature = "cli")]
 #[doc(hidden)]
 #[allow(rustdoc::private_intra_doc_links)]
 pub mod graph;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[cfg(not(feature = "cli"))]
 #[allow(dead_code, unused_imports)]
 mod graph;
-#[cfg(any(feature = "cli", feature = "simulate"))]
+#[cfg(feature = "cli")]
 #[doc(hidden)]
 #[allow(rustdoc::private_intra_doc_links)]
 pub mod io;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[cfg(not(feature = "cli"))]
 #[allow(dead_code, unused_imports)]
 mod io;
-#[cfg(any(feature = "cli", feature = "simulate"))]
+#[cfg(feature = "cli")]
 #[doc(hidden)]
 #[allow(rustdoc::private_intra_doc_links)]
 pub mod pipeline;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[cfg(not(feature = "cli"))]
 #[allow(dead_code, unused_imports)]
 mod pipeline;
-#[cfg(any(feature = "cli", feature = "simulate"))]
+#[cfg(feature = "cli")]
 #[doc(hidden)]
 #[allow(rustdoc::private_intra_doc_links)]
 pub mod robust;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[cfg(not(feature = "cli"))]
 #[allow(dead_code, unused_imports)]
 mod robust;
-#[cfg(feature = "simulate")]
-#[doc(hidden)]
-#[allow(rustdoc::private_intra_doc_links)]
-pub mod simulate;
-#[cfg(any(feature = "cli", feature = "simulate"))]
+#[cfg(feature = "cli")]
 #[doc(hidden)]
 #[allow(rustdoc::private_intra_doc_links)]
 pub mod solve;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[cfg(not(feature = "cli"))]
 #[allow(dead_code, unused_imports)]
 mod solve;
-#[cfg(any(feature = "cli", feature = "simulate"))]
+#[cfg(feature = "cli")]
 #[doc(hidden)]
 #[allow(rustdoc::private_intra_doc_links)]
 pub mod stats;
-#[cfg(not(any(feature = "cli", feature = "simulate")))]
+#[cfg(not(feature = "cli"))]
 #[allow(dead_code, unused_imports)]
 mod stats;
 
@@ -146,7 +143,7 @@ pub use options::{
     RobustOptions, SolverOptions, TestOptions,
 };
 pub use pipeline::CandidateRule;
-pub use pose_graph::{AnyPoseGraph, GraphPose, PoseGraph, PoseGraph2, PoseGraph3};
+pub use pose_graph::{AnyPoseGraph, Edge, GraphPose, PoseGraph, PoseGraph2, PoseGraph3};
 pub use report::{DecisionChange, IncrementalReport, UpdateSolve};
 pub use robust::RobustMethod;
 pub use solution::{AnySolution, LoopDecision, Reason, Solution};
@@ -162,8 +159,6 @@ pub use stats::{Chi2Test, DofConvention};
 pub mod internals {
     pub use crate::graph::{AnyGraph, Graph};
     pub use crate::io::g2o::{G2oPose, ReadOptions, read, write_graph};
-    #[cfg(feature = "simulate")]
-    pub use crate::simulate::{AnySimulation, SimulationOptions, World, simulate};
     pub use crate::solve::init::{ChordalInit, Initialization, initialize};
     pub use crate::solve::{IterationRecord, Optimizer, SolverOptions};
 }
