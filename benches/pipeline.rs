@@ -31,13 +31,13 @@
 //! thread. `cargo test` does not build or run these.
 
 use divan::Bencher;
+use pgo::internals::read;
 use pgo::internals::{
-    AnyGraph as AnyPoseGraph, AnySimulation, ChordalInit, G2oPose, Graph as PoseGraph,
-    Initialization, IterationRecord, Optimizer, ReadOptions, SimulationOptions, SolverOptions,
-    World, initialize,
+    AnyGraph as AnyPoseGraph, ChordalInit, G2oPose, Graph as PoseGraph, Initialization,
+    IterationRecord, Optimizer, ReadOptions, SolverOptions, initialize,
 };
-use pgo::internals::{read, write_graph};
 use pgo::{Se2, Se3};
+use pgo_sim::{AnySimulation, SimulationOptions, World};
 use std::path::PathBuf;
 
 fn main() {
@@ -98,9 +98,23 @@ fn read_options(name: &str) -> ReadOptions {
     }
 }
 
-/// The graph of a case and its vertices without a line in the file.
+/// The graph of a case and its vertices without a line in the file
+/// (simulated graphs are read back from the file `pgo simulate` would
+/// write: the same numbers, bit for bit).
 fn load(case: &str) -> Option<(AnyPoseGraph, Vec<usize>)> {
-    if let Some((world, poses)) = simulated(case) {
+    let path = file_of(case)?;
+    let file = read(&path, read_options(case)).expect("graph reads");
+    Some((file.graph, file.missing))
+}
+
+/// The file to parse for a case (simulated graphs written once to the
+/// temporary directory).
+fn file_of(case: &str) -> Option<PathBuf> {
+    let Some((world, poses)) = simulated(case) else {
+        return dataset(case);
+    };
+    let path = std::env::temp_dir().join(format!("pgo-bench-{case}.g2o"));
+    if !path.is_file() {
         let options = SimulationOptions {
             world,
             poses,
@@ -108,30 +122,9 @@ fn load(case: &str) -> Option<(AnyPoseGraph, Vec<usize>)> {
             seed: 7,
             ..SimulationOptions::default()
         };
-        let graph = match pgo::internals::simulate(&options).expect("simulates") {
-            AnySimulation::Planar(s) => AnyPoseGraph::Planar(s.noisy),
-            AnySimulation::Spatial(s) => AnyPoseGraph::Spatial(s.noisy),
-        };
-        return Some((graph, Vec::new()));
-    }
-    let path = dataset(case)?;
-    let file = read(&path, read_options(case)).expect("dataset reads");
-    Some((file.graph, file.missing))
-}
-
-/// The file to parse for a case (simulated graphs written once to the
-/// temporary directory).
-fn file_of(case: &str) -> Option<PathBuf> {
-    if simulated(case).is_none() {
-        return dataset(case);
-    }
-    let path = std::env::temp_dir().join(format!("pgo-bench-{case}.g2o"));
-    if !path.is_file() {
-        let (graph, _) = load(case)?;
-        let mut out = std::io::BufWriter::new(std::fs::File::create(&path).expect("temp file"));
-        match &graph {
-            AnyPoseGraph::Planar(g) => write_graph(g, &mut out),
-            AnyPoseGraph::Spatial(g) => write_graph(g, &mut out),
+        match pgo_sim::simulate(&options).expect("simulates") {
+            AnySimulation::Planar(s) => s.noisy.write_g2o(&path),
+            AnySimulation::Spatial(s) => s.noisy.write_g2o(&path),
         }
         .expect("writes");
     }

@@ -65,10 +65,6 @@ mod linear;
 mod options;
 mod pose_graph;
 mod robust;
-#[cfg(feature = "simulate")]
-#[doc(hidden)]
-#[allow(rustdoc::private_intra_doc_links)]
-pub mod simulate;
 mod solution;
 mod solve;
 mod stats;
@@ -106,8 +102,6 @@ pub use stats::{Chi2Test, DofConvention};
 pub mod internals {
     pub use crate::graph::{AnyGraph, Graph};
     pub use crate::io::g2o::{G2oPose, ReadOptions, read, write_graph};
-    #[cfg(feature = "simulate")]
-    pub use crate::simulate::{AnySimulation, SimulationOptions, World, simulate};
     pub use crate::solve::init::{ChordalInit, Initialization, initialize};
     pub use crate::solve::{IterationRecord, Optimizer, SolverOptions};
 }

@@ -14,7 +14,6 @@ use crate::report::{IncrementalReport, Report, UpdateSolve};
 use crate::solution::{AnySolution, Solution};
 use crate::solve::{IterationRecord, Observer, StopReason};
 use nalgebra::SMatrix;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -233,45 +232,11 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// the plain edge of its first component.
     pub fn write_g2o(&self, path: impl AsRef<Path>) -> Result<(), Error> {
         let path = path.as_ref();
-        crate::io::write_atomically(path, |w| self.write_lines(w)).map_err(|source| Error::Write {
-            path: path.to_owned(),
-            source,
-        })
-    }
-
-    fn write_lines(&self, out: &mut impl Write) -> std::io::Result<()> {
-        let g = &self.graph;
-        let mut line = String::with_capacity(512);
-        let mut buffer = ryu::Buffer::new();
-        for k in (0..g.num_vertices()).filter(|k| !self.missing.contains(k)) {
-            line.clear();
-            line += &format!("{} {}", P::VERTEX_TAG, g.id(k));
-            g.poses[k].write_numbers(&mut line);
-            writeln!(out, "{line}")?;
-        }
-        for e in &g.edges {
-            line.clear();
-            line += &format!("{} {} {}", P::EDGE_TAG, g.id(e.from), g.id(e.to));
-            e.measurement.write_numbers(&mut line);
-            for r in 0..D {
-                for c in r..D {
-                    line.push(' ');
-                    line += buffer.format(e.information[(r, c)]);
-                }
-            }
-            if let Some(n) = e.candidate.and_then(|c| c.inliers) {
-                line += &format!(" {n}");
-            }
-            writeln!(out, "{line}")?;
-        }
-        let fixed: Vec<String> = (0..g.num_vertices())
-            .filter(|&k| g.is_fixed(k))
-            .map(|k| g.id(k).to_string())
-            .collect();
-        if !fixed.is_empty() {
-            writeln!(out, "FIX {}", fixed.join(" "))?;
-        }
-        Ok(())
+        crate::io::write_atomically(path, |w| g2o::write_graph(&self.graph, &self.missing, w))
+            .map_err(|source| Error::Write {
+                path: path.to_owned(),
+                source,
+            })
     }
 
     /// Whether edges added from now on with an information matrix that is

@@ -149,7 +149,7 @@ impl<P> Solution<P> {
             .ok_or_else(|| io::Error::other("the solution holds no graph"))?;
         match &self.text {
             Some(text) => Ok(text.rewrite(&graph, out)?),
-            None => g2o::write_graph(&graph, out),
+            None => g2o::write_graph(&graph, &[], out),
         }
     }
 

@@ -149,7 +149,7 @@ enum PolicyArg {
     Aliased,
 }
 
-impl From<PolicyArg> for pgo::simulate::OutlierPolicy {
+impl From<PolicyArg> for pgo_sim::OutlierPolicy {
     fn from(p: PolicyArg) -> Self {
         match p {
             PolicyArg::Random => Self::Random,
@@ -168,7 +168,7 @@ enum AliasPlaceArg {
     Anywhere,
 }
 
-impl From<AliasPlaceArg> for pgo::simulate::AliasPlace {
+impl From<AliasPlaceArg> for pgo_sim::AliasPlace {
     fn from(p: AliasPlaceArg) -> Self {
         match p {
             AliasPlaceArg::Revisited => Self::Revisited,
@@ -205,7 +205,7 @@ struct WrongLoopArgs {
     /// Range of |s|, the offset in steps of aliased candidates (either
     /// sign), 1 ≤ MIN ≤ MAX [default: 5,40].
     #[arg(long, value_name = "MIN,MAX", value_parser = parse_alias_offsets)]
-    alias_offset: Option<pgo::simulate::AliasOffsets>,
+    alias_offset: Option<pgo_sim::AliasOffsets>,
     /// Share of the wrong candidates whose inlier counts are drawn from the
     /// true-loop model (each with this probability), 0 ≤ SHARE ≤ 1; in
     /// `simulate`, a positive share implies --inliers.
@@ -233,16 +233,16 @@ impl WrongLoopArgs {
     }
 
     /// The alias offsets, the library's defaults unless given.
-    fn alias_offsets(&self) -> pgo::simulate::AliasOffsets {
+    fn alias_offsets(&self) -> pgo_sim::AliasOffsets {
         self.alias_offset.unwrap_or_default()
     }
 
-    /// The inlier model, [`pgo::simulate::InlierModel`]'s defaults where a
+    /// The inlier model, [`pgo_sim::InlierModel`]'s defaults where a
     /// part is not given.
-    fn inlier_model(&self) -> pgo::simulate::InlierModel {
-        let d = pgo::simulate::InlierModel::default();
+    fn inlier_model(&self) -> pgo_sim::InlierModel {
+        let d = pgo_sim::InlierModel::default();
         let (t, w) = (self.true_inliers, self.wrong_inliers);
-        pgo::simulate::InlierModel {
+        pgo_sim::InlierModel {
             true_median: t.map_or(d.true_median, |m| m.median),
             true_sigma: t.and_then(|m| m.sigma).unwrap_or(d.true_sigma),
             wrong_median: w.map_or(d.wrong_median, |m| m.median),
@@ -251,11 +251,11 @@ impl WrongLoopArgs {
     }
 }
 
-fn parse_alias_offsets(s: &str) -> Result<pgo::simulate::AliasOffsets, String> {
+fn parse_alias_offsets(s: &str) -> Result<pgo_sim::AliasOffsets, String> {
     let bad = || format!("expected MIN,MAX with whole numbers of steps, got '{s}'");
     let (min, max) = s.split_once(',').ok_or_else(bad)?;
     let number = |t: &str| t.trim().parse::<usize>().map_err(|_| bad());
-    Ok(pgo::simulate::AliasOffsets {
+    Ok(pgo_sim::AliasOffsets {
         min: number(min)?,
         max: number(max)?,
     })
@@ -329,18 +329,22 @@ fn print_result(text: &str) -> Result<(), ExitCode> {
 }
 
 fn corrupt(args: CorruptArgs) -> ExitCode {
-    use pgo::graph::AnyGraph;
-    use pgo::simulate::CorruptionOptions;
+    use pgo::AnyPoseGraph;
+    use pgo_sim::CorruptionOptions;
     let mut outputs = vec![("-o", args.output.as_path())];
     outputs.extend(args.labels.as_deref().map(|l| ("--labels", l)));
     if let Err(message) = check_files(&[&args.input], &outputs) {
         say!("error: {message}");
         return ExitCode::from(2);
     }
-    let mut file = match pgo::io::g2o::read(&args.input, Default::default()) {
-        Ok(f) => f,
-        Err(e) => {
+    let graph = match AnyPoseGraph::read_g2o(&args.input) {
+        Ok(g) => g,
+        Err(pgo::Error::Read(e)) => {
             say!("error: {e}");
+            return ExitCode::from(2);
+        }
+        Err(e) => {
+            say!("error: {}: {e}", args.input.display());
             return ExitCode::from(2);
         }
     };
@@ -356,16 +360,16 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
         true_like_by_group: args.placement.true_like_by_group,
         ..CorruptionOptions::default()
     };
-    let result = match &mut file.graph {
-        AnyGraph::Planar(g) => corrupt_graph(g, &file.missing, &options, &args),
-        AnyGraph::Spatial(g) => corrupt_graph(g, &file.missing, &options, &args),
+    let result = match graph {
+        AnyPoseGraph::Planar(g) => corrupt_graph(g, &options, &args),
+        AnyPoseGraph::Spatial(g) => corrupt_graph(g, &options, &args),
     };
     match result {
         Ok(message) => {
             say!("{message}");
             ExitCode::SUCCESS
         }
-        Err(CorruptFailure::Output(e)) => output_failure(&e),
+        Err(CorruptFailure::Output(e)) => e.exit(),
         Err(CorruptFailure::Input(message)) => {
             say!("error: {message}");
             ExitCode::from(2)
@@ -376,32 +380,65 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
 /// Why `pgo corrupt` failed: its input (exit status 2) or an output.
 enum CorruptFailure {
     Input(String),
-    Output(OutputError),
+    Output(SimulatedOutputError),
 }
 
-fn corrupt_graph<P, const D: usize>(
-    g: &mut pgo::graph::Graph<P, D>,
-    missing: &[usize],
-    options: &pgo::simulate::CorruptionOptions,
-    args: &CorruptArgs,
-) -> Result<String, CorruptFailure>
-where
-    P: pgo::io::g2o::G2oPose<D>
-        + pgo::solve::init::ChordalInit<D>
-        + pgo::simulate::ErrorCoordinates<D>,
-{
-    use pgo::io::{g2o::write_graph, output};
-    use rand::SeedableRng;
-    pgo::solve::init::initialize(g, missing, Initialization::File, None)
-        .map_err(|e| CorruptFailure::Input(format!("{}: {e}", args.input.display())))?;
-    let mut rng = rand::rngs::StdRng::seed_from_u64(args.seed);
-    let corruption = pgo::simulate::corrupt(g, options, &mut rng)
-        .map_err(|e| CorruptFailure::Input(e.to_string()))?;
-    output::write(&args.output, |w| write_graph(g, w)).map_err(CorruptFailure::Output)?;
-    if let Some(l) = &args.labels {
-        output::write(l, |w| pgo::simulate::write_labels(g, &corruption.wrong, w))
-            .map_err(CorruptFailure::Output)?;
+/// A graph or labels CSV of `pgo simulate` or `pgo corrupt` that could not
+/// be written.
+enum SimulatedOutputError {
+    /// The g2o file ([`pgo::PoseGraph::write_g2o`]).
+    Graph(pgo::Error),
+    /// The labels CSV.
+    Labels(OutputError),
+}
+
+impl SimulatedOutputError {
+    /// The exit status, as for any output: 141 quietly for a reader of
+    /// stdout that went away, else 1 with the message.
+    fn exit(&self) -> ExitCode {
+        let e = match self {
+            Self::Labels(e) => return output_failure(e),
+            Self::Graph(e) => e,
+        };
+        match e.io_error() {
+            Some((_, source)) if source.kind() == std::io::ErrorKind::BrokenPipe => {
+                ExitCode::from(console::BROKEN_PIPE_STATUS)
+            }
+            Some((path, source)) => {
+                let shown = if path.as_os_str() == "-" {
+                    "stdout".into()
+                } else {
+                    path.display().to_string()
+                };
+                say!("error: {shown}: {source}");
+                ExitCode::from(1)
+            }
+            None => {
+                say!("error: {e}");
+                ExitCode::from(1)
+            }
+        }
     }
+}
+
+fn corrupt_graph<P: pgo_sim::ErrorCoordinates<D>, const D: usize>(
+    mut g: pgo::PoseGraph<P, D>,
+    options: &pgo_sim::CorruptionOptions,
+    args: &CorruptArgs,
+) -> Result<String, CorruptFailure> {
+    use rand::SeedableRng;
+    g.compose_missing_poses();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(args.seed);
+    let corruption = pgo_sim::corrupt(&g, options, &mut rng)
+        .map_err(|e| CorruptFailure::Input(e.to_string()))?;
+    write_graph_and_labels(
+        &corruption.graph,
+        None,
+        &corruption.wrong,
+        &args.output,
+        args.labels.as_deref(),
+    )
+    .map_err(CorruptFailure::Output)?;
     Ok(format!(
         "wrote {}: {} true loop candidates with counts, {} wrong candidates",
         args.output.display(),
@@ -410,8 +447,30 @@ where
     ))
 }
 
+/// Writes a simulated or corrupted graph, its truth if any, and its labels
+/// CSV if asked for.
+fn write_graph_and_labels<P: pgo::GraphPose<D>, const D: usize>(
+    graph: &pgo::PoseGraph<P, D>,
+    truth: Option<(&pgo::PoseGraph<P, D>, &std::path::Path)>,
+    wrong: &[bool],
+    output: &std::path::Path,
+    labels: Option<&std::path::Path>,
+) -> Result<(), SimulatedOutputError> {
+    graph
+        .write_g2o(output)
+        .map_err(SimulatedOutputError::Graph)?;
+    if let Some((truth, path)) = truth {
+        truth.write_g2o(path).map_err(SimulatedOutputError::Graph)?;
+    }
+    if let Some(l) = labels {
+        pgo::io::output::write(l, |w| pgo_sim::write_labels(graph, wrong, w))
+            .map_err(SimulatedOutputError::Labels)?;
+    }
+    Ok(())
+}
+
 fn simulate(args: SimulateArgs) -> ExitCode {
-    use pgo::simulate::{self, AnySimulation, SimulationOptions, World};
+    use pgo_sim::{AnySimulation, SimulationOptions, World};
     let options = SimulationOptions {
         world: match args.world {
             WorldArg::Grid2d => World::Grid2d,
@@ -440,7 +499,7 @@ fn simulate(args: SimulateArgs) -> ExitCode {
         say!("error: {message}");
         return ExitCode::from(2);
     }
-    let result = match simulate::simulate(&options) {
+    let result = match pgo_sim::simulate(&options) {
         Ok(AnySimulation::Planar(s)) => write_simulation(&s, &args),
         Ok(AnySimulation::Spatial(s)) => write_simulation(&s, &args),
         Err(e) => {
@@ -453,30 +512,28 @@ fn simulate(args: SimulateArgs) -> ExitCode {
             say!("{summary}");
             ExitCode::SUCCESS
         }
-        Err(e) => output_failure(&e),
+        Err(e) => e.exit(),
     }
 }
 
-fn write_simulation<P: pgo::io::g2o::G2oPose<D>, const D: usize>(
-    sim: &pgo::simulate::Simulation<P, D>,
+fn write_simulation<P: pgo::GraphPose<D>, const D: usize>(
+    sim: &pgo_sim::Simulation<P, D>,
     args: &SimulateArgs,
-) -> Result<String, OutputError> {
-    use pgo::io::{g2o::write_graph, output};
-    output::write(&args.output, |w| write_graph(&sim.noisy, w))?;
-    if let Some(t) = &args.truth {
-        output::write(t, |w| write_graph(&sim.truth, w))?;
-    }
-    if let Some(l) = &args.labels {
-        output::write(l, |w| {
-            pgo::simulate::write_labels(&sim.noisy, &sim.wrong, w)
-        })?;
-    }
+) -> Result<String, SimulatedOutputError> {
+    let truth = args.truth.as_deref().map(|t| (&sim.truth, t));
+    write_graph_and_labels(
+        &sim.noisy,
+        truth,
+        &sim.wrong,
+        &args.output,
+        args.labels.as_deref(),
+    )?;
     Ok(format!(
         "wrote {}: {} poses, {} edges, {} loop candidates ({} wrong)",
         args.output.display(),
-        sim.noisy.num_vertices(),
-        sim.noisy.edges.len(),
-        sim.noisy.num_candidates(),
+        sim.noisy.len(),
+        sim.noisy.num_edges(),
+        sim.noisy.num_loop_candidates(),
         sim.num_wrong()
     ))
 }

@@ -927,15 +927,24 @@ fn edge_line<P: G2oPose<D>, const D: usize>(g: &Graph<P, D>, k: usize, line: &mu
     line.push('\n');
 }
 
-/// Writes a graph that was not read from a file (e.g. a simulated one):
-/// vertices in index order, then edges, then a `FIX` line for explicitly
-/// fixed vertices.
+/// Writes a graph that is not rewritten over its file (a graph built in
+/// memory, a simulated or corrupted one): vertices in index order but for
+/// those in `without` (vertices a file named without a vertex line, whose
+/// poses are placeholders), then edges (loop candidates with their inlier
+/// counts), then a `FIX` line for explicitly fixed vertices. The one g2o
+/// writer of [`crate::PoseGraph::write_g2o`] and `pgo simulate`/`pgo
+/// corrupt`.
 pub fn write_graph<P: G2oPose<D>, const D: usize>(
     g: &Graph<P, D>,
+    without: &[usize],
     out: &mut impl Write,
 ) -> io::Result<()> {
+    let mut written = vec![true; g.num_vertices()];
+    for &k in without {
+        written[k] = false;
+    }
     let mut line = String::with_capacity(512);
-    for k in 0..g.num_vertices() {
+    for k in (0..g.num_vertices()).filter(|&k| written[k]) {
         line.clear();
         vertex_line(g, k, &mut line);
         out.write_all(line.as_bytes())?;

@@ -84,7 +84,7 @@ fn build<P: G2oPose<D>, const D: usize>(
 
 fn text_of<P: G2oPose<D>, const D: usize>(g: &Graph<P, D>) -> Vec<u8> {
     let mut out = Vec::new();
-    write_graph(g, &mut out).expect("write to memory");
+    write_graph(g, &[], &mut out).expect("write to memory");
     out
 }
 

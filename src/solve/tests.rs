@@ -427,8 +427,9 @@ fn a_step_the_model_foresaw_ends_the_run_when_asked() {
     assert!((runs[1].1 / runs[0].1 - 1.0).abs() < 1e-8, "{runs:?}");
 }
 
-/// The tests on simulated graphs (the `simulate` feature).
-#[cfg(feature = "simulate")]
+/// The tests on simulated graphs (from `pgo-sim`, a dev-dependency:
+/// written as g2o and read back, the library's own types being this
+/// build's).
 mod simulated {
     use super::*;
 
@@ -492,14 +493,14 @@ mod simulated {
     /// A simulated grid of 4000 poses with 40 wrong loops, and weights that
     /// switch half of them off and halve the others (as a robust round would).
     fn simulated_grid() -> (Graph<Se2, 3>, Vec<f64>) {
-        let options = crate::simulate::SimulationOptions {
+        let options = pgo_sim::SimulationOptions {
             poses: 4000,
             loops: 400,
             outliers: 40,
             seed: 11,
             ..Default::default()
         };
-        let sim = crate::simulate::simulate_planar(&options).unwrap();
+        let sim = pgo_sim::simulate_planar(&options).unwrap();
         let weights = (sim.wrong.iter().enumerate())
             .map(|(k, &wrong)| match (wrong, k % 2) {
                 (false, _) => 1.0,
@@ -507,7 +508,21 @@ mod simulated {
                 (true, _) => 0.5,
             })
             .collect();
-        (sim.noisy, weights)
+        (read_back(&sim.noisy), weights)
+    }
+
+    /// The graph as this build of the library reads it from its g2o file.
+    fn read_back(graph: &pgo_sim::pgo::PoseGraph2) -> Graph<Se2, 3> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("simulated.g2o");
+        graph.write_g2o(&path).unwrap();
+        match crate::io::g2o::read(&path, Default::default())
+            .unwrap()
+            .graph
+        {
+            crate::graph::AnyGraph::Planar(g) => g,
+            crate::graph::AnyGraph::Spatial(_) => unreachable!("a grid is planar"),
+        }
     }
 
     /// The poses and the bits of every objective of two runs with `threads`:
@@ -551,12 +566,12 @@ mod simulated {
     /// A simulated grid of `poses` poses from its dead-reckoning guess, which LM
     /// takes many iterations to solve.
     fn dead_reckoned_grid(poses: usize) -> Graph<Se2, 3> {
-        let options = crate::simulate::SimulationOptions {
+        let options = pgo_sim::SimulationOptions {
             poses,
             seed: 3,
             ..Default::default()
         };
-        crate::simulate::simulate_planar(&options).unwrap().noisy
+        read_back(&pgo_sim::simulate_planar(&options).unwrap().noisy)
     }
 
     /// Stops the run at the first question after `after` iterations; keeps the

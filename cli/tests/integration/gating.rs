@@ -6,21 +6,17 @@
 
 use crate::common::{pgo, stderr, temp_dir, verdict_status};
 use pgo::gate::{DegeneratePolicy, GateMode, MixtureOptions, gate};
-use pgo::graph::Graph;
-use pgo::simulate::{
+use pgo_sim::{
     AnySimulation, InlierModel, OutlierPolicy, Simulation, SimulationOptions, World, simulate,
 };
 
 /// Kept true loops / true loops and kept wrong candidates / wrong ones.
-fn gate_rates<P, const D: usize>(sim: &Simulation<P, D>) -> (f64, f64, f64) {
-    let g: &Graph<P, D> = &sim.noisy;
-    let candidates: Vec<usize> = (0..g.edges.len())
-        .filter(|&k| g.edges[k].candidate.is_some())
+fn gate_rates<P: pgo::GraphPose<D>, const D: usize>(sim: &Simulation<P, D>) -> (f64, f64, f64) {
+    let edges: Vec<_> = sim.noisy.edges().collect();
+    let candidates: Vec<usize> = (0..edges.len())
+        .filter(|&k| edges[k].loop_candidate)
         .collect();
-    let counts: Vec<Option<u64>> = candidates
-        .iter()
-        .map(|&k| g.edges[k].candidate.and_then(|c| c.inliers))
-        .collect();
+    let counts: Vec<Option<u64>> = candidates.iter().map(|&k| edges[k].inliers).collect();
     let d = gate(
         &counts,
         GateMode::Auto,

@@ -1,7 +1,7 @@
 //! The robust back end through the pipeline: simulated graphs with planted
 //! wrong loop candidates whose labels the tests know.
 
-use crate::common::{candidate_wrong, sample, temp_dir, write_graph};
+use crate::common::{candidate_wrong, sample, simulate_planar, temp_dir, write_graph};
 use pgo::gate::{DegeneratePolicy, GateMode};
 use pgo::geometry::Se2;
 use pgo::graph::{AnyGraph, Graph};
@@ -9,7 +9,7 @@ use pgo::io::g2o;
 use pgo::pipeline::{self, OptimizeConfig};
 use pgo::report::Report;
 use pgo::robust::{Layers, Reason, RobustMethod};
-use pgo::simulate::{InlierModel, OutlierPolicy, SimulationOptions, simulate_planar};
+use pgo_sim::{InlierModel, OutlierPolicy, SimulationOptions};
 use std::path::{Path, PathBuf};
 
 /// A simulated 2D graph written to `dir`: the noisy file, the clean file

@@ -31,7 +31,7 @@
 //!
 //! For an edge `i → j` with true relative pose `A = Xᵢ⁻¹·Xⱼ`, an error vector
 //! `e ~ N(0, Ω⁻¹)` is drawn in the error coordinates of
-//! [`Pose::error`](crate::geometry::Pose::error) and turned into the pose `E`
+//! [`Pose::error`](pgo::Pose::error) and turned into the pose `E`
 //! whose error coordinates are `e`; the measurement is `Z = A·E⁻¹`, so that
 //! `error(Xᵢ, Xⱼ, Z) = e` exactly. With translation noise `σₜ` (metres) and
 //! rotation noise `σᵣ` (radians):
@@ -69,7 +69,13 @@
 //! noise and information), `counts` (inlier-count models), `wrong`
 //! (placement of wrong candidates), `assemble` (the simulated graphs),
 //! `corrupt` (the steps of `corrupt`), `labels` (the labels CSV),
-//! `options`.
+//! `options`, `graph` (the working graph the steps edit, which becomes a
+//! [`PoseGraph`] when they are done).
+//!
+//! The crate stands on `pgo`'s public API alone: its graphs are built with
+//! [`PoseGraph::add_pose`], [`PoseGraph::add_edge`] and
+//! [`PoseGraph::add_loop_candidate`] (and so checked), read back with
+//! [`PoseGraph::edges`], and written with [`PoseGraph::write_g2o`].
 //!
 //! # Determinism
 //!
@@ -82,11 +88,15 @@
 mod assemble;
 mod corrupt;
 mod counts;
+mod graph;
 mod labels;
 mod noise;
 mod options;
 mod world;
 mod wrong;
+
+/// The library the simulator's graphs are of.
+pub use pgo;
 
 pub use counts::InlierModel;
 pub use labels::write_labels;
@@ -102,14 +112,14 @@ pub use wrong::{
     DEFAULT_LOCAL_WINDOW, DEFAULT_OUTLIER_ROTATION, DEFAULT_OUTLIER_TRANSLATION, OutlierPolicy,
 };
 
-use crate::geometry::{Se2, Se3};
-use crate::graph::{Graph, GraphError};
 use assemble::simulate_on;
+use graph::Graph;
+use pgo::{GraphPose, PoseGraph, Se2, Se3, VertexId};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use world::{grid_trajectory, sphere_trajectory, torus_trajectory};
 
 /// Errors from bad options or graphs that cannot hold what was asked.
-#[derive(Debug, thiserror::Error, PartialEq)]
+#[derive(Debug, thiserror::Error)]
 pub enum SimulationError {
     /// Fewer than two poses.
     #[error("a simulation needs at least 2 poses, got {0}")]
@@ -183,9 +193,26 @@ pub enum SimulationError {
     /// A pose type whose dimension is not that of SE(n).
     #[error("dimension {0} is not that of a rigid-body group SE(n)")]
     UnsupportedDimension(usize),
-    /// Building the graph failed.
+    /// A vertex of the graph to corrupt has no pose (a file named it
+    /// without a vertex line): see [`PoseGraph::compose_missing_poses`].
+    #[error("vertex {id} has no pose")]
+    MissingPose {
+        /// Its id.
+        id: VertexId,
+    },
+    /// The library refused the graph made (an information matrix outside
+    /// [`pgo::INFORMATION_RANGE`], a measurement that is no pose).
     #[error(transparent)]
-    Graph(#[from] GraphError),
+    Graph(#[from] pgo::Error),
+}
+
+/// Errors compare by their `Debug` form: the library's [`pgo::Error`] is
+/// not `PartialEq` (it may hold an I/O error), and its `Debug` form is its
+/// message.
+impl PartialEq for SimulationError {
+    fn eq(&self, other: &Self) -> bool {
+        format!("{self:?}") == format!("{other:?}")
+    }
 }
 
 /// A number in a message: integers in full, others shortest, in scientific
@@ -207,20 +234,20 @@ impl std::fmt::Display for Number {
 
 /// A simulated pose graph with its ground truth.
 #[derive(Clone, Debug)]
-pub struct Simulation<P, const D: usize> {
+pub struct Simulation<P: GraphPose<D>, const D: usize> {
     /// Noisy measurements, starting from the dead-reckoning guess. Edges are
     /// ordered by their later vertex, odometry first, as in the public
     /// datasets.
-    pub noisy: Graph<P, D>,
+    pub noisy: PoseGraph<P, D>,
     /// True poses, and every edge of `noisy` that is not wrong (same order,
     /// same information and candidate flag) with its noise-free
     /// measurement, so that its χ² is zero.
-    pub truth: Graph<P, D>,
+    pub truth: PoseGraph<P, D>,
     /// `wrong[k]`: whether edge `k` of `noisy` is a planted wrong loop.
     pub wrong: Vec<bool>,
 }
 
-impl<P, const D: usize> Simulation<P, D> {
+impl<P: GraphPose<D>, const D: usize> Simulation<P, D> {
     /// Number of planted wrong loops.
     pub fn num_wrong(&self) -> usize {
         self.wrong.iter().filter(|&&w| w).count()
@@ -239,13 +266,13 @@ pub enum AnySimulation {
 /// Simulates the world of `options` in SE(2) or SE(3) as it requires.
 ///
 /// ```
-/// use pgo::simulate::{AnySimulation, SimulationOptions, World, simulate};
+/// use pgo_sim::{AnySimulation, SimulationOptions, World, simulate};
 /// let options = SimulationOptions { world: World::Torus3d, poses: 300, ..Default::default() };
 /// match simulate(&options)? {
-///     AnySimulation::Spatial(sim) => assert_eq!(sim.noisy.num_vertices(), 300),
+///     AnySimulation::Spatial(sim) => assert_eq!(sim.noisy.len(), 300),
 ///     AnySimulation::Planar(_) => unreachable!("a torus is spatial"),
 /// }
-/// # Ok::<(), pgo::simulate::SimulationError>(())
+/// # Ok::<(), pgo_sim::SimulationError>(())
 /// ```
 pub fn simulate(options: &SimulationOptions) -> Result<AnySimulation, SimulationError> {
     if options.world.is_planar() {
@@ -258,7 +285,7 @@ pub fn simulate(options: &SimulationOptions) -> Result<AnySimulation, Simulation
 /// Simulates a planar world ([`World::Grid2d`]).
 ///
 /// ```
-/// use pgo::simulate::{InlierModel, OutlierPolicy, SimulationOptions, simulate_planar};
+/// use pgo_sim::{InlierModel, OutlierPolicy, SimulationOptions, simulate_planar};
 /// let options = SimulationOptions {
 ///     poses: 500,
 ///     loops: 100,
@@ -269,12 +296,57 @@ pub fn simulate(options: &SimulationOptions) -> Result<AnySimulation, Simulation
 ///     ..Default::default()
 /// };
 /// let sim = simulate_planar(&options)?;
-/// assert_eq!(sim.noisy.num_vertices(), 500);
+/// assert_eq!(sim.noisy.len(), 500);
 /// assert_eq!(sim.num_wrong(), 20);
-/// assert!(sim.truth.chi2() < 1e-12);
-/// # Ok::<(), pgo::simulate::SimulationError>(())
+/// // The gate and the robust back end find the planted loops.
+/// let solution = sim.noisy.optimize(&pgo::Options::default()).unwrap();
+/// let rejected = solution.loops().iter().filter(|d| !d.accepted);
+/// assert!(rejected.filter(|d| sim.wrong[d.index]).count() >= 19);
+/// # Ok::<(), pgo_sim::SimulationError>(())
 /// ```
 pub fn simulate_planar(options: &SimulationOptions) -> Result<Simulation<Se2, 3>, SimulationError> {
+    simulate_planar_graphs(options)?.finish()
+}
+
+/// Simulates a spatial world ([`World::Sphere3d`] or [`World::Torus3d`]).
+///
+/// ```
+/// use pgo_sim::{SimulationOptions, World, simulate_spatial};
+/// let options = SimulationOptions { world: World::Sphere3d, poses: 400, loops: 50, ..Default::default() };
+/// let sim = simulate_spatial(&options)?;
+/// assert_eq!(sim.noisy.num_edges(), 399 + 50);
+/// assert!(sim.wrong.iter().all(|&w| !w));
+/// # Ok::<(), pgo_sim::SimulationError>(())
+/// ```
+pub fn simulate_spatial(
+    options: &SimulationOptions,
+) -> Result<Simulation<Se3, 6>, SimulationError> {
+    simulate_spatial_graphs(options)?.finish()
+}
+
+/// A simulation in the working graphs, before they become [`PoseGraph`]s.
+#[derive(Clone, Debug)]
+pub(crate) struct Simulated<P, const D: usize> {
+    pub(crate) noisy: Graph<P, D>,
+    pub(crate) truth: Graph<P, D>,
+    pub(crate) wrong: Vec<bool>,
+}
+
+impl<P: GraphPose<D>, const D: usize> Simulated<P, D> {
+    /// The library's graphs of the simulation.
+    fn finish(self) -> Result<Simulation<P, D>, SimulationError> {
+        Ok(Simulation {
+            noisy: self.noisy.to_pose_graph()?,
+            truth: self.truth.to_pose_graph()?,
+            wrong: self.wrong,
+        })
+    }
+}
+
+/// The planar simulation in working graphs.
+pub(crate) fn simulate_planar_graphs(
+    options: &SimulationOptions,
+) -> Result<Simulated<Se2, 3>, SimulationError> {
     options.validate()?;
     if !options.world.is_planar() {
         return Err(SimulationError::WrongWorld {
@@ -287,19 +359,10 @@ pub fn simulate_planar(options: &SimulationOptions) -> Result<Simulation<Se2, 3>
     simulate_on(options, trajectory, &mut rng)
 }
 
-/// Simulates a spatial world ([`World::Sphere3d`] or [`World::Torus3d`]).
-///
-/// ```
-/// use pgo::simulate::{SimulationOptions, World, simulate_spatial};
-/// let options = SimulationOptions { world: World::Sphere3d, poses: 400, loops: 50, ..Default::default() };
-/// let sim = simulate_spatial(&options)?;
-/// assert_eq!(sim.noisy.edges.len(), 399 + 50);
-/// assert!(sim.wrong.iter().all(|&w| !w));
-/// # Ok::<(), pgo::simulate::SimulationError>(())
-/// ```
-pub fn simulate_spatial(
+/// The spatial simulation in working graphs.
+pub(crate) fn simulate_spatial_graphs(
     options: &SimulationOptions,
-) -> Result<Simulation<Se3, 6>, SimulationError> {
+) -> Result<Simulated<Se3, 6>, SimulationError> {
     options.validate()?;
     let trajectory = match options.world {
         World::Sphere3d => sphere_trajectory(options.poses),
@@ -315,8 +378,13 @@ pub fn simulate_spatial(
     simulate_on(options, trajectory, &mut rng)
 }
 
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Corruption {
+/// What [`corrupt`] did besides returning the corrupted graph.
+#[derive(Clone, Debug)]
+pub struct Corruption<P: GraphPose<D>, const D: usize> {
+    /// The corrupted graph: the poses, edges (some now loop candidates
+    /// with new counts) and fixed poses of the input, then the wrong loop
+    /// candidates.
+    pub graph: PoseGraph<P, D>,
     /// `wrong[k]`: whether edge `k` of the corrupted graph is a wrong loop
     /// (the appended edges and the known-wrong existing ones).
     pub wrong: Vec<bool>,
@@ -325,7 +393,8 @@ pub struct Corruption {
     pub marked: usize,
 }
 
-/// Corrupts an existing graph for robust and gating benchmarks:
+/// Corrupts an existing graph for robust and gating benchmarks, returning
+/// the corrupted copy (the input is left as it is):
 ///
 /// 1. every existing non-sequential edge (`|idᵢ − idⱼ| ≠ 1`) becomes a loop
 ///    candidate, with an inlier count drawn from the true-loop model when an
@@ -342,37 +411,53 @@ pub struct Corruption {
 /// 3. wrong candidates' counts come from the wrong-loop model, or with
 ///    probability `options.true_like_share` from the true-loop model.
 ///
-/// The graph is left unchanged when an error is returned.
+/// Every vertex needs a pose ([`PoseGraph::compose_missing_poses`] gives
+/// those a file left out one); else [`SimulationError::MissingPose`].
 ///
 /// ```
-/// use pgo::geometry::{Pose, Se2};
-/// use pgo::graph::Graph;
-/// use pgo::simulate::{CorruptionOptions, corrupt};
-/// use nalgebra::Matrix3;
+/// use pgo::nalgebra::Matrix3;
+/// use pgo::{PoseGraph2, Se2};
+/// use pgo_sim::{CorruptionOptions, corrupt};
 /// use rand::{SeedableRng, rngs::StdRng};
 ///
-/// let mut graph = Graph::<Se2, 3>::new();
+/// let mut graph = PoseGraph2::new();
 /// for k in 0..50u64 {
-///     graph.add_vertex(k, Se2::new(k as f64, 0.0, 0.0))?;
+///     graph.add_pose(k, Se2::new(k as f64, 0.0, 0.0))?;
 /// }
 /// for k in 1..50u64 {
-///     graph.add_edge(k - 1, k, Se2::new(1.0, 0.0, 0.0), Matrix3::identity(), None)?;
+///     graph.add_edge(k - 1, k, Se2::new(1.0, 0.0, 0.0), Matrix3::identity())?;
 /// }
-/// graph.add_edge(0, 40, Se2::new(40.0, 0.0, 0.0), Matrix3::identity() * 2.0, None)?;
+/// graph.add_edge(0, 40, Se2::new(40.0, 0.0, 0.0), Matrix3::identity() * 2.0)?;
 ///
 /// let options = CorruptionOptions { outliers: 10, ..Default::default() };
-/// let corruption = corrupt(&mut graph, &options, &mut StdRng::seed_from_u64(1))?;
+/// let corruption = corrupt(&graph, &options, &mut StdRng::seed_from_u64(1))?;
 /// assert_eq!(corruption.marked, 1);
-/// assert_eq!(graph.edges.len(), 50 + 10);
-/// assert_eq!(graph.num_candidates(), 1 + 10);
+/// assert_eq!(corruption.graph.num_edges(), 50 + 10);
+/// assert_eq!(corruption.graph.num_loop_candidates(), 1 + 10);
 /// assert_eq!(corruption.wrong.iter().filter(|&&w| w).count(), 10);
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub fn corrupt<P: ErrorCoordinates<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    options: &CorruptionOptions,
+    rng: &mut impl Rng,
+) -> Result<Corruption<P, D>, SimulationError> {
+    let mut working = Graph::of(graph)?;
+    let (wrong, marked) = corrupt_graph(&mut working, options, rng)?;
+    Ok(Corruption {
+        graph: working.to_pose_graph()?,
+        wrong,
+        marked,
+    })
+}
+
+/// [`corrupt`] on the working graph: which edges are wrong, and how many
+/// were marked as true candidates.
+pub(crate) fn corrupt_graph<P: ErrorCoordinates<D>, const D: usize>(
     graph: &mut Graph<P, D>,
     options: &CorruptionOptions,
     rng: &mut impl Rng,
-) -> Result<Corruption, SimulationError> {
+) -> Result<(Vec<bool>, usize), SimulationError> {
     options.validate()?;
     let sequential: Vec<bool> = graph
         .edges
@@ -410,8 +495,8 @@ pub fn corrupt<P: ErrorCoordinates<D>, const D: usize>(
 
     let marked = corrupt::mark_candidates(graph, options, &sequential, &wrong, rng);
     wrong.resize(wrong.len() + planned.len(), true);
-    corrupt::append(graph, planned, &groups, options, rng)?;
-    Ok(Corruption { wrong, marked })
+    corrupt::append(graph, planned, &groups, options, rng);
+    Ok((wrong, marked))
 }
 
 #[cfg(test)]
@@ -424,6 +509,8 @@ mod identity_tests;
 mod noise_tests;
 #[cfg(test)]
 mod options_tests;
+#[cfg(test)]
+mod testing;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]

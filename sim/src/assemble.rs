@@ -8,10 +8,11 @@ use super::wrong::{
     DEFAULT_LOCAL_WINDOW, DEFAULT_OUTLIER_ROTATION, DEFAULT_OUTLIER_TRANSLATION, WrongLoopPlan,
     random_measurement, wrong_groups,
 };
-use super::{Simulation, SimulationError, SimulationOptions};
-use crate::geometry::Pose;
-use crate::graph::{Graph, LoopCandidate, VertexId};
+use super::{Simulated, SimulationError, SimulationOptions};
+use crate::graph::{Graph, LoopCandidate};
 use nalgebra::{SMatrix, Vector3};
+use pgo::Pose;
+use pgo::VertexId;
 use rand::Rng;
 
 /// An edge before the graphs are built.
@@ -31,7 +32,7 @@ pub(super) fn simulate_on<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Size
     options: &SimulationOptions,
     trajectory: Trajectory<P>,
     rng: &mut R,
-) -> Result<Simulation<P, D>, SimulationError> {
+) -> Result<Simulated<P, D>, SimulationError> {
     let truth = &trajectory.poses;
     let mut edges: Vec<PlannedEdge<P>> = (1..truth.len())
         .map(|k| noisy_edge(truth, (k - 1, k), options, None, rng))
@@ -166,29 +167,29 @@ fn dead_reckoning<P: Pose<D>, const D: usize>(odometry: &[PlannedEdge<P>]) -> Ve
 
 /// Builds the noisy graph (dead-reckoning poses, all edges) and the truth
 /// graph (true poses, edges that are not wrong with exact measurements).
-fn assemble<P: Pose<D>, const D: usize>(
+fn assemble<P: ErrorCoordinates<D>, const D: usize>(
     truth_poses: &[P],
     guess: &[P],
     edges: &[PlannedEdge<P>],
     information: SMatrix<f64, D, D>,
-) -> Result<Simulation<P, D>, SimulationError> {
+) -> Result<Simulated<P, D>, SimulationError> {
     let mut noisy = Graph::new();
     let mut truth = Graph::new();
     for (k, (t, g)) in truth_poses.iter().zip(guess).enumerate() {
         let id = k as VertexId;
-        noisy.add_vertex(id, *g)?;
-        truth.add_vertex(id, *t)?;
+        noisy.add_vertex(id, *g);
+        truth.add_vertex(id, *t);
     }
     let mut wrong = Vec::with_capacity(edges.len());
     for e in edges {
         let (from, to) = (e.from as VertexId, e.to as VertexId);
-        noisy.add_edge(from, to, e.measurement, information, e.candidate)?;
+        noisy.add_edge(from, to, e.measurement, information, e.candidate);
         if let Some(exact) = e.truth {
-            truth.add_edge(from, to, exact, information, e.candidate)?;
+            truth.add_edge(from, to, exact, information, e.candidate);
         }
         wrong.push(e.truth.is_none());
     }
-    Ok(Simulation {
+    Ok(Simulated {
         noisy,
         truth,
         wrong,

@@ -3,26 +3,30 @@
 //! g2o_samples/ holds files made by `pgo simulate`. These tests redo both
 //! as the CLI does and compare bytes.
 
+//!
+//! They use the public API alone, as `pgo simulate` and `pgo corrupt` do:
+//! the graphs are written by [`PoseGraph::write_g2o`].
+
 use super::*;
-use crate::graph::AnyGraph;
-use crate::io::g2o::{G2oPose, read, write_graph};
-use crate::solve::init::{ChordalInit, Initialization, initialize};
+use pgo::AnyPoseGraph;
 use rand::{SeedableRng, rngs::StdRng};
 use std::path::{Path, PathBuf};
 
 fn sample(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("g2o_samples")
+        .join("../g2o_samples")
         .join(name)
 }
 
-fn g2o_text<P: G2oPose<D>, const D: usize>(g: &Graph<P, D>) -> Vec<u8> {
-    let mut text = Vec::new();
-    write_graph(g, &mut text).unwrap();
-    text
+/// The bytes [`PoseGraph::write_g2o`] writes.
+pub(crate) fn g2o_text<P: GraphPose<D>, const D: usize>(g: &PoseGraph<P, D>) -> Vec<u8> {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("graph.g2o");
+    g.write_g2o(&path).unwrap();
+    std::fs::read(&path).unwrap()
 }
 
-fn labels_text<P: G2oPose<D>, const D: usize>(g: &Graph<P, D>, wrong: &[bool]) -> Vec<u8> {
+fn labels_text<P: GraphPose<D>, const D: usize>(g: &PoseGraph<P, D>, wrong: &[bool]) -> Vec<u8> {
     let mut text = Vec::new();
     write_labels(g, wrong, &mut text).unwrap();
     text
@@ -30,7 +34,7 @@ fn labels_text<P: G2oPose<D>, const D: usize>(g: &Graph<P, D>, wrong: &[bool]) -
 
 /// Compares a simulation with the bundled files `NAME.g2o`, and when they
 /// exist `NAME_truth.g2o` and `NAME_labels.csv`.
-fn check_sample<P: G2oPose<D>, const D: usize>(sim: &Simulation<P, D>, name: &str) {
+fn check_sample<P: GraphPose<D>, const D: usize>(sim: &Simulation<P, D>, name: &str) {
     let same = |file: String, text: Vec<u8>| {
         let path = sample(&file);
         if path.exists() {
@@ -124,26 +128,21 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 /// Corrupts a bundled sample as `pgo corrupt` does and fingerprints the
 /// graph and the labels.
 fn corrupt_sample(name: &str, options: &CorruptionOptions, seed: u64) -> (u64, u64) {
-    fn run<P, const D: usize>(
-        g: &mut Graph<P, D>,
-        missing: &[usize],
+    fn run<P: ErrorCoordinates<D>, const D: usize>(
+        mut g: PoseGraph<P, D>,
         options: &CorruptionOptions,
         seed: u64,
-    ) -> (u64, u64)
-    where
-        P: G2oPose<D> + ChordalInit<D> + ErrorCoordinates<D>,
-    {
-        initialize(g, missing, Initialization::File, None).unwrap();
-        let corruption = corrupt(g, options, &mut StdRng::seed_from_u64(seed)).unwrap();
+    ) -> (u64, u64) {
+        g.compose_missing_poses();
+        let corruption = corrupt(&g, options, &mut StdRng::seed_from_u64(seed)).unwrap();
         (
-            fnv1a(&g2o_text(g)),
-            fnv1a(&labels_text(g, &corruption.wrong)),
+            fnv1a(&g2o_text(&corruption.graph)),
+            fnv1a(&labels_text(&corruption.graph, &corruption.wrong)),
         )
     }
-    let mut file = read(&sample(name), Default::default()).unwrap();
-    match &mut file.graph {
-        AnyGraph::Planar(g) => run(g, &file.missing, options, seed),
-        AnyGraph::Spatial(g) => run(g, &file.missing, options, seed),
+    match AnyPoseGraph::read_g2o(sample(name)).unwrap() {
+        AnyPoseGraph::Planar(g) => run(g, options, seed),
+        AnyPoseGraph::Spatial(g) => run(g, options, seed),
     }
 }
 

@@ -3,6 +3,7 @@
 use super::tests::{is_odometry, options};
 use super::world::{SpatialHash, ring_size, sphere_trajectory};
 use super::*;
+use crate::testing::{simulate_planar, simulate_spatial};
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use std::f64::consts::{FRAC_PI_2, PI};

@@ -3,8 +3,8 @@
 
 use super::SimulationError;
 use super::options::{MAX_POSES, within_count};
-use crate::geometry::Pose;
 use nalgebra::SVector;
+use pgo::Pose;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;

@@ -5,7 +5,6 @@ use super::counts::{sample_wrong_candidate, sample_wrong_group};
 use super::noise::{ErrorCoordinates, perturb, sample_with_information};
 use super::wrong::{WrongGroup, WrongLoopPlan, random_measurement, wrong_groups};
 use super::{CorruptionOptions, SimulationError};
-use crate::geometry::Pose;
 use crate::graph::{Graph, LoopCandidate};
 use nalgebra::SMatrix;
 use rand::Rng;
@@ -33,7 +32,7 @@ pub(super) fn plan(options: &CorruptionOptions) -> WrongLoopPlan {
 /// pairs of the graph's true loops). An aliased vertex must be farther from the vertex it
 /// stands in for than the median length of the sequential edges (one
 /// typical step, on the graph's poses): nearer, it would be the same place.
-pub(super) fn place<P: Pose<D>, const D: usize, R: Rng + ?Sized>(
+pub(super) fn place<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
     graph: &Graph<P, D>,
     plan: &WrongLoopPlan,
     sequential: &[bool],
@@ -131,13 +130,13 @@ pub(super) fn mark_candidates<P, const D: usize, R: Rng + ?Sized>(
 /// Appends the planned wrong loops (in the order of `groups`) as
 /// candidates with counts drawn for wrong candidates (none without a
 /// model), group by group.
-pub(super) fn append<P: Pose<D>, const D: usize, R: Rng + ?Sized>(
+pub(super) fn append<P: ErrorCoordinates<D>, const D: usize, R: Rng + ?Sized>(
     graph: &mut Graph<P, D>,
     planned: Vec<PlannedWrong<P, D>>,
     groups: &[WrongGroup],
     options: &CorruptionOptions,
     rng: &mut R,
-) -> Result<(), SimulationError> {
+) {
     let shares = (options.true_like_share, options.true_like_by_group);
     let counts: Vec<Option<u64>> = (groups.iter())
         .flat_map(|g| match &options.inliers {
@@ -150,7 +149,6 @@ pub(super) fn append<P: Pose<D>, const D: usize, R: Rng + ?Sized>(
     for ((from, to, measurement, information), inliers) in planned.into_iter().zip(counts) {
         let (from, to) = (graph.id(from), graph.id(to));
         let candidate = Some(LoopCandidate { inliers });
-        graph.add_edge(from, to, measurement, information, candidate)?;
+        graph.add_edge(from, to, measurement, information, candidate);
     }
-    Ok(())
 }

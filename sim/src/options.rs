@@ -21,16 +21,16 @@ pub const MAX_ROTATION_NOISE: f64 = 0.5;
 
 /// Smallest accepted noise σ (translation in metres, rotation in radians).
 /// The information of the noise is `1/σ²` (`4/σᵣ²` for SE(3) rotations);
-/// with `σ ≥ 10⁻¹⁵⁰` it is at most `4·10³⁰⁰`, below `f64::MAX ≈ 1.8·10³⁰⁸`,
-/// so that it is finite when computed and when read back.
-pub const MIN_NOISE: f64 = 1e-150;
+/// with `σ ≥ 10⁻⁴⁹` it is at most `4·10⁹⁸`, inside the range the library
+/// accepts ([`pgo::INFORMATION_RANGE`], up to `10¹⁰⁰`).
+pub const MIN_NOISE: f64 = 1e-49;
 
 /// Largest accepted length (metres): the translation noise σₜ and the
 /// translation scale of wrong measurements. The information `1/σₜ²` of the
-/// largest noise is `10⁻³⁰⁰`, a normal `f64` (above `f64::MIN_POSITIVE ≈
-/// 2.2·10⁻³⁰⁸`), so that the information matrix stays positive definite;
-/// the squared norms of such lengths (`10³⁰⁰`) stay finite too.
-pub const MAX_LENGTH: f64 = 1e150;
+/// largest noise is `10⁻⁹⁸`, inside the range the library accepts
+/// ([`pgo::INFORMATION_RANGE`], down to `10⁻¹⁰⁰`); the squared norms of
+/// such lengths (`10⁹⁸`) stay finite too.
+pub const MAX_LENGTH: f64 = 1e49;
 
 /// Most poses of a simulation, and most wrong candidates of a simulation or
 /// corruption. A simulated SE(3) pose with a loop closure takes about 2 KB

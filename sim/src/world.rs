@@ -1,8 +1,8 @@
 //! The true trajectories of the simulated worlds and the search for true
 //! loop closures among their poses.
 
-use crate::geometry::{Pose, Se2, Se3};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use pgo::{Pose, Se2, Se3};
 use rand::Rng;
 use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};

@@ -2,8 +2,8 @@
 //! and the matching information matrices (see the module documentation of
 //! [`crate::simulate`]).
 
-use crate::geometry::{Pose, Se2, Se3};
 use nalgebra::{Matrix3, Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
+use pgo::{GraphPose, Se2, Se3};
 use rand::Rng;
 use rand_distr::StandardNormal;
 use std::f64::consts::PI;
@@ -13,7 +13,7 @@ use std::f64::consts::PI;
 /// them. Implemented for [`Se2`] and [`Se3`]; the simulator draws all its
 /// measurement noise through it, and `corrupt` the noise
 /// of aliased candidates.
-pub trait ErrorCoordinates<const D: usize>: Pose<D> {
+pub trait ErrorCoordinates<const D: usize>: GraphPose<D> {
     /// The information matrix of the noise drawn by [`Self::sample_error`].
     fn information(translation_sigma: f64, rotation_sigma: f64) -> SMatrix<f64, D, D>;
 

@@ -2,8 +2,8 @@
 
 use super::noise::{ErrorCoordinates, perturb, sample_with_information};
 use super::*;
-use crate::geometry::{Pose, Se2, Se3};
 use nalgebra::{Matrix3, Matrix6, SVector, Vector3};
+use pgo::{Pose, Se2, Se3};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 
 #[test]
