@@ -22,13 +22,6 @@ use std::io::{self, Write};
 /// The exit status after a broken pipe on stdout: 128 + SIGPIPE (13).
 pub const BROKEN_PIPE_STATUS: u8 = 141;
 
-/// Writes `text` to stdout and flushes it.
-pub fn out(text: &str) -> io::Result<()> {
-    let mut stdout = io::stdout().lock();
-    stdout.write_all(text.as_bytes())?;
-    stdout.flush()
-}
-
 /// Writes `text` and a newline to stdout and flushes them.
 pub fn out_line(text: &str) -> io::Result<()> {
     let mut stdout = io::stdout().lock();

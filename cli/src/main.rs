@@ -4,7 +4,7 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use optimize::OptimizeArgs;
-use pgo::output::OutputError;
+use pgo::output::{OutputError, check_files};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -15,7 +15,7 @@ macro_rules! say {
         $crate::console::err_line(format_args!($($arg)*))
     };
 }
-pub(crate) use say;
+
 
 mod console;
 mod inliers;
@@ -463,7 +463,7 @@ fn write_graph_and_labels<P: pgo::GraphPose<D>, const D: usize>(
         truth.write_g2o(path).map_err(SimulatedOutputError::Graph)?;
     }
     if let Some(l) = labels {
-        pgo::io::output::write(l, |w| pgo_sim::write_labels(graph, wrong, w))
+        pgo::output::write(l, |w| pgo_sim::write_labels(graph, wrong, w))
             .map_err(SimulatedOutputError::Labels)?;
     }
     Ok(())

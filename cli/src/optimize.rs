@@ -2,10 +2,9 @@
 //! inlier CSV), optimise it, write the map, the covariances and the
 //! pictures, print the report — with the command line's exit statuses.
 
-use crate::console::{self, BROKEN_PIPE_STATUS};
+use crate::console;
 use crate::inliers::{self, InlierCsvError};
 use crate::plot::{self, PlotError};
-use crate::say;
 use pgo::output::{CheckError, check_files};
 use pgo::report::Report;
 use pgo::{AnyPoseGraph, AnySolution, Error, IterationRecord, Observer, Setting};
@@ -92,14 +91,6 @@ pub enum Failure {
     /// A picture could not be drawn or written.
     #[error(transparent)]
     Plot(#[from] PlotError),
-    /// An output could not be written.
-    #[error("{}: cannot write: {source}", path.display())]
-    Write {
-        /// The output.
-        path: PathBuf,
-        /// The cause.
-        source: std::io::Error,
-    },
 }
 
 /// The library's message for the command line: its options by their flags,
@@ -129,7 +120,7 @@ impl Failure {
                 _ if matches!(error, Error::Undetermined { .. } | Error::NonFiniteEdge { .. }) => 2,
                 _ => 1,
             },
-            Self::Plot(_) | Self::Write { .. } => 1,
+            Self::Plot(_) => 1,
         }
     }
 }
@@ -282,7 +273,6 @@ fn finish(args: &OptimizeArgs, report: &Report, verbose: bool) -> ExitCode {
         );
         return ExitCode::from(CHI2_FAILED_STATUS);
     }
-    let _ = BROKEN_PIPE_STATUS;
     ExitCode::SUCCESS
 }
 

@@ -20,7 +20,7 @@
 mod job;
 mod loops;
 
-pub use job::{loop_points, pictures};
+pub use job::pictures;
 pub use loops::{LoopPoint, plot_loops};
 
 use pgo::{Component, LogNormalMixture, Threshold, ThresholdFit};
@@ -1033,7 +1033,7 @@ mod tests {
     use super::*;
     use pgo::{Degeneracy, MixtureOptions, learn_threshold};
     use pgo::{Se2, Se3};
-    use nalgebra::{UnitQuaternion, Vector3};
+    use pgo::nalgebra::{UnitQuaternion, Vector3};
     use rand::SeedableRng;
     use rand::rngs::StdRng;
     use rand_distr::{Distribution, LogNormal};

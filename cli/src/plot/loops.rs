@@ -241,8 +241,8 @@ mod tests {
     fn candidates() -> (Vec<LoopPoint>, LoopModel) {
         let sample = concat!(env!("CARGO_MANIFEST_DIR"), "/../g2o_samples/grid2d.g2o");
         let graph = pgo::AnyPoseGraph::read_g2o(sample).unwrap();
-        let report = graph.optimize(&pgo::Options::default()).unwrap().into_report();
-        let points = crate::plot::loop_points(&report);
+        let report = graph.optimize(&pgo::Options::default()).unwrap().report().clone();
+        let points = super::super::job::loop_points(&report);
         (points, report.robust.model.unwrap())
     }
 
