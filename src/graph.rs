@@ -17,9 +17,10 @@ pub struct LoopCandidate {
     pub inliers: Option<u64>,
 }
 
-/// A relative-pose measurement between two vertices.
+/// A relative-pose measurement between two vertices, by their indices: the
+/// solver's form of a [`crate::Edge`].
 #[derive(Clone, Debug, PartialEq)]
-pub struct Edge<P, const D: usize> {
+pub struct IndexedEdge<P, const D: usize> {
     /// Index (not id) of the first vertex.
     pub from: usize,
     /// Index (not id) of the second vertex.
@@ -33,7 +34,7 @@ pub struct Edge<P, const D: usize> {
     pub candidate: Option<LoopCandidate>,
 }
 
-impl<P: Pose<D>, const D: usize> Edge<P, D> {
+impl<P: Pose<D>, const D: usize> IndexedEdge<P, D> {
     /// Whether this edge is a loop-closure candidate.
     pub fn is_candidate(&self) -> bool {
         self.candidate.is_some()
@@ -73,7 +74,7 @@ pub struct Graph<P, const D: usize> {
     pub poses: Vec<P>,
     index: HashMap<VertexId, usize>,
     /// All edges, in insertion (file) order.
-    pub edges: Vec<Edge<P, D>>,
+    pub edges: Vec<IndexedEdge<P, D>>,
     fixed: Vec<bool>,
 }
 
@@ -165,7 +166,7 @@ impl<P: Pose<D>, const D: usize> Graph<P, D> {
         }
         let f = self.index_of(from).ok_or(GraphError::UnknownVertex(from))?;
         let t = self.index_of(to).ok_or(GraphError::UnknownVertex(to))?;
-        self.edges.push(Edge {
+        self.edges.push(IndexedEdge {
             from: f,
             to: t,
             measurement,
@@ -242,7 +243,7 @@ impl<P: Pose<D>, const D: usize> Graph<P, D> {
     }
 
     /// The error of one edge at the current estimate.
-    pub fn edge_error(&self, edge: &Edge<P, D>) -> nalgebra::SVector<f64, D> {
+    pub fn edge_error(&self, edge: &IndexedEdge<P, D>) -> nalgebra::SVector<f64, D> {
         P::error(
             &self.poses[edge.from],
             &self.poses[edge.to],
@@ -251,7 +252,7 @@ impl<P: Pose<D>, const D: usize> Graph<P, D> {
     }
 
     /// `eᵀΩe` of one edge at the current estimate.
-    pub fn edge_chi2(&self, edge: &Edge<P, D>) -> f64 {
+    pub fn edge_chi2(&self, edge: &IndexedEdge<P, D>) -> f64 {
         let e = self.edge_error(edge);
         e.dot(&(edge.information * e))
     }

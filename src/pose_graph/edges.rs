@@ -60,7 +60,7 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         self.graph.edges.get(index).map(|e| self.view(e))
     }
 
-    fn view(&self, e: &crate::graph::Edge<P, D>) -> Edge<P, D> {
+    fn view(&self, e: &crate::graph::IndexedEdge<P, D>) -> Edge<P, D> {
         Edge {
             from: self.graph.id(e.from),
             to: self.graph.id(e.to),

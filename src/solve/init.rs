@@ -16,7 +16,7 @@
 
 use super::SolveError;
 use crate::geometry::{NormalBlocks, Pose, Se2, Se3};
-use crate::graph::{Edge, Graph};
+use crate::graph::{Graph, IndexedEdge};
 use crate::linear::{BlockSystem, LinearError, Parallelism};
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, UnitQuaternion, Vector2, Vector3};
 use serde::Serialize;
@@ -151,7 +151,7 @@ pub fn initialize<P: ChordalInit<D>, const D: usize>(
 }
 
 /// Whether an edge is odometry: trusted and between consecutive ids.
-fn is_odometry<P: Pose<D>, const D: usize>(graph: &Graph<P, D>, e: &Edge<P, D>) -> bool {
+fn is_odometry<P: Pose<D>, const D: usize>(graph: &Graph<P, D>, e: &IndexedEdge<P, D>) -> bool {
     e.candidate.is_none() && graph.id(e.from).abs_diff(graph.id(e.to)) == 1
 }
 
