@@ -10,7 +10,7 @@ use crate::io::g2o::{self, FileText, ReadOptions, ReadSummary};
 use crate::options::Options;
 use crate::io::g2o::G2oPose;
 use crate::job::{self, Settings, Warm};
-use crate::report::{IncrementalReport, Report, UpdateSolve};
+use crate::report::Report;
 use crate::solution::{AnySolution, Solution};
 use crate::solve::{IterationRecord, Observer, StopReason};
 use nalgebra::SMatrix;
@@ -492,14 +492,14 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// edges from them. Only as much is solved as the additions
     /// need: nothing when nothing was added, no factorisation when the new
     /// poses hang on the map by one trusted edge each (odometry), else
-    /// EM's decisions from the last ones ([`UpdateSolve`]). The report's
+    /// EM's decisions from the last ones ([`crate::UpdateSolve`]). The report's
     /// `incremental` part says which, and which earlier decisions changed.
     ///
     /// The first update, one with other options than the last, one
     /// after [`PoseGraph::fix`] or [`PoseGraph::forget`], and one whose EM
     /// decisions swing from the last ones (the new evidence overturned
     /// them, `docs/method.md` §7b) run the whole job
-    /// ([`UpdateSolve::Batch`], the reason saying which). A cancelled update keeps the earlier state;
+    /// ([`crate::UpdateSolve::Batch`], the reason saying which). A cancelled update keeps the earlier state;
     /// one cut short by `options.solver.time_limit` or
     /// `options.solver.update_iterations` (bounds on an update's latency;
     /// the report then says not converged) leaves its map as the start of
@@ -538,55 +538,19 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     ) -> Result<Solution<P>, Error> {
         let start = Instant::now();
         options.validate()?;
-        let mut report = self.start()?;
+        let report = self.start()?;
         let config = Settings::new(options);
-        let blank = report.clone();
-        let mut initial = None;
-        let mut graph = self.graph.clone();
-        let warm = match self.state.as_deref_mut() {
-            Some((last, warm)) if last.same_job(options) => {
-                match job::update_graph(&mut graph, warm, &config, &mut report, observer)? {
-                    Some(next) => next,
-                    None => {
-                        // EM's decisions swung: the whole job instead.
-                        graph = self.graph.clone();
-                        report = blank;
-                        initial = Some(job::run(
-                            &mut graph,
-                            &self.missing,
-                            &config,
-                            &mut report,
-                            observer,
-                        )?);
-                        report.incremental = Some(job::after_swing(&graph, warm, &report));
-                        Warm::after(&graph, &report, Default::default())
-                    }
-                }
-            }
-            last => {
-                initial = Some(job::run(
-                    &mut graph,
-                    &self.missing,
-                    &config,
-                    &mut report,
-                    observer,
-                )?);
-                report.incremental = Some(IncrementalReport {
-                    solve: UpdateSolve::Batch,
-                    reason: if last.is_some() {
-                        "options changed"
-                    } else {
-                        "no earlier solution"
-                    }
-                    .into(),
-                    new_poses: graph.num_vertices(),
-                    new_edges: graph.edges.len(),
-                    new_candidates: graph.num_candidates(),
-                    changed: Vec::new(),
-                });
-                Warm::after(&graph, &report, Default::default())
-            }
+        let last = match self.state.as_deref_mut() {
+            Some((last, warm)) if last.same_job(options) => Ok(warm),
+            Some(_) => Err("options changed"),
+            None => Err("no earlier solution"),
         };
+        let job::Updated {
+            graph,
+            mut report,
+            warm,
+            initial,
+        } = job::update(&self.graph, &self.missing, last, &config, report, observer)?;
         if report.optimizer.stop_reason != StopReason::Cancelled {
             self.state = Some(Box::new((options.clone(), warm)));
         }

@@ -522,3 +522,72 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         strict,
     }))
 }
+
+/// What an update ran: the graph as solved, its report, the state the next
+/// update starts from, and the initial guess when the whole job ran.
+pub(crate) struct Updated<P: Pose<D>, const D: usize> {
+    /// The graph with the update's map.
+    pub graph: Graph<P, D>,
+    /// Its report.
+    pub report: Report,
+    /// The state of the next update.
+    pub warm: Warm<P, D>,
+    /// The initial guess, when the whole job ran.
+    pub initial: Option<Vec<P>>,
+}
+
+/// An update of the caller's `graph` (with the vertices no line defined,
+/// `missing`) from `last`, the last update's state — or, `Err(reason)`,
+/// none to resume from: the whole job, its report saying why. The whole
+/// job also runs when EM's decisions swung from the last ones (the new
+/// evidence overturned them, docs/method.md §7b). `report`: the report
+/// before the job.
+pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
+    graph: &Graph<P, D>,
+    missing: &[usize],
+    last: Result<&mut Warm<P, D>, &'static str>,
+    config: &Settings<'_>,
+    report: Report,
+    observer: &mut dyn Observer,
+) -> Result<Updated<P, D>, Error> {
+    let whole = |report: &mut Report, observer: &mut dyn Observer| {
+        let mut solved = graph.clone();
+        let initial = super::run(&mut solved, missing, config, report, observer)?;
+        Ok::<_, Error>((solved, initial))
+    };
+    let mut solved = graph.clone();
+    let mut updated = report.clone();
+    let (solved, report, initial, warm) = match last {
+        Ok(warm) => match update_graph(&mut solved, warm, config, &mut updated, observer)? {
+            Some(next) => (solved, updated, None, next),
+            None => {
+                // EM's decisions swung: the whole job instead.
+                let mut report = report;
+                let (solved, initial) = whole(&mut report, observer)?;
+                report.incremental = Some(after_swing(&solved, warm, &report));
+                let next = Warm::after(&solved, &report, Default::default());
+                (solved, report, Some(initial), next)
+            }
+        },
+        Err(reason) => {
+            let mut report = report;
+            let (solved, initial) = whole(&mut report, observer)?;
+            report.incremental = Some(IncrementalReport {
+                solve: UpdateSolve::Batch,
+                reason: reason.into(),
+                new_poses: solved.num_vertices(),
+                new_edges: solved.edges.len(),
+                new_candidates: solved.num_candidates(),
+                changed: Vec::new(),
+            });
+            let next = Warm::after(&solved, &report, Default::default());
+            (solved, report, Some(initial), next)
+        }
+    };
+    Ok(Updated {
+        graph: solved,
+        report,
+        warm,
+        initial,
+    })
+}

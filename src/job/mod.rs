@@ -9,7 +9,7 @@ mod finish;
 pub(crate) use finish::chi2_test;
 mod incremental;
 
-pub(crate) use incremental::{Warm, after_swing, update_graph};
+pub(crate) use incremental::{Updated, Warm, update};
 
 use crate::error::Error;
 use crate::gate::MixtureOptions;
