@@ -547,7 +547,7 @@ fn bad_options_are_errors() {
     );
 }
 
-/// `cargo test --release --lib simulate::tests::million -- --ignored --nocapture`
+/// `cargo test -p pgo-sim --release --lib tests::million -- --ignored --nocapture`
 #[test]
 #[ignore = "a million poses: run in release mode"]
 fn million_poses_are_fast() {
