@@ -27,9 +27,6 @@ pub struct Solution<P> {
     index: Option<HashMap<VertexId, usize>>,
     loops: Vec<LoopDecision>,
     report: Report,
-    /// The map's edges with their isotropic weights, for
-    /// [`Solution::certificate`].
-    pub(crate) problem: certify::Problem<P>,
     /// The graph as solved (its edges, which are candidates, the gauge), a
     /// `graph::Graph<P, D>`, for [`Solution::covariances`]; clones share
     /// it. `None` only for a solution made without it.
@@ -122,13 +119,22 @@ impl<P> Solution<P> {
             poses: graph.poses.clone(),
             index,
             loops,
-            problem: certify::Problem::of_graph(graph, &report),
             report,
             solved: None,
             threads: 0,
             initial: None,
             text: None,
         }
+    }
+
+    /// The graph as solved.
+    fn solved_graph<const D: usize>(&self) -> Result<Arc<graph::Graph<P, D>>, Error>
+    where
+        P: Pose<D>,
+    {
+        (self.solved.clone())
+            .and_then(|g| g.downcast::<graph::Graph<P, D>>().ok())
+            .ok_or_else(|| Error::Internal("the solution holds no graph".into()))
     }
 
     /// This solution, written back into the text of the file its graph was
@@ -144,9 +150,7 @@ impl<P> Solution<P> {
     where
         P: G2oPose<D>,
     {
-        let graph = (self.solved.clone())
-            .and_then(|g| g.downcast::<graph::Graph<P, D>>().ok())
-            .ok_or_else(|| io::Error::other("the solution holds no graph"))?;
+        let graph = self.solved_graph::<D>().map_err(io::Error::other)?;
         match &self.text {
             Some(text) => Ok(text.rewrite(&graph, out)?),
             None => g2o::write_graph(&graph, &[], out),
@@ -201,9 +205,7 @@ impl<P> Solution<P> {
     where
         P: Pose<D>,
     {
-        let graph = (self.solved.clone())
-            .and_then(|g| g.downcast::<graph::Graph<P, D>>().ok())
-            .ok_or_else(|| Error::Internal("the solution holds no graph".into()))?;
+        let graph = self.solved_graph::<D>()?;
         let in_map = covariance::edges_in_map(&graph, self.loops.iter().map(|l| l.accepted))
             .ok_or_else(|| Error::Internal("loop decisions do not match the graph".into()))?;
         Covariances::new(graph, &in_map, self.threads).map_err(|e| match e {
@@ -357,8 +359,9 @@ impl Solution<Se2> {
     /// # Ok::<(), pgo::Error>(())
     /// ```
     pub fn certificate(&self) -> Result<Certificate, Error> {
+        let problem = certify::Problem::of_graph(&*self.solved_graph::<3>()?, &self.report);
         Ok(certify::certify::<Se2, 2, 3, 3>(
-            &self.problem,
+            &problem,
             &self.poses,
             &self.ids,
         )?)
@@ -375,8 +378,9 @@ impl Solution<Se3> {
     /// A certificate of global optimality of the map over its edges; see
     /// [`Solution::<Se2>::certificate`](Solution#method.certificate).
     pub fn certificate(&self) -> Result<Certificate, Error> {
+        let problem = certify::Problem::of_graph(&*self.solved_graph::<6>()?, &self.report);
         Ok(certify::certify::<Se3, 3, 4, 6>(
-            &self.problem,
+            &problem,
             &self.poses,
             &self.ids,
         )?)

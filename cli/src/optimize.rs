@@ -153,6 +153,8 @@ pub fn run(args: &OptimizeArgs, observer: &mut dyn Observer) -> Result<Report, F
     if let Some(dir) = &args.plot {
         plot::pictures(dir, &graph, &solution, &args.input, &mut report)?;
     }
+    // The solution holds the map and what writing it needs.
+    drop(graph);
     if args.certify {
         match solution.certificate() {
             Ok(c) => report.certificate = Some(c),
