@@ -30,11 +30,10 @@
 //!
 //! # Features
 //!
-//! * `cli` (default): the `pgo` binary; implies `json`, `plot` and
-//!   `simulate`.
-//! * `json`: `report::Report::to_json`.
-//! * `plot`: SVG pictures (`pgo optimize --plot`).
-//! * `simulate`: synthetic graphs (`pgo simulate`, `pgo corrupt`).
+//! * `json` (default): `report::Report::to_json` and `Certificate::to_json`.
+//! * `clap`: [`Options`] and its parts derive `clap::Args`.
+//! * `internals`: internals for pgo's own benchmarks, probes and fuzz
+//!   targets; no stability promise, not part of the API.
 //!
 //! With `default-features = false` the crate is the solver alone.
 
@@ -65,10 +64,6 @@ mod linear;
 mod options;
 mod pose_graph;
 mod robust;
-#[cfg(feature = "simulate")]
-#[doc(hidden)]
-#[allow(rustdoc::private_intra_doc_links)]
-pub mod simulate;
 mod solution;
 mod solve;
 mod stats;
@@ -106,8 +101,6 @@ pub use stats::{Chi2Test, DofConvention};
 pub mod internals {
     pub use crate::graph::{AnyGraph, Graph};
     pub use crate::io::g2o::{G2oPose, ReadOptions, read, write_graph};
-    #[cfg(feature = "simulate")]
-    pub use crate::simulate::{AnySimulation, SimulationOptions, World, simulate};
     pub use crate::solve::init::{ChordalInit, Initialization, initialize};
     pub use crate::solve::{IterationRecord, Optimizer, SolverOptions};
 }
