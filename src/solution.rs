@@ -158,11 +158,9 @@ impl<P> Solution<P> {
     where
         P: G2oPose<D>,
     {
-        crate::io::write_atomically(path, |w| self.write_lines(w)).map_err(|source| {
-            Error::Write {
-                path: path.to_owned(),
-                source,
-            }
+        crate::io::write_atomically(path, |w| self.write_lines(w)).map_err(|source| Error::Write {
+            path: path.to_owned(),
+            source,
         })
     }
 
@@ -448,7 +446,11 @@ impl AnySolution {
     /// # Ok::<(), pgo::Error>(())
     /// ```
     pub fn poses_flat(&self) -> Vec<f64> {
-        either!(self, |s| s.poses.iter().flat_map(G2oPose::numbers).collect())
+        either!(self, |s| s
+            .poses
+            .iter()
+            .flat_map(G2oPose::numbers)
+            .collect())
     }
 
     /// See [`Solution::loops`].
