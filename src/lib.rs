@@ -56,8 +56,6 @@ mod covariance;
 mod error;
 mod gate;
 mod graph;
-#[cfg(test)]
-mod internal_examples;
 mod io;
 mod job;
 mod linear;
@@ -75,15 +73,15 @@ pub use certify::{
 pub use covariance::{AnyCovariances, Covariances};
 pub use error::{Error, ErrorKind, InformationProblem, PoseProblem, Setting};
 pub use gate::{
-    Component, DegeneratePolicy, Degeneracy, GateMode, LogNormalMixture, MixtureOptions, Threshold,
+    Component, Degeneracy, DegeneratePolicy, GateMode, LogNormalMixture, MixtureOptions, Threshold,
     ThresholdFit, learn_threshold,
 };
 pub use geometry::{Pose, Se2, Se3};
 pub use graph::{INFORMATION_RANGE, VertexId};
 pub use io::g2o::{LineProblem, ReadError};
 pub use options::{
-    CandidateRule, ExpertOptions, GateOptions, MAX_THREADS, MAX_TIME_LIMIT_S, Options, ROBUST_C_RANGE,
-    RobustOptions, SolverOptions, TestOptions,
+    CandidateRule, ExpertOptions, GateOptions, MAX_THREADS, MAX_TIME_LIMIT_S, Options,
+    ROBUST_C_RANGE, RobustOptions, SolverOptions, TestOptions,
 };
 pub use pose_graph::{AnyPoseGraph, Edge, GraphPose, PoseGraph, PoseGraph2, PoseGraph3};
 pub use report::{DecisionChange, IncrementalReport, UpdateSolve};
