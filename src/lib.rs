@@ -92,13 +92,15 @@ pub use solve::init::Initialization;
 pub use solve::{Cancel, Cancellable, IterationRecord, Observer, StopReason};
 pub use stats::{Chi2Test, DofConvention};
 
-/// Internals for pgo's own stage benchmarks and probes (benches/,
-/// examples/): no stability promise, not part of the API.
+/// Internals for pgo's own stage benchmarks, probes and fuzz targets
+/// (benches/, examples/, fuzz/): no stability promise, not part of the API.
 #[cfg(feature = "internals")]
 #[doc(hidden)]
 pub mod internals {
     pub use crate::graph::{AnyGraph, Graph};
-    pub use crate::io::g2o::{G2oPose, ReadOptions, read, write_graph};
+    pub use crate::io::g2o::{
+        G2oFile, G2oPose, ReadOptions, RewriteError, read, read_from, write_graph,
+    };
     pub use crate::solve::init::{ChordalInit, Initialization, initialize};
     pub use crate::solve::{IterationRecord, Optimizer, SolverOptions};
 }
