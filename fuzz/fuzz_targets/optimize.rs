@@ -66,10 +66,10 @@ fuzz_target!(|data: &[u8]| {
             let back = read(&output, repair)
                 .unwrap_or_else(|e| panic!("the written graph does not read back: {e}"));
             assert_eq!((back.len(), back.num_edges()), (report.poses, report.edges));
-            let finite = back
-                .ids()
-                .iter()
-                .all(|&id| back.pose(id).is_some_and(|p| p.iter().all(|v| v.is_finite())));
+            let finite = back.ids().iter().all(|&id| {
+                back.pose(id)
+                    .is_some_and(|p| p.iter().all(|v| v.is_finite()))
+            });
             assert!(finite, "non-finite pose written");
         }
         Err(e) => {
