@@ -94,7 +94,7 @@ enum Place {
 /// use pgo::{Options, PoseGraph2, Se2};
 ///
 /// // Three poses 1 m apart, each step measured with σ = 0.1 m and 0.01 rad.
-/// let mut graph = Graph2::new();
+/// let mut graph = PoseGraph2::new();
 /// for k in 0..3 {
 ///     graph.add_pose(k, Se2::new(k as f64, 0.0, 0.0))?;
 /// }

@@ -523,8 +523,8 @@ impl ThresholdFit {
 /// loop-closure candidate): the paper's Algorithm 1 with the changes listed
 /// in the [module documentation](self).
 ///
-/// ```ignore
-/// use pgo::gate::{learn_threshold, MixtureOptions};
+/// ```
+/// use pgo::{MixtureOptions, learn_threshold};
 /// // Many weakly supported candidates (8..=32 inliers) and some strong ones
 /// // (150..=209 inliers).
 /// let mut counts: Vec<u64> = (0..200).map(|i| 8 + (i * 7919) % 25).collect();
@@ -607,27 +607,10 @@ pub struct TwoNormals {
 
 /// Fits [`TwoNormals`] to `y` with the variance floor `floor` (see
 /// [`MixtureOptions`] for the checks; "loop component" there means the
-/// component of the higher mean). The gate fits `ln(count / max)`; the
-/// robust back end fits the logs of the candidates' residuals
-/// ([`crate::robust`]).
-///
-/// ```ignore
-/// use pgo::gate::{fit_two_normals, MixtureOptions};
-/// // ln of two well-separated groups.
-/// let mut y: Vec<f64> = (0..200).map(|i| (i % 20) as f64 * 0.1).collect();
-/// y.extend((0..20).map(|i| 10.0 + (i % 5) as f64 * 0.2));
-/// let fit = fit_two_normals(&y, 1e-6, &MixtureOptions::default());
-/// assert!(fit.degeneracy.is_none());
-/// let t = fit.crossing_log.unwrap();
-/// assert!(t > 1.9 && t < 10.0);
-/// ```
-pub fn fit_two_normals(y: &[f64], floor: f64, options: &MixtureOptions) -> TwoNormals {
-    fit_two_normals_from(y, floor, options, None)
-}
-
-/// [`fit_two_normals`] that runs EM from `previous` alone when it gives a
-/// fit that did not collapse ([`EmStart::Previous`]), from the usual
-/// starts otherwise.
+/// component of the higher mean), running EM from `previous` alone when it
+/// gives a fit that did not collapse ([`EmStart::Previous`]), from the
+/// usual starts otherwise. The gate fits `ln(count / max)`; the robust
+/// back end fits the logs of the candidates' residuals ([`crate::robust`]).
 fn fit_two_normals_from(
     y: &[f64],
     floor: f64,
@@ -915,6 +898,17 @@ impl Rule {
     }
 }
 
+/// [`gate_from`] without a previous fit.
+#[cfg(test)]
+pub fn gate(
+    counts: &[Option<u64>],
+    mode: GateMode,
+    policy: DegeneratePolicy,
+    options: &MixtureOptions,
+) -> GateDecision {
+    gate_from(counts, mode, policy, options, None)
+}
+
 /// Applies the geometric-verification gate to loop-closure candidates.
 ///
 /// `counts[i]` is candidate `i`'s inlier count; `None` means the front end
@@ -929,30 +923,7 @@ impl Rule {
 /// * [`GateMode::Soft`]: learned as `Auto`, all kept unless degenerate (then
 ///   as `Auto`).
 ///
-/// ```ignore
-/// use pgo::gate::{gate, DegeneratePolicy, GateMode, MixtureOptions};
-/// let mut counts: Vec<Option<u64>> = (0..200).map(|i| Some(8 + (i * 7919) % 25)).collect();
-/// counts.extend((0..40).map(|i| Some(150 + (i * 31) % 60)));
-/// counts.push(None);
-/// let d = gate(&counts, GateMode::Auto, DegeneratePolicy::DropAll, &MixtureOptions::default());
-/// assert!(!d.degenerate);
-/// assert_eq!(d.kept_count(), 41); // the 40 strong candidates and the uncounted one
-///
-/// let all_equal = vec![Some(12); 30];
-/// let d = gate(&all_equal, GateMode::Auto, DegeneratePolicy::DropAll, &MixtureOptions::default());
-/// assert!(d.degenerate && d.kept_count() == 0);
-/// println!("{}", d.reason.unwrap()); // all 30 non-zero inlier counts equal 12: ...
-/// ```
-pub fn gate(
-    counts: &[Option<u64>],
-    mode: GateMode,
-    policy: DegeneratePolicy,
-    options: &MixtureOptions,
-) -> GateDecision {
-    gate_from(counts, mode, policy, options, None)
-}
-
-/// [`gate`] for counts that grew from those of the fit `previous`
+/// `previous`: the fit of the counts these grew from, if any
 /// ([`learn_threshold_from`]).
 pub fn gate_from(
     counts: &[Option<u64>],

@@ -56,17 +56,6 @@ pub enum GraphError {
 }
 
 /// A pose graph over poses `P` with `D` degrees of freedom.
-///
-/// ```ignore
-/// use pgo::geometry::{Pose, Se2};
-/// use pgo::graph::Graph;
-/// use nalgebra::Matrix3;
-/// let mut g = Graph::<Se2, 3>::new();
-/// g.add_vertex(0, Se2::identity()).unwrap();
-/// g.add_vertex(1, Se2::new(1.0, 0.0, 0.0)).unwrap();
-/// g.add_edge(0, 1, Se2::new(1.0, 0.0, 0.0), Matrix3::identity(), None).unwrap();
-/// assert_eq!(g.chi2(), 0.0);
-/// ```
 #[derive(Clone, Debug, Default)]
 pub struct Graph<P, const D: usize> {
     ids: Vec<VertexId>,

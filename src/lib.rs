@@ -34,9 +34,11 @@
 //!
 //! # Features
 //!
-//! * `json` (default): [`report::Report::to_json`].
+//! * `json` (default): [`report::Report::to_json`] and `Certificate::to_json`.
 //! * `clap`: [`Options`] and its parts derive `clap::Args`, so a command
 //!   line gets every option of the job as a flag (the `pgo` binary's).
+//! * `internals`: internals for pgo's own benchmarks, probes and fuzz
+//!   targets; no stability promise, not part of the API.
 
 // The robust and I/O modules document how they work inside; their links to
 // private items are for readers of the source.
@@ -57,8 +59,6 @@ mod covariance;
 mod error;
 mod gate;
 mod graph;
-#[cfg(test)]
-mod internal_examples;
 mod io;
 mod job;
 mod linear;
@@ -76,15 +76,15 @@ pub use certify::{
 pub use covariance::{AnyCovariances, Covariances};
 pub use error::{Error, ErrorKind, InformationProblem, PoseProblem, Setting};
 pub use gate::{
-    Component, DegeneratePolicy, Degeneracy, GateMode, LogNormalMixture, MixtureOptions, Threshold,
+    Component, Degeneracy, DegeneratePolicy, GateMode, LogNormalMixture, MixtureOptions, Threshold,
     ThresholdFit, learn_threshold,
 };
 pub use geometry::{Pose, Se2, Se3};
 pub use graph::{INFORMATION_RANGE, VertexId};
 pub use io::g2o::{LineProblem, ReadError};
 pub use options::{
-    CandidateRule, ExpertOptions, GateOptions, MAX_THREADS, MAX_TIME_LIMIT_S, Options, ROBUST_C_RANGE,
-    RobustOptions, SolverOptions, TestOptions,
+    CandidateRule, ExpertOptions, GateOptions, MAX_THREADS, MAX_TIME_LIMIT_S, Options,
+    ROBUST_C_RANGE, RobustOptions, SolverOptions, TestOptions,
 };
 pub use pose_graph::{AnyPoseGraph, Edge, GraphPose, PoseGraph, PoseGraph2, PoseGraph3};
 pub use report::{DecisionChange, IncrementalReport, UpdateSolve};
@@ -95,13 +95,15 @@ pub use solve::init::Initialization;
 pub use solve::{Cancel, Cancellable, IterationRecord, Observer, StopReason};
 pub use stats::{Chi2Test, DofConvention};
 
-/// Internals for pgo's own stage benchmarks and probes (benches/,
-/// examples/): no stability promise, not part of the API.
+/// Internals for pgo's own stage benchmarks, probes and fuzz targets
+/// (benches/, examples/, fuzz/): no stability promise, not part of the API.
 #[cfg(feature = "internals")]
 #[doc(hidden)]
 pub mod internals {
     pub use crate::graph::{AnyGraph, Graph};
-    pub use crate::io::g2o::{G2oPose, ReadOptions, read, write_graph};
+    pub use crate::io::g2o::{
+        G2oFile, G2oPose, ReadOptions, RewriteError, read, read_from, write_graph,
+    };
     pub use crate::solve::init::{ChordalInit, Initialization, initialize};
     pub use crate::solve::{IterationRecord, Optimizer, SolverOptions};
 }

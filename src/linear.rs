@@ -20,12 +20,13 @@
 //! damping) into the factor's panels, factorises — the independent subtrees
 //! in parallel — and runs the two triangular solves.
 //!
-//! Covariances: [`BlockSystem::propagate`] gives `A·H⁻¹·Aᵀ` for any two
-//! blocks by a sparse solve; [`BlockSystem::selected_inverse`] gives every
-//! block of `H⁻¹` on the factor's pattern at once, for the blocks that an
-//! edge of `H` ties ([`BlockSystem::propagate_selected`]);
-//! [`BlockSystem::propagate_group`] gives it for the rows of several edges
-//! at once.
+//! Covariances: [`BlockSystem::propagate_group_solved`] gives `A·H⁻¹·Aᵀ`
+//! for the rows of one or several edges by a sparse solve;
+//! [`BlockSystem::selected_inverse`] gives every block of `H⁻¹` on the
+//! factor's pattern at once, for the blocks that an edge of `H` ties
+//! ([`BlockSystem::propagate_selected`]);
+//! [`BlockSystem::propagate_group_cheaper`] takes whichever of the two
+//! costs less for a group of edges.
 
 mod group;
 mod parallel;
@@ -92,22 +93,6 @@ pub struct SelectedInverse {
 
 /// The normal equations of a pose graph with `D`-dimensional blocks, and
 /// their factorisation.
-///
-/// ```ignore
-/// use nalgebra::{Matrix1, Vector1};
-/// use pgo::linear::{BlockSystem, Parallelism};
-/// // Two scalar variables tied by one edge, plus a prior on the first:
-/// // H = [[2, −1], [−1, 1]], b = [0, −1], so δ = −H⁻¹b = [1, 2].
-/// let mut sys = BlockSystem::<1>::new(2, &[(Some(0), Some(1)), (Some(0), None)], Parallelism::sequential()).unwrap();
-/// sys.clear();
-/// let one = Matrix1::new(1.0);
-/// sys.add_edge(0, &one, &Matrix1::new(-1.0), &one, &Vector1::new(0.0), &Vector1::new(-1.0));
-/// sys.add_edge(1, &one, &Matrix1::zeros(), &Matrix1::zeros(), &Vector1::new(0.0), &Vector1::zeros());
-/// sys.factorize(0.0).unwrap();
-/// let mut step = vec![0.0; 2];
-/// sys.solve(&mut step);
-/// assert!((step[0] - 1.0).abs() < 1e-12 && (step[1] - 2.0).abs() < 1e-12);
-/// ```
 pub struct BlockSystem<const D: usize> {
     n_blocks: usize,
     /// Elimination position of each variable block.
@@ -131,8 +116,6 @@ pub struct BlockSystem<const D: usize> {
     /// scratch.
     rhs: Vec<f64>,
     solve_work: Vec<f64>,
-    /// Scratch of [`BlockSystem::propagate_group`].
-    group_scratch: GroupScratch,
     lambda: f64,
     symbolic: Symbolic<D>,
     /// The factor's panels, allocated by the first factorisation (so that a
@@ -215,7 +198,6 @@ impl<const D: usize> BlockSystem<D> {
             gradient: vec![0.0; n],
             rhs: vec![0.0; n],
             solve_work: Vec::new(),
-            group_scratch: GroupScratch::default(),
             lambda: 0.0,
             symbolic,
             factor: Vec::new(),
@@ -238,11 +220,6 @@ impl<const D: usize> BlockSystem<D> {
         &self.position
     }
 
-    /// The damping `λ` of the last factorisation.
-    pub fn damping(&self) -> f64 {
-        self.lambda
-    }
-
     /// Number of variable blocks.
     pub fn num_blocks(&self) -> usize {
         self.n_blocks
@@ -262,6 +239,7 @@ impl<const D: usize> BlockSystem<D> {
     /// in compressed sparse columns: column pointers, row indices (sorted in
     /// each column) and values — to hand the same matrix to another sparse
     /// solver (benchmarks, tests).
+    #[cfg(any(test, feature = "internals"))]
     pub fn upper_csc(&self) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
         // The off-diagonal blocks above each block column: (row block, slot).
         let mut above: Vec<Vec<(usize, usize)>> = vec![Vec::new(); self.n_blocks];
@@ -600,34 +578,19 @@ impl<const D: usize> BlockSystem<D> {
     /// forward solve visits just the supernodes on their paths to the root
     /// of the elimination tree.
     ///
-    /// ```ignore
-    /// use nalgebra::{Matrix1, Vector1};
-    /// use pgo::linear::{BlockSystem, Parallelism};
-    /// // H = [[2, −1], [−1, 1]], so H⁻¹ = [[1, 1], [1, 2]]; for the edge
-    /// // error e = x₁ − x₀, A = [−1, 1] and A·H⁻¹·Aᵀ = 1 − 2 + 2 = 1.
-    /// let mut sys = BlockSystem::<1>::new(2, &[(Some(0), Some(1)), (Some(0), None)], Parallelism::sequential()).unwrap();
-    /// sys.clear();
-    /// let one = Matrix1::new(1.0);
-    /// sys.add_edge(0, &one, &Matrix1::new(-1.0), &one, &Vector1::zeros(), &Vector1::zeros());
-    /// sys.add_edge(1, &one, &Matrix1::zeros(), &Matrix1::zeros(), &Vector1::zeros(), &Vector1::zeros());
-    /// sys.factorize(0.0).unwrap();
-    /// let m = sys.propagate(Some(0), &Matrix1::new(-1.0), Some(1), &one);
-    /// assert!((m[(0, 0)] - 1.0).abs() < 1e-12);
-    /// // The variance of x₁ alone: (H⁻¹)₁₁ = 2.
-    /// assert!((sys.propagate(None, &one, Some(1), &one)[(0, 0)] - 2.0).abs() < 1e-12);
-    /// ```
-    ///
     /// # Panics
     /// If no factorisation succeeded before, or a block index is out of
     /// range.
+    #[cfg(test)]
     pub fn propagate(
-        &mut self,
+        &self,
         i: Option<usize>,
         a_i: &SMatrix<f64, D, D>,
         j: Option<usize>,
         a_j: &SMatrix<f64, D, D>,
     ) -> SMatrix<f64, D, D> {
-        let gram = self.propagate_group(&[[(i, *a_i), (j, *a_j)]]);
+        let edge = [[(i, *a_i), (j, *a_j)]];
+        let gram = self.propagate_group_solved(&edge, &mut GroupScratch::default());
         SMatrix::from_fn(|r, c| gram[(r, c)])
     }
 
@@ -716,11 +679,6 @@ impl<const D: usize> BlockSystem<D> {
             }
         }
         (dot_b, dot_d)
-    }
-
-    /// The largest absolute entry of `b`, for the gradient stopping test.
-    pub fn gradient_max_norm(&self) -> f64 {
-        self.gradient.iter().fold(0.0, |m, g| m.max(g.abs()))
     }
 }
 
@@ -861,7 +819,7 @@ fn fill_reducing_order(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
+    use nalgebra::{DMatrix, DVector, Matrix1, Matrix2, Vector1, Vector2};
     use rand::{Rng, SeedableRng, rngs::StdRng};
 
     /// A random block system with known dense equivalent.
@@ -1133,5 +1091,45 @@ mod tests {
             sys.factorize(0.0),
             Err(LinearError::NotPositiveDefinite { block: 2 })
         );
+    }
+
+    #[test]
+    fn a_two_variable_system_by_hand() {
+        // Two scalar variables tied by one edge, plus a prior on the first:
+        // H = [[2, −1], [−1, 1]], b = [0, −1], so δ = −H⁻¹b = [1, 2].
+        let mut sys = BlockSystem::<1>::new(
+            2,
+            &[(Some(0), Some(1)), (Some(0), None)],
+            Parallelism::sequential(),
+        )
+        .unwrap();
+        sys.clear();
+        let one = Matrix1::new(1.0);
+        sys.add_edge(
+            0,
+            &one,
+            &Matrix1::new(-1.0),
+            &one,
+            &Vector1::new(0.0),
+            &Vector1::new(-1.0),
+        );
+        sys.add_edge(
+            1,
+            &one,
+            &Matrix1::zeros(),
+            &Matrix1::zeros(),
+            &Vector1::new(0.0),
+            &Vector1::zeros(),
+        );
+        sys.factorize(0.0).unwrap();
+        let mut step = vec![0.0; 2];
+        sys.solve(&mut step);
+        assert!((step[0] - 1.0).abs() < 1e-12 && (step[1] - 2.0).abs() < 1e-12);
+        // H⁻¹ = [[1, 1], [1, 2]]; for the edge error e = x₁ − x₀,
+        // A = [−1, 1] and A·H⁻¹·Aᵀ = 1 − 2 + 2 = 1.
+        let m = sys.propagate(Some(0), &Matrix1::new(-1.0), Some(1), &one);
+        assert!((m[(0, 0)] - 1.0).abs() < 1e-12);
+        // The variance of x₁ alone: (H⁻¹)₁₁ = 2.
+        assert!((sys.propagate(None, &one, Some(1), &one)[(0, 0)] - 2.0).abs() < 1e-12);
     }
 }

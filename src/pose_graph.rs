@@ -6,10 +6,10 @@
 use crate::error::{Error, InformationProblem, PoseProblem};
 use crate::geometry::{Pose, Se2, Se3, dimension};
 use crate::graph::{self, LoopCandidate, VertexId};
-use crate::io::g2o::{self, FileText, ReadOptions, ReadSummary};
-use crate::options::Options;
 use crate::io::g2o::G2oPose;
+use crate::io::g2o::{self, FileText, ReadOptions, ReadSummary};
 use crate::job::{self, Settings, Warm};
+use crate::options::Options;
 use crate::report::Report;
 use crate::solution::{AnySolution, Solution};
 use crate::solve::{IterationRecord, Observer, StopReason};
@@ -348,7 +348,9 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         &mut self,
         counts: &[(VertexId, VertexId, u64)],
     ) -> Result<usize, Error> {
-        let edges = self.graph.edges_of_pairs(counts.iter().map(|&(a, b, _)| (a, b)));
+        let edges = self
+            .graph
+            .edges_of_pairs(counts.iter().map(|&(a, b, _)| (a, b)));
         let edges = edges.map_err(|entry| Error::NoEdge {
             from: counts[entry].0,
             to: counts[entry].1,
@@ -603,7 +605,6 @@ fn trace(r: &IterationRecord) {
         r.step_max
     )
 }
-
 
 /// Refuses a graph read from a file whose information matrices leave
 /// [`graph::INFORMATION_RANGE`] (the reader takes any finite scale).

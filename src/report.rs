@@ -461,7 +461,6 @@ impl Default for OptimizerReport {
     }
 }
 
-
 impl Report {
     /// A report of a graph (read from `input`, with what the reader
     /// noticed, or built in memory), before anything ran.

@@ -137,6 +137,18 @@ impl<P> Solution<P> {
             .ok_or_else(|| Error::Internal("the solution holds no graph".into()))
     }
 
+    /// The map's edges with their isotropic weights, which
+    /// [`Solution::certificate`] certifies.
+    pub(crate) fn certificate_problem<const D: usize>(&self) -> Result<certify::Problem<P>, Error>
+    where
+        P: Pose<D>,
+    {
+        Ok(certify::Problem::of_graph(
+            &*self.solved_graph::<D>()?,
+            &self.report,
+        ))
+    }
+
     /// This solution, written back into the text of the file its graph was
     /// read from (when there is one) by [`Solution::write_g2o`].
     pub(crate) fn with_text(mut self, text: Option<Arc<FileText>>) -> Self {
@@ -162,11 +174,9 @@ impl<P> Solution<P> {
     where
         P: G2oPose<D>,
     {
-        crate::io::write_atomically(path, |w| self.write_lines(w)).map_err(|source| {
-            Error::Write {
-                path: path.to_owned(),
-                source,
-            }
+        crate::io::write_atomically(path, |w| self.write_lines(w)).map_err(|source| Error::Write {
+            path: path.to_owned(),
+            source,
         })
     }
 
@@ -359,7 +369,7 @@ impl Solution<Se2> {
     /// # Ok::<(), pgo::Error>(())
     /// ```
     pub fn certificate(&self) -> Result<Certificate, Error> {
-        let problem = certify::Problem::of_graph(&*self.solved_graph::<3>()?, &self.report);
+        let problem = self.certificate_problem::<3>()?;
         Ok(certify::certify::<Se2, 2, 3, 3>(
             &problem,
             &self.poses,
@@ -378,7 +388,7 @@ impl Solution<Se3> {
     /// A certificate of global optimality of the map over its edges; see
     /// [`Solution::<Se2>::certificate`](Solution#method.certificate).
     pub fn certificate(&self) -> Result<Certificate, Error> {
-        let problem = certify::Problem::of_graph(&*self.solved_graph::<6>()?, &self.report);
+        let problem = self.certificate_problem::<6>()?;
         Ok(certify::certify::<Se3, 3, 4, 6>(
             &problem,
             &self.poses,
@@ -452,7 +462,11 @@ impl AnySolution {
     /// # Ok::<(), pgo::Error>(())
     /// ```
     pub fn poses_flat(&self) -> Vec<f64> {
-        either!(self, |s| s.poses.iter().flat_map(G2oPose::numbers).collect())
+        either!(self, |s| s
+            .poses
+            .iter()
+            .flat_map(G2oPose::numbers)
+            .collect())
     }
 
     /// See [`Solution::loops`].

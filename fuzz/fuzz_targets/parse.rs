@@ -5,8 +5,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use pgo::graph::AnyGraph;
-use pgo::io::g2o::{ReadError, ReadOptions, read_from};
+use pgo::ReadError;
+use pgo::internals::{AnyGraph, ReadOptions, read_from, write_graph};
 use std::path::Path;
 
 fuzz_target!(|data: &[u8]| {
@@ -25,7 +25,11 @@ fuzz_target!(|data: &[u8]| {
             }
         };
         let mut text = Vec::new();
-        file.write(&mut text).expect("write to memory");
+        match &file.graph {
+            AnyGraph::Planar(g) => write_graph(g, &mut text),
+            AnyGraph::Spatial(g) => write_graph(g, &mut text),
+        }
+        .expect("write to memory");
         let again = read_from(text.as_slice(), Path::new("again.g2o"), options)
             .unwrap_or_else(|e| panic!("written file does not read back: {e}"));
         match (&file.graph, &again.graph) {

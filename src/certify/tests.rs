@@ -302,7 +302,7 @@ fn parts_joined_by_no_edge_of_the_map_each_get_a_gauge() {
 }
 
 fn solution_problem(s: &crate::Solution<Se2>) -> Problem<Se2> {
-    s.problem.clone()
+    s.certificate_problem::<3>().unwrap()
 }
 
 #[test]

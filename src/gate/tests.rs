@@ -887,3 +887,14 @@ fn a_previous_fit_without_a_mixture_is_no_start() {
     let fit = learn_threshold_from(&all[..1000], &options, Some(&few));
     assert_ne!(fit.mixture.unwrap().start, EmStart::Previous);
 }
+
+#[test]
+fn two_normals_fit_two_well_separated_groups() {
+    // ln of two well-separated groups.
+    let mut y: Vec<f64> = (0..200).map(|i| (i % 20) as f64 * 0.1).collect();
+    y.extend((0..20).map(|i| 10.0 + (i % 5) as f64 * 0.2));
+    let fit = fit_two_normals_from(&y, 1e-6, &MixtureOptions::default(), None);
+    assert!(fit.degeneracy.is_none());
+    let t = fit.crossing_log.unwrap();
+    assert!(t > 1.9 && t < 10.0);
+}

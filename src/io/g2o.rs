@@ -18,8 +18,8 @@
 //!   edge without one is trusted. (g2o and GTSAM read such files unchanged:
 //!   they ignore the extra token.)
 //! * Max-mixture edges (from the Vertigo / max-mixture outlier datasets) are
-//!   read as their first component, the measurement; the line is written back
-//!   unchanged.
+//!   read as their first component, the measurement; the rewrite keeps the
+//!   line unchanged.
 //! * Tokens are separated by any whitespace (CRLF line ends and tabs work);
 //!   blank lines and lines starting with `#` are skipped; lines with any
 //!   other tag are skipped with one warning per tag.
@@ -28,14 +28,15 @@
 //!   caller can initialise them (see [`crate::solve::init`]).
 //! * Lines longer than [`MAX_LINE_BYTES`] are rejected, and the file is read
 //!   line by line, never whole.
-//! * Two writers: [`G2oFile::rewrite`] writes the input's own text back with
-//!   the new poses (every other byte kept: comments, unknown tags, landmark
-//!   lines, line ends; see [`rewrite`]), which is what `pgo optimize -o`
-//!   and `--in-place` do; [`G2oFile::write`] and [`write_graph`] write the
-//!   model alone, in pgo's own layout.
+//! * Two writers: [`FileText::rewrite`] writes the input's own text back
+//!   with the new poses (every other byte kept: comments, unknown tags,
+//!   landmark lines, line ends; see [`rewrite`]), which is what
+//!   `Solution::write_g2o` does for a graph read from a file;
+//!   [`write_graph`] writes the model alone, in pgo's own layout.
 
 mod rewrite;
 
+#[cfg(feature = "internals")]
 pub use rewrite::RewriteError;
 
 use super::source::{Fingerprint, Fingerprinter, Input, Original};
@@ -46,7 +47,7 @@ use crate::graph::{
     nearest_positive_definite,
 };
 use nalgebra::SMatrix;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
@@ -242,15 +243,7 @@ pub struct ReadSummary {
     pub warnings: Vec<String>,
 }
 
-/// One line of the file that the writer reproduces.
-#[derive(Clone, Debug, PartialEq)]
-enum Record {
-    Vertex(usize),
-    Edge(usize),
-    Fix(Vec<VertexId>),
-}
-
-/// A g2o file as read: the graph, the layout needed to write it back, and
+/// A g2o file as read: the graph, what the rewrite needs of its text, and
 /// what was noticed.
 #[derive(Clone, Debug)]
 pub struct G2oFile {
@@ -261,9 +254,6 @@ pub struct G2oFile {
     pub missing: Vec<usize>,
     /// Notes and warnings.
     pub summary: ReadSummary,
-    records: Vec<Record>,
-    /// Original text of mixture edges, by edge index (written back as read).
-    mixture_lines: HashMap<usize, String>,
     /// What the rewrite needs of the text.
     text: FileText,
 }
@@ -353,7 +343,7 @@ fn push_numbers(out: &mut String, values: &[f64]) {
 }
 
 /// Reads a g2o file; `-` reads stdin (named `<stdin>` in messages). The
-/// text stays available to [`G2oFile::rewrite`] (see [`super::source`]):
+/// text stays available to [`FileText::rewrite`] (see [`super::source`]):
 /// a regular file stays open, anything else is copied as it is read.
 pub fn read(path: &Path, options: ReadOptions) -> Result<G2oFile, ReadError> {
     let input = Input::open(path).map_err(|source| ReadError::Io {
@@ -369,7 +359,9 @@ pub fn read(path: &Path, options: ReadOptions) -> Result<G2oFile, ReadError> {
 
 /// Reads g2o text from any reader; `path` is only used in messages. The
 /// text is not kept: write the result with [`G2oFile::rewrite_from`] (given
-/// the same text again) or [`G2oFile::write`].
+/// the same text again) or [`write_graph`]. (For the tests and the fuzz
+/// targets.)
+#[cfg(any(test, feature = "internals"))]
 pub fn read_from<R: Read>(
     reader: R,
     path: &Path,
@@ -575,8 +567,6 @@ struct Builder<P, const D: usize> {
     graph: Graph<P, D>,
     /// The line that defined each vertex (by index), if any.
     defined_on: Vec<Option<usize>>,
-    records: Vec<Record>,
-    mixture_lines: HashMap<usize, String>,
     fixes: Vec<(usize, Vec<VertexId>)>,
     information_fixed: usize,
 }
@@ -587,8 +577,6 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
             options,
             graph: Graph::new(),
             defined_on: Vec::new(),
-            records: Vec::new(),
-            mixture_lines: HashMap::new(),
             fixes,
             information_fixed: 0,
         }
@@ -627,7 +615,6 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
         }
         self.defined_on[k] = Some(line_no);
         self.graph.poses[k] = pose;
-        self.records.push(Record::Vertex(k));
         Ok(())
     }
 
@@ -686,14 +673,7 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
         }
         let numbers = first.ok_or_else(|| LineProblem::BadMixture("no components".into()))?;
         let inliers = rest.get(body).map(|t| parse_count(t)).transpose()?;
-        self.push_edge(from, to, &numbers, inliers)?;
-        let k = self.graph.edges.len() - 1;
-        // Keep the line as read, without the count (the writer appends it).
-        let keep: Vec<&str> = std::iter::once(tag)
-            .chain(rest[..body].iter().copied())
-            .collect();
-        self.mixture_lines.insert(k, keep.join(" "));
-        Ok(())
+        self.push_edge(from, to, &numbers, inliers)
     }
 
     /// Adds an edge from `numbers` = pose numbers followed by the upper
@@ -728,8 +708,7 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
         self.vertex_index(from);
         self.vertex_index(to);
         let candidate = inliers.map(|n| LoopCandidate { inliers: Some(n) });
-        let k = self
-            .graph
+        self.graph
             .add_edge(from, to, measurement, information, candidate)
             .map_err(|e| match e {
                 // Both vertices exist by now, so a self-loop is all add_edge can report.
@@ -737,12 +716,10 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
                 | GraphError::DuplicateVertex(id)
                 | GraphError::UnknownVertex(id) => LineProblem::SelfLoop { id },
             })?;
-        self.records.push(Record::Edge(k));
         Ok(())
     }
 
     fn fix(&mut self, ids: Vec<VertexId>, line_no: usize) {
-        self.records.push(Record::Fix(ids.clone()));
         self.fixes.push((line_no, ids));
     }
 
@@ -763,12 +740,7 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
         order.sort_by_key(|&k| self.defined_on[k]);
         let defined = order.len();
         order.extend((0..self.graph.num_vertices()).filter(|&k| self.defined_on[k].is_none()));
-        let new_index = self.graph.reorder_vertices(&order);
-        for r in &mut self.records {
-            if let Record::Vertex(k) = r {
-                *k = new_index[*k];
-            }
-        }
+        self.graph.reorder_vertices(&order);
         let mut summary = ReadSummary {
             information_fixed: self.information_fixed,
             ..Default::default()
@@ -783,7 +755,6 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
         // The vectors grew by doubling: give back the unused capacity (up
         // to half of the graph's memory) before the optimiser needs its own.
         self.graph.edges.shrink_to_fit();
-        self.records.shrink_to_fit();
         Ok(G2oFile {
             graph: P::wrap(self.graph),
             text: FileText {
@@ -792,8 +763,6 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
             },
             missing,
             summary,
-            records: self.records,
-            mixture_lines: self.mixture_lines,
         })
     }
 }
@@ -847,61 +816,6 @@ fn upper_triangle_to_matrix<const D: usize>(v: &[f64]) -> SMatrix<f64, D, D> {
         }
     }
     m
-}
-
-impl G2oFile {
-    /// Writes the model back in pgo's own layout: the same tags, edge order
-    /// and inlier counts, with the graph's current vertex estimates; lines
-    /// pgo does not model (comments, unknown tags) are not written, and
-    /// numbers are reformatted. (To write the input's own text with the new
-    /// poses, use [`G2oFile::rewrite`].) Vertices that no line defined are
-    /// written first, in index order. Numbers use the shortest
-    /// representation that reads back to the same bits, so read → write →
-    /// read gives the same graph.
-    pub fn write(&self, out: &mut impl Write) -> io::Result<()> {
-        match &self.graph {
-            AnyGraph::Planar(g) => self.write_graph(g, out),
-            AnyGraph::Spatial(g) => self.write_graph(g, out),
-        }
-    }
-
-    fn write_graph<P: G2oPose<D>, const D: usize>(
-        &self,
-        g: &Graph<P, D>,
-        out: &mut impl Write,
-    ) -> io::Result<()> {
-        let mut line = String::with_capacity(512);
-        for &k in &self.missing {
-            line.clear();
-            vertex_line(g, k, &mut line);
-            out.write_all(line.as_bytes())?;
-        }
-        for record in &self.records {
-            line.clear();
-            match record {
-                Record::Vertex(k) => vertex_line(g, *k, &mut line),
-                Record::Edge(k) => match self.mixture_lines.get(k) {
-                    Some(text) => {
-                        line.push_str(text);
-                        if let Some(n) = g.edges[*k].candidate.and_then(|c| c.inliers) {
-                            let _ = write!(line, " {n}");
-                        }
-                        line.push('\n');
-                    }
-                    None => edge_line(g, *k, &mut line),
-                },
-                Record::Fix(ids) => {
-                    line.push_str("FIX");
-                    for id in ids {
-                        let _ = write!(line, " {id}");
-                    }
-                    line.push('\n');
-                }
-            }
-            out.write_all(line.as_bytes())?;
-        }
-        Ok(())
-    }
 }
 
 fn vertex_line<P: G2oPose<D>, const D: usize>(g: &Graph<P, D>, k: usize, line: &mut String) {
@@ -976,6 +890,16 @@ mod tests {
         )
     }
 
+    /// The graph of `f` as [`write_graph`] writes it.
+    fn written(f: &G2oFile) -> Vec<u8> {
+        let mut out = Vec::new();
+        match &f.graph {
+            AnyGraph::Planar(g) => write_graph(g, &[], &mut out).unwrap(),
+            AnyGraph::Spatial(g) => write_graph(g, &[], &mut out).unwrap(),
+        }
+        out
+    }
+
     fn planar(f: &G2oFile) -> &Graph<Se2, 3> {
         match &f.graph {
             AnyGraph::Planar(g) => g,
@@ -1028,12 +952,9 @@ mod tests {
             EDGE_SE3:QUAT 0 5 1 2 3 0.1 0.2 0.3 0.9 1 0 0 0 0 0 1 0 0 0 0 1 0 0 0 4 0 0 4 0 4 17\n\
             FIX 0\n";
         let a = parse(text).unwrap();
-        let mut out = Vec::new();
-        a.write(&mut out).unwrap();
+        let out = written(&a);
         let b = parse(std::str::from_utf8(&out).unwrap()).unwrap();
-        let mut out2 = Vec::new();
-        b.write(&mut out2).unwrap();
-        assert_eq!(out, out2);
+        assert_eq!(out, written(&b));
         match (&a.graph, &b.graph) {
             (AnyGraph::Spatial(x), AnyGraph::Spatial(y)) => {
                 assert_eq!(x.poses, y.poses);
@@ -1100,19 +1021,13 @@ mod tests {
     }
 
     #[test]
-    fn interleaved_lines_put_vertex_lines_first_and_keep_the_layout() {
+    fn interleaved_lines_put_vertex_lines_first() {
         let text = "EDGE_SE2 2 1 1 0 0 1 0 0 1 0 1\nVERTEX_SE2 1 0 0 0\nVERTEX_SE2 2 1 0 0\nEDGE_SE2 2 3 1 0 0 1 0 0 1 0 1\n";
         let f = parse(text).unwrap();
         let g = planar(&f);
         assert_eq!(g.ids(), &[1, 2, 3]);
         assert_eq!(f.missing, vec![2]);
         assert_eq!((g.id(g.edges[0].from), g.id(g.edges[0].to)), (2, 1));
-        let mut out = Vec::new();
-        f.write(&mut out).unwrap();
-        let lines: Vec<&str> = std::str::from_utf8(&out).unwrap().lines().collect();
-        assert!(lines[0].starts_with("VERTEX_SE2 3 "));
-        assert!(lines[1].starts_with("EDGE_SE2 2 1 "));
-        assert!(lines[2].starts_with("VERTEX_SE2 1 "));
     }
 
     #[test]
@@ -1126,15 +1041,13 @@ mod tests {
     #[test]
     fn mixture_edges_read_their_first_component_and_write_back_unchanged() {
         let mix = "EDGE_SE2_MIXTURE 0 2 2 EDGE_SE2 1 0 2 2 0 0 1 0 0 1 0 1 EDGE_SE2 0.01 0 2 2 0 0 1e-11 0 0 1e-11 0 1e-11";
-        let f = parse(&format!(
-            "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_SE2 2 2 0 0\n{mix}\n"
-        ))
-        .unwrap();
+        let text = format!("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_SE2 2 2 0 0\n{mix}\n");
+        let f = parse(&text).unwrap();
         let g = planar(&f);
         assert_eq!(g.edges[0].measurement, Se2::new(2.0, 0.0, 0.0));
         assert_eq!(g.edges[0].information, nalgebra::Matrix3::identity());
         let mut out = Vec::new();
-        f.write(&mut out).unwrap();
+        f.rewrite_from(text.as_bytes(), &mut out).unwrap();
         assert!(std::str::from_utf8(&out).unwrap().contains(mix));
     }
 

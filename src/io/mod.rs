@@ -1,21 +1,14 @@
 //! Reading and writing pose graphs: the g2o format (with the inlier-count
 //! annotation of loop candidates), inlier counts kept in a CSV beside it,
-//! the input's text kept for rewriting ([`source`]), the one place that
-//! opens output files ([`output`]), and fallible printing for the command
-//! line ([`console`]).
-
+//! the input's text kept for rewriting ([`source`]); output files are
+//! opened by [`crate::output`].
 
 pub mod g2o;
-
-
 #[cfg(test)]
 mod roundtrip_tests;
 pub mod source;
 
-use crate::output;
-use std::fs;
 use std::io::{self, BufRead, BufReader, Read};
-use std::path::Path;
 
 /// Why a line of text could not be had.
 #[derive(Debug)]
@@ -59,11 +52,6 @@ impl<R: Read> LineReader<R> {
         }
     }
 
-    /// The next line and its 1-based number, `None` at the end of the input.
-    pub(crate) fn next_line(&mut self) -> Option<(usize, Result<&str, LineError>)> {
-        self.next_raw().map(|(n, line)| (n, line.map(|l| l.text)))
-    }
-
     /// The next line, its bytes and its text, with its 1-based number;
     /// `None` at the end of the input.
     pub(crate) fn next_raw(&mut self) -> Option<(usize, Result<RawLine<'_>, LineError>)> {
@@ -100,21 +88,17 @@ impl<R: Read> LineReader<R> {
     }
 }
 
-/// Whether `a` and `b` name the same existing file (through links, `.` and
-/// `..` too). False when either does not exist. (For outputs, which may not
-/// exist yet, see [`output::Target::same_as`].)
-pub fn same_file(a: &Path, b: &Path) -> bool {
-    match (fs::canonicalize(a), fs::canonicalize(b)) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => false,
-    }
-}
-
 pub use crate::output::write_atomically;
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The next line's text and its 1-based number ([`LineReader::next_raw`]
+    /// without the bytes).
+    fn next_line<R: Read>(r: &mut LineReader<R>) -> Option<(usize, Result<&str, LineError>)> {
+        r.next_raw().map(|(n, line)| (n, line.map(|l| l.text)))
+    }
 
     #[test]
     fn raw_lines_keep_the_byte_order_mark_and_the_line_end() {
@@ -135,42 +119,34 @@ mod tests {
         let text: &[u8] = b"\xEF\xBB\xBFfirst\r\nsecond\n\xff\nlast";
         let mut r = LineReader::new(text, 16);
         assert_eq!(
-            r.next_line().map(|(n, l)| (n, l.unwrap().to_owned())),
+            next_line(&mut r).map(|(n, l)| (n, l.unwrap().to_owned())),
             Some((1, "first\r\n".into()))
         );
         assert_eq!(
-            r.next_line().map(|(n, l)| (n, l.unwrap().to_owned())),
+            next_line(&mut r).map(|(n, l)| (n, l.unwrap().to_owned())),
             Some((2, "second\n".into()))
         );
-        assert!(matches!(r.next_line(), Some((3, Err(LineError::NotText)))));
+        assert!(matches!(
+            next_line(&mut r),
+            Some((3, Err(LineError::NotText)))
+        ));
         assert_eq!(
-            r.next_line().map(|(n, l)| (n, l.unwrap().to_owned())),
+            next_line(&mut r).map(|(n, l)| (n, l.unwrap().to_owned())),
             Some((4, "last".into()))
         );
-        assert!(r.next_line().is_none());
+        assert!(next_line(&mut r).is_none());
         let long = vec![b'x'; 100];
         let mut r = LineReader::new(long.as_slice(), 16);
-        assert!(matches!(r.next_line(), Some((1, Err(LineError::TooLong)))));
+        assert!(matches!(
+            next_line(&mut r),
+            Some((1, Err(LineError::TooLong)))
+        ));
         // Exactly the limit, plus the newline, is fine.
         let ok = [vec![b'y'; 16], vec![b'\n']].concat();
         let mut r = LineReader::new(ok.as_slice(), 16);
         assert_eq!(
-            r.next_line().map(|(n, l)| (n, l.unwrap().len())),
+            next_line(&mut r).map(|(n, l)| (n, l.unwrap().len())),
             Some((1, 17))
         );
-    }
-
-    #[test]
-    #[cfg(unix)]
-    fn same_file_sees_through_dot_dot_and_links() {
-        let dir = std::env::temp_dir().join(format!("pgo-same-{}", std::process::id()));
-        fs::create_dir_all(dir.join("sub")).unwrap();
-        let a = dir.join("a.g2o");
-        fs::write(&a, "x").unwrap();
-        assert!(same_file(&a, &dir.join("sub/../a.g2o")));
-        std::os::unix::fs::symlink(&a, dir.join("link.g2o")).unwrap();
-        assert!(same_file(&a, &dir.join("link.g2o")));
-        assert!(!same_file(&a, &dir.join("missing.g2o")));
-        fs::remove_dir_all(&dir).unwrap();
     }
 }

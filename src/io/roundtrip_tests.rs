@@ -94,9 +94,10 @@ fn read_text(text: &[u8]) -> G2oFile {
 }
 
 fn file_text(f: &G2oFile) -> Vec<u8> {
-    let mut out = Vec::new();
-    f.write(&mut out).expect("write to memory");
-    out
+    match &f.graph {
+        AnyGraph::Planar(g) => text_of(g),
+        AnyGraph::Spatial(g) => text_of(g),
+    }
 }
 
 /// Same ids, edges (ends, measurements, information, counts) and gauge.

@@ -64,10 +64,7 @@ impl Input {
                     .map_err(|e| format!("cannot make a copy of it to read again: {e}"))
             }),
         };
-        Original {
-            name: self.name,
-            text,
-        }
+        Original { text }
     }
 }
 
@@ -100,18 +97,12 @@ impl Read for Input {
 /// The text of an input that was read, to be read again.
 #[derive(Debug)]
 pub struct Original {
-    name: PathBuf,
     /// The file to read from its start (the input itself, or the copy of a
     /// stream), or why there is none.
     text: Result<File, String>,
 }
 
 impl Original {
-    /// The input's name for messages.
-    pub fn name(&self) -> &Path {
-        &self.name
-    }
-
     /// A reader of the text from its start, or why there is none.
     pub(crate) fn reader(&self) -> Result<impl Read + '_, String> {
         match &self.text {

@@ -2,10 +2,10 @@
 //! edges the initial guess trusts.
 
 use super::Settings;
-use crate::options::CandidateRule;
 use crate::gate::{self, DegeneratePolicy, GateMode, ThresholdFit};
 use crate::geometry::Pose;
 use crate::graph::{Graph, LoopCandidate, UnionFind};
+use crate::options::CandidateRule;
 use crate::report::{GateReport, Report};
 use crate::robust::Candidate;
 
@@ -60,7 +60,8 @@ pub fn gate<P: Pose<D>, const D: usize>(
     // and not when the gate is off; a zero count is no loop by definition.
     let max = report.gate.max_inliers;
     let mixture = decision.count_model();
-    let drop_all = decision.degenerate && config.options.gate.degenerate == DegeneratePolicy::DropAll;
+    let drop_all =
+        decision.degenerate && config.options.gate.degenerate == DegeneratePolicy::DropAll;
     edges
         .iter()
         .zip(&counts)

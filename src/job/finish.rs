@@ -1,7 +1,7 @@
 //! The steps around the robust solve: the initial guess, the χ² test, the
 //! report and the pictures.
 
-use super::{Settings, Error};
+use super::{Error, Settings};
 use crate::graph::Graph;
 use crate::io::g2o::G2oPose;
 use crate::report::{InitializationReport, LoopReport, OptimizerReport, Report, RobustReport};
@@ -38,7 +38,8 @@ pub fn initialize<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     }
     let given = graph.poses.clone();
     if config.options.solver.init != Initialization::File {
-        init_poses(graph, missing, config.options.solver.init, Some(weights)).map_err(solve_error)?;
+        init_poses(graph, missing, config.options.solver.init, Some(weights))
+            .map_err(solve_error)?;
     }
     // An edge whose cost overflows at the start makes the objective
     // meaningless: name it rather than report a bare non-finite objective.
@@ -134,7 +135,14 @@ impl Run<'_> {
             ));
         }
         let final_chi2 = sum(edge_chi2.iter().copied());
-        self.report(graph, optimizer, (summary, phases), final_chi2, &outcome, report);
+        self.report(
+            graph,
+            optimizer,
+            (summary, phases),
+            final_chi2,
+            &outcome,
+            report,
+        );
         Ok(())
     }
 
@@ -150,68 +158,68 @@ impl Run<'_> {
         outcome: &Outcome,
         report: &mut Report,
     ) {
-    // The initialisation left the map whose χ² it reported.
-    let initial_chi2 = report.initialization.chi2;
-    let (candidates, method, c) = (self.candidates, self.method, self.c::<D>());
-    if let Some(summary) = &summary {
-        report.optimizer = OptimizerReport::new(
-            summary,
-            initial_chi2,
-            final_chi2,
-            optimizer.system(),
-            optimizer.max_nnz_factor(),
-        );
-    } else {
-        // No solver run (a budget spent before the first): the map is the
-        // one it started from.
-        report.optimizer.initial_chi2 = initial_chi2;
-        report.optimizer.final_chi2 = final_chi2;
-    }
-    let accepted = outcome.accepted.iter().filter(|&&a| a).count();
-    report.robust = RobustReport {
-        method,
-        c,
-        rounds: outcome.rounds,
-        relaxations: outcome.relaxations,
-        decisions: outcome.decisions,
-        relaxed_starts: outcome.relaxed_starts,
-        clusters: outcome.clusters,
-        accepted_loops: accepted,
-        rejected_loops: candidates.len() - accepted,
-        rescued_loops: candidates
+        // The initialisation left the map whose χ² it reported.
+        let initial_chi2 = report.initialization.chi2;
+        let (candidates, method, c) = (self.candidates, self.method, self.c::<D>());
+        if let Some(summary) = &summary {
+            report.optimizer = OptimizerReport::new(
+                summary,
+                initial_chi2,
+                final_chi2,
+                optimizer.system(),
+                optimizer.max_nnz_factor(),
+            );
+        } else {
+            // No solver run (a budget spent before the first): the map is the
+            // one it started from.
+            report.optimizer.initial_chi2 = initial_chi2;
+            report.optimizer.final_chi2 = final_chi2;
+        }
+        let accepted = outcome.accepted.iter().filter(|&&a| a).count();
+        report.robust = RobustReport {
+            method,
+            c,
+            rounds: outcome.rounds,
+            relaxations: outcome.relaxations,
+            decisions: outcome.decisions,
+            relaxed_starts: outcome.relaxed_starts,
+            clusters: outcome.clusters,
+            accepted_loops: accepted,
+            rejected_loops: candidates.len() - accepted,
+            rescued_loops: candidates
+                .iter()
+                .zip(&outcome.accepted)
+                .filter(|(c, a)| **a && !c.kept)
+                .count(),
+            model: outcome.model.clone(),
+            search: outcome.search.clone(),
+            starts: outcome.starts.clone(),
+        };
+        report.time.relaxation_s = phases.relaxation.as_secs_f64();
+        report.time.evaluation_s = phases.evaluation.as_secs_f64();
+        report.loops = candidates
             .iter()
-            .zip(&outcome.accepted)
-            .filter(|(c, a)| **a && !c.kept)
-            .count(),
-        model: outcome.model.clone(),
-        search: outcome.search.clone(),
-        starts: outcome.starts.clone(),
-    };
-    report.time.relaxation_s = phases.relaxation.as_secs_f64();
-    report.time.evaluation_s = phases.evaluation.as_secs_f64();
-    report.loops = candidates
-        .iter()
-        .enumerate()
-        .map(|(k, cand)| {
-            let e = &graph.edges[cand.edge];
-            LoopReport {
-                from: graph.id(e.from),
-                to: graph.id(e.to),
-                inliers: e.candidate.and_then(|c| c.inliers),
-                kept: cand.kept,
-                accepted: outcome.accepted[k],
-                weight: outcome.weights[k],
-                prior: outcome
-                    .model
-                    .as_ref()
-                    .map(|m| m.prior(cand.count_posterior)),
-                posterior: outcome.posteriors[k],
-                innovation: outcome.innovations[k],
-                reason: outcome.reasons[k],
-            }
-        })
-        .collect();
-}
+            .enumerate()
+            .map(|(k, cand)| {
+                let e = &graph.edges[cand.edge];
+                LoopReport {
+                    from: graph.id(e.from),
+                    to: graph.id(e.to),
+                    inliers: e.candidate.and_then(|c| c.inliers),
+                    kept: cand.kept,
+                    accepted: outcome.accepted[k],
+                    weight: outcome.weights[k],
+                    prior: outcome
+                        .model
+                        .as_ref()
+                        .map(|m| m.prior(cand.count_posterior)),
+                    posterior: outcome.posteriors[k],
+                    innovation: outcome.innovations[k],
+                    reason: outcome.reasons[k],
+                }
+            })
+            .collect();
+    }
 }
 
 /// The χ² test over the edges the map was solved with (weight ≥ ½), each at
@@ -238,7 +246,13 @@ fn test_of<P: G2oPose<D>, const D: usize>(
         .map(|k| edge_chi2[k]));
     let free = graph.num_vertices() - graph.gauge().len();
     let dof_residual = (used * D) as i64 - (free * D) as i64;
-    Chi2Test::new(d2, used as u64, dof_residual, config.options.test.dof, config.options.test.alpha)
+    Chi2Test::new(
+        d2,
+        used as u64,
+        dof_residual,
+        config.options.test.dof,
+        config.options.test.alpha,
+    )
 }
 
 /// A sum in the order given, from +0 ([`Graph::chi2_where`]'s bits).

@@ -19,7 +19,7 @@
 //!    accepts against it ([`robust::Proposal`]), which saves the round
 //!    that would find them.
 
-use super::{Settings, Error, candidates, finish};
+use super::{Error, Settings, candidates, finish};
 use crate::geometry::Pose;
 use crate::graph::Graph;
 use crate::io::g2o::G2oPose;

@@ -113,4 +113,3 @@ pub(crate) fn run<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     report.time.solve_s = solving.elapsed().as_secs_f64();
     Ok(initial)
 }
-

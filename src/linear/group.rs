@@ -41,27 +41,7 @@ const fn recurrence_product_cost(d: usize) -> usize {
 }
 
 impl<const D: usize> BlockSystem<D> {
-    /// The Gram matrix `A·H⁻¹·Aᵀ` of the stacked Jacobians `A` of `edges`
-    /// (`D·m × D·m` for `m` edges, edge `e`'s rows at `D·e..D·e + D`): one
-    /// sparse forward solve `Y = L⁻¹·Pᵀ·Aᵀ` with all `D·m` right-hand sides
-    /// at once, over the supernodes the group reaches (their paths to the
-    /// root), then `A·H⁻¹·Aᵀ = YᵀY`. With one edge it is
-    /// [`BlockSystem::propagate`].
-    ///
-    /// # Panics
-    /// If no factorisation succeeded before, or a block index is out of
-    /// range.
-    pub fn propagate_group(&mut self, edges: &[EdgeJacobian<D>]) -> DMatrix<f64> {
-        let mut scratch = std::mem::take(&mut self.group_scratch);
-        let gram = match self.reach_group(edges, &mut scratch) {
-            Some(_) => self.solve_group(edges, &mut scratch),
-            None => DMatrix::zeros(D * edges.len(), D * edges.len()),
-        };
-        self.group_scratch = scratch;
-        gram
-    }
-
-    /// [`BlockSystem::propagate_group`] by whichever of two ways costs
+    /// [`BlockSystem::propagate_group_solved`] by whichever of two ways costs
     /// less: the recurrence from the selected inverse `z` while its blocks
     /// off the factor's pattern cost less than the sparse solve would
     /// ([`BlockSystem::propagate_group_selected`]), else the solve. The
@@ -86,9 +66,13 @@ impl<const D: usize> BlockSystem<D> {
             .unwrap_or_else(|| self.solve_group(edges, scratch))
     }
 
-    /// [`BlockSystem::propagate_group`] by the sparse solve alone, without
-    /// a selected inverse (threads may share the system, each with its own
-    /// `scratch`).
+    /// The Gram matrix `A·H⁻¹·Aᵀ` of the stacked Jacobians `A` of `edges`
+    /// (`D·m × D·m` for `m` edges, edge `e`'s rows at `D·e..D·e + D`) by
+    /// the sparse solve alone, without a selected inverse: one sparse
+    /// forward solve `Y = L⁻¹·Pᵀ·Aᵀ` with all `D·m` right-hand sides at
+    /// once, over the supernodes the group reaches (their paths to the
+    /// root), then `A·H⁻¹·Aᵀ = YᵀY`. Reads the system only: threads may
+    /// share it, each with its own `scratch`.
     ///
     /// # Panics
     /// If no factorisation succeeded before, or a block index is out of
@@ -125,7 +109,7 @@ impl<const D: usize> BlockSystem<D> {
         }
         assert!(
             !self.factor.is_empty(),
-            "BlockSystem::propagate_group needs a factorisation first"
+            "BlockSystem::propagate_group_* needs a factorisation first"
         );
         (self.symbolic).reach(&positions, &mut scratch.mark, &mut scratch.reach);
         // Y holds only the rows of the supernodes the solve reaches, packed
@@ -145,7 +129,7 @@ impl<const D: usize> BlockSystem<D> {
         Some(k * values + k * k * D * scratch.packed)
     }
 
-    /// The sparse solve of [`BlockSystem::propagate_group`] over the reach
+    /// The sparse solve of [`BlockSystem::propagate_group_solved`] over the reach
     /// [`Self::reach_group`] left in `scratch`.
     fn solve_group(&self, edges: &[EdgeJacobian<D>], scratch: &mut GroupScratch) -> DMatrix<f64> {
         let k = D * edges.len();
@@ -183,7 +167,7 @@ impl<const D: usize> BlockSystem<D> {
 }
 
 impl<const D: usize> BlockSystem<D> {
-    /// [`BlockSystem::propagate_group`] from the selected inverse `z` of the
+    /// [`BlockSystem::propagate_group_solved`] from the selected inverse `z` of the
     /// current factorisation, without a solve. The blocks of `H⁻¹` between
     /// the edges' blocks that are off the factor's pattern follow from the
     /// selected inverse by its own recurrence, in at most `budget` `D×D`
@@ -266,7 +250,7 @@ mod tests {
 
     #[test]
     fn group_gram_is_the_dense_a_hinv_at() {
-        let mut sys = chain();
+        let sys = chain();
         let h = nalgebra::Matrix3::new(2.0, -1.0, 0.0, -1.0, 2.0, -1.0, 0.0, -1.0, 1.0);
         let hinv = h.try_inverse().unwrap();
         let one = Matrix1::new(1.0);
@@ -279,18 +263,19 @@ mod tests {
         ];
         let a = nalgebra::Matrix3::new(-1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, -1.0, 1.0);
         let expected = a * hinv * a.transpose();
-        let gram = sys.propagate_group(&edges);
+        let mut scratch = GroupScratch::default();
+        let gram = sys.propagate_group_solved(&edges, &mut scratch);
         for r in 0..3 {
             for c in 0..3 {
                 assert!((gram[(r, c)] - expected[(r, c)]).abs() < 1e-12, "{r},{c}");
             }
         }
         // One edge: the same as propagate.
-        let single = sys.propagate_group(&edges[..1]);
+        let single = sys.propagate_group_solved(&edges[..1], &mut scratch);
         let p = sys.propagate(Some(0), &minus, Some(2), &one);
         assert!((single[(0, 0)] - p[(0, 0)]).abs() < 1e-12);
         // The scratch is left zeroed: a second call gives the same.
-        assert_eq!(sys.propagate_group(&edges), gram);
+        assert_eq!(sys.propagate_group_solved(&edges, &mut scratch), gram);
         // From the selected inverse: the same where the blocks are on the
         // pattern (a chain: x₀–x₂ is not).
         let z = sys.selected_inverse();

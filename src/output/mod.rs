@@ -398,17 +398,17 @@ impl Write for Sink<'_> {
 /// only if `write`, flushing and syncing all succeed (else the target is as
 /// it was and the temporary is removed); for `-` it goes to stdout.
 ///
-/// ```ignore
+/// ```
 /// let dir = tempfile::tempdir().unwrap();
 /// let path = dir.path().join("out.txt");
-/// pgo::io::output::write(&path, |w| {
+/// pgo::output::write(&path, |w| {
 ///     use std::io::Write;
 ///     writeln!(w, "hello")
 /// })
 /// .unwrap();
 /// assert_eq!(std::fs::read_to_string(&path).unwrap(), "hello\n");
 /// // A directory is no output.
-/// let err = pgo::io::output::write(dir.path(), |_| Ok(())).unwrap_err();
+/// let err = pgo::output::write(dir.path(), |_| Ok(())).unwrap_err();
 /// assert!(err.to_string().ends_with("is a directory; pgo writes only regular files (use - for stdout)"));
 /// ```
 pub fn write<F>(path: &Path, write: F) -> Result<(), OutputError>

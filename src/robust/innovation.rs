@@ -4,7 +4,7 @@
 //! At the least-squares map of the trusted edges and the accepted
 //! candidates (normal matrix `H`), take a cluster's candidates: `A` those
 //! the map was solved with, `R` the others; `e` their errors, `Σ = Ω⁻¹` their
-//! covariances, `M = J·H⁻¹·Jᵀ` ([`BlockSystem::propagate_group`]). To first
+//! covariances, `M = J·H⁻¹·Jᵀ` ([`BlockSystem::propagate_group_solved`]). To first
 //! order (exactly for a linear problem), removing `A` moves the map by
 //! `δ = H⁻¹·J_Aᵀ·S⁻¹·e_A` with `S = Σ_A − M_AA`, so against the map
 //! without `A`
@@ -24,7 +24,7 @@
 //! is singular — the cluster is all that ties part of the map — the map
 //! without it says nothing about it: `None`.
 //!
-//! [`BlockSystem::propagate_group`]: crate::linear::BlockSystem::propagate_group
+//! [`BlockSystem::propagate_group_solved`]: crate::linear::BlockSystem::propagate_group_solved
 
 use super::Candidate;
 use super::model::Evidence;

@@ -16,10 +16,6 @@ use crate::geometry::Pose;
 use crate::solve::{Session, SolveError};
 
 /// The Cauchy weight `c²/(c² + r²)`.
-///
-/// ```ignore
-/// assert_eq!(pgo::robust::cauchy_weight(4.0, 2.0), 0.5);
-/// ```
 pub fn cauchy_weight(r2: f64, c: f64) -> f64 {
     let c2 = c * c;
     c2 / (c2 + r2)

@@ -25,12 +25,10 @@ mod schedule;
 mod search;
 mod starts;
 
-pub use clusters::{MAX_CLUSTER, NEIGHBOURHOOD};
-pub use kernels::{cauchy_weight, dcs_weight, gnc_tls_weight, huber_weight};
-pub use model::{Evidence, LoopModel, Scale, ln_chi2_mean, ln_chi2_sigma};
-pub use schedule::{ANNEAL_STEP, MAX_ANNEAL_STEPS, MAX_DECISIONS, Proposal, SETTLE_STEPS, Swing};
-pub use search::{MAX_REMOVALS, SUSPECTS, Search, Suspect, Test};
-pub use starts::{Start, StartEnd};
+pub use model::{LoopModel, Scale};
+pub use schedule::{Proposal, Swing};
+pub use search::{MAX_REMOVALS, Search, Suspect, Test};
+pub use starts::StartEnd;
 
 use crate::geometry::Pose;
 use crate::solve::init::ChordalInit;
@@ -169,12 +167,6 @@ impl Layers {
     ];
 
     /// Parses `no-LAYER[,no-LAYER…]` (empty: every layer on).
-    ///
-    /// ```ignore
-    /// let l = pgo::robust::Layers::parse("no-clusters,no-search").unwrap();
-    /// assert!(!l.clusters && !l.search && l.decisions);
-    /// assert!(pgo::robust::Layers::parse("no-magic").is_err());
-    /// ```
     pub fn parse(text: &str) -> Result<Self, String> {
         let mut layers = Self::default();
         for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {

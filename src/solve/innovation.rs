@@ -1,14 +1,57 @@
-//! How well each edge agrees with a solution made without it: the
-//! innovation of an edge left out ([`Optimizer::innovation_chi2`]) and the
-//! deleted residual of an edge in it ([`Optimizer::leave_one_out_chi2`]),
-//! from the factorisation of the undamped normal matrix.
+//! The factorisation of the undamped normal matrix at a solution
+//! ([`Optimizer::factor_at`]), which the innovations of the loop candidates
+//! (`crate::robust`) and the covariances read; and, for the tests, how well
+//! each edge agrees with a solution made without it: the innovation of an
+//! edge left out ([`Optimizer::innovation_chi2`]) and the deleted residual
+//! of an edge in it ([`Optimizer::leave_one_out_chi2`]).
 
 use super::{Optimizer, SolveError};
 use crate::geometry::Pose;
 use crate::graph::Graph;
-use crate::linear::{LinearError, SelectedInverse};
+use crate::linear::LinearError;
+#[cfg(test)]
+use crate::linear::SelectedInverse;
+#[cfg(test)]
 use nalgebra::SMatrix;
 
+impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
+    /// Factorises the undamped normal matrix of the edges of non-zero
+    /// `weights` at the graph's poses (for the innovations and covariances
+    /// read from the system then); returns each vertex's block (`None` for
+    /// a vertex held fixed).
+    pub(crate) fn factor_at(
+        &mut self,
+        graph: &Graph<P, D>,
+        weights: &[f64],
+    ) -> Result<Vec<Option<usize>>, SolveError> {
+        if weights.len() != graph.edges.len() {
+            return Err(SolveError::WeightCount {
+                weights: weights.len(),
+                edges: graph.edges.len(),
+            });
+        }
+        self.match_threads()?;
+        self.update_pattern(graph, Some(weights))?;
+        self.factorized = true;
+        self.linearize(graph, Some(weights));
+        match self.system.factorize(0.0) {
+            Ok(()) => {}
+            Err(LinearError::NotPositiveDefinite { block }) => {
+                return Err(SolveError::NotPositiveDefinite {
+                    vertex: graph.id(self.vertex_of[block]),
+                });
+            }
+            Err(e) => return Err(e.into()),
+        }
+        let mut block = vec![None; graph.num_vertices()];
+        for (b, &v) in self.vertex_of.iter().enumerate() {
+            block[v] = Some(b);
+        }
+        Ok(block)
+    }
+}
+
+#[cfg(test)]
 impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// The squared *innovation* `ν² = eᵀ(Ω⁻¹ + J·H⁻¹·Jᵀ)⁻¹e` of each of
     /// `edges` at the graph's poses: the Mahalanobis distance of the error of
@@ -25,7 +68,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         weights: &[f64],
         edges: &[usize],
     ) -> Result<Vec<f64>, SolveError> {
-        let block = self.factor_undamped(graph, weights)?;
+        let block = self.factor_at(graph, weights)?;
         let gauge = graph.gauge();
         Ok(edges
             .iter()
@@ -50,7 +93,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         weights: &[f64],
         edges: &[usize],
     ) -> Result<Vec<Option<f64>>, SolveError> {
-        let block = self.factor_undamped(graph, weights)?;
+        let block = self.factor_at(graph, weights)?;
         let gauge = graph.gauge();
         // The edges of the solution read H⁻¹ from its selected inverse (one
         // pass over the factor), not from a solve each.
@@ -69,7 +112,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// [`Optimizer::innovation_chi2`] of edge `k`, at the factor of
-    /// [`Optimizer::factor_undamped`] (`block`) with the graph's `gauge`.
+    /// [`Optimizer::factor_at`] (`block`) with the graph's `gauge`.
     fn left_out_chi2(
         &mut self,
         graph: &Graph<P, D>,
@@ -135,51 +178,5 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 .map(|(p, lambda)| p * p / lambda)
                 .sum(),
         )
-    }
-
-    /// Factorises the undamped normal matrix of the edges of non-zero
-    /// `weights` at the graph's poses, for covariances from
-    /// [`Optimizer::system_mut`]; returns each vertex's block (`None` for a
-    /// vertex held fixed).
-    pub(crate) fn factor_at(
-        &mut self,
-        graph: &Graph<P, D>,
-        weights: &[f64],
-    ) -> Result<Vec<Option<usize>>, SolveError> {
-        self.factor_undamped(graph, weights)
-    }
-
-    /// Factorises the undamped normal matrix of the edges of non-zero
-    /// `weights` at the graph's poses; returns each vertex's block (`None`
-    /// for a vertex held fixed).
-    fn factor_undamped(
-        &mut self,
-        graph: &Graph<P, D>,
-        weights: &[f64],
-    ) -> Result<Vec<Option<usize>>, SolveError> {
-        if weights.len() != graph.edges.len() {
-            return Err(SolveError::WeightCount {
-                weights: weights.len(),
-                edges: graph.edges.len(),
-            });
-        }
-        self.match_threads()?;
-        self.update_pattern(graph, Some(weights))?;
-        self.factorized = true;
-        self.linearize(graph, Some(weights));
-        match self.system.factorize(0.0) {
-            Ok(()) => {}
-            Err(LinearError::NotPositiveDefinite { block }) => {
-                return Err(SolveError::NotPositiveDefinite {
-                    vertex: graph.id(self.vertex_of[block]),
-                });
-            }
-            Err(e) => return Err(e.into()),
-        }
-        let mut block = vec![None; graph.num_vertices()];
-        for (b, &v) in self.vertex_of.iter().enumerate() {
-            block[v] = Some(b);
-        }
-        Ok(block)
     }
 }

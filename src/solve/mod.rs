@@ -537,6 +537,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// The linear system, e.g. to factorise and solve it in a benchmark.
+    #[cfg(any(test, feature = "internals"))]
     pub fn system_mut(&mut self) -> &mut BlockSystem<D> {
         &mut self.system
     }
@@ -751,24 +752,8 @@ impl Step {
 }
 
 /// Optimises `graph` in place with unit weights: a convenience over
-/// [`Optimizer`].
-///
-/// ```ignore
-/// use nalgebra::Matrix3;
-/// use pgo::geometry::{Pose, Se2};
-/// use pgo::graph::Graph;
-/// use pgo::solve::{optimize, SolverOptions};
-/// let mut g = Graph::<Se2, 3>::new();
-/// for k in 0..3 {
-///     g.add_vertex(k, Se2::new(0.3 * k as f64, 0.0, 0.0)).unwrap();
-/// }
-/// let step = Se2::new(1.0, 0.0, 0.0);
-/// g.add_edge(0, 1, step, Matrix3::identity(), None).unwrap();
-/// g.add_edge(1, 2, step, Matrix3::identity(), None).unwrap();
-/// let summary = optimize(&mut g, &SolverOptions::default()).unwrap();
-/// assert!(summary.final_objective < 1e-20);
-/// assert!((g.poses[2].x - 2.0).abs() < 1e-9);
-/// ```
+/// [`Optimizer`] for the tests.
+#[cfg(test)]
 pub fn optimize<P: Pose<D>, const D: usize>(
     graph: &mut Graph<P, D>,
     options: &SolverOptions,

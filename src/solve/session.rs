@@ -18,6 +18,7 @@ pub struct Budget {
 
 impl Budget {
     /// No limit.
+    #[cfg(test)]
     pub fn unlimited() -> Self {
         Self {
             iterations: usize::MAX,

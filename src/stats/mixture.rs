@@ -103,14 +103,6 @@ pub struct NormalMixture {
 impl NormalMixture {
     /// A mixture of these components, in this order. Errors when there is
     /// none or one is invalid (see [`MixtureError`]).
-    ///
-    /// ```ignore
-    /// use pgo::stats::mixture::{NormalComponent, NormalMixture};
-    /// let c = |weight, mean, sigma| NormalComponent { weight, mean, sigma };
-    /// let m = NormalMixture::new(vec![c(0.5, -2.0, 1.0), c(0.5, 1.0, 1.0)]).unwrap();
-    /// assert_eq!(m.len(), 2);
-    /// assert!(NormalMixture::new(vec![c(0.0, 0.0, 1.0)]).is_err());
-    /// ```
     pub fn new(components: Vec<NormalComponent>) -> Result<Self, MixtureError> {
         if components.is_empty() {
             return Err(MixtureError::NoComponents);
@@ -151,12 +143,8 @@ impl NormalMixture {
         self.components.len()
     }
 
-    /// Always false: a mixture has at least one component.
-    pub fn is_empty(&self) -> bool {
-        self.components.is_empty()
-    }
-
     /// `ln p(y)`.
+    #[cfg(test)]
     pub fn log_density(&self, y: f64) -> f64 {
         self.log_terms(y, &mut vec![0.0; self.len()])
     }
@@ -170,6 +158,7 @@ impl NormalMixture {
     /// The posterior probability of each component given `y`,
     /// `π_k N(y | μ_k, σ_k) / p(y)`, in the order of the components; they
     /// sum to 1.
+    #[cfg(test)]
     pub fn posteriors(&self, y: f64) -> Vec<f64> {
         let mut terms = vec![0.0; self.len()];
         let log_p = self.log_terms(y, &mut terms);
@@ -179,6 +168,7 @@ impl NormalMixture {
     /// `ln(π_k N_k(y)) − ln(π_j N_j(y))`: positive where component `k`
     /// explains `y` better than component `j`. NaN when either index is
     /// out of range.
+    #[cfg(test)]
     pub fn log_odds(&self, k: usize, j: usize, y: f64) -> f64 {
         match (self.components.get(k), self.components.get(j)) {
             (Some(a), Some(b)) => a.log_weighted_density(y) - b.log_weighted_density(y),
@@ -317,15 +307,6 @@ pub struct EmFit {
 /// parameter. `observe` sees the log-likelihood at the start of every
 /// cycle of three EM iterations (`θ`), then that of the final mixture; it
 /// never decreases (up to rounding).
-///
-/// ```ignore
-/// use pgo::stats::mixture::{em, quantile_start, EmOptions};
-/// let y: Vec<f64> = (0..100).map(|i| if i < 60 { -2.0 } else { 3.0 } + (i % 7) as f64 * 0.1).collect();
-/// let options = EmOptions { tolerance: 1e-9, max_iterations: 500, variance_floor: 1e-6 };
-/// let fit = em(&y, quantile_start(&y, 2, 1e-6).unwrap(), &options, |_| {}).unwrap();
-/// let c = fit.mixture.components();
-/// assert!((c[0].weight - 0.6).abs() < 1e-6 && (c[1].mean - 3.3).abs() < 0.05);
-/// ```
 pub fn em(
     y: &[f64],
     start: NormalMixture,

@@ -13,4 +13,4 @@ pub mod mixture;
 pub mod separation;
 pub mod squarem;
 
-pub use chi2::{Chi2Test, DofConvention, StatsError, chi2_critical, normal_upper_quantile};
+pub use chi2::{Chi2Test, DofConvention, StatsError, chi2_critical};

@@ -31,16 +31,6 @@ pub fn ashman_d(a: &NormalComponent, b: &NormalComponent) -> f64 {
 /// `g'(d) = d/σ₀² > 0`), so there is at most one root there, a crossing
 /// exists exactly when `g(0) < 0 < g(d)`, and values above it are more
 /// likely from the upper component.
-///
-/// ```ignore
-/// use pgo::stats::mixture::NormalComponent;
-/// use pgo::stats::separation::crossing;
-/// let low = NormalComponent { weight: 0.5, mean: -1.0, sigma: 0.5 };
-/// let high = NormalComponent { weight: 0.5, mean: 1.0, sigma: 0.5 };
-/// // Equal weights and widths: half-way.
-/// assert!(crossing(&low, &high).unwrap().abs() < 1e-12);
-/// assert_eq!(crossing(&high, &low), None);
-/// ```
 pub fn crossing(low: &NormalComponent, high: &NormalComponent) -> Option<f64> {
     let (m0, m1) = (low.mean, high.mean);
     let (s0, s1) = (low.sigma, high.sigma);

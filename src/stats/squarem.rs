@@ -23,13 +23,6 @@ pub const MAX_HALVINGS: usize = 8;
 /// longest first, each next one with `α + 1` halved; none when the first is
 /// no longer than plain EM's (`α ≥ −1`), or when `θ₁ − θ₀` and the second
 /// difference are not finite.
-///
-/// ```ignore
-/// use pgo::stats::squarem::jumps;
-/// // A linear iteration halving the distance to 0: the jump lands on it.
-/// let first = jumps(&[8.0], &[4.0], &[2.0]).next().unwrap();
-/// assert!(first[0].abs() < 1e-12);
-/// ```
 pub fn jumps<'a>(t0: &'a [f64], t1: &[f64], t2: &[f64]) -> impl Iterator<Item = Vec<f64>> + 'a {
     let r: Vec<f64> = t1.iter().zip(t0).map(|(a, b)| a - b).collect();
     let v: Vec<f64> = (t2.iter().zip(t1).zip(t0))

@@ -24,7 +24,7 @@
 //!   ran), the rewrite fails, and a file output is not replaced.
 
 use super::{FileText, G2oFile, G2oPose, MAX_LINE_BYTES, parse_id, parse_numbers};
-use crate::graph::{AnyGraph, Graph};
+use crate::graph::Graph;
 use crate::io::source::Fingerprinter;
 use crate::io::{LineError, LineReader, RawLine};
 use std::io::{self, Read, Write};
@@ -78,12 +78,22 @@ impl From<RewriteError> for io::Error {
 }
 
 impl G2oFile {
+    /// What the rewrite needs of the text, apart from the graph.
+    pub fn text(&self) -> &FileText {
+        &self.text
+    }
+}
+
+/// The rewrite of a whole [`G2oFile`], for the tests and the fuzz targets
+/// (the library rewrites through [`FileText::rewrite`]).
+#[cfg(any(test, feature = "internals"))]
+impl G2oFile {
     /// Writes the input's own text to `out` with the graph's current poses
     /// ([`FileText::rewrite`]).
     pub fn rewrite(&self, out: &mut impl Write) -> Result<(), RewriteError> {
         match &self.graph {
-            AnyGraph::Planar(g) => self.text.rewrite(g, out),
-            AnyGraph::Spatial(g) => self.text.rewrite(g, out),
+            crate::graph::AnyGraph::Planar(g) => self.text.rewrite(g, out),
+            crate::graph::AnyGraph::Spatial(g) => self.text.rewrite(g, out),
         }
     }
 
@@ -91,14 +101,9 @@ impl G2oFile {
     /// be the text this file was read from).
     pub fn rewrite_from<R: Read>(&self, text: R, out: &mut impl Write) -> Result<(), RewriteError> {
         match &self.graph {
-            AnyGraph::Planar(g) => Rewriter::new(&self.text, g).run(text, out),
-            AnyGraph::Spatial(g) => Rewriter::new(&self.text, g).run(text, out),
+            crate::graph::AnyGraph::Planar(g) => Rewriter::new(&self.text, g).run(text, out),
+            crate::graph::AnyGraph::Spatial(g) => Rewriter::new(&self.text, g).run(text, out),
         }
-    }
-
-    /// What the rewrite needs of the text, apart from the graph.
-    pub fn text(&self) -> &FileText {
-        &self.text
     }
 }
 

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::geometry::{Se2, Se3};
+use crate::graph::AnyGraph;
 use crate::io::g2o::{ReadOptions, read, read_from};
 use std::path::Path;
 

@@ -13,7 +13,7 @@
 //! comes after `b`: the dependencies end at the root. For two blocks whose
 //! paths in the elimination tree meet soon (the ends of neighbouring loop
 //! candidates) that is a handful of `D×D` products, where a sparse solve
-//! ([`super::super::BlockSystem::propagate_group`]) reads every panel on
+//! ([`super::super::BlockSystem::propagate_group_solved`]) reads every panel on
 //! the paths to the root. For two far apart it can be more; a budget of
 //! block products bounds it, and the caller falls back to the solve.
 

@@ -206,3 +206,8 @@ fn convention_serializes_lowercase() {
     );
     assert_eq!(DofConvention::default(), DofConvention::Residual);
 }
+
+#[test]
+fn normal_upper_quantile_at_two_and_a_half_percent() {
+    assert!((normal_upper_quantile(0.025) - 1.959964).abs() < 1e-6);
+}

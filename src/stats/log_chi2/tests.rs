@@ -107,3 +107,10 @@ fn beyond_the_table_the_density_continues_smoothly() {
     assert!(table.ln_density(40.0, 0.0, s) <= table.ln_density(30.0, 0.0, s));
     assert!(table.ln_density(30.0, 0.0, s) < table.ln_density(10.0, 0.0, s));
 }
+
+#[test]
+fn ln_chi2_sigma_is_the_root_of_trigamma_at_half_the_dof() {
+    // ψ₁(3/2) = π²/2 − 4.
+    let s = ln_chi2_sigma(3);
+    assert!((s * s - (PI * PI / 2.0 - 4.0)).abs() < 1e-10);
+}

@@ -419,3 +419,18 @@ fn accelerated_em_over_distinct_counts_reaches_plain_em_over_every_count() {
     );
     assert!((fit.log_likelihood - naive.log_likelihood(&y)).abs() < 1e-9);
 }
+
+#[test]
+fn two_groups_of_near_ties_get_their_shares() {
+    let y: Vec<f64> = (0..100)
+        .map(|i| if i < 60 { -2.0 } else { 3.0 } + (i % 7) as f64 * 0.1)
+        .collect();
+    let options = EmOptions {
+        tolerance: 1e-9,
+        max_iterations: 500,
+        variance_floor: 1e-6,
+    };
+    let fit = em(&y, quantile_start(&y, 2, 1e-6).unwrap(), &options, |_| {}).unwrap();
+    let c = fit.mixture.components();
+    assert!((c[0].weight - 0.6).abs() < 1e-6 && (c[1].mean - 3.3).abs() < 0.05);
+}
