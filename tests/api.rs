@@ -7,20 +7,10 @@ use pgo::{
     AnyPoseGraph, Error, InformationProblem, Options, Pose, PoseGraph, PoseGraph2, PoseGraph3,
     PoseProblem, Reason, Se2, Se3, Solution,
 };
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn sample(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("g2o_samples")
-        .join(name)
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pgo-api-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+mod common;
+use common::{sample, temp_dir};
 
 /// The symmetric matrix whose upper triangle, row by row, is `v`.
 fn upper<const D: usize>(v: &[f64]) -> SMatrix<f64, D, D> {

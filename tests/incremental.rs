@@ -9,13 +9,10 @@ use pgo::{
     Cancel, Options, Pose, PoseGraph, PoseGraph2, Se2, Se3, Solution, StopReason, UpdateSolve,
 };
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn sample(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("g2o_samples")
-        .join(name)
-}
+mod common;
+use common::sample;
 
 /// One line of a g2o file as a front end would send it.
 enum Addition<P, const D: usize> {

@@ -12,18 +12,12 @@ use pgo::{
 };
 use std::path::{Path, PathBuf};
 
-fn sample(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("g2o_samples")
-        .join(name)
-}
+mod common;
+use common::{sample, temp_dir, write};
 
+/// `text` in a file `name` of a fresh temporary directory.
 fn temp_file(name: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("pgo-surface-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join(name);
-    std::fs::write(&path, text).unwrap();
-    path
+    write(&temp_dir(name), name, text)
 }
 
 const I3: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];

@@ -712,5 +712,4 @@ fn median(x: &[f64]) -> f64 {
 }
 
 #[cfg(test)]
-#[path = "schedule_tests.rs"]
 mod tests;

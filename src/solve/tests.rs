@@ -862,3 +862,84 @@ fn an_optimiser_of_the_grown_graph_given_the_last_ones_spare_solves_alike() {
     };
     assert_eq!(run(Some(spare)), run(None));
 }
+
+/// A chain of `n` SE(2) poses with one loop, at extreme scales: positions
+/// up to 10^±`pos_exp`, information 10^±`info_exp`, measurements that
+/// disagree with the guess.
+fn extreme_graph(
+    n: usize,
+    pos_exp: i32,
+    info_exp: i32,
+    seeds: &[(f64, f64, f64)],
+) -> Graph<Se2, 3> {
+    let scale = 10f64.powi(pos_exp);
+    let info = Matrix3::identity() * 10f64.powi(info_exp);
+    let mut g = Graph::new();
+    for k in 0..n {
+        let (a, b, c) = seeds[k % seeds.len()];
+        g.add_vertex(k as u64, Se2::new(a * scale * k as f64, b * scale, c * 3.0))
+            .expect("new id");
+    }
+    for k in 1..n {
+        let (a, b, c) = seeds[(k * 7) % seeds.len()];
+        g.add_edge(
+            (k - 1) as u64,
+            k as u64,
+            Se2::new(scale * (1.0 + a), scale * b, c),
+            info,
+            None,
+        )
+        .expect("edge");
+    }
+    let (a, b, c) = seeds[0];
+    g.add_edge(
+        0,
+        (n - 1) as u64,
+        Se2::new(scale * a * n as f64, scale * b, c * 2.0),
+        info,
+        None,
+    )
+    .expect("loop");
+    g
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
+
+    /// LM and GN at scales where χ² overflows at some trial points (beyond
+    /// the information range the job accepts, so only the solver sees
+    /// them): the result is finite poses with an objective no worse than
+    /// the start, or a named error; never NaN.
+    #[test]
+    fn lm_never_returns_non_finite_poses(
+        n in 3usize..8,
+        pos_exp in -5i32..160,
+        info_exp in -200i32..200,
+        seeds in proptest::collection::vec(
+            (-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0),
+            1..8,
+        ),
+        gn in proptest::prelude::any::<bool>(),
+    ) {
+        use proptest::prelude::prop_assert;
+        let mut g = extreme_graph(n, pos_exp, info_exp, &seeds);
+        let start = g.chi2();
+        let options = SolverOptions {
+            method: if gn { Method::GaussNewton } else { Method::LevenbergMarquardt },
+            max_iterations: 30,
+            ..SolverOptions::default()
+        };
+        match optimize(&mut g, &options) {
+            Ok(s) => {
+                prop_assert!(g.poses.iter().all(|p| p.is_finite()), "{:?}", g.poses);
+                prop_assert!(s.final_objective.is_finite());
+                prop_assert!(s.final_objective <= s.initial_objective, "{s:?}");
+                prop_assert!(s.history.iter().all(|r| r.objective.is_finite()));
+                prop_assert!(s.final_objective <= start || !start.is_finite());
+            }
+            Err(SolveError::NonFiniteStart) => prop_assert!(!start.is_finite()),
+            Err(SolveError::NotPositiveDefinite { vertex }) => prop_assert!(vertex < n as u64),
+            Err(e) => prop_assert!(false, "unexpected error {e}"),
+        }
+    }
+}

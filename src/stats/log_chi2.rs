@@ -235,5 +235,4 @@ fn lerp(lo: f64, hi: f64, t: f64) -> f64 {
 }
 
 #[cfg(test)]
-#[path = "log_chi2/tests.rs"]
 mod tests;

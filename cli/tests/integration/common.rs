@@ -86,22 +86,26 @@ pub fn simulate_planar(
     })
 }
 
-/// The public benchmark datasets: `$PGO_DATASETS`, else `../shared/datasets`
-/// beside the crate. `None` (with a printed reason) when absent, so the
-/// tests that need them skip.
+/// The public benchmark datasets: `$PGO_DATASETS`, else
+/// `../shared/datasets` beside the repository. When they are absent,
+/// `None` with the reason printed, so that the tests that need them skip —
+/// unless `CI` is `true`, where a missing dataset directory fails the test.
 pub fn datasets() -> Option<PathBuf> {
     let dir = std::env::var_os("PGO_DATASETS")
         .map(PathBuf::from)
         .unwrap_or_else(|| repository().join("../shared/datasets"));
     if dir.join("intel.g2o").is_file() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "skipped: public datasets not found at {} (set PGO_DATASETS)",
-            dir.display()
-        );
-        None
+        return Some(dir);
     }
+    let reason = format!(
+        "public datasets not found at {} (set PGO_DATASETS)",
+        dir.display()
+    );
+    if std::env::var("CI").is_ok_and(|ci| ci == "true") {
+        panic!("{reason}; CI=true, where the datasets must be present");
+    }
+    eprintln!("skipped: {reason}");
+    None
 }
 
 /// A bundled sample file.

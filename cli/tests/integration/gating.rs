@@ -1,92 +1,9 @@
-//! Gating alone (issue: "Loop gating"): on graphs from `pgo simulate` whose
-//! true and wrong candidates have inlier counts as far apart as in the
-//! paper's figures, the learned `T_GV` keeps the true loops and drops the
-//! wrong ones; degenerate counts are reported before optimisation; and the
-//! χ² test fails when wrong loops are let in on purpose.
+//! Gating through `pgo optimize` on graphs from `pgo simulate`: degenerate
+//! counts are reported before optimisation, and the χ² test fails when
+//! wrong loops are let in on purpose. (The learned `T_GV` alone is the
+//! library's tests/gating.rs.)
 
 use crate::common::{pgo, stderr, temp_dir, verdict_status};
-use pgo::gate::{DegeneratePolicy, GateMode, MixtureOptions, gate};
-use pgo_sim::{
-    AnySimulation, InlierModel, OutlierPolicy, Simulation, SimulationOptions, World, simulate,
-};
-
-/// Kept true loops / true loops and kept wrong candidates / wrong ones.
-fn gate_rates<P: pgo::GraphPose<D>, const D: usize>(sim: &Simulation<P, D>) -> (f64, f64, f64) {
-    let edges: Vec<_> = sim.noisy.edges().collect();
-    let candidates: Vec<usize> = (0..edges.len())
-        .filter(|&k| edges[k].loop_candidate)
-        .collect();
-    let counts: Vec<Option<u64>> = candidates.iter().map(|&k| edges[k].inliers).collect();
-    let d = gate(
-        &counts,
-        GateMode::Auto,
-        DegeneratePolicy::DropAll,
-        &MixtureOptions::default(),
-    );
-    assert!(!d.degenerate, "{:?}", d.reason);
-    let (mut true_kept, mut trues, mut wrong_kept, mut wrongs) = (0, 0, 0, 0);
-    for (&k, &kept) in candidates.iter().zip(&d.kept) {
-        if sim.wrong[k] {
-            wrongs += 1;
-            wrong_kept += usize::from(kept);
-        } else {
-            trues += 1;
-            true_kept += usize::from(kept);
-        }
-    }
-    let threshold = d.threshold.unwrap_or(f64::NAN);
-    (
-        true_kept as f64 / trues as f64,
-        wrong_kept as f64 / wrongs as f64,
-        threshold,
-    )
-}
-
-#[test]
-fn gating_alone_keeps_true_loops_and_drops_wrong_ones_on_simulated_graphs() {
-    // The paper's figures: wrong candidates peak near v = 0.05 of the maximum
-    // and the threshold sits near 0.1–0.2, i.e. medians a factor 10
-    // apart in inliers (150 vs 15), σ 0.5 in ln for both.
-    let model = InlierModel {
-        true_median: 150.0,
-        true_sigma: 0.5,
-        wrong_median: 15.0,
-        wrong_sigma: 0.5,
-    };
-    for world in [World::Grid2d, World::Sphere3d, World::Torus3d] {
-        for policy in [
-            OutlierPolicy::Random,
-            OutlierPolicy::Local,
-            OutlierPolicy::Grouped,
-        ] {
-            for (seed, loops, outliers) in [(1, 300, 100), (2, 200, 200), (3, 100, 400)] {
-                let options = SimulationOptions {
-                    world,
-                    poses: 1500,
-                    loops,
-                    outliers,
-                    outlier_policy: policy,
-                    seed,
-                    inliers: Some(model),
-                    ..Default::default()
-                };
-                let (kept_true, kept_wrong, t) = match simulate(&options).unwrap() {
-                    AnySimulation::Planar(s) => gate_rates(&s),
-                    AnySimulation::Spatial(s) => gate_rates(&s),
-                };
-                let case = format!("{world:?} {policy:?} {loops} loops {outliers} wrong");
-                assert!(
-                    kept_true >= 0.95,
-                    "{case}: kept {kept_true} of true loops (T_GV {t})"
-                );
-                assert!(
-                    kept_wrong <= 0.05,
-                    "{case}: let {kept_wrong} of wrong ones through (T_GV {t})"
-                );
-            }
-        }
-    }
-}
 
 /// Runs `pgo simulate` with `args` into `dir/name` and returns the path.
 fn simulated(dir: &std::path::Path, name: &str, args: &[&str]) -> String {

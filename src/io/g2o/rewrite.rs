@@ -308,5 +308,4 @@ fn token_end(text: &str, n: usize) -> usize {
 }
 
 #[cfg(test)]
-#[path = "rewrite_tests.rs"]
 mod tests;

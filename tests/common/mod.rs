@@ -1,0 +1,76 @@
+//! The fixtures of the library's integration tests, one module for every
+//! test file (`mod common;`): the bundled samples, a temporary directory
+//! per test, the public benchmark datasets, and the labels of the
+//! samples' loop candidates.
+
+// Each test file is its own crate and uses only some of the fixtures.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+/// The repository's root (the library's crate is at its top).
+pub fn repository() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A bundled sample file (`g2o_samples/`).
+pub fn sample(name: &str) -> PathBuf {
+    repository().join("g2o_samples").join(name)
+}
+
+/// A fresh, empty temporary directory for one test, named after the test
+/// file's crate, the process and `name`.
+pub fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!(
+        "pgo-{}-{}-{name}",
+        env!("CARGO_CRATE_NAME"),
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("create temp dir");
+    d
+}
+
+/// Writes `text` to `dir/name` and returns the path.
+pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).expect("write test file");
+    p
+}
+
+/// The public benchmark datasets: `$PGO_DATASETS`, else
+/// `../shared/datasets` beside the repository. When they are absent,
+/// `None` with the reason printed, so that the tests that need them skip —
+/// unless `CI` is `true`, where a missing dataset directory fails the test.
+pub fn datasets() -> Option<PathBuf> {
+    let dir = std::env::var_os("PGO_DATASETS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repository().join("../shared/datasets"));
+    if dir.join("intel.g2o").is_file() {
+        return Some(dir);
+    }
+    let reason = format!(
+        "public datasets not found at {} (set PGO_DATASETS)",
+        dir.display()
+    );
+    if std::env::var("CI").is_ok_and(|ci| ci == "true") {
+        panic!("{reason}; CI=true, where the datasets must be present");
+    }
+    eprintln!("skipped: {reason}");
+    None
+}
+
+/// For every loop candidate (an edge between poses not one apart) of a
+/// labels CSV (`edge,from,to,wrong`, as `g2o_samples/make.sh` writes them),
+/// in file order, whether it is wrong.
+pub fn candidate_wrong(labels_csv: &str) -> Vec<bool> {
+    labels_csv
+        .lines()
+        .skip(1)
+        .filter_map(|line| {
+            let f: Vec<&str> = line.split(',').collect();
+            let (from, to): (u64, u64) = (f[1].parse().ok()?, f[2].parse().ok()?);
+            (from.abs_diff(to) != 1).then(|| f[3] == "1")
+        })
+        .collect()
+}
