@@ -34,7 +34,7 @@ use divan::Bencher;
 use pgo::internals::read;
 use pgo::internals::{
     AnyGraph as AnyPoseGraph, ChordalInit, G2oPose, Graph as PoseGraph, Initialization,
-    IterationRecord, Optimizer, ReadOptions, SolverOptions, initialize,
+    IterationRecord, Optimizer, ReadOptions, SolveSettings, initialize,
 };
 use pgo::{Se2, Se3};
 use pgo_sim::{AnySimulation, SimulationOptions, World};
@@ -138,7 +138,7 @@ fn prepared<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
 ) -> (PoseGraph<P, D>, Optimizer<P, D>) {
     initialize(&mut g, missing, Initialization::File, None).expect("spanning tree");
     initialize(&mut g, missing, Initialization::Chordal, None).expect("chordal");
-    let opt = Optimizer::new(&g, None, SolverOptions::default()).expect("optimiser");
+    let opt = Optimizer::new(&g, None, SolveSettings::default()).expect("optimiser");
     (g, opt)
 }
 
@@ -273,7 +273,7 @@ fn optimize_from<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         .bench_local_values(|mut g| {
             initialize(&mut g, missing, Initialization::File, None).expect("spanning tree");
             initialize(&mut g, missing, Initialization::Chordal, None).expect("chordal");
-            let mut opt = Optimizer::new(&g, None, SolverOptions::default()).expect("optimiser");
+            let mut opt = Optimizer::new(&g, None, SolveSettings::default()).expect("optimiser");
             opt.run(&mut g, None, &mut |_: &IterationRecord| {})
                 .expect("converges")
         });

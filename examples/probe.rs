@@ -8,7 +8,7 @@
 //! (`PROBE_LIN=1`: time only the linearisation, e.g. under `perf`).
 use pgo::internals::{
     AnyGraph as AnyPoseGraph, ChordalInit, G2oPose, Graph as PoseGraph, Initialization, Optimizer,
-    ReadOptions, SolverOptions, initialize, read,
+    ReadOptions, SolveSettings, initialize, read,
 };
 use std::time::Instant;
 
@@ -42,7 +42,7 @@ fn probe<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let mut opt = Optimizer::new(
         &g,
         None,
-        SolverOptions {
+        SolveSettings {
             threads,
             ..Default::default()
         },

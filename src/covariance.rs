@@ -158,7 +158,7 @@ impl<P: Pose<D>, const D: usize> Covariances<P, D> {
     /// Factorises the normal matrix of the edges of `graph` that `in_map`
     /// marks (one flag per edge) at its poses, undamped, on `threads`
     /// threads (0 or 1: the calling thread; as
-    /// [`crate::solve::SolverOptions::threads`]), and computes its
+    /// [`crate::solve::SolveSettings::threads`]), and computes its
     /// selected inverse. Errors: [`SolveError::NotPositiveDefinite`] (the
     /// edges at a pose do not determine it, to rounding),
     /// [`SolveError::Linear`] (threads, memory).

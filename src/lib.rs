@@ -105,5 +105,5 @@ pub mod internals {
         G2oFile, G2oPose, ReadOptions, RewriteError, read, read_from, write_graph,
     };
     pub use crate::solve::init::{ChordalInit, Initialization, initialize};
-    pub use crate::solve::{IterationRecord, Optimizer, SolverOptions};
+    pub use crate::solve::{IterationRecord, Optimizer, SolveSettings};
 }

@@ -8,7 +8,7 @@ use crate::report::{InitializationReport, LoopReport, OptimizerReport, Report, R
 use crate::robust::{self, Candidate, Outcome, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization, initialize as init_poses};
 use crate::solve::{
-    Budget, Observer, Optimizer, PhaseTimes, Session, SolveError, SolverOptions, Summary,
+    Budget, Observer, Optimizer, PhaseTimes, Session, SolveError, SolveSettings, Summary,
 };
 use crate::stats::{Chi2Test, StatsError};
 use std::time::Instant;
@@ -68,7 +68,7 @@ pub struct Run<'a> {
     /// The job's settings.
     pub config: &'a Settings<'a>,
     /// This solve's method, bounds and tolerances.
-    pub solver: SolverOptions,
+    pub solver: SolveSettings,
     /// The loop candidates, with what the gate made of them.
     pub candidates: &'a [Candidate],
     /// How they are weighed.

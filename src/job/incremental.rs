@@ -28,7 +28,7 @@ use crate::report::{
 };
 use crate::robust::{self, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization, grow_tree};
-use crate::solve::{Observer, Optimizer, Ordering, Session, SolverOptions, Spare};
+use crate::solve::{Observer, Optimizer, Ordering, Session, SolveSettings, Spare};
 use crate::stats::Chi2Test;
 use std::time::Instant;
 
@@ -47,7 +47,7 @@ pub const UPDATE_TOLERANCE: f64 = 1e-4;
 
 /// An update's solves also stop after a step whose decrease the
 /// Gauss–Newton model foresaw to within this share of the objective
-/// ([`crate::solve::SolverOptions::model_tolerance`]): from the last map
+/// ([`crate::solve::SolveSettings::model_tolerance`]): from the last map
 /// one step usually takes out all but the nonlinearity, and this spares
 /// the iteration that would only confirm it (16 % of the factorisations of
 /// a city10000 replay in steps of 10 poses). At 10⁻⁷ the last update of a
@@ -390,17 +390,17 @@ fn update_solver(
     config: &Settings<'_>,
     method: RobustMethod,
     closing: bool,
-) -> (SolverOptions, bool) {
+) -> (SolveSettings, bool) {
     let cap = update_iterations(config, method);
     let max_iterations = cap.unwrap_or(config.solver.max_iterations);
     if closing {
-        let solver = SolverOptions {
+        let solver = SolveSettings {
             max_iterations,
             ..config.solver.clone()
         };
         return (solver, true);
     }
-    let solver = SolverOptions {
+    let solver = SolveSettings {
         relative_tolerance: UPDATE_TOLERANCE,
         model_tolerance: Some(match cap {
             Some(_) => UPDATE_TOLERANCE,

@@ -19,7 +19,7 @@ use crate::options::Options;
 use crate::report::Report;
 use crate::robust::{self, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization};
-use crate::solve::{Observer, Optimizer, Session, SolverOptions};
+use crate::solve::{Observer, Optimizer, Session, SolveSettings};
 use std::time::Instant;
 
 /// What a job is told ([`Options`]) and what follows from it for the
@@ -29,7 +29,7 @@ pub(crate) struct Settings<'a> {
     /// The caller's options.
     pub options: &'a Options,
     /// Each solve's method, bounds and tolerances.
-    pub solver: SolverOptions,
+    pub solver: SolveSettings,
     /// The gate's mixture fit.
     pub mixture: MixtureOptions,
 }
@@ -37,10 +37,10 @@ pub(crate) struct Settings<'a> {
 impl<'a> Settings<'a> {
     /// The settings of a job run with `options`.
     pub fn new(options: &'a Options) -> Self {
-        let defaults = SolverOptions::default();
+        let defaults = SolveSettings::default();
         Self {
             options,
-            solver: SolverOptions {
+            solver: SolveSettings {
                 method: options.solver.method,
                 max_iterations: options
                     .solver

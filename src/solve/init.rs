@@ -714,7 +714,7 @@ mod tests {
         let zero = nearest_rotation(&Matrix3::zeros());
         assert!(zero.coords.iter().all(|v| v.is_finite()));
     }
-    use crate::solve::{SolverOptions, optimize};
+    use crate::solve::{SolveSettings, optimize};
     use nalgebra::{Matrix3, Matrix6, Vector6};
     use rand::{Rng, SeedableRng, rngs::StdRng};
 
@@ -812,11 +812,11 @@ mod tests {
         let mut g = planar_graph(&truth, 0.05, 2);
         let mut reference = g.clone();
         reference.poses = truth.clone();
-        let best = optimize(&mut reference, &SolverOptions::default())
+        let best = optimize(&mut reference, &SolveSettings::default())
             .unwrap()
             .final_objective;
         initialize(&mut g, &[], Initialization::Chordal, None).unwrap();
-        let s = optimize(&mut g, &SolverOptions::default()).unwrap();
+        let s = optimize(&mut g, &SolveSettings::default()).unwrap();
         assert!(
             (s.final_objective - best).abs() < 1e-9 * best,
             "{} vs {best}",

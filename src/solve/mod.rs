@@ -58,9 +58,12 @@ impl Method {
     }
 }
 
-/// Options of the optimiser.
+/// The optimiser's settings for one solve: method, bounds, tolerances and
+/// threads. The job derives them from the caller's
+/// [`crate::SolverOptions`]; an incremental update tightens or loosens
+/// the tolerances for its own solves.
 #[derive(Clone, Debug)]
-pub struct SolverOptions {
+pub struct SolveSettings {
     /// GN or LM.
     pub method: Method,
     /// Most outer iterations (accepted or final steps).
@@ -98,7 +101,7 @@ pub struct SolverOptions {
     pub threads: usize,
 }
 
-impl Default for SolverOptions {
+impl Default for SolveSettings {
     fn default() -> Self {
         Self {
             method: Method::LevenbergMarquardt,
@@ -137,7 +140,7 @@ pub enum StopReason {
     /// The observer asked to stop ([`Observer::should_stop`]).
     Cancelled,
     /// Damped steps lowered the objective by less than
-    /// [`SolverOptions::crawl_tolerance`]: LM was crawling. Not a minimum.
+    /// [`SolveSettings::crawl_tolerance`]: LM was crawling. Not a minimum.
     Crawling,
     /// The objective stopped decreasing (the relative decrease or the step
     /// fell below its tolerance) where the Gauss–Newton model is not
@@ -362,7 +365,7 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     factorized: bool,
     /// Values of the largest factor among the patterns built so far.
     max_nnz_factor: usize,
-    options: SolverOptions,
+    options: SolveSettings,
     trial: Vec<P>,
     best: Vec<P>,
     step: Vec<f64>,
@@ -376,7 +379,7 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     measurements: Vec<P::Prepared>,
     /// The poses last evaluated, each with its preparation.
     prepared: Vec<(P, P::Prepared)>,
-    /// Where the parallel work runs ([`SolverOptions::threads`]); shared
+    /// Where the parallel work runs ([`SolveSettings::threads`]); shared
     /// with `system`.
     parallelism: Parallelism,
     /// The order kept across a growing graph's solves, if any.
@@ -429,7 +432,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     pub fn new(
         graph: &Graph<P, D>,
         weights: Option<&[f64]>,
-        options: SolverOptions,
+        options: SolveSettings,
     ) -> Result<Self, SolveError> {
         Self::with_ordering(graph, weights, options, None)
     }
@@ -441,7 +444,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     pub fn with_ordering(
         graph: &Graph<P, D>,
         weights: Option<&[f64]>,
-        options: SolverOptions,
+        options: SolveSettings,
         ordering: Option<Ordering>,
     ) -> Result<Self, SolveError> {
         if let Some(w) = weights {
@@ -515,7 +518,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         self.ordering.as_ref()
     }
 
-    /// Starts or stops the private pool if [`SolverOptions::threads`] was
+    /// Starts or stops the private pool if [`SolveSettings::threads`] was
     /// changed ([`Self::options_mut`]) since it was set up.
     fn match_threads(&mut self) -> Result<(), SolveError> {
         if self.options.threads.max(1) != self.parallelism.threads() {
@@ -532,7 +535,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// The options, e.g. to change the iteration limit between runs.
-    pub fn options_mut(&mut self) -> &mut SolverOptions {
+    pub fn options_mut(&mut self) -> &mut SolveSettings {
         &mut self.options
     }
 
@@ -634,9 +637,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
 
     /// The reason to stop after a step of damping `lambda` that took the
     /// objective from `previous` to `objective`, if any: LM crawling (a
-    /// damped step below [`SolverOptions::crawl_tolerance`]), or a relative
+    /// damped step below [`SolveSettings::crawl_tolerance`]), or a relative
     /// decrease below the tolerance or foreseen by the model to within
-    /// [`SolverOptions::model_tolerance`] — convergence where the model is
+    /// [`SolveSettings::model_tolerance`] — convergence where the model is
     /// trusted, else a stall.
     fn stop_after_step(&self, previous: f64, objective: f64, lambda: f64) -> Option<StopReason> {
         let decrease = ((previous - objective) / previous).abs();
@@ -756,7 +759,7 @@ impl Step {
 #[cfg(test)]
 pub fn optimize<P: Pose<D>, const D: usize>(
     graph: &mut Graph<P, D>,
-    options: &SolverOptions,
+    options: &SolveSettings,
 ) -> Result<Summary, SolveError> {
     let mut optimizer = Optimizer::new(graph, None, options.clone())?;
     optimizer.run(graph, None, &mut |_: &IterationRecord| {})

@@ -222,7 +222,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
 
     /// Whether the last step, lightly damped, lowered the objective from
     /// `objective` to `new_objective` by what the model foresaw, to within
-    /// [`SolverOptions::model_tolerance`] of the objective.
+    /// [`SolveSettings::model_tolerance`] of the objective.
     pub(super) fn model_agreed(&self, objective: f64, new_objective: f64) -> bool {
         self.options.model_tolerance.is_some_and(|tol| {
             let predicted = self.system.predicted_decrease(&self.step);

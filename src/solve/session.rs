@@ -2,7 +2,7 @@
 //! end solves many times (a step per reweighting, a solve per decision),
 //! and `--max-iters` / `--time-limit` bound all of them together.
 
-use super::{Observer, Optimizer, SolveError, SolverOptions, StopReason, Summary};
+use super::{Observer, Optimizer, SolveError, SolveSettings, StopReason, Summary};
 use crate::geometry::Pose;
 use crate::graph::Graph;
 use std::time::{Duration, Instant};
@@ -35,7 +35,7 @@ pub struct Session<'a, P: Pose<D>, const D: usize> {
     /// The graph; its poses are the current map.
     pub graph: &'a mut Graph<P, D>,
     /// Options of a run to convergence.
-    pub options: SolverOptions,
+    pub options: SolveSettings,
     budget: Budget,
     observer: &'a mut dyn Observer,
     summary: Option<Summary>,
@@ -58,7 +58,7 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
     pub fn new(
         optimizer: &'a mut Optimizer<P, D>,
         graph: &'a mut Graph<P, D>,
-        options: SolverOptions,
+        options: SolveSettings,
         budget: Budget,
         observer: &'a mut dyn Observer,
     ) -> Self {
@@ -127,7 +127,7 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
     /// `max_iterations` (and what is left of the budget).
     pub fn run(&mut self, weights: &[f64], max_iterations: usize) -> Result<(), SolveError> {
         let left = self.budget.iterations.saturating_sub(self.iterations());
-        *self.optimizer.options_mut() = SolverOptions {
+        *self.optimizer.options_mut() = SolveSettings {
             max_iterations: max_iterations.min(left),
             time_limit: self
                 .budget
@@ -162,7 +162,7 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
 
     /// [`Self::converge`], stopping also once LM crawls: a damped step
     /// lowers the objective by less than `tolerance` of it
-    /// ([`SolverOptions::crawl_tolerance`]). Returns whether the run
+    /// ([`SolveSettings::crawl_tolerance`]). Returns whether the run
     /// converged (then not crawling).
     pub fn converge_unless_crawling(
         &mut self,

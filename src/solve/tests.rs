@@ -44,7 +44,7 @@ fn lm_and_gn_reach_the_exact_optimum_of_a_consistent_loop() {
         let mut g = square(0.3, 1);
         let s = optimize(
             &mut g,
-            &SolverOptions {
+            &SolveSettings {
                 method,
                 ..Default::default()
             },
@@ -80,7 +80,7 @@ fn open_loop() -> (Graph<Se2, 3>, Matrix3<f64>) {
 fn inconsistent_loop_matches_the_closed_form_optimum() {
     // The optimum spreads the error equally: objective = 0.4² / 4.
     let (mut g, _) = open_loop();
-    let s = optimize(&mut g, &SolverOptions::default()).unwrap();
+    let s = optimize(&mut g, &SolveSettings::default()).unwrap();
     assert!(
         (s.final_objective - 0.04).abs() < 1e-8,
         "{}",
@@ -98,7 +98,7 @@ fn innovation_is_the_chi2_a_left_out_edge_adds_to_the_optimum() {
     // problem is linear).
     let (mut g, i) = open_loop();
     let without = [1.0, 1.0, 1.0, 0.0];
-    let mut opt = Optimizer::new(&g, Some(&without), SolverOptions::default()).unwrap();
+    let mut opt = Optimizer::new(&g, Some(&without), SolveSettings::default()).unwrap();
     opt.run(&mut g, Some(&without), &mut |_: &IterationRecord| {})
         .unwrap();
     let plain = g.edge_chi2(&g.edges[3]);
@@ -110,7 +110,7 @@ fn innovation_is_the_chi2_a_left_out_edge_adds_to_the_optimum() {
     let nu2 = opt.innovation_chi2(&g, &without, &[0, 1]).unwrap();
     assert!(nu2.iter().all(|&v| v.abs() < 1e-12), "{nu2:?}");
     // With the edge in the solution, the optimum's χ² is that rise.
-    let s = optimize(&mut g, &SolverOptions::default()).unwrap();
+    let s = optimize(&mut g, &SolveSettings::default()).unwrap();
     assert!((s.final_objective - 0.04).abs() < 1e-8);
     // A vertex no edge of non-zero weight ties to the gauge is held
     // fixed: the solution adds nothing to an edge at it.
@@ -118,7 +118,7 @@ fn innovation_is_the_chi2_a_left_out_edge_adds_to_the_optimum() {
     g2.add_vertex(9, Se2::new(5.0, 0.0, 0.0)).unwrap();
     g2.add_edge(3, 9, Se2::new(1.0, 0.0, 0.0), i, None).unwrap();
     let w = [1.0, 1.0, 1.0, 1.0, 0.0];
-    let mut opt = Optimizer::new(&g2, Some(&[1.0; 5]), SolverOptions::default()).unwrap();
+    let mut opt = Optimizer::new(&g2, Some(&[1.0; 5]), SolveSettings::default()).unwrap();
     let nu2 = opt.innovation_chi2(&g2, &w, &[4]).unwrap();
     assert_eq!(nu2[0], g2.edge_chi2(&g2.edges[4]));
     // Weights must match the edges.
@@ -132,9 +132,9 @@ fn leave_one_out_innovation_is_the_innovation_without_the_edge() {
     // each edge's deleted residual at the optimum of all four is 0.04,
     // the innovation of the closing edge left out.
     let (mut g, i) = open_loop();
-    optimize(&mut g, &SolverOptions::default()).unwrap();
+    optimize(&mut g, &SolveSettings::default()).unwrap();
     let all = [1.0; 4];
-    let mut opt = Optimizer::new(&g, Some(&all), SolverOptions::default()).unwrap();
+    let mut opt = Optimizer::new(&g, Some(&all), SolveSettings::default()).unwrap();
     let nu2 = opt.leave_one_out_chi2(&g, &all, &[0, 1, 2, 3]).unwrap();
     for v in &nu2 {
         let v = v.expect("every edge of a loop is checked by the others");
@@ -148,7 +148,7 @@ fn leave_one_out_innovation_is_the_innovation_without_the_edge() {
     g2.add_vertex(9, Se2::new(5.0, 0.0, 0.0)).unwrap();
     g2.add_edge(3, 9, Se2::new(1.0, 0.0, 0.0), i, None).unwrap();
     let w = [1.0, 1.0, 1.0, 0.0, 1.0];
-    let mut opt = Optimizer::new(&g2, Some(&w), SolverOptions::default()).unwrap();
+    let mut opt = Optimizer::new(&g2, Some(&w), SolveSettings::default()).unwrap();
     let nu2 = opt.leave_one_out_chi2(&g2, &w, &[0, 4]).unwrap();
     assert_eq!(nu2, [None, None]);
     // An edge left out gets the innovation `innovation_chi2` gives it;
@@ -207,7 +207,7 @@ fn spatial_chain_with_loop_converges() {
         None,
     )
     .unwrap();
-    let s = optimize(&mut g, &SolverOptions::default()).unwrap();
+    let s = optimize(&mut g, &SolveSettings::default()).unwrap();
     assert!(s.final_objective < 1e-14, "{}", s.final_objective);
     assert!((g.poses[19].translation - truth[19].translation).norm() < 1e-6);
 }
@@ -224,7 +224,7 @@ fn weights_switch_edges_off() {
         None,
     )
     .unwrap();
-    let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+    let mut opt = Optimizer::new(&g, None, SolveSettings::default()).unwrap();
     let w = [1.0, 1.0, 1.0, 1.0, 0.0];
     let s = opt
         .run(&mut g, Some(&w), &mut |_: &IterationRecord| {})
@@ -246,7 +246,7 @@ fn vertices_cut_off_by_weight_zero_are_held_and_come_back() {
     let z = Se2::new(1.0, 0.0, 0.0);
     g.add_edge(2, 40, z, Matrix3::identity(), None).unwrap();
     g.add_edge(40, 41, z, Matrix3::identity(), None).unwrap();
-    let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+    let mut opt = Optimizer::new(&g, None, SolveSettings::default()).unwrap();
     let mut w = vec![1.0; g.edges.len()];
     w[4] = 0.0;
     let s = opt
@@ -273,7 +273,7 @@ fn disconnected_vertices_are_named() {
     g.add_vertex(41, Se2::identity()).unwrap();
     g.add_edge(40, 41, Se2::identity(), Matrix3::identity(), None)
         .unwrap();
-    let err = optimize(&mut g, &SolverOptions::default()).unwrap_err();
+    let err = optimize(&mut g, &SolveSettings::default()).unwrap_err();
     assert_eq!(
         err,
         SolveError::Unconstrained {
@@ -297,7 +297,7 @@ fn rank_deficient_edges_are_a_named_error() {
     for method in [Method::GaussNewton, Method::LevenbergMarquardt] {
         let err = optimize(
             &mut g.clone(),
-            &SolverOptions {
+            &SolveSettings {
                 method,
                 ..Default::default()
             },
@@ -313,7 +313,7 @@ fn iteration_and_time_limits_are_honoured_and_keep_the_best() {
     let start = g.chi2();
     let s = optimize(
         &mut g,
-        &SolverOptions {
+        &SolveSettings {
             max_iterations: 1,
             ..Default::default()
         },
@@ -326,7 +326,7 @@ fn iteration_and_time_limits_are_honoured_and_keep_the_best() {
     assert!(s.final_objective <= start && (g.chi2() - s.final_objective).abs() < 1e-12);
     let s = optimize(
         &mut g,
-        &SolverOptions {
+        &SolveSettings {
             time_limit: Some(Duration::ZERO),
             ..Default::default()
         },
@@ -343,7 +343,7 @@ fn every_run_starts_undamped() {
     for seed in 0..500 {
         let mut g = square(2.5, seed);
         let start = g.poses.clone();
-        let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+        let mut opt = Optimizer::new(&g, None, SolveSettings::default()).unwrap();
         let mut records = Vec::new();
         opt.run(&mut g, None, &mut |r: &IterationRecord| records.push(*r))
             .unwrap();
@@ -373,7 +373,7 @@ fn non_finite_start_is_an_error_not_a_nan_result() {
     let mut g = square(0.0, 5);
     g.poses[1].x = f64::NAN;
     assert_eq!(
-        optimize(&mut g, &SolverOptions::default()).unwrap_err(),
+        optimize(&mut g, &SolveSettings::default()).unwrap_err(),
         SolveError::NonFiniteStart
     );
 }
@@ -382,7 +382,7 @@ fn non_finite_start_is_an_error_not_a_nan_result() {
 fn threads_start_a_private_pool_of_that_size_only_from_two() {
     let mut g = square(0.3, 6);
     for (threads, expected) in [(0, 1), (1, 1), (2, 2), (3, 3)] {
-        let options = SolverOptions {
+        let options = SolveSettings {
             threads,
             ..Default::default()
         };
@@ -391,7 +391,7 @@ fn threads_start_a_private_pool_of_that_size_only_from_two() {
         assert_eq!(opt.parallelism.is_parallel(), threads >= 2);
     }
     // Changing the option between runs starts or stops the pool.
-    let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+    let mut opt = Optimizer::new(&g, None, SolveSettings::default()).unwrap();
     opt.options_mut().threads = 2;
     opt.run(&mut g, None, &mut |_: &IterationRecord| {})
         .unwrap();
@@ -407,14 +407,14 @@ fn a_step_the_model_foresaw_ends_the_run_when_asked() {
     // an incremental update has), the model tolerance spares the
     // confirming iteration and lands on the same optimum.
     let mut g = square(0.3, 6);
-    optimize(&mut g, &SolverOptions::default()).unwrap();
+    optimize(&mut g, &SolveSettings::default()).unwrap();
     let k = g.edges.len() - 1;
     g.edges[k].measurement.x += 0.05;
     let runs: Vec<(usize, f64)> = [None, Some(1e-8)]
         .into_iter()
         .map(|model_tolerance| {
             let mut h = g.clone();
-            let options = SolverOptions {
+            let options = SolveSettings {
                 model_tolerance,
                 ..Default::default()
             };
@@ -453,7 +453,7 @@ mod simulated {
         let o = Optimizer::with_ordering(
             &small,
             None,
-            SolverOptions::default(),
+            SolveSettings::default(),
             Some(Ordering::default()),
         )
         .unwrap();
@@ -462,9 +462,9 @@ mod simulated {
         // Grown by 50 poses: the old vertices keep their order, the new
         // ones come last, and the factor is at most 10 % above AMD's.
         let grown = prefix(&g, 3050);
-        let fresh = Optimizer::new(&grown, None, SolverOptions::default()).unwrap();
+        let fresh = Optimizer::new(&grown, None, SolveSettings::default()).unwrap();
         let o =
-            Optimizer::with_ordering(&grown, None, SolverOptions::default(), Some(kept.clone()))
+            Optimizer::with_ordering(&grown, None, SolveSettings::default(), Some(kept.clone()))
                 .unwrap();
         let positions = o.system().positions();
         let (old, new) = positions.split_at(2999);
@@ -473,7 +473,7 @@ mod simulated {
         assert!(fill <= 1.1 * 3050.0 / 3000.0, "{fill}");
         // Where innovations are needed, the paths to the root count too:
         // the order is kept only while they stay within 10 %.
-        let options = SolverOptions::default();
+        let options = SolveSettings::default();
         let with_paths = Some(kept.clone().for_innovations(true));
         let p = Optimizer::with_ordering(&grown, None, options, with_paths).unwrap();
         let reordered = p.system().positions() == fresh.system().positions();
@@ -529,7 +529,7 @@ mod simulated {
     /// unit weights, then [`simulated_grid`]'s.
     fn two_rounds(threads: usize) -> (Vec<Se2>, Vec<u64>) {
         let (mut g, weights) = simulated_grid();
-        let options = SolverOptions {
+        let options = SolveSettings {
             threads,
             ..Default::default()
         };
@@ -597,14 +597,14 @@ mod simulated {
         let k = 3;
         // The same run limited to k iterations: where the cancelled one must be.
         let mut limited = start.clone();
-        let options = SolverOptions {
+        let options = SolveSettings {
             max_iterations: k,
             ..Default::default()
         };
         let expected = optimize(&mut limited, &options).unwrap();
         assert_eq!(expected.stop_reason, StopReason::MaxIterations);
         let mut g = start.clone();
-        let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+        let mut opt = Optimizer::new(&g, None, SolveSettings::default()).unwrap();
         let mut observer = StopAfter {
             after: k,
             records: Vec::new(),
@@ -626,7 +626,7 @@ mod simulated {
         let start = dead_reckoned_grid(300);
         let mut g = start.clone();
         let cancel = Cancel::new();
-        let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+        let mut opt = Optimizer::new(&g, None, SolveSettings::default()).unwrap();
         let mut seen = 0;
         let mut progress = |_: &IterationRecord| seen += 1;
         // Not cancelled: the run goes on (and reports) ...
@@ -681,7 +681,7 @@ mod simulated {
             Some((g, records, k + 1))
         });
         let (mut g, full, k) = found.expect("no start with a rejected trial");
-        let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+        let mut opt = Optimizer::new(&g, None, SolveSettings::default()).unwrap();
         let mut observer = StopBetweenTrials::default();
         let s = opt.run(&mut g, None, &mut observer).unwrap();
         // Stopped in iteration k + 1, after its first rejected trial: the poses
@@ -695,7 +695,7 @@ mod simulated {
 
     /// [`optimize`] with an observer.
     fn optimize_observed(g: &mut Graph<Se2, 3>, observer: &mut dyn Observer) -> Summary {
-        let mut opt = Optimizer::new(g, None, SolverOptions::default()).unwrap();
+        let mut opt = Optimizer::new(g, None, SolveSettings::default()).unwrap();
         opt.run(g, None, observer).unwrap()
     }
 
@@ -717,7 +717,7 @@ mod simulated {
     /// The decrease of χ² that the undamped Gauss–Newton model foresees from
     /// the graph's poses, relative to χ² there.
     fn newton_decrement(g: &Graph<Se2, 3>) -> f64 {
-        let mut opt = Optimizer::new(g, None, SolverOptions::default()).unwrap();
+        let mut opt = Optimizer::new(g, None, SolveSettings::default()).unwrap();
         let chi2 = opt.linearize(g, None);
         opt.system_mut().factorize(0.0).unwrap();
         let mut step = vec![0.0; 3 * opt.system().num_blocks()];
@@ -729,13 +729,13 @@ mod simulated {
     fn a_crawl_ends_the_run_only_when_asked_and_only_under_damping() {
         // A far start: the first undamped step is rejected and LM goes on
         // damped, each step lowering the objective a little.
-        let options = SolverOptions {
+        let options = SolveSettings {
             initial_lambda: 1e2,
             ..Default::default()
         };
         let s = optimize(&mut far_start(0, 1e3), &options).unwrap();
         assert!(s.history.iter().any(|r| r.lambda > 0.0), "{s:?}");
-        let crawl = |t: f64| SolverOptions {
+        let crawl = |t: f64| SolveSettings {
             crawl_tolerance: Some(t),
             ..options.clone()
         };
@@ -758,7 +758,7 @@ mod simulated {
         for seed in 0..4 {
             for method in [Method::LevenbergMarquardt, Method::GaussNewton] {
                 let mut g = far_start(seed, 1e3);
-                let options = SolverOptions {
+                let options = SolveSettings {
                     method,
                     ..Default::default()
                 };
@@ -780,7 +780,7 @@ mod simulated {
         // barely decreases (less than the relative tolerance) while the model
         // still foresees a large decrease. That is no convergence.
         let mut g = far_start(0, 1e3);
-        let options = SolverOptions {
+        let options = SolveSettings {
             initial_lambda: 1e12,
             ..Default::default()
         };
@@ -793,7 +793,7 @@ mod simulated {
         assert!(decrement > 1e-3, "{decrement:e}");
         // So is a step below the step tolerance because the damping made it so.
         let mut g = far_start(0, 1e3);
-        let options = SolverOptions {
+        let options = SolveSettings {
             initial_lambda: 1e12,
             step_tolerance: 1e-3,
             ..Default::default()
@@ -802,8 +802,8 @@ mod simulated {
         assert_eq!((s.iterations, s.stop_reason), (0, StopReason::Stalled));
         // An undamped step below it is convergence.
         let (mut g, _) = open_loop();
-        optimize(&mut g, &SolverOptions::default()).unwrap();
-        let options = SolverOptions {
+        optimize(&mut g, &SolveSettings::default()).unwrap();
+        let options = SolveSettings {
             step_tolerance: 1e-3,
             ..Default::default()
         };
@@ -818,7 +818,7 @@ fn the_last_evaluation_gives_each_edges_chi2_at_the_map_while_it_is_there() {
     let mut g = square(0.3, 4);
     g.edges[1].measurement = Se2::new(0.5, -0.2, 0.1).compose(&g.edges[1].measurement);
     let weights = [1.0, 1.0, 0.5, 0.0];
-    let mut opt = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
+    let mut opt = Optimizer::new(&g, Some(&weights), SolveSettings::default()).unwrap();
     opt.run(&mut g, Some(&weights), &mut |_: &IterationRecord| {})
         .unwrap();
     let reused = opt
@@ -838,7 +838,7 @@ fn the_last_evaluation_gives_each_edges_chi2_at_the_map_while_it_is_there() {
 #[test]
 fn an_optimiser_of_the_grown_graph_given_the_last_ones_spare_solves_alike() {
     let mut g = square(0.3, 5);
-    let mut first = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+    let mut first = Optimizer::new(&g, None, SolveSettings::default()).unwrap();
     first
         .run(&mut g, None, &mut |_: &IterationRecord| {})
         .unwrap();
@@ -851,7 +851,7 @@ fn an_optimiser_of_the_grown_graph_given_the_last_ones_spare_solves_alike() {
     g.poses[2].theta += 0.05;
     let run = |spare: Option<Spare<Se2, 3>>| {
         let mut g = g.clone();
-        let mut opt = Optimizer::new(&g, None, SolverOptions::default()).unwrap();
+        let mut opt = Optimizer::new(&g, None, SolveSettings::default()).unwrap();
         if let Some(s) = spare {
             opt.reuse_spare(s);
         }
@@ -924,10 +924,10 @@ proptest::proptest! {
         use proptest::prelude::prop_assert;
         let mut g = extreme_graph(n, pos_exp, info_exp, &seeds);
         let start = g.chi2();
-        let options = SolverOptions {
+        let options = SolveSettings {
             method: if gn { Method::GaussNewton } else { Method::LevenbergMarquardt },
             max_iterations: 30,
-            ..SolverOptions::default()
+            ..SolveSettings::default()
         };
         match optimize(&mut g, &options) {
             Ok(s) => {

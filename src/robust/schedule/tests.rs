@@ -2,7 +2,7 @@ use super::*;
 use crate::geometry::Se2;
 use crate::graph::LoopCandidate;
 use crate::solve::Budget;
-use crate::solve::{Cancel, Optimizer, SolverOptions};
+use crate::solve::{Cancel, Optimizer, SolveSettings};
 use nalgebra::Matrix3;
 
 /// A square walk of 16 poses with odometry, four true loops between the
@@ -88,7 +88,7 @@ fn twist(g: &mut Graph<Se2, 3>) {
 fn with_session<R>(
     g: &mut Graph<Se2, 3>,
     weights: &mut [f64],
-    options: SolverOptions,
+    options: SolveSettings,
     f: impl FnOnce(Session<'_, Se2, 3>, &mut [f64]) -> R,
 ) -> R {
     let mut optimizer = Optimizer::new(g, Some(weights), options.clone()).unwrap();
@@ -104,7 +104,7 @@ fn the_chordal_annealing_holds_the_true_loops_at_one_relaxation_per_e_step() {
     let annealed = with_session(
         &mut g,
         &mut weights,
-        SolverOptions::default(),
+        SolveSettings::default(),
         |mut s, w| anneal_chordal(&mut s, w, &candidates, 2.0).unwrap(),
     );
     assert!(annealed.steps > 1 && !annealed.cut_short);
@@ -129,7 +129,7 @@ fn a_map_at_the_optimum_of_the_accepted_set_is_kept_over_its_relaxation() {
     with_session(
         &mut g,
         &mut weights,
-        SolverOptions::default(),
+        SolveSettings::default(),
         |mut s, w| {
             s.converge(w).unwrap();
             let optimum = s.graph.poses.clone();
@@ -151,7 +151,7 @@ fn a_solve_that_would_end_in_a_local_minimum_starts_from_the_relaxation() {
     with_session(
         &mut g,
         &mut weights,
-        SolverOptions::default(),
+        SolveSettings::default(),
         |mut s, w| {
             let twisted = s.graph.poses.clone();
             s.converge(w).unwrap();
@@ -214,10 +214,10 @@ fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
     twist(&mut g);
     let mut weights = vec![1.0; g.edges.len()];
     weights[candidates[4].edge] = 0.0;
-    let options = SolverOptions {
+    let options = SolveSettings {
         relative_tolerance: 0.0,
         initial_lambda: 1e2,
-        ..SolverOptions::default()
+        ..SolveSettings::default()
     };
     let (decided, summary) = with_session(&mut g, &mut weights, options, |mut s, w| {
         let layers = Layers::default();
@@ -246,7 +246,7 @@ fn the_model_is_fitted_on_exact_innovations() {
     let decided = with_session(
         &mut g,
         &mut weights,
-        SolverOptions::default(),
+        SolveSettings::default(),
         |mut s, w| {
             // Each candidate its own cluster ((2, 10) is beside the true (3, 9)).
             let layers = Layers {
@@ -265,7 +265,7 @@ fn the_model_is_fitted_on_exact_innovations() {
     assert_eq!(decided.accepted, [true, true, true, true, false]);
     assert!(decided.innovations.exact.iter().all(|&e| e));
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
-    let mut o = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
+    let mut o = Optimizer::new(&g, Some(&weights), SolveSettings::default()).unwrap();
     let mut eval = Evaluation::new(&mut o, &g, &weights).unwrap();
     let alone = vec![vec![4]];
     let bound = eval.innovations(&edges, &decided.accepted, &alone, false);
@@ -295,7 +295,7 @@ fn a_swing_is_a_round_that_flips_back_what_the_round_before_flipped() {
 fn a_cancel_is_seen_after_an_evaluation_without_an_iteration() {
     let (mut g, _) = walk();
     let weights = vec![1.0; g.edges.len()];
-    let options = SolverOptions::default();
+    let options = SolveSettings::default();
     let mut optimizer = Optimizer::new(&g, Some(&weights), options.clone()).unwrap();
     let cancel = Cancel::new();
     let mut observer = cancel.clone();
@@ -324,7 +324,7 @@ fn a_few_clusters_are_judged_by_their_solves_alone_to_the_same_innovations() {
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     let mut weights = vec![1.0; g.edges.len()];
     weights[edges[4]] = 0.0;
-    let mut o = Optimizer::new(&g, Some(&weights), SolverOptions::default()).unwrap();
+    let mut o = Optimizer::new(&g, Some(&weights), SolveSettings::default()).unwrap();
     o.run(
         &mut g,
         Some(&weights),
@@ -403,7 +403,7 @@ fn on_graph<R>(
     let out = with_session(
         &mut g,
         &mut weights,
-        SolverOptions::default(),
+        SolveSettings::default(),
         |mut s, w| {
             s.converge(w).unwrap();
             let decided = Decided::start(s.graph, &edges, w, &layers);
