@@ -47,6 +47,17 @@ pub struct OptimizeArgs {
     /// pose no edge in the map ties to them is left out, with a warning.
     #[arg(long, value_name = "FILE.csv")]
     pub covariances: Option<PathBuf>,
+    /// Write the optimised trajectory here in the TUM format, as evo reads
+    /// it (atomically; `-` writes stdout): per pose in the graph's order,
+    /// `timestamp tx ty tz qx qy qz qw`, the timestamp its vertex id; a 2D
+    /// pose as z = 0 and a rotation about z.
+    #[arg(long, value_name = "FILE")]
+    pub tum: Option<PathBuf>,
+    /// Write the optimised trajectory here in the KITTI format, as evo
+    /// reads it (atomically; `-` writes stdout): per pose in the graph's
+    /// order (KITTI has no ids), the 3×4 matrix [R t] row by row.
+    #[arg(long, value_name = "FILE")]
+    pub kitti: Option<PathBuf>,
     /// Everything the job itself can be told (the library's `Options`).
     #[command(flatten)]
     pub options: pgo::Options,
@@ -64,7 +75,6 @@ pub struct OptimizeArgs {
     #[arg(short, long)]
     pub verbose: bool,
 }
-
 
 /// The exit status of `pgo optimize` when the result fails its χ² test
 /// (the outputs are still written).
@@ -117,7 +127,13 @@ impl Failure {
             Self::Job { error, .. } => match error.kind() {
                 K::Io | K::Parse | K::Dimension | K::InvalidInformation | K::InvalidPose => 2,
                 K::Unconstrained | K::EmptyGraph | K::UnknownVertex | K::InvalidOption => 2,
-                _ if matches!(error, Error::Undetermined { .. } | Error::NonFiniteEdge { .. }) => 2,
+                _ if matches!(
+                    error,
+                    Error::Undetermined { .. } | Error::NonFiniteEdge { .. }
+                ) =>
+                {
+                    2
+                }
                 _ => 1,
             },
             Self::Plot(_) => 1,
@@ -144,7 +160,8 @@ pub fn run(args: &OptimizeArgs, observer: &mut dyn Observer) -> Result<Report, F
     if let Some(csv) = &args.inliers {
         let rows = inliers::read_csv(csv)?;
         let n = inliers::apply(&mut graph, &rows, csv)?;
-        replaced = (n > 0).then(|| format!("{}: replaced the inlier counts of {n} edges", csv.display()));
+        replaced =
+            (n > 0).then(|| format!("{}: replaced the inlier counts of {n} edges", csv.display()));
     }
     let solution = graph.optimize_with(&args.options, observer).map_err(job)?;
     let mut report = solution.report().clone();
@@ -173,13 +190,25 @@ pub fn run(args: &OptimizeArgs, observer: &mut dyn Observer) -> Result<Report, F
     if let Some(path) = &args.covariances {
         write_covariances(&solution, path, &mut report).map_err(job)?;
     }
+    if let Some(path) = &args.tum {
+        solution.write_tum(path).map_err(job)?;
+        report.trajectories.push(path.display().to_string());
+    }
+    if let Some(path) = &args.kitti {
+        solution.write_kitti(path).map_err(job)?;
+        report.trajectories.push(path.display().to_string());
+    }
     report.time.total_s = start.elapsed().as_secs_f64();
     Ok(report)
 }
 
 /// Writes the covariances of the map (`--covariances`): a warning names
 /// the poses left out.
-fn write_covariances(solution: &AnySolution, path: &Path, report: &mut Report) -> Result<(), Error> {
+fn write_covariances(
+    solution: &AnySolution,
+    path: &Path,
+    report: &mut Report,
+) -> Result<(), Error> {
     let covariances = solution.covariances()?;
     let mut unbounded = Vec::new();
     pgo::output::write_atomically(path, |w| {
@@ -264,7 +293,9 @@ fn finish(args: &OptimizeArgs, report: &Report, verbose: bool) -> ExitCode {
         }
     }
     if report.optimizer.stop_reason == pgo::StopReason::Cancelled {
-        say!("pgo: interrupted: the best map so far was written (exit status {INTERRUPTED_STATUS})");
+        say!(
+            "pgo: interrupted: the best map so far was written (exit status {INTERRUPTED_STATUS})"
+        );
         return ExitCode::from(INTERRUPTED_STATUS);
     }
     if report.chi2_test.as_ref().is_some_and(|t| !t.passed) {
@@ -299,16 +330,24 @@ pub fn check_optimize_files(args: &OptimizeArgs) -> Result<(), String> {
         }
     };
     checked.map_err(|e| e.to_string())?;
-    check_covariances_file(args, &inputs)
+    check_extra_outputs(args, &inputs)
 }
 
-/// [`check_files`] for `--covariances`: an output of its own, beside `-o`
-/// (or the input, `--in-place`) and `--json` on stdout.
-fn check_covariances_file(args: &OptimizeArgs, inputs: &[&std::path::Path]) -> Result<(), String> {
-    let Some(path) = &args.covariances else {
+/// [`check_files`] for `--covariances`, `--tum` and `--kitti`: outputs of
+/// their own, beside each other, `-o` (or the input, `--in-place`) and
+/// `--json` on stdout: at most one of them all may be `-`.
+fn check_extra_outputs(args: &OptimizeArgs, inputs: &[&std::path::Path]) -> Result<(), String> {
+    let extra = [
+        ("--covariances", &args.covariances),
+        ("--tum", &args.tum),
+        ("--kitti", &args.kitti),
+    ];
+    let mut outputs: Vec<(&str, &Path)> = (extra.iter())
+        .filter_map(|(option, path)| Some((*option, path.as_deref()?)))
+        .collect();
+    if outputs.is_empty() {
         return Ok(());
-    };
-    let mut outputs = vec![("--covariances", path.as_path())];
+    }
     outputs.extend(args.output.as_deref().map(|o| ("-o", o)));
     let inputs = if args.in_place {
         outputs.push(("--in-place", args.input.as_path()));
