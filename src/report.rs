@@ -57,6 +57,10 @@ pub struct Report {
     pub loops: Vec<LoopReport>,
     /// SVG pictures written (`--plot`).
     pub plots: Vec<String>,
+    /// Trajectory files written (`pgo optimize --tum`, then `--kitti`;
+    /// [`crate::Solution::write_tum`], [`crate::Solution::write_kitti`]),
+    /// as given (`-`: stdout).
+    pub trajectories: Vec<String>,
     /// Warnings, one line each.
     pub warnings: Vec<String>,
     /// Where the job's time went.
@@ -486,6 +490,7 @@ impl Report {
             robust: RobustReport::default(),
             loops: Vec::new(),
             plots: Vec::new(),
+            trajectories: Vec::new(),
             warnings: read.warnings.clone(),
             time: JobTime::default(),
             incremental: None,
@@ -559,6 +564,9 @@ impl Report {
         }
         if let Some(out) = &self.output {
             s += &format!("wrote {out}\n");
+        }
+        for path in &self.trajectories {
+            s += &format!("wrote {path}\n");
         }
         s
     }

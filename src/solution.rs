@@ -17,6 +17,8 @@ use std::io::{self, Write};
 use std::path::Path;
 use std::sync::Arc;
 
+mod trajectory;
+
 /// The result of [`crate::PoseGraph::optimize`].
 #[derive(Clone, Debug)]
 pub struct Solution<P> {
@@ -180,6 +182,19 @@ impl<P> Solution<P> {
         })
     }
 
+    /// [`Solution::write_tum`] and [`Solution::write_kitti`] for either
+    /// pose type.
+    fn write_trajectory(&self, path: &Path, format: trajectory::Format) -> Result<(), Error>
+    where
+        P: trajectory::Embed,
+    {
+        crate::output::write_atomically(path, |w| trajectory::write(self.poses(), format, w))
+            .map_err(|source| Error::Write {
+                path: path.to_owned(),
+                source,
+            })
+    }
+
     /// This solution, with the poses its solve started from (`initial`,
     /// in the graph's order).
     pub(crate) fn starting_from(mut self, initial: Vec<P>) -> Self {
@@ -340,6 +355,50 @@ impl Solution<Se2> {
         self.write_file(path.as_ref())
     }
 
+    /// Writes the optimised trajectory in the TUM format, atomically as
+    /// [`Solution::write_g2o`] writes (`-` is the standard output): one
+    /// line per pose in the graph's order, `timestamp tx ty tz qx qy qz
+    /// qw`, as evo (`evo_ape tum`) and the TUM RGB-D tools read it. pgo's
+    /// poses have no time: the timestamp is the vertex id (to associate
+    /// with a ground truth, give its poses the same ids, or map ids to
+    /// times yourself). The pose is embedded in SE(3): `(x, y, 0)` and the
+    /// rotation by θ about z, quaternion `(0, 0, sin θ/2, cos θ/2)` with
+    /// `qw ≥ 0` (in 3D the pose's own quaternion; its sign is arbitrary).
+    /// Numbers are in their shortest form that reads back to the same
+    /// bits. Errors: [`Error::Write`] (nothing is replaced then).
+    ///
+    /// ```
+    /// use pgo::nalgebra::Matrix3;
+    /// use pgo::{Options, PoseGraph2, Se2};
+    ///
+    /// let mut graph = PoseGraph2::new();
+    /// graph.add_pose(7, Se2::new(0.0, 0.0, 0.0))?;
+    /// graph.add_pose(8, Se2::new(0.9, 0.0, 0.0))?;
+    /// graph.add_edge(7, 8, Se2::new(1.0, 0.0, 0.0), Matrix3::identity())?;
+    /// let solution = graph.optimize(&Options::default())?;
+    /// let path = std::env::temp_dir().join(format!("pgo-doc-{}.tum", std::process::id()));
+    /// solution.write_tum(&path)?;
+    /// let text = std::fs::read_to_string(&path)?;
+    /// assert_eq!(text.lines().next(), Some("7 0.0 0.0 0.0 0.0 0.0 0.0 1.0"));
+    /// # std::fs::remove_file(&path).unwrap();
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn write_tum(&self, path: impl AsRef<Path>) -> Result<(), Error> {
+        self.write_trajectory(path.as_ref(), trajectory::Format::Tum)
+    }
+
+    /// Writes the optimised trajectory in the KITTI odometry format,
+    /// atomically as [`Solution::write_g2o`] writes (`-` is the standard
+    /// output): one line per pose, the first three rows of its 4 × 4 matrix
+    /// `[R t; 0 0 0 1]` row by row, `r11 r12 r13 tx r21 r22 r23 ty r31 r32
+    /// r33 tz`, as evo (`evo_ape kitti`) reads it. The format has no ids or
+    /// times: line k is the k-th pose in the graph's order (as the poses
+    /// were added, or as the file had them). The pose is embedded in SE(3)
+    /// as for [`Solution::write_tum`]. Errors: [`Error::Write`].
+    pub fn write_kitti(&self, path: impl AsRef<Path>) -> Result<(), Error> {
+        self.write_trajectory(path.as_ref(), trajectory::Format::Kitti)
+    }
+
     /// A certificate of global optimality of the map over its edges
     /// (trusted edges and accepted loops): the map refined on SE-Sync's
     /// isotropic problem (one rotation and one translation weight per edge
@@ -383,6 +442,18 @@ impl Solution<Se3> {
     /// [`Solution::<Se2>::write_g2o`](Solution#method.write_g2o).
     pub fn write_g2o(&self, path: impl AsRef<Path>) -> Result<(), Error> {
         self.write_file(path.as_ref())
+    }
+
+    /// Writes the optimised trajectory in the TUM format; see
+    /// [`Solution::<Se2>::write_tum`](Solution#method.write_tum).
+    pub fn write_tum(&self, path: impl AsRef<Path>) -> Result<(), Error> {
+        self.write_trajectory(path.as_ref(), trajectory::Format::Tum)
+    }
+
+    /// Writes the optimised trajectory in the KITTI format; see
+    /// [`Solution::<Se2>::write_kitti`](Solution#method.write_kitti).
+    pub fn write_kitti(&self, path: impl AsRef<Path>) -> Result<(), Error> {
+        self.write_trajectory(path.as_ref(), trajectory::Format::Kitti)
     }
 
     /// A certificate of global optimality of the map over its edges; see
@@ -512,6 +583,18 @@ impl AnySolution {
     /// Writes the optimised map as a g2o file ([`Solution::write_g2o`]).
     pub fn write_g2o(&self, path: impl AsRef<Path>) -> Result<(), Error> {
         either!(self, |s| s.write_g2o(path))
+    }
+
+    /// Writes the optimised trajectory in the TUM format
+    /// ([`Solution::write_tum`]).
+    pub fn write_tum(&self, path: impl AsRef<Path>) -> Result<(), Error> {
+        either!(self, |s| s.write_tum(path))
+    }
+
+    /// Writes the optimised trajectory in the KITTI format
+    /// ([`Solution::write_kitti`]).
+    pub fn write_kitti(&self, path: impl AsRef<Path>) -> Result<(), Error> {
+        either!(self, |s| s.write_kitti(path))
     }
 
     /// See [`Solution::incremental`].

@@ -1013,6 +1013,52 @@ enum PgoStatus pgo_result_converged(const struct PgoResult *result, bool *out);
 const char *pgo_result_report_json(const struct PgoResult *result);
 
 /**
+ * Writes the optimised map as a g2o file at `path`, atomically (a
+ * temporary file renamed over it; `"-"` writes the standard output): a
+ * graph read from a file as that file's own text with the new poses
+ * (every other line byte for byte), any other graph as
+ * `pgo_graph_write_g2o` writes it, with the optimised poses. Nothing is
+ * replaced on failure.
+ *
+ * Errors: `PGO_ERR_IO` (the message names the file),
+ * `PGO_ERR_INVALID_ARGUMENT` (NULL `result`, NULL or non-UTF-8 `path`).
+ *
+ * # Safety
+ * `result` is NULL or a live result; `path` is NULL or a NUL-terminated
+ * string.
+ */
+enum PgoStatus pgo_result_write_g2o(const struct PgoResult *result, const char *path);
+
+/**
+ * Writes the optimised trajectory in the TUM format at `path`, as evo
+ * reads it, atomically as `pgo_result_write_g2o` writes: one line per
+ * pose in the graph's order, `timestamp tx ty tz qx qy qz qw`, the
+ * timestamp the vertex id (poses have no time); a 2D pose as z = 0 and a
+ * rotation about z. Numbers in their shortest form that reads back to the
+ * same bits.
+ *
+ * Errors: those of `pgo_result_write_g2o`.
+ *
+ * # Safety
+ * As `pgo_result_write_g2o`.
+ */
+enum PgoStatus pgo_result_write_tum(const struct PgoResult *result, const char *path);
+
+/**
+ * Writes the optimised trajectory in the KITTI format at `path`, as evo
+ * reads it, atomically as `pgo_result_write_g2o` writes: one line per
+ * pose in the graph's order (the format has no ids: the order of
+ * `pgo_graph_ids`), the 3×4 matrix `[R t]` row by row; a 2D pose as
+ * z = 0 and a rotation about z.
+ *
+ * Errors: those of `pgo_result_write_g2o`.
+ *
+ * # Safety
+ * As `pgo_result_write_g2o`.
+ */
+enum PgoStatus pgo_result_write_kitti(const struct PgoResult *result, const char *path);
+
+/**
  * Frees a result made by `pgo_graph_optimize` or `pgo_graph_update`, and
  * the strings it handed out. NULL is allowed and does nothing.
  *

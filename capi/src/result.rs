@@ -6,7 +6,7 @@
 use crate::cancel::PgoCancel;
 use crate::graph::PgoGraph;
 use crate::options::PgoOptions;
-use crate::status::{Failure, PgoStatus, borrow, borrow_mut, out_ptr, status, value};
+use crate::status::{Failure, PgoStatus, borrow, borrow_mut, out_ptr, status, text, value};
 use pgo::{AnySolution, DecisionChange, LoopDecision, Options, Reason, UpdateSolve};
 use std::ffi::{CStr, CString, c_char};
 use std::ptr;
@@ -667,6 +667,84 @@ pub unsafe extern "C" fn pgo_result_report_json(result: *const PgoResult) -> *co
         let json = CString::new(json)
             .map_err(|_| Failure::new(PgoStatus::PgoErrInternal, "the report holds a NUL byte"))?;
         Ok(result.report_json.get_or_init(|| json).as_ptr())
+    })
+}
+
+/// Writes the optimised map as a g2o file at `path`, atomically (a
+/// temporary file renamed over it; `"-"` writes the standard output): a
+/// graph read from a file as that file's own text with the new poses
+/// (every other line byte for byte), any other graph as
+/// `pgo_graph_write_g2o` writes it, with the optimised poses. Nothing is
+/// replaced on failure.
+///
+/// Errors: `PGO_ERR_IO` (the message names the file),
+/// `PGO_ERR_INVALID_ARGUMENT` (NULL `result`, NULL or non-UTF-8 `path`).
+///
+/// # Safety
+/// `result` is NULL or a live result; `path` is NULL or a NUL-terminated
+/// string.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_write_g2o(
+    result: *const PgoResult,
+    path: *const c_char,
+) -> PgoStatus {
+    // SAFETY: the caller's contract.
+    unsafe { write(result, path, |s, p| s.write_g2o(p)) }
+}
+
+/// Writes the optimised trajectory in the TUM format at `path`, as evo
+/// reads it, atomically as `pgo_result_write_g2o` writes: one line per
+/// pose in the graph's order, `timestamp tx ty tz qx qy qz qw`, the
+/// timestamp the vertex id (poses have no time); a 2D pose as z = 0 and a
+/// rotation about z. Numbers in their shortest form that reads back to the
+/// same bits.
+///
+/// Errors: those of `pgo_result_write_g2o`.
+///
+/// # Safety
+/// As `pgo_result_write_g2o`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_write_tum(
+    result: *const PgoResult,
+    path: *const c_char,
+) -> PgoStatus {
+    // SAFETY: the caller's contract.
+    unsafe { write(result, path, |s, p| s.write_tum(p)) }
+}
+
+/// Writes the optimised trajectory in the KITTI format at `path`, as evo
+/// reads it, atomically as `pgo_result_write_g2o` writes: one line per
+/// pose in the graph's order (the format has no ids: the order of
+/// `pgo_graph_ids`), the 3×4 matrix `[R t]` row by row; a 2D pose as
+/// z = 0 and a rotation about z.
+///
+/// Errors: those of `pgo_result_write_g2o`.
+///
+/// # Safety
+/// As `pgo_result_write_g2o`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_write_kitti(
+    result: *const PgoResult,
+    path: *const c_char,
+) -> PgoStatus {
+    // SAFETY: the caller's contract.
+    unsafe { write(result, path, |s, p| s.write_kitti(p)) }
+}
+
+/// Runs `write` on the solution and the path.
+///
+/// # Safety
+/// `result` is NULL or a live result; `path` is NULL or a NUL-terminated
+/// string.
+unsafe fn write(
+    result: *const PgoResult,
+    path: *const c_char,
+    write: impl FnOnce(&AnySolution, &str) -> Result<(), pgo::Error>,
+) -> PgoStatus {
+    status(|| {
+        // SAFETY: the caller's contract.
+        let (result, path) = unsafe { (borrow(result, "result")?, text(path, "path")?) };
+        Ok(write(&result.solution, path)?)
     })
 }
 

@@ -47,6 +47,17 @@ pub struct OptimizeArgs {
     /// pose no edge in the map ties to them is left out, with a warning.
     #[arg(long, value_name = "FILE.csv")]
     pub covariances: Option<PathBuf>,
+    /// Write the optimised trajectory here in the TUM format, as evo reads
+    /// it (atomically; `-` writes stdout): per pose in the graph's order,
+    /// `timestamp tx ty tz qx qy qz qw`, the timestamp its vertex id; a 2D
+    /// pose as z = 0 and a rotation about z.
+    #[arg(long, value_name = "FILE")]
+    pub tum: Option<PathBuf>,
+    /// Write the optimised trajectory here in the KITTI format, as evo
+    /// reads it (atomically; `-` writes stdout): per pose in the graph's
+    /// order (KITTI has no ids), the 3×4 matrix [R t] row by row.
+    #[arg(long, value_name = "FILE")]
+    pub kitti: Option<PathBuf>,
     /// Everything the job itself can be told (the library's `Options`).
     #[command(flatten)]
     pub options: pgo::Options,
@@ -113,6 +124,11 @@ impl Failure {
         use pgo::ErrorKind as K;
         match self {
             Self::Inliers(_) => 2,
+            // An output that cannot be written: the job ran.
+            Self::Job {
+                error: Error::Write { .. },
+                ..
+            } => 1,
             Self::Job { error, .. } => match error.kind() {
                 K::Io | K::Parse | K::Dimension | K::InvalidInformation | K::InvalidPose => 2,
                 K::Unconstrained | K::EmptyGraph | K::UnknownVertex | K::InvalidOption => 2,
@@ -180,6 +196,14 @@ pub fn run(args: &OptimizeArgs, observer: &mut dyn Observer) -> Result<Report, F
     }
     if let Some(path) = &args.covariances {
         write_covariances(&solution, path, &mut report).map_err(job)?;
+    }
+    if let Some(path) = &args.tum {
+        solution.write_tum(path).map_err(job)?;
+        report.trajectories.push(path.display().to_string());
+    }
+    if let Some(path) = &args.kitti {
+        solution.write_kitti(path).map_err(job)?;
+        report.trajectories.push(path.display().to_string());
     }
     report.time.total_s = start.elapsed().as_secs_f64();
     Ok(report)
@@ -313,16 +337,24 @@ pub fn check_optimize_files(args: &OptimizeArgs) -> Result<(), String> {
         }
     };
     checked.map_err(|e| e.to_string())?;
-    check_covariances_file(args, &inputs)
+    check_extra_outputs(args, &inputs)
 }
 
-/// [`check_files`] for `--covariances`: an output of its own, beside `-o`
-/// (or the input, `--in-place`) and `--json` on stdout.
-fn check_covariances_file(args: &OptimizeArgs, inputs: &[&std::path::Path]) -> Result<(), String> {
-    let Some(path) = &args.covariances else {
+/// [`check_files`] for `--covariances`, `--tum` and `--kitti`: outputs of
+/// their own, beside each other, `-o` (or the input, `--in-place`) and
+/// `--json` on stdout: at most one of them all may be `-`.
+fn check_extra_outputs(args: &OptimizeArgs, inputs: &[&std::path::Path]) -> Result<(), String> {
+    let extra = [
+        ("--covariances", &args.covariances),
+        ("--tum", &args.tum),
+        ("--kitti", &args.kitti),
+    ];
+    let mut outputs: Vec<(&str, &Path)> = (extra.iter())
+        .filter_map(|(option, path)| Some((*option, path.as_deref()?)))
+        .collect();
+    if outputs.is_empty() {
         return Ok(());
-    };
-    let mut outputs = vec![("--covariances", path.as_path())];
+    }
     outputs.extend(args.output.as_deref().map(|o| ("-o", o)));
     let inputs = if args.in_place {
         outputs.push(("--in-place", args.input.as_path()));

@@ -202,6 +202,12 @@ class Result:
         """Whether a Cancel token stopped the job (the best map so far)."""
     def certificate(self) -> Dict[str, Any]:
         """Certificate of global optimality of the map (certified, eta, cost, map_cost, gap_bound, max_translation_change, max_rotation_change, lambda_min, lambda_min_bounds, eigenvector_poses, time)."""
+    def write_g2o(self, path: Union[str, os.PathLike[str]]) -> None:
+        """Writes the optimised map as a g2o file, atomically (``"-"``: stdout): a file's own text with the new poses, else the graph's lines; raises FileError."""
+    def write_tum(self, path: Union[str, os.PathLike[str]]) -> None:
+        """Writes the optimised trajectory as TUM (evo): per pose in the graph's order ``id tx ty tz qx qy qz qw``, the vertex id as timestamp; 2D as z = 0 and a rotation about z; raises FileError."""
+    def write_kitti(self, path: Union[str, os.PathLike[str]]) -> None:
+        """Writes the optimised trajectory as KITTI (evo): per pose in the graph's order (no ids), the 3×4 matrix [R t] row by row; 2D as z = 0 and a rotation about z; raises FileError."""
     def covariance(self, id: VertexId) -> npt.NDArray[np.float64]:
         """Pose ``id``'s marginal covariance, D×D (3: x y θ; 6: x y z rx ry rz; right perturbation)."""
     def covariances(

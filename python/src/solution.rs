@@ -234,6 +234,39 @@ impl Solution {
         covariance::relative(py, &self.covariances, &self.solution, (a, b))
     }
 
+    /// Writes the optimised map as a g2o file at `path` (`str` or
+    /// path-like), atomically (a temporary file renamed over it; `"-"` is
+    /// the process's standard output): a graph read from a file as that
+    /// file's own text with the new poses, any other graph as
+    /// `PoseGraph.write_g2o` writes it, with the optimised poses. Raises
+    /// `pgo.FileError` (an `OSError`) when it cannot be written; nothing
+    /// is replaced then.
+    fn write_g2o(&self, py: Python<'_>, path: &Bound<'_, PyAny>) -> PyResult<()> {
+        let path = convert::path(path)?;
+        py.detach(|| self.solution.write_g2o(&path)).map_err(error)
+    }
+
+    /// Writes the optimised trajectory in the TUM format at `path`, as
+    /// evo reads it (atomically, as `write_g2o`): one line per pose in the
+    /// graph's order, `timestamp tx ty tz qx qy qz qw`, the timestamp the
+    /// vertex id (poses have no time); a 2D pose as z = 0 and a rotation
+    /// about z. Raises `pgo.FileError`.
+    fn write_tum(&self, py: Python<'_>, path: &Bound<'_, PyAny>) -> PyResult<()> {
+        let path = convert::path(path)?;
+        py.detach(|| self.solution.write_tum(&path)).map_err(error)
+    }
+
+    /// Writes the optimised trajectory in the KITTI format at `path`, as
+    /// evo reads it (atomically, as `write_g2o`): one line per pose in the
+    /// graph's order (the format has no ids), the 3×4 matrix `[R t]` row
+    /// by row; a 2D pose as z = 0 and a rotation about z. Raises
+    /// `pgo.FileError`.
+    fn write_kitti(&self, py: Python<'_>, path: &Bound<'_, PyAny>) -> PyResult<()> {
+        let path = convert::path(path)?;
+        py.detach(|| self.solution.write_kitti(&path))
+            .map_err(error)
+    }
+
     /// `Result(poses=…, loops=…, accepted=…, chi2=…, verdict=…)`.
     fn __repr__(&self) -> String {
         let loops = self.solution.loops();

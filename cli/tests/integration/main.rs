@@ -12,6 +12,7 @@ mod hostile;
 mod library;
 mod replays;
 mod robust;
+mod trajectory;
 // SIGKILL, and /proc to tell which leftover temporaries are stale.
 #[cfg(target_os = "linux")]
 mod killed;
