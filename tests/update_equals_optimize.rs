@@ -79,7 +79,9 @@ fn compare<P: GraphPose<D>, const D: usize>(u: &Solution<P>, b: &Solution<P>) ->
     let (cu, cb) = (u.chi2(), b.chi2());
     let rel = (cu - cb).abs() / cb.abs().max(f64::MIN_POSITIVE);
     if rel > TOLERANCE && (cu - cb).abs() > 1e-12 {
-        out.push(format!("χ² {cu:.9e} vs batch {cb:.9e} (relative {rel:.2e})"));
+        out.push(format!(
+            "χ² {cu:.9e} vs batch {cb:.9e} (relative {rel:.2e})"
+        ));
     }
     let (mut lo, mut hi) = (
         pgo::nalgebra::Vector3::repeat(f64::INFINITY),
@@ -131,7 +133,8 @@ fn replay<P: GraphPose<D>, const D: usize>(
     let mut next = rng.random_range(1..=50usize);
     let mut compared = 0;
     for k in 0..n {
-        g.add_pose(k as u64, *noisy.pose(k as u64).unwrap()).unwrap();
+        g.add_pose(k as u64, *noisy.pose(k as u64).unwrap())
+            .unwrap();
         for &e in &due[k] {
             let e = noisy.edge(e).unwrap();
             if e.loop_candidate {
@@ -163,9 +166,9 @@ fn replay<P: GraphPose<D>, const D: usize>(
         let u = g.update(&options).unwrap();
         let b = g.optimize(&options).unwrap();
         compared += 1;
-        let solve = u.incremental().map_or(String::new(), |i| {
-            format!("{:?} ({})", i.solve, i.reason)
-        });
+        let solve = u
+            .incremental()
+            .map_or(String::new(), |i| format!("{:?} ({})", i.solve, i.reason));
         for what in compare(&u, &b) {
             mismatches.push(Mismatch {
                 case,
@@ -270,7 +273,8 @@ fn the_issue_47_replays_are_the_batch_job() {
         let mut from = 0;
         for &stop in stops {
             for k in from..stop {
-                g.add_pose(k as u64, *noisy.pose(k as u64).unwrap()).unwrap();
+                g.add_pose(k as u64, *noisy.pose(k as u64).unwrap())
+                    .unwrap();
             }
             for e in noisy.edges() {
                 let hi = e.from.max(e.to) as usize;
