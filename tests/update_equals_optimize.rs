@@ -132,10 +132,10 @@ fn replay<P: GraphPose<D>, const D: usize>(
     let mut g = PoseGraph::<P, D>::new();
     let mut next = rng.random_range(1..=50usize);
     let mut compared = 0;
-    for k in 0..n {
+    for (k, due) in due.iter().enumerate() {
         g.add_pose(k as u64, *noisy.pose(k as u64).unwrap())
             .unwrap();
-        for &e in &due[k] {
+        for &e in due {
             let e = noisy.edge(e).unwrap();
             if e.loop_candidate {
                 g.add_loop_candidate(e.from, e.to, e.measurement, e.information, e.inliers)
