@@ -120,6 +120,10 @@ pub enum UpdateSolve {
     Warm,
     /// From the last solution, every candidate weighed again by the robust
     /// kernel (a kernel method, or fewer candidates than EM's model needs).
+    /// No longer made: from the last map a kernel can end in another
+    /// minimum than the batch job's, so such an update runs the whole job
+    /// ([`UpdateSolve::Batch`], docs/method.md §7b). Kept so that reports
+    /// and bindings keep their names.
     Full,
 }
 

@@ -185,8 +185,15 @@ fn a_replay_ends_with_the_batch_map_and_decisions() {
     for every in [7, 60] {
         let kinds = replay::<Se2, 3>("aliased.g2o", se2, every);
         assert_eq!(kinds[0], UpdateSolve::Batch);
-        assert!(kinds[1..].iter().all(|k| *k != UpdateSolve::Batch));
-        assert!(kinds.contains(&UpdateSolve::Warm));
+        // A young map's updates run the whole job (too few candidates for
+        // EM's model, no model or no accepted loop to resume from:
+        // docs/method.md §7b); once EM resumes, none does.
+        let warm = kinds.iter().position(|k| *k == UpdateSolve::Warm);
+        let warm = warm.expect("EM resumes");
+        assert!(
+            kinds[warm..].iter().all(|k| *k != UpdateSolve::Batch),
+            "{kinds:?}"
+        );
     }
     let kinds = replay::<Se2, 3>("grid2d.g2o", se2, 25);
     assert!(kinds.contains(&UpdateSolve::Warm));

@@ -1124,9 +1124,11 @@ fn an_outvoted_loop_is_listed_as_changed() {
         let r = update(g, ptr::null());
         let u = update_of(r);
         assert_eq!((u.new_poses, u.new_edges, u.new_candidates), (1, 4, 3));
+        // Too few candidates for EM's model: the whole job
+        // (docs/method.md §7b), which reports the change as an update does.
         assert!(matches!(
             u.solve,
-            PgoUpdateSolve::PgoUpdateWarm | PgoUpdateSolve::PgoUpdateFull
+            PgoUpdateSolve::PgoUpdateWarm | PgoUpdateSolve::PgoUpdateBatch
         ));
         let changes = changes_of(r);
         assert_eq!(changes.len(), 1, "{changes:?}");
@@ -1281,10 +1283,14 @@ fn a_replay_through_c_is_the_librarys_and_ends_with_the_batch_job() {
     }
     use PgoUpdateSolve::*;
     assert_eq!(kinds[0].0, PgoUpdateBatch);
-    // A later whole job only where EM's decisions from the last ones
-    // swung (the documented fall-back; here at 100 poses).
+    // A later whole job only while the map is young (too few candidates
+    // for EM's model, no model or accepted loop to resume from) or where
+    // EM's decisions from the last ones swung (the documented fall-backs,
+    // docs/method.md §7b).
+    let resumed = kinds.iter().position(|(s, _)| *s == PgoUpdateWarm);
+    let resumed = resumed.unwrap_or(kinds.len());
     assert!(
-        (kinds[1..].iter()).all(|(s, why)| *s != PgoUpdateBatch || why.contains("swung")),
+        (kinds[resumed..].iter()).all(|(s, why)| *s != PgoUpdateBatch || why.contains("swung")),
         "{kinds:?}"
     );
     let kinds: Vec<PgoUpdateSolve> = kinds.into_iter().map(|(s, _)| s).collect();

@@ -144,8 +144,12 @@ def test_a_replay_of_a_square_walk_ends_with_the_batch_job():
         if previous is None:
             assert (inc["solve"], inc["reason"]) == ("batch", "no earlier solution")
             assert inc["changed"] == []
+        elif inc["solve"] == "batch":
+            # A young map: too few candidates for EM's model, or no model
+            # or accepted loop to resume from (docs/method.md §7b).
+            assert "swung" not in inc["reason"] and "warm" not in kinds[:-1], (k, inc)
+            assert_changed_lists_the_flips(result, previous)
         else:
-            assert inc["solve"] != "batch", (k, inc)
             assert [inc["new_poses"], inc["new_edges"], inc["new_candidates"]] == added
             assert_changed_lists_the_flips(result, previous)
         new_ids = [s[0] for s in steps[k + 1 - added[0]:k + 1]]
@@ -162,9 +166,9 @@ def test_a_replay_of_a_square_walk_ends_with_the_batch_job():
                 assert pose_difference(result.pose(i), previous.pose(i)) < 1e-12, i
             assert accepted(result) == accepted(previous)
         elif previous is not None:
-            assert inc["solve"] in ("warm", "full"), (k, inc)
+            assert inc["solve"] in ("warm", "batch"), (k, inc)
         previous, added = result, [0, 0, 0]
-    assert kinds.count("extended") >= 4 and kinds.count("warm") + kinds.count("full") >= 4, kinds
+    assert kinds.count("extended") >= 4 and kinds.count("warm") + kinds.count("batch") - 1 >= 4, kinds
 
     # Nothing added: the last map stands.
     again = graph.update()
