@@ -109,11 +109,17 @@ fn library_message(input: &Path, error: &Error) -> String {
 
 impl Failure {
     /// The process exit status: 2 for input the job cannot take, 1 for
-    /// other failures.
+    /// other failures (an output that cannot be written among them).
     pub fn exit_code(&self) -> u8 {
         use pgo::ErrorKind as K;
         match self {
             Self::Inliers(_) => 2,
+            // An output that cannot be written is a runtime error, not bad
+            // input (the README's exit statuses).
+            Self::Job {
+                error: Error::Write { .. },
+                ..
+            } => 1,
             Self::Job { error, .. } => match error.kind() {
                 K::Io | K::Parse | K::Dimension | K::InvalidInformation | K::InvalidPose => 2,
                 K::Unconstrained | K::EmptyGraph | K::UnknownVertex | K::InvalidOption => 2,
