@@ -245,7 +245,11 @@ mod tests {
     /// The loop candidates of `g` as the job sees them: edge index and count.
     fn candidates(g: &pgo::AnyPoseGraph) -> Vec<(usize, Option<u64>)> {
         let solution = g.optimize(&pgo::Options::default()).unwrap();
-        solution.loops().iter().map(|l| (l.index, l.inliers)).collect()
+        solution
+            .loops()
+            .iter()
+            .map(|l| (l.index, l.inliers))
+            .collect()
     }
 
     #[test]

@@ -16,7 +16,6 @@ macro_rules! say {
     };
 }
 
-
 mod console;
 mod inliers;
 mod optimize;
@@ -290,7 +289,6 @@ struct GateArgs {
     #[arg(long)]
     json: bool,
 }
-
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {

@@ -65,7 +65,6 @@ pub struct OptimizeArgs {
     pub verbose: bool,
 }
 
-
 /// The exit status of `pgo optimize` when the result fails its χ² test
 /// (the outputs are still written).
 const CHI2_FAILED_STATUS: u8 = 3;
@@ -123,7 +122,13 @@ impl Failure {
             Self::Job { error, .. } => match error.kind() {
                 K::Io | K::Parse | K::Dimension | K::InvalidInformation | K::InvalidPose => 2,
                 K::Unconstrained | K::EmptyGraph | K::UnknownVertex | K::InvalidOption => 2,
-                _ if matches!(error, Error::Undetermined { .. } | Error::NonFiniteEdge { .. }) => 2,
+                _ if matches!(
+                    error,
+                    Error::Undetermined { .. } | Error::NonFiniteEdge { .. }
+                ) =>
+                {
+                    2
+                }
                 _ => 1,
             },
             Self::Plot(_) => 1,
@@ -150,7 +155,8 @@ pub fn run(args: &OptimizeArgs, observer: &mut dyn Observer) -> Result<Report, F
     if let Some(csv) = &args.inliers {
         let rows = inliers::read_csv(csv)?;
         let n = inliers::apply(&mut graph, &rows, csv)?;
-        replaced = (n > 0).then(|| format!("{}: replaced the inlier counts of {n} edges", csv.display()));
+        replaced =
+            (n > 0).then(|| format!("{}: replaced the inlier counts of {n} edges", csv.display()));
     }
     let solution = graph.optimize_with(&args.options, observer).map_err(job)?;
     let mut report = solution.report().clone();
@@ -187,7 +193,11 @@ pub fn run(args: &OptimizeArgs, observer: &mut dyn Observer) -> Result<Report, F
 
 /// Writes the covariances of the map (`--covariances`): a warning names
 /// the poses left out.
-fn write_covariances(solution: &AnySolution, path: &Path, report: &mut Report) -> Result<(), Error> {
+fn write_covariances(
+    solution: &AnySolution,
+    path: &Path,
+    report: &mut Report,
+) -> Result<(), Error> {
     let covariances = solution.covariances()?;
     let mut unbounded = Vec::new();
     pgo::output::write_atomically(path, |w| {
@@ -272,7 +282,9 @@ fn finish(args: &OptimizeArgs, report: &Report, verbose: bool) -> ExitCode {
         }
     }
     if report.optimizer.stop_reason == pgo::StopReason::Cancelled {
-        say!("pgo: interrupted: the best map so far was written (exit status {INTERRUPTED_STATUS})");
+        say!(
+            "pgo: interrupted: the best map so far was written (exit status {INTERRUPTED_STATUS})"
+        );
         return ExitCode::from(INTERRUPTED_STATUS);
     }
     if report.chi2_test.as_ref().is_some_and(|t| !t.passed) {

@@ -23,8 +23,8 @@ mod loops;
 pub use job::pictures;
 pub use loops::{LoopPoint, plot_loops};
 
-use pgo::{Component, LogNormalMixture, Threshold, ThresholdFit};
 use pgo::Pose;
+use pgo::{Component, LogNormalMixture, Threshold, ThresholdFit};
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
@@ -1031,9 +1031,9 @@ fn draw_key(area: &DrawingArea<SVGBackend<'_>, Shift>) -> DrawResult<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use pgo::nalgebra::{UnitQuaternion, Vector3};
     use pgo::{Degeneracy, MixtureOptions, learn_threshold};
     use pgo::{Se2, Se3};
-    use pgo::nalgebra::{UnitQuaternion, Vector3};
     use rand::SeedableRng;
     use rand::rngs::StdRng;
     use rand_distr::{Distribution, LogNormal};

@@ -241,7 +241,11 @@ mod tests {
     fn candidates() -> (Vec<LoopPoint>, LoopModel) {
         let sample = concat!(env!("CARGO_MANIFEST_DIR"), "/../g2o_samples/grid2d.g2o");
         let graph = pgo::AnyPoseGraph::read_g2o(sample).unwrap();
-        let report = graph.optimize(&pgo::Options::default()).unwrap().report().clone();
+        let report = graph
+            .optimize(&pgo::Options::default())
+            .unwrap()
+            .report()
+            .clone();
         let points = super::super::job::loop_points(&report);
         (points, report.robust.model.unwrap())
     }
