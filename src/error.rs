@@ -174,16 +174,20 @@ pub enum Error {
     /// An edge's cost is not finite at the initial guess: its measurement,
     /// information or poses are too large for floating point.
     #[error(
-        "edge {edge} (vertex {from} → {to}) has a non-finite χ² at the initial guess: \
-         its measurement, information or poses are too large"
+        "edge {edge} (vertex {from} → {to}) has a non-finite χ² at the {} initial guess: \
+         its measurement, information or poses are too large",
+        initialization_name(*.initialization)
     )]
     NonFiniteEdge {
-        /// The edge's index, as returned when it was added.
+        /// The edge's index, as returned when it was added (a file's edges
+        /// counted from 0 in file order).
         edge: usize,
         /// Its first vertex id.
         from: VertexId,
         /// Its second vertex id.
         to: VertexId,
+        /// The initial guess ([`crate::SolverOptions::init`]).
+        initialization: crate::Initialization,
     },
     /// The initial guess or the optimiser's result is not finite.
     #[error("the optimisation produced non-finite poses")]
@@ -477,6 +481,17 @@ fn read_message(e: &ReadError, name: &dyn Fn(Setting) -> String) -> String {
             name(Setting::RepairRead)
         ),
         other => other.to_string(),
+    }
+}
+
+/// An initial guess as the options name it.
+fn initialization_name(i: crate::Initialization) -> &'static str {
+    use crate::Initialization as I;
+    match i {
+        I::File => "file",
+        I::Odometry => "odometry",
+        I::Chordal => "chordal",
+        I::Previous => "previous",
     }
 }
 

@@ -119,12 +119,13 @@ fn library_message(input: &Path, error: &Error) -> String {
 
 impl Failure {
     /// The process exit status: 2 for input the job cannot take, 1 for
-    /// other failures.
+    /// other failures (an output that cannot be written among them).
     pub fn exit_code(&self) -> u8 {
         use pgo::ErrorKind as K;
         match self {
             Self::Inliers(_) => 2,
-            // An output that cannot be written: the job ran.
+            // An output that cannot be written is a runtime error, not bad
+            // input (the README's exit statuses).
             Self::Job {
                 error: Error::Write { .. },
                 ..

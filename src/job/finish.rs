@@ -51,6 +51,7 @@ pub fn initialize<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             edge: k,
             from: graph.id(e.from),
             to: graph.id(e.to),
+            initialization: config.options.solver.init,
         });
     }
     report.initialization = InitializationReport {

@@ -74,3 +74,47 @@ pub fn candidate_wrong(labels_csv: &str) -> Vec<bool> {
         })
         .collect()
 }
+
+/// A copy of `graph` built call by call through the public API with each
+/// edge passed through `change` (with its index): the poses of `ids()`
+/// in order, the edges `change` returns (`None` leaves one out) as trusted
+/// edges or loop candidates with their counts, and the fixed poses. For
+/// tests that scale information, bend measurements or drop edges.
+pub fn rebuilt<P: pgo::GraphPose<D>, const D: usize>(
+    graph: &pgo::PoseGraph<P, D>,
+    mut change: impl FnMut(usize, pgo::Edge<P, D>) -> Option<pgo::Edge<P, D>>,
+) -> pgo::PoseGraph<P, D> {
+    let mut copy = pgo::PoseGraph::new();
+    for &id in graph.ids() {
+        let pose = *graph.pose(id).expect("every vertex has a pose");
+        copy.add_pose(id, pose).expect("pose");
+    }
+    for (k, e) in graph.edges().enumerate() {
+        let Some(e) = change(k, e) else { continue };
+        if e.loop_candidate {
+            copy.add_loop_candidate(e.from, e.to, e.measurement, e.information, e.inliers)
+        } else {
+            copy.add_edge(e.from, e.to, e.measurement, e.information)
+        }
+        .expect("edge");
+    }
+    for id in graph.fixed() {
+        copy.fix(id).expect("fixed pose");
+    }
+    copy
+}
+
+/// For every loop candidate of `graph` in order, whether it is wrong
+/// (`wrong`: per edge, as `pgo_sim` labels them).
+pub fn candidate_labels<P: pgo::GraphPose<D>, const D: usize>(
+    graph: &pgo::PoseGraph<P, D>,
+    wrong: &[bool],
+) -> Vec<bool> {
+    assert_eq!(graph.num_edges(), wrong.len());
+    graph
+        .edges()
+        .zip(wrong)
+        .filter(|(e, _)| e.loop_candidate)
+        .map(|(_, &w)| w)
+        .collect()
+}

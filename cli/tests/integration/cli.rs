@@ -140,7 +140,7 @@ fn disconnected_graph_names_the_unconstrained_vertices() {
     let out = pgo(&["optimize", input.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2));
     assert!(
-        stderr(&out).contains("not connected to the gauge vertex 0")
+        stderr(&out).contains("not connected to the fixed vertex 0")
             && stderr(&out).contains("7, 8"),
         "{}",
         stderr(&out)

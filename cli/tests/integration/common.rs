@@ -36,56 +36,6 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     p
 }
 
-/// Writes a 2D graph as g2o to `path`.
-pub fn write_graph(graph: &pgo::graph::Graph<pgo::geometry::Se2, 3>, path: &Path) {
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).expect("create"));
-    pgo::io::g2o::write_graph(graph, &[], &mut f).expect("write");
-}
-
-/// For every loop candidate (an edge between poses not one apart) of a
-/// `pgo corrupt --labels` CSV (`edge,from,to,wrong`), in file order,
-/// whether it is wrong.
-pub fn candidate_wrong(labels_csv: &str) -> Vec<bool> {
-    labels_csv
-        .lines()
-        .skip(1)
-        .filter_map(|line| {
-            let f: Vec<&str> = line.split(',').collect();
-            let (from, to): (u64, u64) = (f[1].parse().ok()?, f[2].parse().ok()?);
-            (from.abs_diff(to) != 1).then(|| f[3] == "1")
-        })
-        .collect()
-}
-
-/// A simulated planar graph as the tests take it apart: the noisy graph in
-/// the library's insides (written as g2o by the simulator and read back,
-/// the same numbers), and which of its edges are wrong.
-pub struct Simulated {
-    pub noisy: pgo::graph::Graph<pgo::geometry::Se2, 3>,
-    pub wrong: Vec<bool>,
-}
-
-/// [`pgo_sim::simulate_planar`], taken apart ([`Simulated`]).
-pub fn simulate_planar(
-    options: &pgo_sim::SimulationOptions,
-) -> Result<Simulated, pgo_sim::SimulationError> {
-    let sim = pgo_sim::simulate_planar(options)?;
-    let dir = tempfile::tempdir().expect("temporary directory");
-    let path = dir.path().join("simulated.g2o");
-    sim.noisy.write_g2o(&path).expect("write");
-    let noisy = match pgo::io::g2o::read(&path, Default::default())
-        .expect("read back")
-        .graph
-    {
-        pgo::graph::AnyGraph::Planar(g) => g,
-        pgo::graph::AnyGraph::Spatial(_) => unreachable!("a grid is planar"),
-    };
-    Ok(Simulated {
-        noisy,
-        wrong: sim.wrong,
-    })
-}
-
 /// The public benchmark datasets: `$PGO_DATASETS`, else
 /// `../shared/datasets` beside the repository. When they are absent,
 /// `None` with the reason printed, so that the tests that need them skip —

@@ -557,7 +557,7 @@ fn two_disconnected_pieces_name_the_unreachable_vertices() {
         &path,
         &[],
         None,
-        "not connected to the gauge vertex 0",
+        "not connected to the fixed vertex 0",
     );
     assert_rejected(&dir, &path, &[], None, "e.g. 5, 6");
     let path = file(

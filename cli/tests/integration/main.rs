@@ -11,7 +11,6 @@ mod gating;
 mod hostile;
 mod library;
 mod replays;
-mod robust;
 mod trajectory;
 // SIGKILL, and /proc to tell which leftover temporaries are stale.
 #[cfg(target_os = "linux")]
