@@ -11,7 +11,9 @@ use numpy::{AllowTypeChange, PyArrayLikeDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::PyOverflowError;
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
-use pyo3::types::{PyBool, PyByteArray, PyBytes, PyFloat, PyString, PyType};
+use pyo3::types::{
+    PyBool, PyByteArray, PyBytes, PyFloat, PyList, PyMemoryView, PyString, PyTuple, PyType,
+};
 use std::path::PathBuf;
 
 /// A library error as the `pgo.Error` subclass of its kind.
@@ -139,9 +141,10 @@ pub fn matrix(value: &Bound<'_, PyAny>, size: usize) -> PyResult<Vec<f64>> {
 }
 
 /// Any array-like of real numbers (integers or floats) as a float64
-/// array. Refused: text and bytes (numpy would parse `'1'` as 1), bools,
-/// complex numbers (numpy would drop the imaginary part), objects, and
-/// masked arrays (numpy would drop the mask).
+/// array. Refused: text and bytes, a memoryview of bytes included (numpy
+/// would parse `'1'` as 1, or take each byte as a number), bools, complex
+/// numbers (numpy would drop the imaginary part), objects, and masked
+/// arrays, also as rows of a list (numpy would drop the mask).
 fn numbers<'py>(
     what: &str,
     value: &Bound<'py, PyAny>,
@@ -158,11 +161,30 @@ fn numbers<'py>(
             describe(value)
         )));
     }
-    if value.is_instance(MASKED.import(py, "numpy.ma", "MaskedArray")?)? {
+    if let Ok(view) = value.cast::<PyMemoryView>() {
+        // A view of bytes is bytes: numpy would take each byte as a number.
+        let exporter = view.getattr("obj")?;
+        let bytes =
+            exporter.is_instance_of::<PyBytes>() || exporter.is_instance_of::<PyByteArray>();
+        let format: String = view.getattr("format")?.extract()?;
+        if bytes && matches!(format.as_str(), "B" | "b" | "c") {
+            return Err(wrong_type(format!(
+                "{what}: expected numbers, got a view of bytes {}",
+                describe(&exporter)
+            )));
+        }
+    }
+    let masked = MASKED.import(py, "numpy.ma", "MaskedArray")?;
+    if let Some(found) = find_masked(value, masked, 0)? {
+        let inside = if found.is(value) {
+            String::new()
+        } else {
+            format!(" inside {}", describe(value))
+        };
         return Err(wrong_type(format!(
             "{what}: a masked array's mask would be ignored; pass an array without one \
-             (.filled() or .compressed()), got {}",
-            describe(value)
+             (.filled() or .compressed()), got {}{inside}",
+            describe(&found)
         )));
     }
     let asarray = ASARRAY.import(py, "numpy", "asarray")?;
@@ -178,6 +200,7 @@ fn numbers<'py>(
         "f" | "i" | "u" => None,
         "b" => Some("booleans"),
         "c" => Some("complex numbers (only real ones are taken)"),
+        "U" | "S" => Some("text"),
         _ => Some("no numbers"),
     };
     if let Some(found) = refused {
@@ -195,6 +218,36 @@ fn numbers<'py>(
             describe(value)
         ))
     })
+}
+
+/// `value` if it is a masked array (`numpy.ma.masked` included), else
+/// the first masked array nested in it as lists and tuples, rows of a
+/// matrix say: numpy would take their data and drop their masks.
+fn find_masked<'py>(
+    value: &Bound<'py, PyAny>,
+    masked: &Bound<'py, PyType>,
+    depth: usize,
+) -> PyResult<Option<Bound<'py, PyAny>>> {
+    if value.is_instance(masked)? {
+        return Ok(Some(value.clone()));
+    }
+    // Deeper than any vector or matrix: numpy refuses it anyway.
+    if depth >= 32 {
+        return Ok(None);
+    }
+    let items = if let Ok(list) = value.cast::<PyList>() {
+        list.iter().collect::<Vec<_>>()
+    } else if let Ok(tuple) = value.cast::<PyTuple>() {
+        tuple.iter().collect()
+    } else {
+        return Ok(None);
+    };
+    for item in &items {
+        if let Some(found) = find_masked(item, masked, depth + 1)? {
+            return Ok(Some(found));
+        }
+    }
+    Ok(None)
 }
 
 /// An option's value as the text `pgo optimize` takes after its flag:

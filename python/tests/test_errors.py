@@ -110,11 +110,16 @@ BAD_CALLS = {
     "pose of text": (lambda: two_poses().add_pose(2, "abc"), pgo.ArgumentTypeError,
                      "pose: expected numbers, got 'abc' (str)"),
     "pose of texts": (lambda: two_poses().add_pose(2, ["1", "2", "3"]), pgo.ArgumentTypeError,
-                      "pose: expected real numbers, got no numbers: ['1', '2', '3'] (list)"),
+                      "pose: expected real numbers, got text: ['1', '2', '3'] (list)"),
     "pose of bytes": (lambda: two_poses().add_pose(2, b"abc"), pgo.ArgumentTypeError,
                       "pose: expected numbers, got b'abc' (bytes)"),
     "pose of a bytearray": (lambda: two_poses().add_pose(2, bytearray(b"abc")),
                             pgo.ArgumentTypeError, "(bytearray)"),
+    "pose of a view of bytes": (lambda: two_poses().add_pose(2, memoryview(b"abc")),
+                                pgo.ArgumentTypeError,
+                                "pose: expected numbers, got a view of bytes b'abc' (bytes)"),
+    "nested texts": (lambda: two_poses().add_edge(0, 1, (1, 0, 0), [["1", "0", "0"], I3[1], I3[2]]),
+                     pgo.ArgumentTypeError, "information: expected real numbers, got text"),
     "pose of bools": (lambda: two_poses().add_pose(2, [True, False, True]),
                       pgo.ArgumentTypeError, "pose: expected real numbers, got booleans"),
     "complex pose": (lambda: two_poses().add_pose(2, np.array([1 + 2j, 0, 0])),
@@ -128,6 +133,12 @@ BAD_CALLS = {
                     pgo.ArgumentTypeError, "pose: a masked array's mask would be ignored"),
     "masked information": (lambda: two_poses().add_edge(0, 1, (1, 0, 0), np.ma.masked_array(np.eye(3))),
                            pgo.ArgumentTypeError, "information: a masked array"),
+    "masked rows": (lambda: two_poses().add_edge(
+                        0, 1, (1, 0, 0),
+                        [np.ma.masked_array([1.0, 0, 0], mask=[1, 0, 0]), I3[1], I3[2]]),
+                    pgo.ArgumentTypeError, "information: a masked array's mask would be ignored"),
+    "masked element": (lambda: two_poses().add_pose(2, [np.ma.masked, 0.0, 0.0]),
+                       pgo.ArgumentTypeError, "got masked (MaskedConstant) inside [masked, 0.0"),
     "pose of objects": (lambda: two_poses().add_pose(2, [1.0, None, 0.0]), pgo.ArgumentTypeError,
                         "pose: expected real numbers, got no numbers"),
     "pose as a matrix": (lambda: two_poses().add_pose(2, np.zeros((3, 1))), pgo.InvalidArgumentError,
@@ -284,6 +295,25 @@ def test_numbers_of_any_real_type_are_taken():
     graph.add_edge(0, np.int64(1), [1, 0, 0], np.eye(3, dtype=np.int64))
     graph.add_loop_candidate(0, 1, (1.0, 0.0, 0.0), I3, inliers=np.int16(40))
     assert graph.pose(1) == (1.0, 0.0, 0.0)
+
+
+def test_the_valid_forms_of_numbers_and_ids_are_taken():
+    graph = pgo.PoseGraph(np.int64(2))
+    graph.add_pose(0, (0, 0, 0))
+    graph.add_pose(1, [1.0, 0, 0.5])
+    graph.add_pose(2, np.array([2, 0, 0]))
+    graph.add_pose(3, memoryview(np.array([3.0, 0.0, 0.0])))
+    graph.add_pose(2**64 - 1, np.array([4.0, 0.0, 0.0], dtype=np.float32))
+    graph.add_edge(0, 1, (1, 0, 0.5), I3)
+    graph.add_edge(1, 2, [1.0, 0.0, -0.5], np.eye(3))
+    graph.add_edge(2, 3, np.array([1, 0, 0]), tuple(tuple(row) for row in I3))
+    graph.add_edge(3, 2**64 - 1, (1.0, 0.0, 0.0), [1, 0, 0, 0, 1, 0, 0, 0, 1])
+    graph.add_loop_candidate(0, 3, np.array([3.0, 0.0, 0.0]), np.eye(3, dtype=np.int32),
+                             inliers=40)
+    assert graph.pose(1) == (1.0, 0.0, 0.5)
+    assert graph.pose(3) == (3.0, 0.0, 0.0)
+    result = graph.optimize()
+    assert len(result.pose(np.uint64(2**64 - 1))) == 3
 
 
 def test_a_huge_quaternion_is_normalised_not_called_zero():
