@@ -8,9 +8,12 @@ import numpy.typing as npt
 
 __version__: str
 
-#: A vertex id: an integer in 0 ..= 2**64 - 1.
+#: A vertex id: an integer in 0 ..= 2**64 - 1 (a bool is none).
 VertexId = int
-#: A pose or measurement: (x, y, θ) in 2D, (x, y, z, qx, qy, qz, qw) in 3D.
+#: A pose or measurement: (x, y, θ) in 2D, (x, y, z, qx, qy, qz, qw) in 3D,
+#: as a sequence or array of real numbers (ints or floats). Refused, with a
+#: pgo.ArgumentTypeError: text, bytes (a memoryview of them too), bools,
+#: complex numbers, objects, masked arrays (also as items of a list).
 Numbers = Union[Sequence[float], npt.ArrayLike]
 #: An information matrix: 3×3 (2D) or 6×6 (3D), nested or an array.
 Matrix = Union[Sequence[Sequence[float]], npt.ArrayLike]
