@@ -594,7 +594,7 @@ def ablation_section(folder):
            "(docs/method.md says what each layer does). A layer earns its place where switching it "
            "off lowers F1, raises the map error or raises the cost on some family. The search acts "
            "only on a failed χ² test, which none of these cases ends with (the unit tests in "
-           "src/robust/schedule_tests.rs show what it does on one).", "",
+           "src/robust/schedule/tests.rs show what it does on one).", "",
            "Made by:", "", "```sh", ABLATION_CMD, "```", ""]
     runs = {}
     for layer in ABLATION_LAYERS:
