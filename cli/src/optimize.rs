@@ -338,7 +338,21 @@ pub fn check_optimize_files(args: &OptimizeArgs) -> Result<(), String> {
         }
     };
     checked.map_err(|e| e.to_string())?;
+    check_plot_dir(args.plot.as_deref())?;
     check_extra_outputs(args, &inputs)
+}
+
+/// `--plot DIR` must be a directory or not exist yet (it is made): a file
+/// there is refused before anything runs, so that no other output waits
+/// on a job whose pictures cannot be written.
+fn check_plot_dir(dir: Option<&std::path::Path>) -> Result<(), String> {
+    match dir.map(std::fs::metadata) {
+        Some(Ok(meta)) if !meta.is_dir() => Err(format!(
+            "--plot {}: not a directory (the pictures go into a directory, made if missing)",
+            dir.map_or_else(String::new, |d| d.display().to_string())
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// [`check_files`] for `--covariances`, `--tum` and `--kitti`: outputs of

@@ -251,6 +251,31 @@ fn plot_writes_the_count_histogram_the_loop_decisions_and_the_trajectory() {
     assert_eq!(r["plots"].as_array().unwrap().len(), 1);
 }
 
+#[test]
+fn plot_into_a_file_is_refused_before_anything_runs() {
+    let dir = temp_dir("plot-file");
+    let file = dir.join("not-a-dir");
+    std::fs::write(&file, "x").unwrap();
+    let map = dir.join("map.g2o");
+    let out = pgo(&[
+        "optimize",
+        &sample("grid2d.g2o"),
+        "-o",
+        map.to_str().unwrap(),
+        "--plot",
+        file.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    let message = stderr(&out);
+    assert!(
+        message.contains("--plot") && message.contains("not a directory"),
+        "{message}"
+    );
+    // Nothing ran: no map, and the file is as it was.
+    assert!(!map.exists());
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "x");
+}
+
 /// Runs `pgo ARGS` with `input` on stdin; kills it after 60 s.
 fn pgo_stdin(args: &[&str], input: &[u8]) -> std::process::Output {
     use std::io::Write;
