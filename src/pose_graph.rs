@@ -204,23 +204,32 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     }
 
     fn read(path: &Path, fix_information: bool) -> Result<Self, Error> {
-        let file = g2o::read(path, ReadOptions { fix_information })?;
+        let mut file = g2o::read(path, ReadOptions { fix_information })?;
         in_range(&file.graph)?;
-        let text = Some(Arc::new(file.text().clone()));
         let found = file.graph.dimension();
-        let graph = P::unwrap(file.graph).ok_or(Error::Dimension {
+        let graph = std::mem::replace(
+            &mut file.graph,
+            graph::AnyGraph::Planar(graph::Graph::new()),
+        );
+        let graph = P::unwrap(graph).ok_or(Error::Dimension {
             expected: dimension::<D>(),
             found,
         })?;
-        Ok(Self {
+        Ok(Self::of_file(graph, file, path, fix_information))
+    }
+
+    /// The graph `graph` read from the file `path` (the rest of `file`:
+    /// the vertices no line defined, what the reader noticed, the text).
+    fn of_file(graph: graph::Graph<P, D>, file: g2o::G2oFile, path: &Path, repair: bool) -> Self {
+        Self {
             graph,
-            text,
+            text: Some(Arc::new(file.text().clone())),
             missing: file.missing,
             source: Some((path.to_owned(), file.summary)),
-            repair_information: fix_information,
+            repair_information: repair,
             repaired: 0,
             state: None,
-        })
+        }
     }
 
     /// Writes the graph as a g2o file, atomically (a temporary file renamed
@@ -733,34 +742,20 @@ impl AnyPoseGraph {
     }
 
     fn read(path: &Path, fix: bool) -> Result<Self, Error> {
-        let file = g2o::read(
+        let mut file = g2o::read(
             path,
             ReadOptions {
                 fix_information: fix,
             },
         )?;
         in_range(&file.graph)?;
-        let text = Some(Arc::new(file.text().clone()));
-        let source = Some((path.to_owned(), file.summary));
-        Ok(match file.graph {
-            graph::AnyGraph::Planar(graph) => Self::Planar(PoseGraph {
-                graph,
-                missing: file.missing,
-                source,
-                text,
-                repair_information: fix,
-                repaired: 0,
-                state: None,
-            }),
-            graph::AnyGraph::Spatial(graph) => Self::Spatial(PoseGraph {
-                graph,
-                missing: file.missing,
-                source,
-                text,
-                repair_information: fix,
-                repaired: 0,
-                state: None,
-            }),
+        let graph = std::mem::replace(
+            &mut file.graph,
+            graph::AnyGraph::Planar(graph::Graph::new()),
+        );
+        Ok(match graph {
+            graph::AnyGraph::Planar(g) => Self::Planar(PoseGraph::of_file(g, file, path, fix)),
+            graph::AnyGraph::Spatial(g) => Self::Spatial(PoseGraph::of_file(g, file, path, fix)),
         })
     }
 

@@ -607,45 +607,43 @@ pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     report: Report,
     observer: &mut dyn Observer,
 ) -> Result<Updated<P, D>, Error> {
-    let whole = |report: &mut Report, observer: &mut dyn Observer| {
+    // The whole job on a copy of the caller's graph, `why` saying why from
+    // the graph it solved and its report.
+    type Why<'a, P, const D: usize> = &'a dyn Fn(&Graph<P, D>, &Report) -> IncrementalReport;
+    let whole = |mut report: Report, observer: &mut dyn Observer, why: Why<'_, P, D>| {
         let mut solved = graph.clone();
-        let initial = super::run(&mut solved, missing, config, report, observer)?;
-        Ok::<_, Error>((solved, initial))
+        let initial = super::run(&mut solved, missing, config, &mut report, observer)?;
+        report.incremental = Some(why(&solved, &report));
+        let warm = Warm::after(&solved, &report, Default::default());
+        Ok(Updated {
+            graph: solved,
+            report,
+            warm,
+            initial: Some(initial),
+        })
     };
-    let mut solved = graph.clone();
-    let mut updated = report.clone();
-    let (solved, report, initial, warm) = match last {
-        Ok(warm) => match update_graph(&mut solved, warm, config, &mut updated, observer)? {
-            Ok(next) => (solved, updated, None, next),
-            Err(reason) => {
+    match last {
+        Ok(warm) => {
+            let (mut solved, mut updated) = (graph.clone(), report.clone());
+            match update_graph(&mut solved, warm, config, &mut updated, observer)? {
+                Ok(next) => Ok(Updated {
+                    graph: solved,
+                    report: updated,
+                    warm: next,
+                    initial: None,
+                }),
                 // No start to resume from, or EM's decisions swung: the
                 // whole job instead.
-                let mut report = report;
-                let (solved, initial) = whole(&mut report, observer)?;
-                report.incremental = Some(after_fallback(&solved, warm, &report, reason));
-                let next = Warm::after(&solved, &report, Default::default());
-                (solved, report, Some(initial), next)
+                Err(reason) => whole(report, observer, &|g, r| after_fallback(g, warm, r, reason)),
             }
-        },
-        Err(reason) => {
-            let mut report = report;
-            let (solved, initial) = whole(&mut report, observer)?;
-            report.incremental = Some(IncrementalReport {
-                solve: UpdateSolve::Batch,
-                reason: reason.into(),
-                new_poses: solved.num_vertices(),
-                new_edges: solved.edges.len(),
-                new_candidates: solved.num_candidates(),
-                changed: Vec::new(),
-            });
-            let next = Warm::after(&solved, &report, Default::default());
-            (solved, report, Some(initial), next)
         }
-    };
-    Ok(Updated {
-        graph: solved,
-        report,
-        warm,
-        initial,
-    })
+        Err(reason) => whole(report, observer, &|g, _| IncrementalReport {
+            solve: UpdateSolve::Batch,
+            reason: reason.into(),
+            new_poses: g.num_vertices(),
+            new_edges: g.edges.len(),
+            new_candidates: g.num_candidates(),
+            changed: Vec::new(),
+        }),
+    }
 }

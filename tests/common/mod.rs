@@ -1,5 +1,5 @@
 //! The fixtures of the library's integration tests, one module for every
-//! test file (`mod common;`): the bundled samples, a temporary directory
+//! test file (`mod common;`) and for the command line's tests: the bundled samples, a temporary directory
 //! per test, the public benchmark datasets, and the labels of the
 //! samples' loop candidates.
 
@@ -8,9 +8,14 @@
 
 use std::path::{Path, PathBuf};
 
-/// The repository's root (the library's crate is at its top).
+/// The repository's root: the library's crate is at its top, and the
+/// command line's tests (`cli/`) include this module too.
 pub fn repository() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    let crate_dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    (crate_dir.ancestors())
+        .find(|d| d.join("g2o_samples").is_dir())
+        .unwrap_or(crate_dir)
+        .to_owned()
 }
 
 /// A bundled sample file (`g2o_samples/`).
