@@ -386,8 +386,12 @@ def prepare(args, work):
                     tag = "-%s-o%s%s" % (args.alias_place, args.alias_offset or "",
                                          "-G" if args.alias_by_group else "") if wide else ""
                     case = "%s aliased%s %d" % (name, " " + args.alias_place if wide else "", n)
-                    stem = os.path.join(work, "%s-aliased%s-g%d-t%g-%d" % (
-                        name, tag.replace(",", "_"), args.alias_group_size, args.alias_true_like, n))
+                    # The seed is in the name of the wider cases: seeds of one
+                    # share are different files.
+                    seeded = "-s%d" % args.seed if wide else ""
+                    stem = os.path.join(work, "%s-aliased%s-g%d-t%g%s-%d" % (
+                        name, tag.replace(",", "_"), args.alias_group_size, args.alias_true_like,
+                        seeded, n))
                     flags = ["--wrong", str(n), "--wrong-mode", "aliased", "--seed", str(alias_seed),
                              "--group-size", str(args.alias_group_size),
                              "--true-like-counts", repr(args.alias_true_like),

@@ -563,3 +563,109 @@ fn each_layer_can_be_switched_off_and_the_report_says_which() {
     }
     assert!(Options::default().set("expert", "no-such-layer").is_err());
 }
+
+/// The first `n` poses of `graph` and the edges among them (with each
+/// edge's index in `graph`).
+fn prefix<P: pgo::GraphPose<D>, const D: usize>(
+    graph: &pgo::PoseGraph<P, D>,
+    n: u64,
+) -> (pgo::PoseGraph<P, D>, Vec<usize>) {
+    let mut young = pgo::PoseGraph::new();
+    for &id in graph.ids().iter().filter(|&&id| id < n) {
+        young.add_pose(id, *graph.pose(id).unwrap()).unwrap();
+    }
+    let mut kept = Vec::new();
+    for (k, e) in graph.edges().enumerate() {
+        if e.from < n && e.to < n {
+            if e.loop_candidate {
+                young.add_loop_candidate(e.from, e.to, e.measurement, e.information, e.inliers)
+            } else {
+                young.add_edge(e.from, e.to, e.measurement, e.information)
+            }
+            .unwrap();
+            kept.push(k);
+        }
+    }
+    (young, kept)
+}
+
+/// Accepted true and wrong candidates of `young` (a prefix whose edges are
+/// `kept` of a graph with labels `wrong`), and how many true ones it has.
+fn young_counts<P: pgo::GraphPose<D>, const D: usize>(
+    young: pgo::PoseGraph<P, D>,
+    kept: &[usize],
+    wrong: &[bool],
+) -> (usize, usize, usize) {
+    let labels: Vec<bool> = kept.iter().map(|&k| wrong[k]).collect();
+    let labels = candidate_labels(&young, &labels);
+    let r = young.optimize(&Options::default()).expect("optimise");
+    let (tp, fp, _) = counts(r.report(), &labels);
+    (tp, fp, labels.iter().filter(|w| !**w).count())
+}
+
+/// A young map keeps its true loops: on prefixes of simulated walks with
+/// 1 to 20 candidates, all true, every one is accepted — with fewer than
+/// `MIN_CANDIDATES` by EM's kernel, with more by a model that finds no
+/// wrong population — and a clear outlier added among them is rejected
+/// (docs/method.md §4, "Few candidates, all true").
+#[test]
+fn young_maps_keep_their_loops() {
+    let grid = pgo_sim::simulate_planar(&SimulationOptions {
+        poses: 2000,
+        loops: 200,
+        outliers: 50,
+        inliers: Some(InlierModel::default()),
+        seed: 2,
+        ..Default::default()
+    })
+    .expect("simulate");
+    let sphere = pgo_sim::simulate_spatial(&SimulationOptions {
+        world: pgo_sim::World::Sphere3d,
+        poses: 2000,
+        loops: 200,
+        outliers: 50,
+        inliers: Some(InlierModel::default()),
+        seed: 6,
+        ..Default::default()
+    })
+    .expect("simulate");
+    for n in [75, 80, 100, 126, 150, 170, 200] {
+        let (young, kept) = prefix(&grid.noisy, n);
+        let (tp, fp, true_loops) = young_counts(young, &kept, &grid.wrong);
+        assert!(true_loops >= 1);
+        assert_eq!((tp, fp), (true_loops, 0), "grid2d, {n} poses");
+    }
+    for n in [60, 100, 147, 200] {
+        let (young, kept) = prefix(&sphere.noisy, n);
+        let (tp, fp, true_loops) = young_counts(young, &kept, &sphere.wrong);
+        assert_eq!((tp, fp), (true_loops, 0), "sphere3d, {n} poses");
+    }
+    // A clear outlier among the first loops: 3 m and 0.5 rad off.
+    for n in [80, 150] {
+        let (mut young, mut kept) = prefix(&grid.noisy, n);
+        let far = grid
+            .noisy
+            .pose(n - 1)
+            .unwrap()
+            .compose(&Se2::new(3.0, -2.0, 0.5));
+        let z = grid.noisy.pose(5).unwrap().inverse().compose(&far);
+        young
+            .add_loop_candidate(
+                5,
+                n - 1,
+                z,
+                pgo::nalgebra::Matrix3::identity() * 100.0,
+                Some(150),
+            )
+            .unwrap();
+        let mut wrong = grid.wrong.clone();
+        kept.push(wrong.len());
+        wrong.push(true);
+        let (tp, fp, true_loops) = young_counts(young, &kept, &wrong);
+        assert_eq!(
+            (tp, fp),
+            (true_loops, 0),
+            "grid2d with an outlier, {n} poses"
+        );
+    }
+}

@@ -539,6 +539,10 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
 /// The reason of an update whose EM decisions swung from the last ones.
 const SWUNG: &str = "EM's decisions from the last ones swung: the whole job";
 
+/// The reason of an update whose map failed the χ² test: the whole job
+/// tries EM's second start, as `optimize()` does (docs/method.md §5).
+const FAILED: &str = "the update's map failed the χ² test: the whole job, with its second start";
+
 /// Why the last decisions, in `warm`, are no start from which the robust
 /// solve `method` of `candidates` candidates reaches the batch job's
 /// decisions and map (`None`: they are). The batch job weighs the
@@ -625,7 +629,17 @@ pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     match last {
         Ok(warm) => {
             let (mut solved, mut updated) = (graph.clone(), report.clone());
+            // An exact update (not capped: that promises a latency, not
+            // the batch map) whose map fails the test.
+            let failed = |r: &Report| {
+                config.options.robust.method == RobustMethod::Em
+                    && config.options.solver.update_iterations.is_none()
+                    && r.chi2_test.as_ref().is_some_and(|t| !t.passed)
+            };
             match update_graph(&mut solved, warm, config, &mut updated, observer)? {
+                Ok(_) if failed(&updated) => {
+                    whole(report, observer, &|g, r| after_fallback(g, warm, r, FAILED))
+                }
                 Ok(next) => Ok(Updated {
                     graph: solved,
                     report: updated,

@@ -24,14 +24,22 @@
 //! is singular — the cluster is all that ties part of the map — the map
 //! without it says nothing about it: `None`.
 //!
+//! `S` is also singular to rounding when the map without the cluster joins
+//! its ends only through a chain far looser than the loops (`S ≈
+//! Σ·C⁻¹·Σ` for a chain of covariance `C ≫ Σ`): `Σ_A − M_AA` cancels. Such
+//! a cluster is not left unchecked: [`through_wide_chains`] solves the map
+//! without it and judges its members against that map as candidates
+//! outside it, where nothing cancels.
+//!
 //! [`BlockSystem::propagate_group_solved`]: crate::linear::BlockSystem::propagate_group_solved
 
 use super::Candidate;
 use super::model::Evidence;
 use crate::geometry::Pose;
 use crate::graph::Graph;
+use crate::graph::UnionFind;
 use crate::linear::{EdgeJacobian, GroupScratch, Parallelism, SelectedInverse};
-use crate::solve::{Optimizer, SolveError};
+use crate::solve::{Optimizer, Session, SolveError};
 use faer::Par;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{
@@ -88,6 +96,10 @@ pub struct Evaluation<'a, P: Pose<D>, const D: usize> {
     optimizer: &'a mut Optimizer<P, D>,
     graph: &'a Graph<P, D>,
     block: Vec<Option<usize>>,
+    /// The step left to the exact least-squares map of the factorised
+    /// linearisation ([`Optimizer::remaining_step`]): the errors are read
+    /// there.
+    step: Vec<f64>,
     /// The selected inverse, unless every cluster is solved for
     /// ([`Evaluation::for_clusters`]).
     inverse: Option<SelectedInverse>,
@@ -119,10 +131,12 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         weights: &[f64],
     ) -> Result<Self, SolveError> {
         let block = optimizer.factor_at(graph, weights)?;
+        let step = optimizer.remaining_step();
         Ok(Self {
             optimizer,
             graph,
             block,
+            step,
             inverse: None,
             scratch: Mutex::default(),
             within: true,
@@ -262,7 +276,15 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             let e = &graph.edges[edges[k]];
             let l =
                 P::error_and_jacobians(&graph.poses[e.from], &graph.poses[e.to], &e.measurement);
-            lin.errors.push(l.error);
+            // The error at the exact map of the linearisation: e + J·δ.
+            let mut error = l.error;
+            for (b, jac) in [(self.block[e.from], &l.jac_i), (self.block[e.to], &l.jac_j)] {
+                if let Some(b) = b {
+                    error +=
+                        jac * SVector::<f64, D>::from_column_slice(&self.step[b * D..b * D + D]);
+                }
+            }
+            lin.errors.push(error);
             lin.jacobians
                 .push([(self.block[e.from], l.jac_i), (self.block[e.to], l.jac_j)]);
             lin.covariances.push(e.information.try_inverse());
@@ -302,6 +324,85 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, (a, self.within));
         (nu2, joint, true)
     }
+}
+
+/// Gives an innovation to the members of every cluster of `clusters` (of
+/// the candidates `edges`; `accepted[k]`: the map in the session was
+/// solved with candidate `k`, the edges of non-zero `weights`) that `innov`
+/// left without one although edges of the map outside the cluster join
+/// both ends of each member (module doc): the map without the cluster is
+/// solved, its members are judged against it as candidates outside the
+/// map, and the joint statistic is the drop of `Σ eᵀΩe` between the two
+/// maps. The session's map is put back (the optimiser's factorisation is
+/// the last map's: an evaluation factorises its own).
+/// Clusters that nothing else joins keep `None`: their prior decides.
+pub fn through_wide_chains<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &[f64],
+    (edges, accepted, clusters): (&[usize], &[bool], &[Vec<usize>]),
+    innov: &mut Innovations,
+) -> Result<(), SolveError> {
+    let open: Vec<usize> = (0..clusters.len())
+        .filter(|&c| {
+            let members = &clusters[c];
+            members.iter().any(|&k| accepted[k]) && members.iter().all(|&k| innov.nu2[k].is_none())
+        })
+        .filter(|&c| joined_without(session.graph, weights, edges, &clusters[c]))
+        .collect();
+    if open.is_empty() {
+        return Ok(());
+    }
+    let poses = session.graph.poses.clone();
+    let with = session.graph.chi2_where(|i| weights[i] > 0.0);
+    for c in open {
+        let members = &clusters[c];
+        let mut without = weights.to_vec();
+        members.iter().for_each(|&k| without[edges[k]] = 0.0);
+        session.converge(&without)?;
+        let dropped = with - session.graph.chi2_where(|i| without[i] > 0.0);
+        let outside = vec![false; accepted.len()];
+        let judged = Evaluation::for_clusters(
+            session.optimizer,
+            session.graph,
+            &without,
+            (edges, std::slice::from_ref(members)),
+        )?
+        .judging_within_clusters(false)
+        .innovations(edges, &outside, std::slice::from_ref(members), true);
+        for &k in members {
+            innov.nu2[k] = judged.nu2[k];
+            innov.exact[k] = true;
+        }
+        innov.joint[c] = Some(dropped.max(0.0));
+        session.graph.poses.copy_from_slice(&poses);
+    }
+    Ok(())
+}
+
+/// Whether the edges of non-zero `weights` outside `members` (indices into
+/// the candidates' `edges`) join both ends of every member, the gauge's
+/// vertices counting as joined.
+fn joined_without<P: Pose<D>, const D: usize>(
+    graph: &Graph<P, D>,
+    weights: &[f64],
+    edges: &[usize],
+    members: &[usize],
+) -> bool {
+    let mut parts = UnionFind::new(graph.poses.len());
+    let gauge = graph.gauge();
+    gauge.windows(2).for_each(|w| {
+        parts.union(w[0], w[1]);
+    });
+    let cluster: Vec<usize> = members.iter().map(|&k| edges[k]).collect();
+    for (i, e) in graph.edges.iter().enumerate() {
+        if weights[i] > 0.0 && !cluster.contains(&i) {
+            parts.union(e.from, e.to);
+        }
+    }
+    cluster.iter().all(|&i| {
+        let e = &graph.edges[i];
+        parts.find(e.from) == parts.find(e.to)
+    })
 }
 
 /// A cluster's members' `ν²`, its joint statistic, and whether the `ν²`

@@ -616,6 +616,31 @@ impl LoopModel {
         truth.ln(y) - self.ln_wrong_density(y)
     }
 
+    /// [`Self::raw_ratio`] as the decisions weigh it. Without a wrong
+    /// population (`K = 0`) the uniform density of wrong loops spans the
+    /// candidates' own `y`: when they are all true loops — a young map's
+    /// few — their upper tail would count as evidence against them. So
+    /// there an innovation is evidence against a loop only beyond EM's
+    /// kernel width on the true loops' scale, `y > ln(s²·c²)` (`c²` =
+    /// `χ²_D(1 − 10⁻⁶)`, `ln s²` = `μ_true − E[ln χ²_D]`), where a true
+    /// loop falls once in a million; below it the ratio is at least 1 and
+    /// the prior decides.
+    fn decisive_ratio(&self, truth: &Density<'_>, y: f64) -> f64 {
+        let raw = self.raw_ratio(truth, y);
+        if self.wrong_loops.is_empty() && y <= self.kernel_edge() {
+            raw.max(0.0)
+        } else {
+            raw
+        }
+    }
+
+    /// `ln(s²·c²)`: EM's kernel width on the true loops' scale
+    /// ([`Self::decisive_ratio`]).
+    fn kernel_edge(&self) -> f64 {
+        let c = super::default_c(super::RobustMethod::Em, self.dof);
+        self.true_loops.mean - ln_chi2_mean(self.dof) + 2.0 * c.ln()
+    }
+
     /// Tabulates the running minimum of the likelihood ratio from the true
     /// loops' mean up to the largest `y`.
     fn tabulate(&mut self, y: &[f64]) {
@@ -626,7 +651,8 @@ impl LoopModel {
         let truth = self.true_loops(&table);
         self.envelope = (0..=steps)
             .map(|i| {
-                low = low.min(self.raw_ratio(&truth, self.true_loops.mean + i as f64 * GRID_STEP));
+                let y = self.true_loops.mean + i as f64 * GRID_STEP;
+                low = low.min(self.decisive_ratio(&truth, y));
                 low
             })
             .collect();
@@ -652,7 +678,7 @@ impl LoopModel {
             // Beyond the table: the raw ratio there, and no more than the
             // table's last value.
             _ => {
-                let raw = self.raw_ratio(&self.true_loops(&LogChi2::of(self.dof)), y);
+                let raw = self.decisive_ratio(&self.true_loops(&LogChi2::of(self.dof)), y);
                 self.envelope.last().map_or(raw, |&v| v.min(raw))
             }
         }

@@ -20,7 +20,7 @@
 //!    map returned is the least-squares map of the accepted loops.
 
 use super::clusters::clusters;
-use super::innovation::{Evaluation, Innovations};
+use super::innovation::{Evaluation, Innovations, through_wide_chains};
 use super::kernels::{GNC_MU_STEP, cauchy_weight};
 use super::model::{Evidence, LoopModel, Scale};
 use super::{Candidate, Layers};
@@ -348,8 +348,11 @@ impl Decided {
         // Exact innovations: a lower bound (a lone candidate outside the map)
         // is not the evidence the model describes, and a wrong loop's bound
         // can sit among the true loops' innovations.
-        let innov = eval.innovations(edges, &self.accepted, &self.clusters, true);
+        let mut innov = eval.innovations(edges, &self.accepted, &self.clusters, true);
         let parallelism = eval.parallelism().clone();
+        drop(eval);
+        let clusters = (edges, self.accepted.as_slice(), self.clusters.as_slice());
+        through_wide_chains(session, weights, clusters, &mut innov)?;
         let (model, next) = judge(
             candidates,
             &innov,

@@ -39,7 +39,7 @@
 //! fewer loops always fail by less, and keeping the end that fails least
 //! would throw away true loops to shrink `D²`.
 
-use super::innovation::Evaluation;
+use super::innovation::{Evaluation, through_wide_chains};
 use super::schedule::Decided;
 use super::{Candidate, Layers};
 use crate::geometry::Pose;
@@ -156,6 +156,12 @@ pub fn explain<P: Pose<D>, const D: usize>(
         decided.innovations = Evaluation::new(session.optimizer, session.graph, weights)?
             .judging_within_clusters(decided.within)
             .innovations(&edges, &decided.accepted, &decided.clusters, true);
+        let clusters = (
+            edges.as_slice(),
+            decided.accepted.as_slice(),
+            decided.clusters.as_slice(),
+        );
+        through_wide_chains(session, weights, clusters, &mut decided.innovations)?;
         session.evaluated_since(start);
     }
 }

@@ -49,6 +49,18 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         }
         Ok(block)
     }
+
+    /// The Gauss–Newton step `δ = −H⁻¹·b` left at the poses of the last
+    /// [`Self::factor_at`] (by variable block, `δ[k·D + a]`): what separates
+    /// them from the exact least-squares map of their linearisation. A
+    /// solve to tolerance leaves it small, but formulas that assume the
+    /// exact map (deleted residuals) divide it by the tiny covariance of a
+    /// loop that a loose chain alone checks.
+    pub(crate) fn remaining_step(&mut self) -> Vec<f64> {
+        let mut step = vec![0.0; self.vertex_of.len() * D];
+        self.system.solve(&mut step);
+        step
+    }
 }
 
 #[cfg(test)]

@@ -618,3 +618,84 @@ fn deciding(layers: &Layers, relax: bool, swing: Swing) -> Deciding<'_> {
         swing,
     }
 }
+
+/// The walk with the cluster of loops (1, 13) and (2, 14) — a wrong pair,
+/// off by the same (3, −2, 1) — in the map, and the odometry edge 6–7 of
+/// information `chain` (0: left out of the map). Returns the innovations
+/// of the pair straight from the evaluation and after
+/// [`through_wide_chains`].
+fn pair_over_a_chain(chain: f64) -> [(Option<f64>, Option<f64>); 2] {
+    pair_over_a_chain_refitted(chain, false)
+}
+
+/// [`pair_over_a_chain`]; with `refit`, the second of each pair is the
+/// innovation against the map solved without the pair, whatever the
+/// formulas gave.
+fn pair_over_a_chain_refitted(chain: f64, refit: bool) -> [(Option<f64>, Option<f64>); 2] {
+    let (mut g, candidates) = walk_with(&[(1, 13, true), (2, 14, true)]);
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    let mut weights = vec![1.0; g.edges.len()];
+    let link = (g.edges.iter())
+        .position(|e| (e.from, e.to) == (6, 7))
+        .unwrap();
+    g.edges[link].information *= chain;
+    if chain == 0.0 {
+        weights[link] = 0.0;
+    }
+    let accepted = vec![true; 2];
+    let clusters = vec![vec![0, 1]];
+    with_session(
+        &mut g,
+        &mut weights,
+        SolveSettings::default(),
+        |mut s, w| {
+            s.converge(w).unwrap();
+            let before = Evaluation::new(s.optimizer, s.graph, w)
+                .unwrap()
+                .innovations(&edges, &accepted, &clusters, true);
+            let mut after = before.clone();
+            if refit {
+                after.nu2 = vec![None; 2];
+            }
+            through_wide_chains(&mut s, w, (&edges, &accepted, &clusters), &mut after).unwrap();
+            [0, 1].map(|k| (before.nu2[k], after.nu2[k]))
+        },
+    )
+}
+
+/// A cluster whose ends the rest of the map joins only through a chain
+/// 10¹³ times looser than the loops (`S = Σ_A − M_AA` cancels to rounding)
+/// gets its innovation from the map solved without it: small, as the
+/// chain allows almost any offset — not left to its prior. Without the
+/// chain nothing joins the ends and the prior decides (`None`).
+#[test]
+fn a_cluster_over_a_wide_chain_is_checked_against_it() {
+    for (before, after) in pair_over_a_chain(1e-13) {
+        assert_eq!(before, None, "S cancels to rounding");
+        let nu2 = after.expect("the chain joins the ends");
+        assert!((0.0..1e-6).contains(&nu2), "{nu2}");
+    }
+    for (before, after) in pair_over_a_chain(0.0) {
+        assert_eq!((before, after), (None, None));
+    }
+    // A chain within rounding: the formulas give the innovation, unchanged.
+    for (before, after) in pair_over_a_chain(1.0) {
+        assert!(before.is_some());
+        assert_eq!(before, after);
+    }
+}
+
+/// The deleted residuals of a cluster over a loose chain (10¹⁰ times looser
+/// than the loops) are read at the exact map of the factorised
+/// linearisation: at the map LM stopped at, the step left to it — within
+/// LM's tolerance — divided by the cluster's tiny `S` made the pair's
+/// innovations 10⁴–10⁷ times too large. The member the map without the
+/// pair judges (the other is judged against the map with it) agrees with
+/// the map solved without the pair.
+#[test]
+fn deleted_residuals_over_a_loose_chain_match_the_map_without_them() {
+    let [_, (formula, refit)] = pair_over_a_chain_refitted(1e-10, true);
+    let (formula, refit) = (formula.unwrap(), refit.unwrap());
+    assert!(refit < 1e-7, "{refit}");
+    assert!((formula / refit - 1.0).abs() < 0.2, "{formula} {refit}");
+}
