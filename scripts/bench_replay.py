@@ -304,6 +304,7 @@ class Pgo:
         self.options = options
         self.g = pgo.PoseGraph(2)
         self.r = None
+        self.phases = {}    # where the updates' time went, summed (s)
 
     def add_pose(self, vid, pose, first):
         self.g.add_pose(vid, tuple(pose))
@@ -318,6 +319,18 @@ class Pgo:
         t0 = time.perf_counter()
         self.r = self.g.update(**self.options)
         return time.perf_counter() - t0
+
+    def profile(self):
+        """Adds the last update's phases (its report's times) to `phases`:
+        the optimiser's runs, EM's evaluations (innovations, the loop
+        model's fit, the decisions) and relaxations, the initial guess and
+        the gate; the rest of an update's time is bookkeeping."""
+        report = self.r.report
+        t = report["time"]
+        for key, v in (("optimizer", report["optimizer"]["time_s"]),
+                       ("evaluations", t["evaluation_s"]), ("relaxations", t["relaxation_s"]),
+                       ("initial guess", t["initialize_s"]), ("gate", t["gate_s"])):
+            self.phases[key] = self.phases.get(key, 0.0) + float(v)
 
     def estimate(self, vid):
         return tuple(self.r.pose(vid))
@@ -398,6 +411,7 @@ def replay(data, tool, every, max_poses):
         pending = {}
         if isinstance(tool, Pgo):
             t0 = time.perf_counter()
+            tool.profile()
             inc = getattr(tool.r, "incremental", None)
             if inc is None:
                 inc = tool.r.report.get("incremental") or {}
@@ -480,6 +494,8 @@ def run_case(args, case, data, ref, tool_name, every, options):
                 "latency_ms": latency_summary(lat), "latency_series": downsample(rr["steps_at"], lat)})
     if hasattr(tool, "parts"):
         row["parts"] = tool.parts
+    if isinstance(tool, Pgo):
+        row["phases_s"] = tool.phases
     ids = data.order[:rr["poses"]]
     poses = tool.final_poses(ids)
     clean = data.clean_graph()

@@ -386,9 +386,10 @@ def prepare(args, work):
                     tag = "-%s-o%s%s" % (args.alias_place, args.alias_offset or "",
                                          "-G" if args.alias_by_group else "") if wide else ""
                     case = "%s aliased%s %d" % (name, " " + args.alias_place if wide else "", n)
-                    # The seed is in the name of the wider cases: seeds of one
-                    # share are different files.
-                    seeded = "-s%d" % args.seed if wide else ""
+                    # The seed is in the name: seeds of one share are different
+                    # files (the revisited placement's seed 1 keeps the name of
+                    # earlier runs, and its cached peers).
+                    seeded = "-s%d" % args.seed if wide or args.seed != 1 else ""
                     stem = os.path.join(work, "%s-aliased%s-g%d-t%g%s-%d" % (
                         name, tag.replace(",", "_"), args.alias_group_size, args.alias_true_like,
                         seeded, n))

@@ -107,3 +107,8 @@ pub mod internals {
     pub use crate::solve::init::{ChordalInit, Initialization, initialize};
     pub use crate::solve::{IterationRecord, Optimizer, SolveSettings};
 }
+
+/// The README's Rust example, compiled and run with the doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -405,6 +405,15 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
         self.graph.edges.len()
     }
 
+    /// What reading its file noticed, one line each, with the line of the
+    /// file it concerns: skipped tags (and the tag a misspelled one is a
+    /// slip of), vertices only edges name, repaired information matrices.
+    /// Empty for a graph built call by call. The job's report starts its
+    /// warnings with these.
+    pub fn read_warnings(&self) -> &[String] {
+        self.source.as_ref().map_or(&[], |(_, s)| &s.warnings)
+    }
+
     /// Number of loop-closure candidates.
     pub fn num_loop_candidates(&self) -> usize {
         self.graph.num_candidates()
@@ -762,6 +771,11 @@ impl AnyPoseGraph {
     /// Writes the graph as a g2o file ([`PoseGraph::write_g2o`]).
     pub fn write_g2o(&self, path: impl AsRef<Path>) -> Result<(), Error> {
         either!(self, |g| g.write_g2o(path))
+    }
+
+    /// See [`PoseGraph::read_warnings`].
+    pub fn read_warnings(&self) -> &[String] {
+        either!(self, |g| g.read_warnings())
     }
 
     /// 2 or 3.

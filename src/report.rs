@@ -311,7 +311,10 @@ impl RobustReport {
     pub fn summary(&self) -> String {
         let mut notes = Vec::new();
         if self.rescued_loops > 0 {
-            notes.push(format!("{} below the gate", self.rescued_loops));
+            notes.push(format!(
+                "{} rescued from those the gate dropped",
+                self.rescued_loops
+            ));
         }
         if let Some(search) = &self.search {
             let removed: usize = search.removed.iter().map(|r| r.loops.len()).sum();
@@ -511,19 +514,37 @@ impl Report {
             .map_err(|e| crate::Error::Internal(format!("cannot serialise the report: {e}")))
     }
 
-    /// The human summary, a few lines for stderr.
+    /// The human summary, a few lines for stderr: [`Self::header`], then
+    /// [`Self::human_body`].
     pub fn human_summary(&self) -> String {
-        let o = &self.optimizer;
-        let mut s = format!(
-            "{}: {}D, {} poses, {} edges, {} loop candidates\n",
-            self.input, self.dimension, self.poses, self.edges, self.loop_candidates
+        let mut s = Self::header(
+            &self.input,
+            self.dimension,
+            [self.poses, self.edges, self.loop_candidates],
         );
+        s.push('\n');
+        s + &self.human_body()
+    }
+
+    /// The summary's first line: the input, its dimension and its poses,
+    /// edges and loop candidates (what `pgo optimize` prints before it
+    /// starts).
+    pub fn header(input: &str, dimension: usize, [poses, edges, candidates]: [usize; 3]) -> String {
+        format!("{input}: {dimension}D, {poses} poses, {edges} edges, {candidates} loop candidates")
+    }
+
+    /// The summary after its header: the initial guess, the optimiser, the
+    /// gate's and the robust method's decisions and the χ² verdict, the
+    /// certificate, the warnings and the files written.
+    pub fn human_body(&self) -> String {
+        let o = &self.optimizer;
+        let mut s = String::new();
         s += &format!(
             "initial guess: {:?}, χ² {:.6e} (file's guess {:.6e})\n",
             self.initialization.method, self.initialization.chi2, self.input_chi2
         );
         s += &format!(
-            "{}: {} iterations, χ² {:.10e} → {:.10e}, {} ({:?}), {:.3} s\n",
+            "{}: {} iterations, objective {:.10e} → {:.10e}, {} ({:?}), {:.3} s\n",
             o.solver,
             o.iterations,
             o.initial_objective,

@@ -59,7 +59,7 @@ pub struct LoopDecision {
     /// Its inlier count, if it has one.
     pub inliers: Option<u64>,
     /// Whether the gate kept it.
-    pub gated: bool,
+    pub kept: bool,
     /// Its final weight in the optimisation, in [0, 1].
     pub weight: f64,
     /// Whether it is in the map: weight ≥ ½.
@@ -76,7 +76,7 @@ pub struct LoopDecision {
 impl Reason {
     /// Its name as the JSON report spells it (snake case): `consistent`,
     /// `inconsistent`, `unchecked`, `explains_chi2`, `unsettled`,
-    /// `kernel`, `gated` or `trusted` (for bindings).
+    /// `kernel`, `dropped` or `trusted` (for bindings).
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Consistent => "consistent",
@@ -85,7 +85,7 @@ impl Reason {
             Self::ExplainsChi2 => "explains_chi2",
             Self::Unsettled => "unsettled",
             Self::Kernel => "kernel",
-            Self::Gated => "gated",
+            Self::Dropped => "dropped",
             Self::Trusted => "trusted",
         }
     }
@@ -105,7 +105,7 @@ impl<P> Solution<P> {
                 from: l.from,
                 to: l.to,
                 inliers: l.inliers,
-                gated: l.kept,
+                kept: l.kept,
                 weight: l.weight,
                 accepted: l.accepted,
                 posterior: l.posterior,

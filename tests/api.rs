@@ -120,14 +120,14 @@ fn a_planar_graph_built_call_by_call_is_the_job_of_its_file() {
     // others, and the χ² test has a verdict.
     let loops = s.loops();
     assert_eq!(loops.len(), 400);
-    assert!(loops.iter().any(|l| l.gated) && loops.iter().any(|l| !l.gated));
+    assert!(loops.iter().any(|l| l.kept) && loops.iter().any(|l| !l.kept));
     assert!(loops.iter().filter(|l| l.accepted).count() > 100);
     assert!(s.passed().is_some());
     assert_eq!(s.report().loops.len(), 400);
     for l in loops {
         assert_eq!(l.accepted, l.weight >= 0.5);
-        if l.reason == Reason::Gated {
-            assert!(!l.accepted && !l.gated, "{l:?}");
+        if l.reason == Reason::Dropped {
+            assert!(!l.accepted && !l.kept, "{l:?}");
         }
     }
 }
@@ -234,7 +234,7 @@ fn a_wrong_loop_is_rejected_and_says_why() {
     assert!(!w.accepted && w.weight < 0.5);
     assert_ne!(
         w.reason,
-        Reason::Gated,
+        Reason::Dropped,
         "the robust back end weighed it: {w:?}"
     );
     assert_eq!(s.passed(), Some(true));

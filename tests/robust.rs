@@ -339,7 +339,7 @@ fn every_decision_says_why_and_follows_the_posterior() {
         let expected = if l.kept {
             Reason::Kernel
         } else {
-            Reason::Gated
+            Reason::Dropped
         };
         assert_eq!(l.reason, expected);
         assert!(l.posterior.is_none() && l.innovation.is_none());

@@ -214,7 +214,7 @@ fn reasons_and_update_solves_are_named_as_the_json_spells_them() {
         Reason::ExplainsChi2,
         Reason::Unsettled,
         Reason::Kernel,
-        Reason::Gated,
+        Reason::Dropped,
         Reason::Trusted,
     ];
     for r in reasons {

@@ -8,7 +8,8 @@
  * was never added).
  *
  * Then reads the map's covariances: how well pose 8 is known, alone and
- * as seen from pose 4.
+ * as seen from pose 4. A progress callback watches the solver's
+ * iterations.
  *
  * Checks its own expectations — the right loop accepted, the wrong one
  * rejected, the test passed, the deliberate error reported, the fixed
@@ -100,8 +101,8 @@ static int report(const PgoResult *result, size_t right, size_t wrong) {
         PgoLoopDecision d;
         check(pgo_result_loop(result, k, &d), "pgo_result_loop");
         const char *reason = pgo_result_loop_reason(result, k);
-        printf("loop %zu (%llu -> %llu, %lld inliers): gated %d, weight %.3f, %s by %s\n", d.index,
-               (unsigned long long)d.from, (unsigned long long)d.to, (long long)d.inliers, d.gated,
+        printf("loop %zu (%llu -> %llu, %lld inliers): kept %d, weight %.3f, %s by %s\n", d.index,
+               (unsigned long long)d.from, (unsigned long long)d.to, (long long)d.inliers, d.kept,
                d.weight, d.accepted ? "accepted" : "rejected", reason ? reason : "?");
         if ((d.index == right && !d.accepted) || (d.index == wrong && d.accepted)) {
             fprintf(stderr, "unexpected decision for loop %zu\n", d.index);
@@ -140,6 +141,21 @@ static int covariances(const PgoResult *result) {
     return failures + !(c8[0] > 0.0 && rel[0] > 0.0);
 }
 
+/* A progress callback: counts the solver's iterations and keeps the last
+ * objective (a real front end would update a status line). Returning
+ * nonzero would stop the job. */
+struct progress {
+    size_t iterations;
+    double objective;
+};
+
+static int on_iteration(size_t iterations, double objective, void *user_data) {
+    struct progress *p = user_data;
+    p->iterations = iterations;
+    p->objective = objective;
+    return 0;
+}
+
 int main(void) {
     printf("pgo %s\n", pgo_version());
     PgoGraph *graph = NULL;
@@ -152,7 +168,15 @@ int main(void) {
     int failures = show_an_error(graph);
     check(pgo_options_new(&options), "pgo_options_new");
     check(pgo_options_set(options, "alpha", "0.05"), "pgo_options_set");
-    check(pgo_graph_optimize(graph, options, &result), "pgo_graph_optimize");
+    PgoCancel *watch = NULL;
+    struct progress seen = {0, 0.0};
+    check(pgo_cancel_new(&watch), "pgo_cancel_new");
+    check(pgo_cancel_set_progress(watch, on_iteration, &seen), "pgo_cancel_set_progress");
+    check(pgo_graph_optimize_with(graph, options, watch, &result), "pgo_graph_optimize_with");
+    pgo_cancel_free(watch);
+    printf("progress: %zu solver iterations, last objective %.6g\n", seen.iterations,
+           seen.objective);
+    failures += seen.iterations == 0;
     failures += report(result, right, wrong);
     failures += covariances(result);
     const char *json = pgo_result_report_json(result);

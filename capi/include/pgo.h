@@ -204,6 +204,16 @@ typedef struct PgoOptions PgoOptions;
 typedef struct PgoResult PgoResult;
 
 /**
+ * A progress callback: called at every solver iteration of a job run with
+ * the token that holds it, with the solver iterations of the job so far
+ * (every solve of it), the objective the solver just reached, and the
+ * `user_data` given to `pgo_cancel_set_progress`. It runs on the thread
+ * that runs the job; a nonzero return cancels the token (as
+ * `pgo_cancel_request`), stopping the job.
+ */
+typedef int32_t (*PgoProgress)(size_t iterations, double objective, void *user_data);
+
+/**
  * A certificate of global optimality of a map (filled by
  * `pgo_result_certificate`): the map refined on the isotropic problem
  * over its edges and whether it is that problem's global optimum, proven
@@ -343,7 +353,7 @@ typedef struct PgoLoopDecision {
   /**
    * Whether the gate kept it.
    */
-  bool gated;
+  bool kept;
   /**
    * Its final weight in the optimisation, in [0, 1].
    */
@@ -412,6 +422,23 @@ enum PgoStatus pgo_cancel_request(const struct PgoCancel *cancel);
  * `cancel` is NULL or a live token; `out` is NULL or writable.
  */
 enum PgoStatus pgo_cancel_requested(const struct PgoCancel *cancel, bool *out);
+
+/**
+ * Sets the progress callback of jobs run with this token from now on
+ * (NULL: none): `progress(iterations, objective, user_data)` at every
+ * solver iteration, on the job's thread — to show a long job alive, or
+ * to stop it by returning nonzero.
+ *
+ * Errors: `PGO_ERR_INVALID_ARGUMENT` for a NULL `cancel`.
+ *
+ * # Safety
+ * `cancel` is NULL or a live token; `progress` is NULL or a function
+ * that may be called with `user_data` from the thread of any job run
+ * with this token, for as long as it is set.
+ */
+enum PgoStatus pgo_cancel_set_progress(const struct PgoCancel *cancel,
+                                       PgoProgress progress,
+                                       void *user_data);
 
 /**
  * Frees a token made by `pgo_cancel_new`. NULL is allowed and does
@@ -788,7 +815,8 @@ enum PgoStatus pgo_graph_optimize(const struct PgoGraph *graph,
  * `pgo_graph_optimize`, stopped at its next iteration once `cancel`
  * (NULL: none) is cancelled by `pgo_cancel_request` from another thread:
  * the result then holds the best map so far and `pgo_result_cancelled`
- * says so.
+ * says so. The token's progress callback (`pgo_cancel_set_progress`), if
+ * any, sees every solver iteration.
  *
  * Errors: those of `pgo_graph_optimize`.
  *
@@ -933,7 +961,7 @@ enum PgoStatus pgo_result_loop(const struct PgoResult *result,
 /**
  * Why the `k`-th loop ended where it did: `"consistent"`,
  * `"inconsistent"`, `"unchecked"`, `"explains_chi2"`, `"unsettled"`,
- * `"kernel"`, `"gated"` or `"trusted"` (the reason's name in snake case; later
+ * `"kernel"`, `"dropped"` or `"trusted"` (the reason's name in snake case; later
  * versions may add reasons). The string is static: never free it. NULL on failure
  * (`PGO_ERR_INVALID_ARGUMENT` in `pgo_last_error`: NULL `result`, `k` out
  * of range).

@@ -3,7 +3,7 @@
 //! `PgoLoopDecision` per loop candidate and, for an update, a `PgoUpdate`
 //! and one `PgoDecisionChange` per earlier decision it changed.
 
-use crate::cancel::PgoCancel;
+use crate::cancel::{PgoCancel, Watch};
 use crate::graph::PgoGraph;
 use crate::options::PgoOptions;
 use crate::status::{Failure, PgoStatus, borrow, borrow_mut, out_ptr, status, text, value};
@@ -65,7 +65,7 @@ pub struct PgoLoopDecision {
     /// Its inlier count; -1 if it has none.
     pub inliers: i64,
     /// Whether the gate kept it.
-    pub gated: bool,
+    pub kept: bool,
     /// Its final weight in the optimisation, in [0, 1].
     pub weight: f64,
     /// Whether it is in the map (weight ≥ ½).
@@ -87,7 +87,7 @@ impl From<&LoopDecision> for PgoLoopDecision {
             inliers: d
                 .inliers
                 .map_or(-1, |n| i64::try_from(n).unwrap_or(i64::MAX)),
-            gated: d.gated,
+            kept: d.kept,
             weight: d.weight,
             accepted: d.accepted,
             posterior: d.posterior.unwrap_or(f64::NAN),
@@ -122,7 +122,8 @@ pub unsafe extern "C" fn pgo_graph_optimize(
 /// `pgo_graph_optimize`, stopped at its next iteration once `cancel`
 /// (NULL: none) is cancelled by `pgo_cancel_request` from another thread:
 /// the result then holds the best map so far and `pgo_result_cancelled`
-/// says so.
+/// says so. The token's progress callback (`pgo_cancel_set_progress`), if
+/// any, sees every solver iteration.
 ///
 /// Errors: those of `pgo_graph_optimize`.
 ///
@@ -140,18 +141,9 @@ pub unsafe extern "C" fn pgo_graph_optimize_with(
     unsafe {
         run_job(options, out, |o| {
             let graph = &borrow(graph, "graph")?.graph;
-            Ok(graph.optimize_with(o, &mut token(cancel))?)
+            Ok(graph.optimize_with(o, &mut Watch::of(cancel))?)
         })
     }
-}
-
-/// The token of `cancel`, or one nothing cancels for NULL.
-///
-/// # Safety
-/// `cancel` is NULL or a live token.
-unsafe fn token(cancel: *const PgoCancel) -> pgo::Cancel {
-    // SAFETY: the caller's contract.
-    unsafe { cancel.as_ref() }.map_or_else(pgo::Cancel::new, |c| c.token.clone())
 }
 
 /// Runs `job` with `options` (NULL: the defaults) and stores its result at
@@ -228,7 +220,7 @@ pub unsafe extern "C" fn pgo_graph_update_with(
     unsafe {
         run_job(options, out, |o| {
             let graph = &mut borrow_mut(graph, "graph")?.graph;
-            Ok(graph.update_with(o, &mut token(cancel))?)
+            Ok(graph.update_with(o, &mut Watch::of(cancel))?)
         })
     }
 }
@@ -522,7 +514,7 @@ pub unsafe extern "C" fn pgo_result_loop(
 
 /// Why the `k`-th loop ended where it did: `"consistent"`,
 /// `"inconsistent"`, `"unchecked"`, `"explains_chi2"`, `"unsettled"`,
-/// `"kernel"`, `"gated"` or `"trusted"` (the reason's name in snake case; later
+/// `"kernel"`, `"dropped"` or `"trusted"` (the reason's name in snake case; later
 /// versions may add reasons). The string is static: never free it. NULL on failure
 /// (`PGO_ERR_INVALID_ARGUMENT` in `pgo_last_error`: NULL `result`, `k` out
 /// of range).

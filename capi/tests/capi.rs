@@ -642,7 +642,7 @@ fn assert_same(r: *const PgoResult, expected: &AnySolution, ids: &[u64]) {
             from: 0,
             to: 0,
             inliers: 0,
-            gated: false,
+            kept: false,
             weight: f64::NAN,
             accepted: false,
             posterior: f64::NAN,

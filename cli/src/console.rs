@@ -16,8 +16,11 @@
 //!   `/dev/null` by the Rust runtime (on Linux and the BSDs) before `main`,
 //!   so no file pgo opens can take its place and receive its messages.
 
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::cell::Cell;
 use std::fmt;
 use std::io::{self, Write};
+use std::time::Duration;
 
 /// The exit status after a broken pipe on stdout: 128 + SIGPIPE (13).
 pub const BROKEN_PIPE_STATUS: u8 = 141;
@@ -50,5 +53,49 @@ pub fn stdout_failure(e: &io::Error) -> u8 {
     } else {
         err_line(format_args!("error: stdout: {e}"));
         1
+    }
+}
+
+/// A line on stderr that shows a long job is alive: the time, the solver's
+/// iterations so far (over every solve of the job) and the last objective.
+/// Drawn only on a terminal (nothing in a pipe, a file or CI logs), and
+/// not at all when `hidden` (`-q`, or `-v` printing every iteration).
+pub struct Spinner {
+    bar: ProgressBar,
+    iterations: Cell<usize>,
+}
+
+impl Spinner {
+    /// A spinner on stderr, drawn from the first iteration on.
+    pub fn new(hidden: bool) -> Self {
+        let target = if hidden {
+            ProgressDrawTarget::hidden()
+        } else {
+            ProgressDrawTarget::stderr()
+        };
+        let bar = ProgressBar::with_draw_target(None, target);
+        if let Ok(style) = ProgressStyle::with_template("{spinner} {elapsed:>4} {msg}") {
+            bar.set_style(style);
+        }
+        Self {
+            bar,
+            iterations: Cell::new(0),
+        }
+    }
+
+    /// One more solver iteration, ending at `objective`.
+    pub fn iteration(&self, objective: f64) {
+        let n = self.iterations.get() + 1;
+        self.iterations.set(n);
+        if n == 1 {
+            self.bar.enable_steady_tick(Duration::from_millis(200));
+        }
+        self.bar
+            .set_message(format!("solver iteration {n}, objective {objective:.6e}"));
+    }
+
+    /// Takes the line away, before the summary is printed.
+    pub fn clear(&self) {
+        self.bar.finish_and_clear();
     }
 }

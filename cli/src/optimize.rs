@@ -84,6 +84,11 @@ const CHI2_FAILED_STATUS: u8 = 3;
 /// shells report it; the outputs are still written).
 const INTERRUPTED_STATUS: u8 = 130;
 
+/// The exit status of `pgo optimize` when its budget (`--max-iters`,
+/// `--time-limit`) ran out before the job finished: the map written is the
+/// best so far, its decisions and χ² verdict those of an unfinished job.
+const BUDGET_STATUS: u8 = 4;
+
 /// Why `pgo optimize` failed.
 #[derive(Debug, thiserror::Error)]
 pub enum Failure {
@@ -148,8 +153,14 @@ impl Failure {
 }
 
 /// Runs `pgo optimize`: returns the report after writing every output
-/// asked for. `observer` sees every solver iteration.
-pub fn run(args: &OptimizeArgs, observer: &mut dyn Observer) -> Result<Report, Failure> {
+/// asked for. `observer` sees every solver iteration. Unless `-q`, the
+/// summary's header and what reading the file noticed are printed as soon
+/// as the file is read (returned too, so that the summary does not repeat
+/// them).
+pub fn run(
+    args: &OptimizeArgs,
+    observer: &mut dyn Observer,
+) -> Result<(Report, Vec<String>), Failure> {
     let start = Instant::now();
     let job = |error| Failure::Job {
         input: args.input.clone(),
@@ -162,6 +173,16 @@ pub fn run(args: &OptimizeArgs, observer: &mut dyn Observer) -> Result<Report, F
     }
     .map_err(job)?;
     let read_s = start.elapsed().as_secs_f64();
+    let said = graph.read_warnings().to_vec();
+    if !args.quiet {
+        let sizes = [graph.len(), graph.num_edges(), graph.num_loop_candidates()];
+        let input = args.input.display().to_string();
+        say!("{}", Report::header(&input, graph.dimension(), sizes));
+        said.iter().for_each(|w| say!("warning: {w}"));
+        if let Some(note) = candidates_hint(&graph, &args.options) {
+            say!("note: {note}");
+        }
+    }
     let mut replaced = None;
     if let Some(csv) = &args.inliers {
         let rows = inliers::read_csv(csv)?;
@@ -207,7 +228,24 @@ pub fn run(args: &OptimizeArgs, observer: &mut dyn Observer) -> Result<Report, F
         report.trajectories.push(path.display().to_string());
     }
     report.time.total_s = start.elapsed().as_secs_f64();
-    Ok(report)
+    Ok((report, said))
+}
+
+/// A hint for a file whose loops the job will all trust: no edge has an
+/// inlier count (as in the public datasets), yet some join non-consecutive
+/// poses, and `--candidates non-sequential` was not given.
+fn candidates_hint(graph: &AnyPoseGraph, options: &pgo::Options) -> Option<String> {
+    let counted = options.gate.candidates == pgo::CandidateRule::Counted;
+    let loops = match graph {
+        AnyPoseGraph::Planar(g) => g.edges().filter(|e| e.from.abs_diff(e.to) != 1).count(),
+        AnyPoseGraph::Spatial(g) => g.edges().filter(|e| e.from.abs_diff(e.to) != 1).count(),
+    };
+    (counted && graph.num_loop_candidates() == 0 && loops > 0).then(|| {
+        format!(
+            "no edge has an inlier count, so all {loops} edges between non-consecutive poses are \
+             trusted loops; --candidates non-sequential weighs them as loop candidates"
+        )
+    })
 }
 
 /// Writes the covariances of the map (`--covariances`): a warning names
@@ -252,10 +290,11 @@ pub fn command(args: OptimizeArgs) -> ExitCode {
     let cancel = pgo::Cancel::new();
     let on_interrupt = cancel.clone();
     let _ = ctrlc::set_handler(move || on_interrupt.cancel());
+    let spinner = console::Spinner::new(args.quiet || verbose);
     let progress = |r: &IterationRecord| {
         if verbose {
             say!(
-                "iteration {:>3}: χ² {:.10e}  λ {:.1e}  rejected {}  |δ|∞ {:.2e}",
+                "iteration {:>3}: objective {:.10e}  λ {:.1e}  rejected {}  |δ|∞ {:.2e}",
                 r.iteration,
                 r.objective,
                 r.lambda,
@@ -263,10 +302,13 @@ pub fn command(args: OptimizeArgs) -> ExitCode {
                 r.step_max
             );
         }
+        spinner.iteration(r.objective);
     };
     let mut observer = pgo::Cancellable::new(cancel, progress);
-    match run(&args, &mut observer) {
-        Ok(report) => finish(&args, &report, verbose),
+    let outcome = run(&args, &mut observer);
+    spinner.clear();
+    match outcome {
+        Ok((report, said)) => finish(&args, &report, &said),
         // `-o -`: a reader that went away (141, quietly), or a full stdout.
         Err(Failure::Job {
             error: Error::Write { path, source },
@@ -279,13 +321,15 @@ pub fn command(args: OptimizeArgs) -> ExitCode {
     }
 }
 
-/// Prints the summary and the report; the exit status of a job that ran.
-fn finish(args: &OptimizeArgs, report: &Report, verbose: bool) -> ExitCode {
+/// Prints the summary (but its header and the warnings `said` already)
+/// and the report; the exit status of a job that ran.
+fn finish(args: &OptimizeArgs, report: &Report, said: &[String]) -> ExitCode {
     if !args.quiet {
-        console::err(format_args!("{}", report.human_summary()));
-        if verbose {
-            console::err(format_args!("{}\n", report.time_summary()));
-        }
+        let mut rest = report.clone();
+        rest.warnings.retain(|w| !said.contains(w));
+        console::err(format_args!("{}", rest.human_body()));
+        // The solver's line counts its own time; where the rest went.
+        console::err(format_args!("{}\n", report.time_summary()));
     }
     if args.json {
         match serde_json::to_string_pretty(report) {
@@ -311,6 +355,18 @@ fn finish(args: &OptimizeArgs, report: &Report, verbose: bool) -> ExitCode {
             "pgo: the χ² test FAILED: the map does not fit its measurements (exit status {CHI2_FAILED_STATUS})"
         );
         return ExitCode::from(CHI2_FAILED_STATUS);
+    }
+    let budget = match report.optimizer.stop_reason {
+        pgo::StopReason::TimeLimit => Some("--time-limit"),
+        pgo::StopReason::MaxIterations => Some("--max-iters"),
+        _ => None,
+    };
+    if let Some(option) = budget {
+        say!(
+            "pgo: {option} stopped the job before it finished: the best map so far was written, \
+             its loop decisions and χ² verdict unfinished (exit status {BUDGET_STATUS})"
+        );
+        return ExitCode::from(BUDGET_STATUS);
     }
     ExitCode::SUCCESS
 }

@@ -40,8 +40,9 @@ use std::path::{Path, PathBuf};
 pub const MAX_POLYLINE_POINTS: usize = 20_000;
 
 /// At most this many loop closures are drawn per panel, sampled evenly from
-/// the input when there are more.
-pub const MAX_LOOP_SEGMENTS: usize = 20_000;
+/// the input when there are more: beyond a few thousand the lines bury the
+/// trajectory (city10000 has 10,688 loops) and say nothing more.
+pub const MAX_LOOP_SEGMENTS: usize = 3_000;
 
 /// The histogram of [`plot_counts`] has this many bins over `(0, 1]`, or one
 /// bin per integer count when the largest count is smaller.
@@ -585,16 +586,16 @@ pub fn top_view<P: Pose<D>, const D: usize>(poses: &[P]) -> Vec<[f64; 2]> {
 ///   consecutive pairs that share a pose (`(0, 1), (1, 2), ...`) form one
 ///   polyline, decimated to about [`MAX_POLYLINE_POINTS`] points in all
 ///   (every k-th pose, keeping the ends). A circle marks the first pose.
-/// * `loops` are segments coloured from red (weight 0, dropped) through
-///   yellow to green (weight 1, kept), in steps of 0.05. Loops with weight
-///   < ½ are drawn under
-///   the odometry, loops with weight ≥ ½ over it, each group in increasing
-///   weight. At most [`MAX_LOOP_SEGMENTS`] loops are drawn, evenly sampled;
+/// * `loops` are segments coloured from red (weight 0, rejected) through
+///   yellow to green (weight 1, accepted), in steps of 0.05. Before
+///   optimisation loops with weight < ½ are drawn under the odometry,
+///   loops with weight ≥ ½ over it, each group in increasing weight; after
+///   it, the accepted loops only. At most [`MAX_LOOP_SEGMENTS`] loops are drawn, evenly sampled;
 ///   segments that fall on the same pixels with the same colour, or on a
 ///   single pixel, are drawn once or not at all. Lines are opaque: SVG
 ///   renderers slow down badly on tens of thousands of translucent elements.
 /// * The caption gives the counts over all loops, e.g.
-///   `kept 120 loops, dropped 40` (kept means weight ≥ ½), and says when the
+///   `accepted 120 loops, rejected 40` (weight ≥ ½ or not), and says when the
 ///   odometry or the loops were sampled. A colour bar under the panels reads
 ///   the weights.
 ///
@@ -685,7 +686,7 @@ impl Scene {
             }
         };
         let mut s = format!(
-            "{}, {}; kept {}, dropped {} (kept: final weight ≥ ½)",
+            "{}, {}; accepted {}, rejected {} (accepted: final weight ≥ ½)",
             plural(self.poses, "pose", "poses"),
             plural(self.odometry_edges, "odometry edge", "odometry edges"),
             plural(self.kept, "loop", "loops"),
@@ -862,8 +863,18 @@ fn render_trajectory(
         header.draw_text(title, &text_style(22, BLACK), (24, 12))?;
         header.draw_text(&scene.caption(), &text_style(15, BLACK), (24, 44))?;
         let (left, right) = panels.split_horizontally(TRAJECTORY_SIZE.0 / 2);
-        draw_panel(&left, "before optimisation", before, scene)?;
-        draw_panel(&right, "after optimisation", after, scene)?;
+        draw_panel(
+            &left,
+            "before optimisation: every loop",
+            before,
+            (scene, true),
+        )?;
+        draw_panel(
+            &right,
+            "after optimisation: the accepted loops",
+            after,
+            (scene, false),
+        )?;
         draw_key(&footer)?;
         root.present()?;
     }
@@ -874,13 +885,14 @@ fn render_trajectory(
 type PanelChart<'a, 'b> =
     ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
-/// One panel: the loops kept (weight ≥ ½) over the odometry over the loops
-/// dropped, the first pose circled.
+/// One panel: the loops accepted (weight ≥ ½) over the odometry over the
+/// loops rejected (when `rejected`; the map after optimisation is drawn
+/// with the loops it holds only), the first pose circled.
 fn draw_panel(
     area: &DrawingArea<SVGBackend<'_>, Shift>,
     caption: &str,
     points: &[[f64; 2]],
-    scene: &Scene,
+    (scene, rejected): (&Scene, bool),
 ) -> DrawResult<()> {
     let area = area.titled(caption, (FONT, 18))?;
     let mut chart = draw_panel_axes(&area, points)?;
@@ -889,7 +901,11 @@ fn draw_panel(
         (p[0].is_finite() && p[1].is_finite()).then_some((p[0], p[1]))
     };
     let mut seen: HashSet<SegmentKey> = HashSet::new();
-    let dropped = loop_segments(&chart, scene, false, &at, &mut seen);
+    let dropped = if rejected {
+        loop_segments(&chart, scene, false, &at, &mut seen)
+    } else {
+        Vec::new()
+    };
     let kept = loop_segments(&chart, scene, true, &at, &mut seen);
     chart.draw_series(dropped)?;
     chart.draw_series(
@@ -1007,7 +1023,7 @@ fn draw_key(area: &DrawingArea<SVGBackend<'_>, Shift>) -> DrawResult<()> {
     area.draw_text("first pose", &label, (212, y))?;
     let right = text_style(15, BLACK).pos(Pos::new(HPos::Right, VPos::Center));
     let (x0, x1) = (620, 920);
-    area.draw_text("loop weight 0 (dropped)", &right, (x0 - 10, y))?;
+    area.draw_text("loop weight 0 (rejected)", &right, (x0 - 10, y))?;
     let steps = 60;
     for s in 0..steps {
         let a = x0 + (x1 - x0) * s / steps;
@@ -1024,7 +1040,7 @@ fn draw_key(area: &DrawingArea<SVGBackend<'_>, Shift>) -> DrawResult<()> {
     ))?;
     let middle = text_style(13, BLACK).pos(Pos::new(HPos::Center, VPos::Top));
     area.draw_text("½", &middle, ((x0 + x1) / 2, y + 10))?;
-    area.draw_text("1 (kept)", &label, (x1 + 10, y))?;
+    area.draw_text("1 (accepted)", &label, (x1 + 10, y))?;
     Ok(())
 }
 
@@ -1295,9 +1311,9 @@ mod tests {
             "A square, twice",
             "before optimisation",
             "after optimisation",
-            "200 poses, 199 odometry edges; kept 3 loops, dropped 2",
-            "loop weight 0 (dropped)",
-            "1 (kept)",
+            "200 poses, 199 odometry edges; accepted 3 loops, rejected 2",
+            "loop weight 0 (rejected)",
+            "1 (accepted)",
             "x [m]",
             "y [m]",
         ] {
@@ -1317,10 +1333,11 @@ mod tests {
             first.find(&green).unwrap(),
         );
         assert!(r < o && o < g, "{r} {o} {g}");
-        // After optimisation the kept loops join poses at the same place:
-        // zero-length segments are not drawn. The dropped ones still show.
+        // After optimisation the accepted loops join poses at the same
+        // place: zero-length segments are not drawn. The rejected ones are
+        // left out of the map after optimisation.
         assert!(!second.contains(&green));
-        assert!(second.find(&red).unwrap() < second.find(&odometry_line).unwrap());
+        assert!(!second.contains(&red));
     }
 
     fn svg_colour(c: RGBColor) -> String {
@@ -1352,7 +1369,7 @@ mod tests {
         let path = dir.join("empty.svg");
         plot_trajectory(&path, &[], &[], &[], &[], "nothing").unwrap();
         let svg = read_svg(&path);
-        assert!(svg.contains("no poses") && svg.contains("kept 0 loops, dropped 0"));
+        assert!(svg.contains("no poses") && svg.contains("accepted 0 loops, rejected 0"));
 
         let path = dir.join("single.svg");
         plot_trajectory(&path, &[[3.0, 4.0]], &[[3.0, 4.0]], &[], &[], "one").unwrap();
@@ -1374,7 +1391,7 @@ mod tests {
         }];
         let path = dir.join("nan.svg");
         plot_trajectory(&path, &before, &after, &odometry, &loops, "nan").unwrap();
-        assert!(read_svg(&path).contains("kept 0 loops, dropped 1"));
+        assert!(read_svg(&path).contains("accepted 0 loops, rejected 1"));
         // A straight line: zero extent in y.
         assert!(!read_svg(&path).contains("NaN"));
 
@@ -1505,7 +1522,7 @@ mod tests {
         plot_trajectory(&path, &before, &after, &odometry, &loops, "large").unwrap();
         let elapsed = start.elapsed();
         let svg = read_svg(&path);
-        assert!(svg.contains("kept 37500 loops, dropped 12500"));
+        assert!(svg.contains("accepted 37500 loops, rejected 12500"));
         assert!(svg.contains("odometry decimated to"));
         assert!(svg.contains(&format!(
             "{MAX_LOOP_SEGMENTS} of 50000 loops drawn, evenly sampled"

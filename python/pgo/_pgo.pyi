@@ -1,7 +1,7 @@
 """Type stubs of the extension module ``pgo._pgo`` (re-exported by ``pgo``)."""
 
 import os
-from typing import Any, Dict, Iterable, List, Literal, Optional, Sequence, Tuple, TypedDict, Union
+from typing import Any, Callable, Dict, Iterable, List, Literal, Optional, Sequence, Tuple, TypedDict, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -143,10 +143,10 @@ class PoseGraph:
         """The pose as given; None for a vertex a file named only in edges."""
     def write_g2o(self, path: Union[str, os.PathLike[str]]) -> None:
         """Writes the graph as a g2o file, atomically."""
-    def optimize(self, *, cancel: Optional[Cancel] = None, **options: OptionValue) -> Result:
-        """Runs the job of ``pgo optimize``; options are its flags, ``_`` for ``-`` (option_names() lists them); ``cancel`` stops it."""
-    def update(self, *, cancel: Optional[Cancel] = None, **options: OptionValue) -> Result:
-        """The job again after additions, from the last update's map; options and cancel as optimize's, plus update_iters=K (at most K iterations per solve; the map may then be short of the optimum, and a later update goes on from it)."""
+    def optimize(self, *, cancel: Optional[Cancel] = None, progress: Optional[Callable[[int, float], object]] = None, **options: OptionValue) -> Result:
+        """Runs the job of ``pgo optimize``; options are its flags, ``_`` for ``-`` (option_names() lists them); ``cancel`` stops it; ``progress(iterations, objective)`` is called at every solver iteration (an exception it raises stops the job and is raised)."""
+    def update(self, *, cancel: Optional[Cancel] = None, progress: Optional[Callable[[int, float], object]] = None, **options: OptionValue) -> Result:
+        """The job again after additions, from the last update's map; options, cancel and progress as optimize's, plus update_iters=K (at most K iterations per solve; the map may then be short of the optimum, and a later update goes on from it)."""
     def forget(self) -> None:
         """Drops what update keeps: the next update runs the whole job."""
     def __repr__(self) -> str: ...
@@ -181,7 +181,7 @@ class Result:
         """(ids, poses): ids of N poses and an N×3 (2D) or N×7 (3D) array."""
     @property
     def loops(self) -> List[Dict[str, Any]]:
-        """One dict per loop candidate: index, from, to, inliers, gated, weight, accepted, posterior, innovation, reason."""
+        """One dict per loop candidate: index, from, to, inliers, kept, weight, accepted, posterior, innovation, reason."""
     @property
     def report(self) -> Dict[str, Any]:
         """The report ``pgo optimize --json`` prints."""

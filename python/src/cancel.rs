@@ -48,8 +48,12 @@ impl Cancel {
 /// the job has returned.
 pub struct Stop {
     token: Option<pgo::Cancel>,
-    /// The error a signal handler raised, once one did.
+    /// The error a signal handler (or the progress callback) raised, once
+    /// one did.
     pub interrupted: Option<PyErr>,
+    /// Called with the solver's iterations so far and the last objective.
+    progress: Option<Py<PyAny>>,
+    iterations: usize,
 }
 
 impl Stop {
@@ -58,12 +62,32 @@ impl Stop {
         Self {
             token: token.map(|t| t.get().0.clone()),
             interrupted: None,
+            progress: None,
+            iterations: 0,
         }
+    }
+
+    /// Also calls `progress(iterations, objective)` at every solver
+    /// iteration; an exception it raises stops the job and is raised when
+    /// the job has returned.
+    pub fn reporting_to(mut self, progress: Option<Py<PyAny>>) -> Self {
+        self.progress = progress;
+        self
     }
 }
 
 impl Observer for Stop {
-    fn iteration(&mut self, _: &IterationRecord) {}
+    fn iteration(&mut self, record: &IterationRecord) {
+        self.iterations += 1;
+        let Some(progress) = &self.progress else {
+            return;
+        };
+        if self.interrupted.is_some() {
+            return;
+        }
+        let n = self.iterations;
+        self.interrupted = Python::attach(|py| progress.call1(py, (n, record.objective)).err());
+    }
 
     fn should_stop(&mut self) -> bool {
         if self.token.as_ref().is_some_and(pgo::Cancel::is_cancelled) {

@@ -179,17 +179,23 @@ impl PoseGraph {
     /// `expert="no-search"`; see `pgo.option_names()`); `None` leaves one
     /// at its default. The GIL is released while it runs. `cancel`, a
     /// `pgo.Cancel`, stops it from another thread; Ctrl-C stops it too and
-    /// raises `KeyboardInterrupt`.
-    #[pyo3(signature = (*, cancel = None, **options))]
+    /// raises `KeyboardInterrupt`. `progress`, a callable, is called as
+    /// `progress(iterations, objective)` at every solver iteration (the
+    /// iterations of every solve of the job so far, the objective the
+    /// solver just reached), with the GIL held: to show a long job alive
+    /// (a tqdm bar, a log line); an exception it raises stops the job and
+    /// is raised here.
+    #[pyo3(signature = (*, cancel = None, progress = None, **options))]
     fn optimize(
         &self,
         py: Python<'_>,
         cancel: Option<&Bound<'_, Cancel>>,
+        progress: Option<Py<PyAny>>,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Solution> {
         let options = parse_options(options)?;
         let graph = &self.graph;
-        let mut stop = Stop::new(cancel);
+        let mut stop = Stop::new(cancel).reporting_to(progress);
         let solution = detached(py, &mut stop, |stop| graph.optimize_with(&options, stop))?;
         Ok(Solution::new(solution))
     }
@@ -204,19 +210,20 @@ impl PoseGraph {
     /// earlier decisions changed. The first update, one with other options
     /// than the last, and one after `fix` or `forget` run the whole job
     /// ("batch"); a failed or cancelled one leaves the kept state as it
-    /// was. Options, `cancel` and Ctrl-C as `optimize`'s. The GIL is
-    /// released while it runs; meanwhile another thread's use of the graph
-    /// raises `RuntimeError`.
-    #[pyo3(signature = (*, cancel = None, **options))]
+    /// was. Options, `cancel`, `progress` and Ctrl-C as `optimize`'s. The
+    /// GIL is released while it runs; meanwhile another thread's use of
+    /// the graph raises `RuntimeError`.
+    #[pyo3(signature = (*, cancel = None, progress = None, **options))]
     fn update(
         &mut self,
         py: Python<'_>,
         cancel: Option<&Bound<'_, Cancel>>,
+        progress: Option<Py<PyAny>>,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Solution> {
         let options = parse_options(options)?;
         let graph = &mut self.graph;
-        let mut stop = Stop::new(cancel);
+        let mut stop = Stop::new(cancel).reporting_to(progress);
         let solution = detached(py, &mut stop, |stop| graph.update_with(&options, stop))?;
         Ok(Solution::new(solution))
     }

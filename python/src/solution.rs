@@ -73,13 +73,13 @@ impl Solution {
 
     /// One dict per loop candidate, in the order they were added: `index`
     /// (as `add_loop_candidate` returned it), `from`, `to`, `inliers` (int
-    /// or None), `gated` (the gate kept it), `weight` (its final weight in
+    /// or None), `kept` (the gate kept it), `weight` (its final weight in
     /// [0, 1]), `accepted` (weight ≥ ½: it is in the map), `posterior`
     /// (EM's probability that it is a true loop) and `innovation` (its ν²
     /// against the map without its cluster), each None where the method
     /// gives none, and `reason` (why it ended where it did: "consistent",
     /// "inconsistent", "unchecked", "explains_chi2", "unsettled", "kernel",
-    /// "gated" or "trusted").
+    /// "dropped" or "trusted").
     #[getter]
     fn loops<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
         let loops = PyList::empty(py);
@@ -290,7 +290,7 @@ fn loop_dict<'py>(py: Python<'py>, d: &LoopDecision) -> PyResult<Bound<'py, PyDi
     dict.set_item("from", d.from)?;
     dict.set_item("to", d.to)?;
     dict.set_item("inliers", d.inliers)?;
-    dict.set_item("gated", d.gated)?;
+    dict.set_item("kept", d.kept)?;
     dict.set_item("weight", d.weight)?;
     dict.set_item("accepted", d.accepted)?;
     dict.set_item("posterior", d.posterior)?;

@@ -80,7 +80,7 @@ def test_result_poses_array_and_accessors():
     assert result.verdict in ("passed", "failed") and result.passed == (result.verdict == "passed")
     assert result.d2 is not None and result.chi2 >= 0.0
     [loop] = result.loops
-    assert set(loop) == {"index", "from", "to", "inliers", "gated", "weight", "accepted",
+    assert set(loop) == {"index", "from", "to", "inliers", "kept", "weight", "accepted",
                          "posterior", "innovation", "reason"}
     assert loop["accepted"] and loop["weight"] >= 0.5 and isinstance(loop["reason"], str)
     assert isinstance(result.report, dict) and len(result.report["loops"]) == 1

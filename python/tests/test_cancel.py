@@ -93,3 +93,27 @@ def test_ctrl_c_raises_keyboard_interrupt_and_the_graph_stays_usable(big_graph):
     result = big_graph.update()
     assert not result.cancelled
     assert result.incremental["solve"] == "batch"
+
+
+@pytest.mark.parametrize("job", ["optimize", "update"])
+def test_progress_sees_every_solver_iteration(job):
+    graph = pgo.read_g2o(SAMPLES / "aliased.g2o")
+    seen = []
+    result = getattr(graph, job)(progress=lambda n, objective: seen.append((n, objective)))
+    assert not result.cancelled
+    assert [n for n, _ in seen] == list(range(1, len(seen) + 1))
+    assert len(seen) >= result.report["optimizer"]["iterations"] > 0
+    assert all(isinstance(o, float) and o >= 0.0 for _, o in seen)
+
+
+def test_an_exception_in_progress_stops_the_job_and_is_raised():
+    graph = pgo.read_g2o(SAMPLES / "aliased.g2o")
+    calls = []
+
+    def give_up(n, objective):
+        calls.append(n)
+        raise RuntimeError("enough")
+
+    with pytest.raises(RuntimeError, match="enough"):
+        graph.optimize(progress=give_up)
+    assert calls == [1]

@@ -23,19 +23,19 @@ def test_option_names_are_the_flags():
 
 
 def test_gate_off_keeps_every_candidate(grid, default):
-    assert not all(d["gated"] for d in default.loops)
-    assert all(d["gated"] for d in grid.optimize(gate="off").loops)
+    assert not all(d["kept"] for d in default.loops)
+    assert all(d["kept"] for d in grid.optimize(gate="off").loops)
 
 
 def test_gate_threshold_as_an_int(grid):
     loops = grid.optimize(gate=200).loops
-    assert all(d["gated"] == (d["inliers"] >= 200) for d in loops)
+    assert all(d["kept"] == (d["inliers"] >= 200) for d in loops)
 
 
 def test_robust_none_accepts_what_the_gate_keeps(grid, default):
     loops = grid.optimize(robust="none").loops
-    assert all(d["accepted"] == d["gated"] and d["weight"] in (0.0, 1.0) for d in loops)
-    assert {d["reason"] for d in loops} == {"trusted", "gated"}
+    assert all(d["accepted"] == d["kept"] and d["weight"] in (0.0, 1.0) for d in loops)
+    assert {d["reason"] for d in loops} == {"trusted", "dropped"}
     assert [d["accepted"] for d in loops] != [d["accepted"] for d in default.loops]
 
 

@@ -75,6 +75,54 @@ fn shown_tag(tag: &str) -> String {
     shown
 }
 
+/// The tags the reader knows.
+const KNOWN_TAGS: [&str; 7] = [
+    "VERTEX_SE2",
+    "EDGE_SE2",
+    "EDGE_SE2_MIXTURE",
+    "VERTEX_SE3:QUAT",
+    "EDGE_SE3:QUAT",
+    "EDGE_SE3:QUAT_MIXTURE",
+    "FIX",
+];
+
+/// The known tag an unknown `tag` is a slip of, if any: at most two
+/// letters inserted, deleted, replaced or swapped (case ignored), so that
+/// `EGDE_SE2` or `edge_se2` is named, and `EDGE_SE3` (a tag of g2o's other
+/// formats) is matched to its nearest.
+fn known_tag_like(tag: &str) -> Option<&'static str> {
+    let tag = tag.to_ascii_uppercase();
+    (KNOWN_TAGS.iter().copied())
+        .map(|known| (edit_distance(&tag, known), known))
+        .filter(|&(d, _)| d <= 2)
+        .min_by_key(|&(d, _)| d)
+        .map(|(_, known)| known)
+}
+
+/// The optimal-string-alignment distance of `a` and `b` (insertions,
+/// deletions, replacements and swaps of neighbours), of their bytes.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len().abs_diff(b.len()) > 2 || a.len() > 64 {
+        return usize::MAX;
+    }
+    let mut d = vec![vec![0usize; b.len() + 1]; a.len() + 1];
+    (0..=a.len()).for_each(|i| d[i][0] = i);
+    (0..=b.len()).for_each(|j| d[0][j] = j);
+    for i in 1..=a.len() {
+        for j in 1..=b.len() {
+            let cost = usize::from(a[i - 1] != b[j - 1]);
+            d[i][j] = (d[i - 1][j] + 1)
+                .min(d[i][j - 1] + 1)
+                .min(d[i - 1][j - 1] + cost);
+            if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
+                d[i][j] = d[i][j].min(d[i - 2][j - 2] + 1);
+            }
+        }
+    }
+    d[a.len()][b.len()]
+}
+
 /// What is wrong with one line of a g2o file.
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
 pub enum LineProblem {
@@ -382,6 +430,7 @@ fn parse<R: Read>(
         state: State::Undecided { fixes: Vec::new() },
         summary: ReadSummary::default(),
         lines: 0,
+        skipped_first: BTreeMap::new(),
     };
     let mut fingerprint = Fingerprinter::default();
     while let Some((line_no, line)) = lines.next_raw() {
@@ -421,6 +470,8 @@ struct Parser<'a> {
     summary: ReadSummary,
     /// Lines read so far.
     lines: usize,
+    /// The first line of each skipped tag (as counted in `skipped_tags`).
+    skipped_first: BTreeMap<String, usize>,
 }
 
 impl Parser<'_> {
@@ -457,6 +508,7 @@ impl Parser<'_> {
                     OTHER_TAGS
                 };
                 *tags.entry(key.to_owned()).or_insert(0) += 1;
+                self.skipped_first.entry(key.to_owned()).or_insert(line_no);
                 Ok(())
             }
         };
@@ -550,8 +602,12 @@ impl Parser<'_> {
             State::Spatial(b) => b.finish().map_err(|(line, p)| self.error(line, p))?,
         };
         for (tag, count) in &self.summary.skipped_tags {
+            let first = self.skipped_first.get(tag).copied().unwrap_or(0);
+            let hint = known_tag_like(tag)
+                .map(|known| format!(": did you mean {known}?"))
+                .unwrap_or_default();
             self.summary.warnings.push(format!(
-                "skipped {count} line(s) with unsupported tag {}",
+                "line {first}: skipped {count} line(s) with unsupported tag {}{hint}",
                 shown_tag(tag)
             ));
         }
@@ -567,6 +623,10 @@ struct Builder<P, const D: usize> {
     graph: Graph<P, D>,
     /// The line that defined each vertex (by index), if any.
     defined_on: Vec<Option<usize>>,
+    /// The line that named each vertex first (by index).
+    named_on: Vec<usize>,
+    /// The line being read.
+    line_no: usize,
     fixes: Vec<(usize, Vec<VertexId>)>,
     information_fixed: usize,
 }
@@ -577,12 +637,15 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
             options,
             graph: Graph::new(),
             defined_on: Vec::new(),
+            named_on: Vec::new(),
+            line_no: 0,
             fixes,
             information_fixed: 0,
         }
     }
 
     fn line(&mut self, tag: &str, rest: &[&str], line_no: usize) -> Result<(), LineProblem> {
+        self.line_no = line_no;
         if tag == P::VERTEX_TAG {
             self.vertex(tag, rest, line_no)
         } else if tag == P::EDGE_TAG {
@@ -597,6 +660,7 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
         let (k, added) = self.graph.vertex_or_insert(id, P::identity());
         if added {
             self.defined_on.push(None);
+            self.named_on.push(self.line_no);
         }
         k
     }
@@ -740,6 +804,15 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
         order.sort_by_key(|&k| self.defined_on[k]);
         let defined = order.len();
         order.extend((0..self.graph.num_vertices()).filter(|&k| self.defined_on[k].is_none()));
+        // Vertices only edges name, in a file that defines others: a
+        // VERTEX line missing, or an id mistyped.
+        let undefined = (defined > 0)
+            .then(|| {
+                (order[defined..].iter())
+                    .min_by_key(|&&k| self.named_on[k])
+                    .map(|&k| (self.graph.id(k), self.named_on[k]))
+            })
+            .flatten();
         self.graph.reorder_vertices(&order);
         let mut summary = ReadSummary {
             information_fixed: self.information_fixed,
@@ -752,6 +825,13 @@ impl<P: G2oPose<D>, const D: usize> Builder<P, D> {
             ));
         }
         let missing: Vec<usize> = (defined..self.graph.num_vertices()).collect();
+        if let Some((id, line)) = undefined {
+            summary.warnings.push(format!(
+                "line {line}: vertex {id} has no VERTEX line ({} such vertices): their poses are \
+                 composed along the edges from the defined ones",
+                missing.len()
+            ));
+        }
         // The vectors grew by doubling: give back the unused capacity (up
         // to half of the graph's memory) before the optimiser needs its own.
         self.graph.edges.shrink_to_fit();
@@ -1009,6 +1089,49 @@ mod tests {
         assert_eq!(f.summary.skipped_tags.get("EQUIV"), Some(&2));
         assert_eq!(f.summary.skipped_tags.get("BR"), Some(&1));
         assert_eq!(f.summary.warnings.len(), 2);
+    }
+
+    /// A misspelled tag is named with the line it is first on and the tag
+    /// it is likely a slip of; a foreign one only with its line.
+    #[test]
+    fn a_misspelled_tag_is_named_with_its_line_and_the_tag_meant() {
+        let f = parse(&format!(
+            "{SE2}EGDE_SE2 0 1 1 0 0 1 0 0 1 0 1\nPARAMS_SE2OFFSET 0\n"
+        ))
+        .unwrap();
+        let first = SE2.lines().count() + 1;
+        assert_eq!(
+            f.summary.warnings,
+            [
+                format!(
+                    "line {first}: skipped 1 line(s) with unsupported tag EGDE_SE2: did you mean EDGE_SE2?"
+                ),
+                format!(
+                    "line {}: skipped 1 line(s) with unsupported tag PARAMS_SE2OFFSET",
+                    first + 1
+                ),
+            ]
+        );
+        assert_eq!(known_tag_like("edge_se3:quat"), Some("EDGE_SE3:QUAT"));
+        assert_eq!(known_tag_like("EDGE_SE2_XY"), None);
+    }
+
+    /// In a file that defines its vertices, an edge naming one it does not
+    /// define is worth a warning: a VERTEX line is missing or an id
+    /// mistyped. Edge-only files (every vertex composed) get none.
+    #[test]
+    fn an_edge_to_an_undefined_vertex_is_named_with_its_line() {
+        let f = parse(&format!("{SE2}EDGE_SE2 2 7 1 0 0 1 0 0 1 0 1\n")).unwrap();
+        let line = SE2.lines().count() + 1;
+        assert_eq!(f.summary.warnings.len(), 1, "{:?}", f.summary.warnings);
+        assert!(
+            f.summary.warnings[0]
+                .starts_with(&format!("line {line}: vertex 7 has no VERTEX line (1 such")),
+            "{:?}",
+            f.summary.warnings
+        );
+        let edges_only = parse("EDGE_SE2 4 5 1 0 0 1 0 0 1 0 1\n").unwrap();
+        assert!(edges_only.summary.warnings.is_empty());
     }
 
     #[test]

@@ -227,7 +227,7 @@ pub enum Reason {
     Kernel,
     /// Dropped by the gate, and the method weighs only the kept ones (a
     /// kernel, or EM with the layer `rescue` off).
-    Gated,
+    Dropped,
     /// Kept with weight 1 (no robust method).
     Trusted,
 }
@@ -279,7 +279,7 @@ impl Outcome {
             weights: vec![0.0; n],
             posteriors: vec![None; n],
             innovations: vec![None; n],
-            reasons: vec![Reason::Gated; n],
+            reasons: vec![Reason::Dropped; n],
             model: None,
             rounds: 0,
             relaxations: 0,
@@ -598,7 +598,7 @@ fn record(
         out.reasons[k] = if removed.contains(&k) {
             Reason::ExplainsChi2
         } else if !candidates[k].kept && !decided.rescue {
-            Reason::Gated
+            Reason::Dropped
         } else if e.is_none() {
             Reason::Unchecked
         } else if consistent != decided.accepted[k] {

@@ -623,8 +623,11 @@ impl LoopModel {
     /// there an innovation is evidence against a loop only beyond EM's
     /// kernel width on the true loops' scale, `y > ln(s²·c²)` (`c²` =
     /// `χ²_D(1 − 10⁻⁶)`, `ln s²` = `μ_true − E[ln χ²_D]`), where a true
-    /// loop falls once in a million; below it the ratio is at least 1 and
-    /// the prior decides.
+    /// loop falls once in a million — and never within it on the scale of
+    /// the information as stated (`s² ≥ 1`: a file whose loops mostly fit
+    /// far better than stated does not make one that fits as stated
+    /// wrong). Below the edge the ratio is at least 1 and the prior
+    /// decides.
     fn decisive_ratio(&self, truth: &Density<'_>, y: f64) -> f64 {
         let raw = self.raw_ratio(truth, y);
         if self.wrong_loops.is_empty() && y <= self.kernel_edge() {
@@ -634,11 +637,12 @@ impl LoopModel {
         }
     }
 
-    /// `ln(s²·c²)`: EM's kernel width on the true loops' scale
+    /// `ln(max(s², 1)·c²)`: EM's kernel width on the true loops' scale, or
+    /// on the stated information's when theirs is smaller
     /// ([`Self::decisive_ratio`]).
     fn kernel_edge(&self) -> f64 {
         let c = super::default_c(super::RobustMethod::Em, self.dof);
-        self.true_loops.mean - ln_chi2_mean(self.dof) + 2.0 * c.ln()
+        (self.true_loops.mean - ln_chi2_mean(self.dof)).max(0.0) + 2.0 * c.ln()
     }
 
     /// Tabulates the running minimum of the likelihood ratio from the true

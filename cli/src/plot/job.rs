@@ -31,12 +31,16 @@ pub fn pictures(
     }
     if let Some(model) = &report.robust.model {
         let path = dir.join("loops.svg");
-        plot_loops(&path, &loop_points(report), model)?;
+        let points = loop_points(report);
+        plot_loops(&path, &points, report.loops.len() - points.len(), model)?;
         report.plots.push(path.display().to_string());
     }
-    let title = input
+    let mut title = input
         .file_name()
         .map_or_else(|| "pose graph".into(), |n| n.to_string_lossy().into_owned());
+    if graph.dimension() == 3 {
+        title.push_str(" (3D: seen from above, x and y)");
+    }
     let path = dir.join("trajectory.svg");
     match (graph, solution) {
         (AnyPoseGraph::Planar(g), AnySolution::Planar(s)) => trajectory(&path, g, s, &title)?,

@@ -45,7 +45,12 @@ pub struct LoopPoint {
 /// At most [`MAX_LOOP_SEGMENTS`] candidates are drawn, evenly sampled (the
 /// caption says so). A point that is not finite, or a prior outside
 /// `[0, 1]`, gives [`PlotError::InvalidInput`].
-pub fn plot_loops(path: &Path, points: &[LoopPoint], model: &LoopModel) -> Result<(), PlotError> {
+pub fn plot_loops(
+    path: &Path,
+    points: &[LoopPoint],
+    unjudged: usize,
+    model: &LoopModel,
+) -> Result<(), PlotError> {
     if let Some(k) = points.iter().position(|p| {
         !(p.innovation.is_finite() && p.innovation > 0.0 && (0.0..=1.0).contains(&p.prior))
     }) {
@@ -58,7 +63,7 @@ pub fn plot_loops(path: &Path, points: &[LoopPoint], model: &LoopModel) -> Resul
             ),
         ));
     }
-    let svg = render(points, model).map_err(|e| draw_error(path, e))?;
+    let svg = render(points, unjudged, model).map_err(|e| draw_error(path, e))?;
     write_svg(path, &svg)
 }
 
@@ -80,7 +85,7 @@ fn grid((lo, hi): (f64, f64)) -> impl Iterator<Item = f64> {
     (0..=CURVE_POINTS).map(move |i| lo + (hi - lo) * i as f64 / CURVE_POINTS as f64)
 }
 
-fn render(points: &[LoopPoint], model: &LoopModel) -> DrawResult<String> {
+fn render(points: &[LoopPoint], unjudged: usize, model: &LoopModel) -> DrawResult<String> {
     let range = x_range(points, model);
     let drawn: Vec<LoopPoint> = even_indices(points.len(), MAX_LOOP_SEGMENTS)
         .into_iter()
@@ -92,7 +97,7 @@ fn render(points: &[LoopPoint], model: &LoopModel) -> DrawResult<String> {
         root.fill(&WHITE)?;
         let (header, body) = root.split_vertically(76);
         let (top, bottom) = body.split_vertically(300);
-        draw_header(&header, points, drawn.len(), model)?;
+        draw_header(&header, points, (drawn.len(), unjudged), model)?;
         draw_densities(&top, model, range)?;
         draw_decisions(&bottom, &drawn, model, range)?;
         root.present()?;
@@ -100,20 +105,29 @@ fn render(points: &[LoopPoint], model: &LoopModel) -> DrawResult<String> {
     Ok(svg)
 }
 
+/// The title and a caption: the decisions of the candidates drawn, how
+/// many were not (`unjudged`: no innovation, or no prior), and the model's
+/// groups of wrong loops and the share of wrong loops whose counts look
+/// true.
 fn draw_header(
     area: &DrawingArea<SVGBackend<'_>, Shift>,
     points: &[LoopPoint],
-    drawn: usize,
+    (drawn, unjudged): (usize, usize),
     model: &LoopModel,
 ) -> DrawResult<()> {
     let accepted = points.iter().filter(|p| p.accepted).count();
     let wrong = model.wrong_loops.len();
-    let mut caption = format!(
-        "{accepted} accepted, {} rejected; {wrong} wrong-loop population{}, aliasing rate {:.3}",
-        points.len() - accepted,
+    let mut caption = format!("{accepted} accepted, {} rejected", points.len() - accepted);
+    if unjudged > 0 {
+        caption.push_str(&format!(
+            "; {unjudged} without an innovation (unchecked, or dropped by the gate) not drawn"
+        ));
+    }
+    caption.push_str(&format!(
+        "; the model: {wrong} group{} of wrong loops, {:.1} % of wrong loops with true-like counts",
         if wrong == 1 { "" } else { "s" },
-        model.aliasing_rate
-    );
+        100.0 * model.aliasing_rate
+    ));
     if drawn < points.len() {
         caption.push_str(&format!(
             "; {drawn} of {} drawn, evenly sampled",
@@ -254,7 +268,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("pgo-plot-loops-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join(name);
-        plot_loops(&path, points, model)?;
+        plot_loops(&path, points, 0, model)?;
         Ok(std::fs::read_to_string(path).unwrap())
     }
 

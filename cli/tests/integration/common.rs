@@ -26,10 +26,13 @@ pub fn sample(name: &str) -> String {
 }
 
 /// The exit status `pgo optimize` gives for its JSON report: 3 when the χ²
-/// test failed, 0 otherwise.
+/// test failed, 4 when its budget stopped it, 0 otherwise.
 pub fn verdict_status(report: &serde_json::Value) -> i32 {
+    let stop = report["optimizer"]["stop_reason"].as_str();
     if report["chi2_test"]["passed"] == serde_json::Value::Bool(false) {
         3
+    } else if matches!(stop, Some("time_limit" | "max_iterations")) {
+        4
     } else {
         0
     }

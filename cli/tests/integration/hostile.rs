@@ -4,7 +4,7 @@
 //! None may panic. (Parser details live in the unit tests of `io::g2o`; this
 //! is what a user of the command line sees.)
 
-use crate::common::{pgo, stderr, temp_dir};
+use crate::common::{pgo, stderr, temp_dir, verdict_status};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -81,8 +81,9 @@ fn accepted(dir: &Path, path: &str, args: &[&str]) -> (serde_json::Value, String
     all.extend_from_slice(args);
     let out = pgo(&all);
     assert_no_panic(&out, path);
-    assert_eq!(out.status.code(), Some(0), "{path}: {}", stderr(&out));
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON report");
+    let status = verdict_status(&report);
+    assert_eq!(out.status.code(), Some(status), "{path}: {}", stderr(&out));
     let text = std::fs::read_to_string(&out_path).expect("output written");
     (report, text)
 }
