@@ -628,9 +628,10 @@ impl LoopModel {
     /// far better than stated does not make one that fits as stated
     /// wrong). Below the edge the ratio is at least 1 and the prior
     /// decides.
-    fn decisive_ratio(&self, truth: &Density<'_>, y: f64) -> f64 {
+    /// `edge` is [`Self::kernel_edge`].
+    fn decisive_ratio(&self, truth: &Density<'_>, y: f64, edge: f64) -> f64 {
         let raw = self.raw_ratio(truth, y);
-        if self.wrong_loops.is_empty() && y <= self.kernel_edge() {
+        if self.wrong_loops.is_empty() && y <= edge {
             raw.max(0.0)
         } else {
             raw
@@ -653,10 +654,11 @@ impl LoopModel {
         let mut low = f64::INFINITY;
         let table = LogChi2::of(self.dof);
         let truth = self.true_loops(&table);
+        let edge = self.kernel_edge();
         self.envelope = (0..=steps)
             .map(|i| {
                 let y = self.true_loops.mean + i as f64 * GRID_STEP;
-                low = low.min(self.decisive_ratio(&truth, y));
+                low = low.min(self.decisive_ratio(&truth, y, edge));
                 low
             })
             .collect();
@@ -682,7 +684,8 @@ impl LoopModel {
             // Beyond the table: the raw ratio there, and no more than the
             // table's last value.
             _ => {
-                let raw = self.decisive_ratio(&self.true_loops(&LogChi2::of(self.dof)), y);
+                let table = LogChi2::of(self.dof);
+                let raw = self.decisive_ratio(&self.true_loops(&table), y, self.kernel_edge());
                 self.envelope.last().map_or(raw, |&v| v.min(raw))
             }
         }
