@@ -15,7 +15,7 @@ use rand::{SeedableRng, rngs::StdRng};
 use std::path::Path;
 
 mod common;
-use common::{candidate_labels, datasets, rebuilt, temp_dir, write};
+use common::{candidate_labels, datasets, prefix, rebuilt, temp_dir, write};
 
 /// Dataset `name` read as a graph of either dimension (`None` without the
 /// datasets).
@@ -533,20 +533,7 @@ fn a_young_real_map_keeps_its_loops() {
         Some(e)
     });
     for (n, want_rejected) in [(100, 0), (200, 0), (300, 2), (400, 0), (600, 0), (808, 0)] {
-        let mut young = PoseGraph2::new();
-        for &id in as_candidates.ids().iter().filter(|&&id| id < n) {
-            young
-                .add_pose(id, *as_candidates.pose(id).unwrap())
-                .unwrap();
-        }
-        for e in as_candidates.edges().filter(|e| e.from < n && e.to < n) {
-            if e.loop_candidate {
-                young.add_loop_candidate(e.from, e.to, e.measurement, e.information, e.inliers)
-            } else {
-                young.add_edge(e.from, e.to, e.measurement, e.information)
-            }
-            .unwrap();
-        }
+        let (young, _) = prefix(&as_candidates, n);
         let r = young.optimize(&Options::default()).unwrap();
         let loops = &r.report().loops;
         let rejected = loops.iter().filter(|l| !l.accepted).count();

@@ -10,7 +10,7 @@ use pgo_sim::{InlierModel, OutlierPolicy, SimulationOptions};
 use std::path::{Path, PathBuf};
 
 mod common;
-use common::{candidate_labels, candidate_wrong, rebuilt, sample, temp_dir};
+use common::{candidate_labels, candidate_wrong, prefix, rebuilt, sample, temp_dir};
 
 fn run(input: &Path, options: &Options) -> Report {
     run_to(input, options, None)
@@ -564,31 +564,6 @@ fn each_layer_can_be_switched_off_and_the_report_says_which() {
     assert!(Options::default().set("expert", "no-such-layer").is_err());
 }
 
-/// The first `n` poses of `graph` and the edges among them (with each
-/// edge's index in `graph`).
-fn prefix<P: pgo::GraphPose<D>, const D: usize>(
-    graph: &pgo::PoseGraph<P, D>,
-    n: u64,
-) -> (pgo::PoseGraph<P, D>, Vec<usize>) {
-    let mut young = pgo::PoseGraph::new();
-    for &id in graph.ids().iter().filter(|&&id| id < n) {
-        young.add_pose(id, *graph.pose(id).unwrap()).unwrap();
-    }
-    let mut kept = Vec::new();
-    for (k, e) in graph.edges().enumerate() {
-        if e.from < n && e.to < n {
-            if e.loop_candidate {
-                young.add_loop_candidate(e.from, e.to, e.measurement, e.information, e.inliers)
-            } else {
-                young.add_edge(e.from, e.to, e.measurement, e.information)
-            }
-            .unwrap();
-            kept.push(k);
-        }
-    }
-    (young, kept)
-}
-
 /// Accepted true and wrong candidates of `young` (a prefix whose edges are
 /// `kept` of a graph with labels `wrong`), and how many true ones it has.
 fn young_counts<P: pgo::GraphPose<D>, const D: usize>(
@@ -610,25 +585,17 @@ fn young_counts<P: pgo::GraphPose<D>, const D: usize>(
 /// (docs/method.md §4, "Few candidates, all true").
 #[test]
 fn young_maps_keep_their_loops() {
-    let grid = pgo_sim::simulate_planar(&SimulationOptions {
+    let world = |world, seed| SimulationOptions {
+        world,
         poses: 2000,
         loops: 200,
         outliers: 50,
         inliers: Some(InlierModel::default()),
-        seed: 2,
+        seed,
         ..Default::default()
-    })
-    .expect("simulate");
-    let sphere = pgo_sim::simulate_spatial(&SimulationOptions {
-        world: pgo_sim::World::Sphere3d,
-        poses: 2000,
-        loops: 200,
-        outliers: 50,
-        inliers: Some(InlierModel::default()),
-        seed: 6,
-        ..Default::default()
-    })
-    .expect("simulate");
+    };
+    let grid = pgo_sim::simulate_planar(&world(pgo_sim::World::Grid2d, 2)).expect("simulate");
+    let sphere = pgo_sim::simulate_spatial(&world(pgo_sim::World::Sphere3d, 6)).expect("simulate");
     for n in [75, 80, 100, 126, 150, 170, 200] {
         let (young, kept) = prefix(&grid.noisy, n);
         let (tp, fp, true_loops) = young_counts(young, &kept, &grid.wrong);

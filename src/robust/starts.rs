@@ -17,10 +17,9 @@
 //! The second start is sought only when the annealed end's map fails the
 //! χ² test (or there is no test): a map that passes is consistent with the
 //! information of its edges, the test the method's answer rests on, and it
-//! stands. A failed test is what a second start can resolve. Over the
-//! places sweep's 24 runs (docs/benchmarks.md) the kernel start changed
-//! the decisions on one, whose annealed end failed; on a graph of 10⁶
-//! poses it would double the solver's factorisations for nothing.
+//! stands. A failed test is what a second start can resolve; run always,
+//! it doubled the solver's factorisations on a graph of 10⁶ poses for
+//! nothing (docs/method.md §5, "Only when the test fails").
 //!
 //! Each start ends at an accepted set `S` and its least-squares map `X_S`.
 //! The job keeps
@@ -112,18 +111,20 @@ impl<P: Clone> End<P> {
     where
         P: Pose<D>,
     {
-        let test = (job.test)(graph, weights);
-        let summary = StartEnd {
-            start,
-            accepted: (job.candidates.iter())
-                .filter(|c| weights[c.edge] >= 0.5)
-                .count(),
-            objective: None,
-            passed: test.as_ref().map(|t| t.passed),
-            chosen: false,
-            iterations: 0,
-            settled: true,
-        };
+        let summary = summary(graph, weights, job, start);
+        Self::keep(graph, weights, job, (summary, out))
+    }
+
+    /// The end of `summary` in the session's graph and `weights`.
+    fn keep<const D: usize>(
+        graph: &Graph<P, D>,
+        weights: &[f64],
+        job: &Job<'_, P, D>,
+        (summary, out): (StartEnd, Outcome),
+    ) -> Self
+    where
+        P: Pose<D>,
+    {
         Self {
             poses: graph.poses.clone(),
             weights: weights.to_vec(),
@@ -177,6 +178,27 @@ impl<P: Clone> End<P> {
     }
 }
 
+/// Where the session's map and `weights` ended from `start`, with its χ²
+/// verdict (the iterations still to be set).
+fn summary<P: Pose<D>, const D: usize>(
+    graph: &Graph<P, D>,
+    weights: &[f64],
+    job: &Job<'_, P, D>,
+    start: Start,
+) -> StartEnd {
+    StartEnd {
+        start,
+        accepted: (job.candidates.iter())
+            .filter(|c| weights[c.edge] >= 0.5)
+            .count(),
+        objective: None,
+        passed: (job.test)(graph, weights).map(|t| t.passed),
+        chosen: false,
+        iterations: 0,
+        settled: true,
+    }
+}
+
 /// EM: the annealed start, then — when its map fails the χ² test, the
 /// caller gave poses and budget is left — the kernel start from the
 /// caller's poses, and the better end (module doc) left in the session's
@@ -195,15 +217,16 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     else {
         return Ok(annealed);
     };
-    let mut first = End::take(session.graph, weights, job, (Start::Annealed, annealed));
-    first.summary.iterations = share;
-    if first.summary.passed == Some(true) {
+    let mut ended = summary(session.graph, weights, job, Start::Annealed);
+    ended.iterations = share;
+    if ended.passed == Some(true) {
         // A map that passes the χ² test is not second-guessed (module doc).
-        first.summary.chosen = true;
-        let mut out = first.out;
-        out.starts = vec![first.summary];
+        ended.chosen = true;
+        let mut out = annealed;
+        out.starts = vec![ended];
         return Ok(out);
     }
+    let mut first = End::keep(session.graph, weights, job, (ended, annealed));
     session.graph.poses.copy_from_slice(given);
     let before = session.iterations();
     let kernel = kernel_start(session, weights, job, share)?;

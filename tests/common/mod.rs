@@ -87,10 +87,40 @@ pub fn candidate_wrong(labels_csv: &str) -> Vec<bool> {
 /// tests that scale information, bend measurements or drop edges.
 pub fn rebuilt<P: pgo::GraphPose<D>, const D: usize>(
     graph: &pgo::PoseGraph<P, D>,
+    change: impl FnMut(usize, pgo::Edge<P, D>) -> Option<pgo::Edge<P, D>>,
+) -> pgo::PoseGraph<P, D> {
+    copied(graph, |_| true, change)
+}
+
+/// The first `n` poses of `graph` (ids below `n`) and the edges among
+/// them, as a young map of a front end; with the index in `graph` of each
+/// edge kept.
+#[allow(dead_code)]
+pub fn prefix<P: pgo::GraphPose<D>, const D: usize>(
+    graph: &pgo::PoseGraph<P, D>,
+    n: u64,
+) -> (pgo::PoseGraph<P, D>, Vec<usize>) {
+    let mut kept = Vec::new();
+    let young = copied(
+        graph,
+        |id| id < n,
+        |k, e| {
+            let inside = e.from < n && e.to < n;
+            inside.then(|| kept.push(k));
+            inside.then_some(e)
+        },
+    );
+    (young, kept)
+}
+
+/// [`rebuilt`] of the poses for which `keep` holds.
+fn copied<P: pgo::GraphPose<D>, const D: usize>(
+    graph: &pgo::PoseGraph<P, D>,
+    keep: impl Fn(u64) -> bool,
     mut change: impl FnMut(usize, pgo::Edge<P, D>) -> Option<pgo::Edge<P, D>>,
 ) -> pgo::PoseGraph<P, D> {
     let mut copy = pgo::PoseGraph::new();
-    for &id in graph.ids() {
+    for &id in graph.ids().iter().filter(|&&id| keep(id)) {
         let pose = *graph.pose(id).expect("every vertex has a pose");
         copy.add_pose(id, pose).expect("pose");
     }
@@ -103,7 +133,7 @@ pub fn rebuilt<P: pgo::GraphPose<D>, const D: usize>(
         }
         .expect("edge");
     }
-    for id in graph.fixed() {
+    for id in graph.fixed().into_iter().filter(|&id| keep(id)) {
         copy.fix(id).expect("fixed pose");
     }
     copy
