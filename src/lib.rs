@@ -37,6 +37,9 @@
 //! * `json` (default): [`report::Report::to_json`] and `Certificate::to_json`.
 //! * `clap`: [`Options`] and its parts derive `clap::Args`, so a command
 //!   line gets every option of the job as a flag (the `pgo` binary's).
+//! * `plot`: the `plot` module and `Solution::write_plots`: the SVG
+//!   pictures of a job (what `pgo optimize --plot DIR` writes), drawn with
+//!   plotters.
 //! * `internals`: internals for pgo's own benchmarks, probes and fuzz
 //!   targets; no stability promise, not part of the API.
 
@@ -52,6 +55,8 @@ pub use nalgebra;
 
 pub mod geometry;
 pub mod output;
+#[cfg(feature = "plot")]
+pub mod plot;
 pub mod report;
 
 mod certify;

@@ -15,8 +15,12 @@ use std::any::Any;
 use std::collections::HashMap;
 use std::io::{self, Write};
 use std::path::Path;
+#[cfg(feature = "plot")]
+use std::path::PathBuf;
 use std::sync::Arc;
 
+#[cfg(feature = "plot")]
+mod plots;
 mod trajectory;
 
 /// The result of [`crate::PoseGraph::optimize`].
@@ -399,6 +403,54 @@ impl Solution<Se2> {
         self.write_trajectory(path.as_ref(), trajectory::Format::Kitti)
     }
 
+    /// Writes the job's pictures as SVG files into `dir` (made if
+    /// missing), what `pgo optimize --plot DIR` writes, and returns the
+    /// paths written, in this order:
+    ///
+    /// * `counts.svg`, when the candidates have inlier counts and the gate
+    ///   fitted them: their histogram with the mixture and `T_GV`
+    ///   ([`crate::plot::plot_counts`]);
+    /// * `loops.svg`, when EM's loop model decided the loops: each
+    ///   candidate's innovation and prior against the model
+    ///   ([`crate::plot::plot_loops`]);
+    /// * `trajectory.svg`: the initial guess and the map side by side, the
+    ///   loops coloured by their final weight
+    ///   ([`crate::plot::plot_trajectory`]; a 3D map seen from above),
+    ///   titled with the input file's name for a graph read from a file.
+    ///
+    /// Each file is written atomically (a temporary file renamed over it).
+    /// Errors: [`crate::plot::PlotError`] naming the file (or `dir`);
+    /// `pgo::Error::from` turns it into [`Error::Write`] for a file that
+    /// cannot be written. Needs the `plot` feature.
+    ///
+    /// ```
+    /// use pgo::nalgebra::Matrix3;
+    /// use pgo::{Options, PoseGraph2, Se2};
+    ///
+    /// let mut graph = PoseGraph2::new();
+    /// for k in 0..4 {
+    ///     graph.add_pose(k, Se2::new(k as f64, 0.1 * k as f64, 0.0))?;
+    /// }
+    /// for k in 1..4 {
+    ///     graph.add_edge(k - 1, k, Se2::new(1.0, 0.0, 0.0), Matrix3::identity())?;
+    /// }
+    /// graph.add_loop_candidate(0, 3, Se2::new(3.0, 0.0, 0.0), Matrix3::identity(), Some(120))?;
+    /// let solution = graph.optimize(&Options::default())?;
+    /// let dir = std::env::temp_dir().join(format!("pgo-doc-plots-{}", std::process::id()));
+    /// let written = solution.write_plots(&dir)?;
+    /// assert_eq!(written.last(), Some(&dir.join("trajectory.svg")));
+    /// assert!(std::fs::read_to_string(&written[0])?.starts_with("<svg"));
+    /// # std::fs::remove_dir_all(&dir)?;
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    #[cfg(feature = "plot")]
+    pub fn write_plots(
+        &self,
+        dir: impl AsRef<Path>,
+    ) -> Result<Vec<PathBuf>, crate::plot::PlotError> {
+        self.plots::<3>(dir.as_ref())
+    }
+
     /// A certificate of global optimality of the map over its edges
     /// (trusted edges and accepted loops): the map refined on SE-Sync's
     /// isotropic problem (one rotation and one translation weight per edge
@@ -454,6 +506,17 @@ impl Solution<Se3> {
     /// [`Solution::<Se2>::write_kitti`](Solution#method.write_kitti).
     pub fn write_kitti(&self, path: impl AsRef<Path>) -> Result<(), Error> {
         self.write_trajectory(path.as_ref(), trajectory::Format::Kitti)
+    }
+
+    /// Writes the job's pictures as SVG files into `dir`; see
+    /// [`Solution::<Se2>::write_plots`](Solution#method.write_plots). The
+    /// trajectory is seen from above (x and y).
+    #[cfg(feature = "plot")]
+    pub fn write_plots(
+        &self,
+        dir: impl AsRef<Path>,
+    ) -> Result<Vec<PathBuf>, crate::plot::PlotError> {
+        self.plots::<6>(dir.as_ref())
     }
 
     /// A certificate of global optimality of the map over its edges; see
@@ -595,6 +658,16 @@ impl AnySolution {
     /// ([`Solution::write_kitti`]).
     pub fn write_kitti(&self, path: impl AsRef<Path>) -> Result<(), Error> {
         either!(self, |s| s.write_kitti(path))
+    }
+
+    /// Writes the job's pictures as SVG files into `dir` and returns the
+    /// paths written ([`Solution::write_plots`](Solution#method.write_plots)).
+    #[cfg(feature = "plot")]
+    pub fn write_plots(
+        &self,
+        dir: impl AsRef<Path>,
+    ) -> Result<Vec<PathBuf>, crate::plot::PlotError> {
+        either!(self, |s| s.write_plots(dir))
     }
 
     /// See [`Solution::incremental`].

@@ -19,7 +19,6 @@ macro_rules! say {
 mod console;
 mod inliers;
 mod optimize;
-mod plot;
 
 /// Pose-graph optimisation with unsupervised loop-closure gating.
 #[derive(Parser, Debug)]

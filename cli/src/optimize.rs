@@ -4,8 +4,8 @@
 
 use crate::console;
 use crate::inliers::{self, InlierCsvError};
-use crate::plot::{self, PlotError};
 use pgo::output::{CheckError, check_files};
+use pgo::plot::PlotError;
 use pgo::report::Report;
 use pgo::{AnyPoseGraph, AnySolution, Error, IterationRecord, Observer, Setting};
 use std::path::{Path, PathBuf};
@@ -191,14 +191,15 @@ pub fn run(
             (n > 0).then(|| format!("{}: replaced the inlier counts of {n} edges", csv.display()));
     }
     let solution = graph.optimize_with(&args.options, observer).map_err(job)?;
+    // The solution holds the map and what writing it and its pictures needs.
+    drop(graph);
     let mut report = solution.report().clone();
     report.time.read_s = read_s;
     report.warnings.splice(0..0, replaced);
     if let Some(dir) = &args.plot {
-        plot::pictures(dir, &graph, &solution, &args.input, &mut report)?;
+        let written = solution.write_plots(dir)?;
+        (report.plots).extend(written.iter().map(|p| p.display().to_string()));
     }
-    // The solution holds the map and what writing it needs.
-    drop(graph);
     if args.certify {
         match solution.certificate() {
             Ok(c) => report.certificate = Some(c),

@@ -108,6 +108,13 @@ impl G2oFile {
 }
 
 impl FileText {
+    /// The input's name, as it was given to the reader (`<stdin>` for the
+    /// standard input): the title of a solution's pictures.
+    #[cfg(feature = "plot")]
+    pub fn name(&self) -> &std::path::Path {
+        &self.name
+    }
+
     /// Writes the input's own text to `out` with the poses of `graph` (the
     /// graph read from it, optimised), by the rules of
     /// [`self`](crate::io::g2o::rewrite): every line kept byte for byte but

@@ -5,7 +5,8 @@ use super::{
     Chart, DrawResult, FONT, LOOP_COLOUR, MAX_LOOP_SEGMENTS, PlotError, draw_error, draw_mesh,
     even_indices, invalid, text_style, write_svg,
 };
-use pgo::LoopModel;
+use crate::report::Report;
+use crate::robust::LoopModel;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -28,6 +29,20 @@ pub struct LoopPoint {
     pub prior: f64,
     /// Whether the final map was solved with it.
     pub accepted: bool,
+}
+
+/// The candidates the loop model weighed in a job's `report`, for
+/// [`plot_loops`]: those with an innovation and a prior, in file order.
+pub fn loop_points(report: &Report) -> Vec<LoopPoint> {
+    (report.loops.iter())
+        .filter_map(|l| {
+            Some(LoopPoint {
+                innovation: l.innovation?,
+                prior: l.prior?,
+                accepted: l.accepted,
+            })
+        })
+        .collect()
 }
 
 /// Writes the loop decisions picture to `path` as SVG, in two panels over
@@ -253,14 +268,14 @@ mod tests {
     /// The loop candidates of the bundled sample as the job decided them,
     /// and its loop model.
     fn candidates() -> (Vec<LoopPoint>, LoopModel) {
-        let sample = concat!(env!("CARGO_MANIFEST_DIR"), "/../g2o_samples/grid2d.g2o");
-        let graph = pgo::AnyPoseGraph::read_g2o(sample).unwrap();
+        let sample = concat!(env!("CARGO_MANIFEST_DIR"), "/g2o_samples/grid2d.g2o");
+        let graph = crate::AnyPoseGraph::read_g2o(sample).unwrap();
         let report = graph
-            .optimize(&pgo::Options::default())
+            .optimize(&crate::Options::default())
             .unwrap()
             .report()
             .clone();
-        let points = super::super::job::loop_points(&report);
+        let points = loop_points(&report);
         (points, report.robust.model.unwrap())
     }
 
