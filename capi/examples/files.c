@@ -1,16 +1,18 @@
 /*
  * pgo's C API on files: read a g2o file, list its pose ids, optimise it,
  * and write the optimised map (g2o: the file's own text with the new
- * poses) and the trajectory in the TUM and KITTI formats that evo reads
- * (evo_ape tum truth.tum map.tum).
+ * poses), the trajectory in the TUM and KITTI formats that evo reads
+ * (evo_ape tum truth.tum map.tum) and the pictures of `pgo optimize --plot`.
  *
- *   files IN.g2o OUTDIR     writes OUTDIR/map.g2o, map.tum and map.kitti
+ *   files IN.g2o OUTDIR     writes OUTDIR/map.g2o, map.tum, map.kitti and
+ *                           OUTDIR/pictures/ (counts.svg, loops.svg,
+ *                           trajectory.svg)
  *
  * Checks its own expectations — the map read back has the same ids in
  * the same order; the TUM file has one line per pose, its id as the
- * timestamp and its translation as pgo_result_pose gives it, to the bit —
- * and
- * exits 1 otherwise, so CI runs it as a test.
+ * timestamp and its translation as pgo_result_pose gives it, to the bit;
+ * the trajectory picture is an SVG — and exits 1 otherwise, so CI runs it
+ * as a test.
  *
  * Build (see capi/README.md):
  *   cargo build --release -p pgo-capi
@@ -98,15 +100,31 @@ static int compare_tum(const char *path, const PgoResult *result, const uint64_t
     return failures + (lines != n);
 }
 
+/* Whether the file at `path` begins as an SVG picture does. */
+static int is_svg(const char *path) {
+    FILE *f = fopen(path, "r");
+    char head[5] = {0};
+    int ok = f != NULL && fread(head, 1, 4, f) == 4 && strcmp(head, "<svg") == 0;
+    if (f != NULL) {
+        fclose(f);
+    }
+    if (!ok) {
+        fprintf(stderr, "%s is no SVG picture\n", path);
+    }
+    return ok;
+}
+
 int main(int argc, char **argv) {
     if (argc != 3) {
         fprintf(stderr, "usage: %s IN.g2o OUTDIR\n", argv[0]);
         return 2;
     }
-    char map_path[4096], tum_path[4096], kitti_path[4096];
+    char map_path[4096], tum_path[4096], kitti_path[4096], plots[4096], picture[4096];
     join(map_path, sizeof map_path, argv[2], "map.g2o");
     join(tum_path, sizeof tum_path, argv[2], "map.tum");
     join(kitti_path, sizeof kitti_path, argv[2], "map.kitti");
+    join(plots, sizeof plots, argv[2], "pictures");
+    join(picture, sizeof picture, plots, "trajectory.svg");
 
     PgoGraph *graph = NULL;
     PgoResult *result = NULL;
@@ -122,9 +140,11 @@ int main(int argc, char **argv) {
     check(pgo_result_write_g2o(result, map_path), "pgo_result_write_g2o");
     check(pgo_result_write_tum(result, tum_path), "pgo_result_write_tum");
     check(pgo_result_write_kitti(result, kitti_path), "pgo_result_write_kitti");
-    printf("wrote %s, %s and %s\n", map_path, tum_path, kitti_path);
+    check(pgo_result_write_plots(result, plots), "pgo_result_write_plots");
+    printf("wrote %s, %s, %s and the pictures in %s\n", map_path, tum_path, kitti_path, plots);
 
-    int failures = compare_map(map_path, ids, n) + compare_tum(tum_path, result, ids, n, width);
+    int failures = compare_map(map_path, ids, n) + compare_tum(tum_path, result, ids, n, width) +
+                   !is_svg(picture);
     free(ids);
     pgo_result_free(result);
     pgo_graph_free(graph);

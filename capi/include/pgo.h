@@ -1087,6 +1087,25 @@ enum PgoStatus pgo_result_write_tum(const struct PgoResult *result, const char *
 enum PgoStatus pgo_result_write_kitti(const struct PgoResult *result, const char *path);
 
 /**
+ * Writes the job's pictures as SVG files into the directory `dir` (made
+ * if missing), what `pgo optimize --plot DIR` writes, each atomically as
+ * `pgo_result_write_g2o` writes: `counts.svg` (when the candidates have
+ * inlier counts and the gate fitted them), `loops.svg` (when EM's loop
+ * model decided the loops) and `trajectory.svg` (the initial guess and
+ * the map side by side, the loops coloured by their final weight; a 3D
+ * map seen from above).
+ *
+ * Errors: `PGO_ERR_IO` (the directory or a picture cannot be written; the
+ * message names it), `PGO_ERR_INTERNAL` (a picture could not be drawn),
+ * `PGO_ERR_INVALID_ARGUMENT` (NULL `result`, NULL or non-UTF-8 `dir`).
+ *
+ * # Safety
+ * `result` is NULL or a live result; `dir` is NULL or a NUL-terminated
+ * string.
+ */
+enum PgoStatus pgo_result_write_plots(const struct PgoResult *result, const char *dir);
+
+/**
  * Frees a result made by `pgo_graph_optimize` or `pgo_graph_update`, and
  * the strings it handed out. NULL is allowed and does nothing.
  *

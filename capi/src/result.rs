@@ -723,6 +723,34 @@ pub unsafe extern "C" fn pgo_result_write_kitti(
     unsafe { write(result, path, |s, p| s.write_kitti(p)) }
 }
 
+/// Writes the job's pictures as SVG files into the directory `dir` (made
+/// if missing), what `pgo optimize --plot DIR` writes, each atomically as
+/// `pgo_result_write_g2o` writes: `counts.svg` (when the candidates have
+/// inlier counts and the gate fitted them), `loops.svg` (when EM's loop
+/// model decided the loops) and `trajectory.svg` (the initial guess and
+/// the map side by side, the loops coloured by their final weight; a 3D
+/// map seen from above).
+///
+/// Errors: `PGO_ERR_IO` (the directory or a picture cannot be written; the
+/// message names it), `PGO_ERR_INTERNAL` (a picture could not be drawn),
+/// `PGO_ERR_INVALID_ARGUMENT` (NULL `result`, NULL or non-UTF-8 `dir`).
+///
+/// # Safety
+/// `result` is NULL or a live result; `dir` is NULL or a NUL-terminated
+/// string.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_write_plots(
+    result: *const PgoResult,
+    dir: *const c_char,
+) -> PgoStatus {
+    status(|| {
+        // SAFETY: the caller's contract.
+        let (result, dir) = unsafe { (borrow(result, "result")?, text(dir, "dir")?) };
+        result.solution.write_plots(dir).map_err(pgo::Error::from)?;
+        Ok(())
+    })
+}
+
 /// Runs `write` on the solution and the path.
 ///
 /// # Safety

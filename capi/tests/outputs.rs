@@ -1,7 +1,7 @@
 //! Writing what the job found from C: `pgo_result_write_g2o` (the
 //! optimised map), `pgo_result_write_tum` and `pgo_result_write_kitti`
 //! (the trajectory as evo reads it), after listing a file's pose ids with
-//! `pgo_graph_ids`.
+//! `pgo_graph_ids`; `pgo_result_write_plots` (the pictures).
 
 use pgo::AnyPoseGraph;
 use pgo_c::*;
@@ -190,6 +190,62 @@ fn bad_paths_and_results_are_refused_and_leave_nothing() {
             );
         }
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
+        pgo_result_free(r);
+        pgo_graph_free(g);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_pictures_of_a_file_are_written_into_a_directory_made_for_them() {
+    let dir = temp_dir("plots");
+    unsafe {
+        let mut g = ptr::null_mut();
+        ok(pgo_graph_read_g2o(
+            c_path(&sample("grid2d.g2o")).as_ptr(),
+            &mut g,
+        ));
+        let mut r = ptr::null_mut();
+        ok(pgo_graph_optimize(g, ptr::null(), &mut r));
+        let pictures = dir.join("made").join("pictures");
+        ok(pgo_result_write_plots(r, c_path(&pictures).as_ptr()));
+        let mut names: Vec<String> = std::fs::read_dir(&pictures)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["counts.svg", "loops.svg", "trajectory.svg"]);
+        for name in &names {
+            let svg = std::fs::read_to_string(pictures.join(name)).unwrap();
+            assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+        }
+        let trajectory = std::fs::read_to_string(pictures.join("trajectory.svg")).unwrap();
+        assert!(trajectory.contains("grid2d.g2o"));
+        // A file where the directory should be: refused, left as it was.
+        let file = dir.join("a-file");
+        std::fs::write(&file, "x").unwrap();
+        let below = file.join("pictures");
+        assert_fails(
+            pgo_result_write_plots(r, c_path(&below).as_ptr()),
+            PgoStatus::PgoErrIo,
+            &format!("{}: cannot write", below.display()),
+        );
+        assert_fails(
+            pgo_result_write_plots(r, c_path(&file).as_ptr()),
+            PgoStatus::PgoErrIo,
+            "a-file",
+        );
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), "x");
+        assert_fails(
+            pgo_result_write_plots(r, ptr::null()),
+            PgoStatus::PgoErrInvalidArgument,
+            "dir is NULL",
+        );
+        assert_fails(
+            pgo_result_write_plots(ptr::null(), c_path(&pictures).as_ptr()),
+            PgoStatus::PgoErrInvalidArgument,
+            "result is NULL",
+        );
         pgo_result_free(r);
         pgo_graph_free(g);
     }
