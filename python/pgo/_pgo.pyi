@@ -211,6 +211,8 @@ class Result:
         """Writes the optimised trajectory as TUM (evo): per pose in the graph's order ``id tx ty tz qx qy qz qw``, the vertex id as timestamp; 2D as z = 0 and a rotation about z; raises FileError."""
     def write_kitti(self, path: Union[str, os.PathLike[str]]) -> None:
         """Writes the optimised trajectory as KITTI (evo): per pose in the graph's order (no ids), the 3×4 matrix [R t] row by row; 2D as z = 0 and a rotation about z; raises FileError."""
+    def write_plots(self, dir: Union[str, os.PathLike[str]]) -> List[str]:
+        """Writes the job's SVG pictures into ``dir`` (made if missing), as ``pgo optimize --plot``: counts.svg (counts and a gate fit), loops.svg (EM's loop model), trajectory.svg; returns the paths written; raises FileError."""
     def covariance(self, id: VertexId) -> npt.NDArray[np.float64]:
         """Pose ``id``'s marginal covariance, D×D (3: x y θ; 6: x y z rx ry rz; right perturbation)."""
     def covariances(

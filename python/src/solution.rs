@@ -267,6 +267,25 @@ impl Solution {
             .map_err(error)
     }
 
+    /// Writes the job's pictures as SVG files into the directory `dir`
+    /// (`str` or path-like; made if missing), what `pgo optimize --plot
+    /// DIR` writes: `counts.svg` (when the candidates have inlier counts
+    /// and the gate fitted them), `loops.svg` (when EM's loop model
+    /// decided) and `trajectory.svg` (before and after, loops coloured by
+    /// their final weight), each atomically. Returns the paths written, as
+    /// `str`, in that order. Raises `pgo.FileError` when the directory or
+    /// a picture cannot be written.
+    fn write_plots(&self, py: Python<'_>, dir: &Bound<'_, PyAny>) -> PyResult<Vec<String>> {
+        let dir = convert::path(dir)?;
+        let written = py
+            .detach(|| self.solution.write_plots(&dir))
+            .map_err(|e| error(e.into()))?;
+        Ok(written
+            .iter()
+            .map(|p| p.to_string_lossy().into_owned())
+            .collect())
+    }
+
     /// `Result(poses=…, loops=…, accepted=…, chi2=…, verdict=…)`.
     fn __repr__(&self) -> String {
         let loops = self.solution.loops();
