@@ -22,7 +22,11 @@
 #
 # usage: scripts/bench_aliasing_sweep.sh [OUT_DIR] (extra arguments go to
 #        bench_robust.py, e.g. --pgo target/release/pgo)
-#        SWEEP_DATASETS="intel MIT" restricts the datasets; SWEEP_PLACES,
+#        SWEEP_DATASETS="intel MIT" restricts the data
+#        PEERS_FROM=DIR takes the peers' results from the JSON of the same
+#        name in DIR, an earlier run of the same cases (bench_robust.py
+#        --peers-from checks that its options match), where no cache is
+#        left: pgo is measured again, the peers are notsets; SWEEP_PLACES,
 #        SWEEP_SEEDS and SWEEP_GROUPS the other axes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -45,7 +49,8 @@ for place in ${SWEEP_PLACES:-anywhere revisited}; do
                     --outliers "$count" --no-maxmix --scales calibrated published \
                     --seed "$seed" --only "$name" --timeout 300 --gnc-rel-tol 1e-5 \
                     --work "bench-out/aliasing_sweep" \
-                    --out "$out/${place}_s${seed}_g${group}_${name}.json" "$@"
+                    --out "$out/${place}_s${seed}_g${group}_${name}.json" \
+                    ${PEERS_FROM:+--peers-from "$PEERS_FROM/${place}_s${seed}_g${group}_${name}.json"} "$@"
             done
         done
     done

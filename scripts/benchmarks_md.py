@@ -460,7 +460,13 @@ def places_section(folder):
            "within 300 s of CPU time. Goal per case: pgo's map error (ATE, %% of the extent) at most "
            "the best peer's + %g, its precision at least the best peer's; and precision ≥ 0.99, "
            "recall ≥ 0.97, map error ≤ %g %%." % (PEER_MAP_SLACK, SWEEP_MAP_GOAL), "",
-           "Made by:", "", "```sh"] + PLACES_CMDS + ["```", ""]
+           "Made by:", "", "```sh"] + PLACES_CMDS + ["```", "",
+           "The commands make these cases and more; the table shows the cases in the folder. "
+           "pgo was last measured again alone, with the peers' results taken from the run before "
+           "(`cp bench/results/aliasing_places/*.json OLD/`, then each case's command with "
+           "`PEERS_FROM=OLD`): a peer's result on a file depends on nothing pgo does, and "
+           "`bench_robust.py --peers-from` checks that the cases are the same. pgo's times are "
+           "of that run, the peers' of theirs.", ""]
     runs = places_runs(folder)
     if not runs:
         return out + ["**Not run yet.**", ""]

@@ -118,7 +118,8 @@ pub fn explain<P: Pose<D>, const D: usize>(
         }
         let ranked = rank(decided, &t, D);
         let tested = ranked.len();
-        let (found, together) = choose(&ranked, &t, D, &mut stood_out);
+        let left = MAX_REMOVALS - search.removed.len().min(MAX_REMOVALS);
+        let (found, together) = choose(&ranked, &t, (D, left), &mut stood_out);
         let Some(cluster) = found.filter(|_| search.removed.len() < MAX_REMOVALS) else {
             if !t.passed {
                 match before.take() {
@@ -176,7 +177,7 @@ pub fn explain<P: Pose<D>, const D: usize>(
 fn choose(
     ranked: &[Suspect],
     t: &Chi2Test,
-    dimension: usize,
+    (dimension, left): (usize, usize),
     stood_out: &mut [bool],
 ) -> (Option<Suspect>, bool) {
     let found = (ranked.iter())
@@ -190,7 +191,7 @@ fn choose(
     let together = found.is_none() && !t.passed;
     let found = found.or_else(|| {
         together
-            .then(|| jointly((ranked, &outstanding), t, dimension))
+            .then(|| jointly((ranked, &outstanding), t, (dimension, left)))
             .flatten()
     });
     for (s, _) in ranked.iter().zip(&outstanding).filter(|(_, o)| **o) {
@@ -249,11 +250,13 @@ fn alone<P: Pose<D>, const D: usize>(
 /// them if the map would pass without it and the next ones (the drops
 /// added up). Taken out one at a time, each removal followed by a solve
 /// and a ranking, they are kept only if the map ends up passing
-/// ([`Before`]).
+/// ([`Before`]). `None` also when more than `left` clusters (the removals
+/// left of [`MAX_REMOVALS`]) would be needed: each removal is a solve, and
+/// a failure that needs more is not a few wrong loops'.
 fn jointly(
     (ranked, outstanding): (&[Suspect], &[bool]),
     t: &Chi2Test,
-    dimension: usize,
+    (dimension, left): (usize, usize),
 ) -> Option<Suspect> {
     let mut out: Vec<(f64, &Suspect)> = (ranked.iter().zip(outstanding))
         .filter(|(_, o)| **o)
@@ -261,7 +264,7 @@ fn jointly(
         .collect();
     out.sort_by(|a, b| b.0.total_cmp(&a.0));
     let (mut drop, mut loops) = (0.0, 0);
-    for (_, s) in &out {
+    for (_, s) in out.iter().take(left) {
         drop += s.d2_drop;
         loops += s.loops.len();
         if passes_without(t, drop, loops, dimension) {
@@ -465,5 +468,34 @@ mod tests {
         // stands out.
         assert!(!passes_without(&t, 5.0, 1, 6));
         assert!(!explains(&t, 5.0, (1, 6), 1));
+    }
+
+    /// Three clusters that stand out, none alone enough: `D²` exceeds the
+    /// critical value (about 5572) by 13 and more, and each drop is 80.
+    fn three_that_explain_together() -> (Chi2Test, Vec<Suspect>) {
+        let t = Chi2Test::new(5585.3 + 150.0, 10_899, 5400, DofConvention::Residual, 0.05).unwrap();
+        let ranked: Vec<Suspect> = (0..3)
+            .map(|k| Suspect {
+                loops: vec![k],
+                d2_drop: 80.0,
+                explains: false,
+            })
+            .collect();
+        (t, ranked)
+    }
+
+    #[test]
+    fn clusters_that_explain_a_failure_together_are_taken_out_only_within_the_removals_left() {
+        let (t, ranked) = three_that_explain_together();
+        let outstanding: Vec<bool> = (ranked.iter())
+            .map(|s| stands_out(&t, s.d2_drop, (1, 6), ranked.len()))
+            .collect();
+        assert_eq!(outstanding, [true; 3]);
+        assert!(!passes_without(&t, 160.0, 2, 6));
+        assert!(passes_without(&t, 240.0, 3, 6));
+        let first = jointly((&ranked, &outstanding), &t, (6, 3));
+        assert_eq!(first.map(|s| s.loops), Some(vec![0]));
+        // Two removals left cannot make the map pass: none is started.
+        assert!(jointly((&ranked, &outstanding), &t, (6, 2)).is_none());
     }
 }
