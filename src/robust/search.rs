@@ -168,7 +168,8 @@ pub fn explain<P: Pose<D>, const D: usize>(
 }
 
 /// The cluster of `ranked` to take out next, if any, and whether it
-/// explains the failure of `t` only together with others ([`jointly`]);
+/// explains the failure of `t` only together with others ([`jointly`],
+/// within the `left` removals left; edges of dimension `dimension`);
 /// marks in `stood_out` the loops of every cluster that stands out now.
 /// Once the test passes, a cluster is taken out only if it stands out now
 /// and did not before: loops consistent with one taken out, which only its
@@ -470,8 +471,9 @@ mod tests {
         assert!(!explains(&t, 5.0, (1, 6), 1));
     }
 
-    /// Three clusters that stand out, none alone enough: `D²` exceeds the
-    /// critical value (about 5572) by 13 and more, and each drop is 80.
+    /// Three clusters that stand out, none alone enough: `D²` 5735 exceeds
+    /// the critical value (about 5571) by 164, so two drops of 80 leave the
+    /// map failing and three make it pass.
     fn three_that_explain_together() -> (Chi2Test, Vec<Suspect>) {
         let t = Chi2Test::new(5585.3 + 150.0, 10_899, 5400, DofConvention::Residual, 0.05).unwrap();
         let ranked: Vec<Suspect> = (0..3)
