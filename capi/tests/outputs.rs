@@ -52,6 +52,18 @@ fn numbers(path: &Path) -> Vec<Vec<f64>> {
         .collect()
 }
 
+/// The graph read from `path` and its job's result, with the default
+/// options (free them with `pgo_graph_free` and `pgo_result_free`).
+unsafe fn optimised(path: &Path) -> (*mut PgoGraph, *mut PgoResult) {
+    let mut g = ptr::null_mut();
+    let mut r = ptr::null_mut();
+    unsafe {
+        ok(pgo_graph_read_g2o(c_path(path).as_ptr(), &mut g));
+        ok(pgo_graph_optimize(g, ptr::null(), &mut r));
+    }
+    (g, r)
+}
+
 #[test]
 fn a_file_s_map_and_trajectories_are_written_by_its_ids() {
     let dir = temp_dir("outputs");
@@ -152,13 +164,7 @@ fn a_graph_built_in_memory_writes_its_map() {
 fn bad_paths_and_results_are_refused_and_leave_nothing() {
     let dir = temp_dir("outputs-bad");
     unsafe {
-        let mut g = ptr::null_mut();
-        ok(pgo_graph_read_g2o(
-            c_path(&sample("grid2d.g2o")).as_ptr(),
-            &mut g,
-        ));
-        let mut r = ptr::null_mut();
-        ok(pgo_graph_optimize(g, ptr::null(), &mut r));
+        let (g, r) = optimised(&sample("grid2d.g2o"));
         let writers: [(&str, unsafe extern "C" fn(_, _) -> _); 3] = [
             ("g2o", pgo_result_write_g2o),
             ("tum", pgo_result_write_tum),
@@ -200,13 +206,7 @@ fn bad_paths_and_results_are_refused_and_leave_nothing() {
 fn the_pictures_of_a_file_are_written_into_a_directory_made_for_them() {
     let dir = temp_dir("plots");
     unsafe {
-        let mut g = ptr::null_mut();
-        ok(pgo_graph_read_g2o(
-            c_path(&sample("grid2d.g2o")).as_ptr(),
-            &mut g,
-        ));
-        let mut r = ptr::null_mut();
-        ok(pgo_graph_optimize(g, ptr::null(), &mut r));
+        let (g, r) = optimised(&sample("grid2d.g2o"));
         let pictures = dir.join("made").join("pictures");
         ok(pgo_result_write_plots(r, c_path(&pictures).as_ptr()));
         let mut names: Vec<String> = std::fs::read_dir(&pictures)

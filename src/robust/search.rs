@@ -118,7 +118,7 @@ pub fn explain<P: Pose<D>, const D: usize>(
         }
         let ranked = rank(decided, &t, D);
         let tested = ranked.len();
-        let left = MAX_REMOVALS - search.removed.len().min(MAX_REMOVALS);
+        let left = MAX_REMOVALS.saturating_sub(search.removed.len());
         let (found, together) = choose(&ranked, &t, (D, left), &mut stood_out);
         let Some(cluster) = found.filter(|_| search.removed.len() < MAX_REMOVALS) else {
             if !t.passed {
