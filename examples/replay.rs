@@ -192,13 +192,14 @@ fn update(
         let o = &r.optimizer;
         writeln!(
             out,
-            "{poses:>7} poses  {name:<8} {ms:8.2} ms  {} iterations, {} factorisations ({:.2} ms), optimiser {:.2} ms; {} EM decisions ({:.2} ms judging), {} earlier decisions changed",
+            "{poses:>7} poses  {name:<8} {ms:8.2} ms  {} iterations, {} factorisations ({:.2} ms), optimiser {:.2} ms; {} EM decisions ({:.2} ms judging, {:.2} ms of it the loop model), {} earlier decisions changed",
             o.iterations,
             o.factorizations,
             o.timing.factorize_s * 1e3,
             o.time_s * 1e3,
             r.robust.decisions,
             r.time.evaluation_s * 1e3,
+            r.time.loop_model_s * 1e3,
             changes.len(),
         )?;
         for c in changes {

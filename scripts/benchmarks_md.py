@@ -750,7 +750,7 @@ def replay_section(path):
     return out
 
 
-PHASES = ["optimizer", "evaluations", "relaxations", "initial guess", "gate"]
+PHASES = ["optimizer", "innovations", "loop model", "relaxations", "initial guess", "gate"]
 
 
 def replay_phases(rows):

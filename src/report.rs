@@ -94,6 +94,9 @@ pub struct JobTime {
     /// Of the solve: EM's evaluations of maps (innovations and their
     /// covariances, the loop model, the decisions).
     pub evaluation_s: f64,
+    /// Of the evaluations: the loop model's fits (EM on the innovations
+    /// and counts); the rest is the innovations and their covariances.
+    pub loop_model_s: f64,
     /// Writing the output.
     pub write_s: f64,
     /// The whole job.
@@ -601,7 +604,8 @@ impl Report {
         let t = &self.time;
         format!(
             "time: read {:.2} s, gate {:.2} s, initial guess {:.2} s, solve {:.2} s (optimiser \
-             {:.2} s, relaxations {:.2} s, evaluations {:.2} s), write {:.2} s; {:.2} s in all",
+             {:.2} s, relaxations {:.2} s, evaluations {:.2} s of which the loop model {:.2} s), \
+             write {:.2} s; {:.2} s in all",
             t.read_s,
             t.gate_s,
             t.initialize_s,
@@ -609,6 +613,7 @@ impl Report {
             self.optimizer.time_s,
             t.relaxation_s,
             t.evaluation_s,
+            t.loop_model_s,
             t.write_s,
             t.total_s
         )

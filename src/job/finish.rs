@@ -198,6 +198,7 @@ impl Run<'_> {
         };
         report.time.relaxation_s = phases.relaxation.as_secs_f64();
         report.time.evaluation_s = phases.evaluation.as_secs_f64();
+        report.time.loop_model_s = phases.model.as_secs_f64();
         report.loops = candidates
             .iter()
             .enumerate()

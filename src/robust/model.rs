@@ -282,30 +282,40 @@ impl LoopModel {
         let mut order: Vec<usize> = (0..y.len()).collect();
         order.sort_by(|&a, &b| y[a].total_cmp(&y[b]));
         let counts = Counts::new(evidence);
+        // Every number of populations from every start: a second tight
+        // population can pay for itself where a first one spread over both
+        // does not. Without wrong populations EM starts from every
+        // candidate as a true loop whatever the start, so that fit runs
+        // once. The fits are independent: they run side by side where
+        // there are threads.
+        let starts = starts(&order, start);
+        let fits: Vec<(usize, usize)> = (starts.iter().enumerate())
+            .flat_map(|(s, _)| (usize::from(s > 0)..=most).map(move |k| (s, k)))
+            .collect();
+        let fitted = parallelism.map(&fits, |&(s, k)| {
+            Self::fit_k(
+                (evidence, &counts),
+                (&y, &order),
+                &starts[s],
+                k,
+                (floor, pinned, dimension),
+                layers.aliasing,
+            )
+        });
         let mut best: Option<(f64, Self)> = None;
-        // Every number of populations: a second tight population can pay for
-        // itself where a first one spread over both does not. The fits are
-        // independent, so they run side by side where there are threads.
-        for start in starts(&order, start) {
-            let fit_k = |k: usize| {
-                Self::fit_k(
-                    (evidence, &counts),
-                    (&y, &order),
-                    &start,
-                    k,
-                    (floor, pinned, dimension),
-                    layers.aliasing,
-                )
-            };
-            let ks: Vec<usize> = (0..=most).collect();
-            let fits = parallelism.map(&ks, |&k| fit_k(k));
-            for (k, (model, sums)) in fits.into_iter().map_while(|f| f).enumerate() {
-                let length = model.message_length(&sums, k, y.len());
-                if !model.separated() || !model.ordered(&sums) {
+        for s in 0..starts.len() {
+            // Each start's fits by number of populations, up to the first
+            // with too few candidates to start from.
+            let of_start = (fits.iter().zip(fitted.iter()))
+                .filter(|((from, _), _)| *from == s)
+                .map_while(|((_, k), f)| f.as_ref().map(|f| (*k, f)));
+            for (k, (model, sums)) in of_start {
+                let length = model.message_length(sums, k, y.len());
+                if !model.separated() || !model.ordered(sums) {
                     continue;
                 }
                 if best.as_ref().is_none_or(|(b, _)| length < *b) {
-                    best = Some((length, model));
+                    best = Some((length, model.clone()));
                 }
             }
         }

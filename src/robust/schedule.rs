@@ -353,6 +353,7 @@ impl Decided {
         drop(eval);
         let clusters = (edges, self.accepted.as_slice(), self.clusters.as_slice());
         through_wide_chains(session, weights, clusters, &mut innov)?;
+        let fit = Instant::now();
         let (model, next) = judge(
             candidates,
             &innov,
@@ -361,6 +362,7 @@ impl Decided {
             how.layers,
             &parallelism,
         );
+        session.modelled(fit.elapsed());
         session.evaluated_since(start);
         self.innovations = innov;
         self.model = Some(model);

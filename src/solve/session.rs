@@ -51,6 +51,8 @@ pub struct PhaseTimes {
     /// Evaluations of the map: innovations and their covariances, the
     /// model fitted to them, the decisions they give.
     pub evaluation: Duration,
+    /// Of the evaluations: the loop model's fits to the innovations.
+    pub model: Duration,
 }
 
 impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
@@ -86,6 +88,11 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
     pub fn evaluated_since(&mut self, start: Instant) {
         self.phases.evaluation += start.elapsed();
         self.poll();
+    }
+
+    /// Adds `took` to the loop model's time (a part of the evaluations').
+    pub fn modelled(&mut self, took: Duration) {
+        self.phases.model += took;
     }
 
     /// Asks the observer whether to stop: between the optimiser's runs too,
