@@ -8,8 +8,11 @@
 //!   follows the gate's true-loop component, a wrong loop's either the
 //!   wrong-loop component (verification saw through it) or — at a rate
 //!   `a`, the rate at which verification is fooled (perceptual aliasing) —
-//!   the true-loop component. So the prior is `π_k = (1 − a)·p_k`, `p_k`
-//!   the gate's posterior of the true-loop component. Without counts every
+//!   the true-loop component. So the prior is `π_k = (1 − a)·p_k + b·(1 −
+//!   p_k)`, `p_k` the gate's posterior of the true-loop component and `b`
+//!   the share of true loops among the counts that look wrong: 0 in a fit
+//!   (the gate's split stands), ½ when no fit is possible ([`LoopModel::fit`]:
+//!   the counts then say nothing either way). Without counts every
 //!   candidate has the same prior, the share `ρ` of true loops.
 //! * **the innovation** `ν_k²`: the candidate's squared Mahalanobis error
 //!   against the map made without it (and without the candidates of its
@@ -58,6 +61,9 @@ pub struct LoopModel {
     pub span: f64,
     /// The rate at which a wrong loop's count looks like a true loop's.
     pub aliasing_rate: f64,
+    /// The share of true loops among the candidates whose count looks like
+    /// a wrong loop's: 0 in a fit, ½ in the model of nothing (no fit).
+    pub missed_rate: f64,
     /// The share of true loops among candidates without a count.
     pub true_share: f64,
     /// The log-likelihood of the fit.
@@ -79,6 +85,7 @@ impl std::fmt::Debug for LoopModel {
             .field("wrong_loops", &self.wrong_loops)
             .field("span", &self.span)
             .field("aliasing_rate", &self.aliasing_rate)
+            .field("missed_rate", &self.missed_rate)
             .field("true_share", &self.true_share)
             .field("ln_likelihood", &self.ln_likelihood)
             .finish()
@@ -368,7 +375,17 @@ impl LoopModel {
         sums.below.1 <= sums.below.0
     }
 
-    /// A model of nothing: every candidate a true loop.
+    /// The model of nothing, when no fit holds the candidates more
+    /// consistent than the true loops' mean to be mostly true loops and
+    /// keeps its wrong populations apart ([`Self::fit`]): the counts and
+    /// the innovations disagree beyond what the model explains — on a young
+    /// map whose few candidates are all true loops, a gate that split their
+    /// counts (a feature count that saturates near its maximum) against
+    /// innovations that all agree. Every prior is then ½ (`a = b = ρ = ½`),
+    /// and with no wrong population an innovation is evidence against a
+    /// loop only beyond EM's kernel width ([`Self::decisive_ratio`]): the
+    /// candidates are decided by their innovations at that width, as fewer
+    /// than [`super::MIN_CANDIDATES`] are by EM's kernel.
     fn empty(y: &[f64], floor: f64, dof: usize) -> Self {
         let mut sums = Sums::new(None);
         for &yi in y {
@@ -386,6 +403,7 @@ impl LoopModel {
             wrong_loops: Vec::new(),
             span: span(y, floor),
             aliasing_rate: 0.5,
+            missed_rate: 0.5,
             true_share: 0.5,
             ln_likelihood: 0.0,
             dof,
@@ -545,6 +563,7 @@ impl LoopModel {
             // without a count, each with a uniform (Beta(1, 1)) prior so
             // that neither is ever 0 or 1.
             aliasing_rate: (sums.fooled + 1.0) / (sums.counted + 2.0),
+            missed_rate: 0.0,
             true_share: (sums.uncounted - sums.wrong + 1.0) / (sums.uncounted + 2.0),
             ln_likelihood: 0.0,
             dof,
@@ -677,9 +696,8 @@ impl LoopModel {
     /// The prior probability of a true loop before its innovation is seen.
     pub fn prior(&self, count_posterior: Option<f64>) -> f64 {
         match count_posterior {
-            Some(p) => {
-                ((1.0 - self.aliasing_rate) * p).clamp(f64::MIN_POSITIVE, 1.0 - f64::EPSILON)
-            }
+            Some(p) => ((1.0 - self.aliasing_rate) * p + self.missed_rate * (1.0 - p))
+                .clamp(f64::MIN_POSITIVE, 1.0 - f64::EPSILON),
             None => self.true_share,
         }
     }
@@ -975,6 +993,25 @@ mod tests {
             e[true_loops.len()..].iter().all(|x| m.posterior(x) < 0.5),
             "{m:?}"
         );
+    }
+
+    /// A young map's 25 true loops whose counts the gate split: 7 look
+    /// true (near the largest count), 18 wrong, and every innovation is
+    /// Gaussian at the stated scale. No fit calls the consistent ones true,
+    /// so the model of nothing decides, by the innovations alone: every
+    /// loop accepted, and a candidate far beyond them not.
+    #[test]
+    fn loops_the_gate_split_are_kept_when_no_fit_explains_them() {
+        let mut e = gaussian_loops(25, 1.0, Some(1e-9));
+        for x in e.iter_mut().step_by(4).take(7) {
+            x.count_posterior = Some(0.999);
+        }
+        // As the annealing left them: the 7 with true-like counts accepted.
+        let start: Vec<bool> = e.iter().map(|x| x.count_posterior > Some(0.5)).collect();
+        let m = fitted_from(&e, &start);
+        assert_eq!(m.missed_rate, 0.5, "{m:?}");
+        assert!(e.iter().all(|x| m.posterior(x) >= 0.5), "{m:?}");
+        assert!(m.posterior(&ev(Some(1e-9), 1e4)) < 0.5, "{m:?}");
     }
 
     #[test]
