@@ -321,3 +321,206 @@ fn the_issue_47_replays_are_the_batch_job() {
     }
     assert!(found.is_empty());
 }
+
+/// A simulated map (`world`, 400 poses, 60 true loops) with 40 aliases
+/// placed anywhere, in groups of `group` a 5–30 poses off, every group's
+/// counts like a true loop's (`pgo corrupt --wrong-mode aliased
+/// --alias-place anywhere --alias-offset 5,30 --true-like-counts 1.0
+/// --true-like-by-group`), and which of its edges are wrong.
+fn aliased_anywhere(world: World, seed: u64, group: usize) -> AnySimulation {
+    use pgo_sim::{AliasOffsets, AliasPlace, CorruptionOptions, corrupt};
+    let sim = simulate(&SimulationOptions {
+        world,
+        poses: 400,
+        loops: 60,
+        inliers: Some(InlierModel::default()),
+        seed,
+        ..Default::default()
+    })
+    .unwrap();
+    let aliases = CorruptionOptions {
+        outliers: 40,
+        policy: OutlierPolicy::Aliased,
+        group_size: group,
+        alias_offsets: AliasOffsets { min: 5, max: 30 },
+        alias_place: AliasPlace::Anywhere,
+        inliers: Some(InlierModel::default()),
+        true_like_share: 1.0,
+        true_like_by_group: true,
+        ..CorruptionOptions::default()
+    };
+    let mut rng = StdRng::seed_from_u64(seed);
+    match sim {
+        AnySimulation::Planar(mut s) => {
+            s.noisy = corrupt(&s.noisy, &aliases, &mut rng).unwrap().graph;
+            AnySimulation::Planar(s)
+        }
+        AnySimulation::Spatial(mut s) => {
+            s.noisy = corrupt(&s.noisy, &aliases, &mut rng).unwrap().graph;
+            AnySimulation::Spatial(s)
+        }
+    }
+}
+
+/// One update of [`every_poses`]: after how many poses, why it ran the
+/// whole job (`None`: it did not), how many of how many candidates it
+/// accepted, and how it differed from the batch job.
+#[derive(Debug)]
+struct Step {
+    poses: usize,
+    whole_job: Option<String>,
+    accepted: (usize, usize),
+    mismatches: Vec<String>,
+}
+
+/// Replays the first `upto` poses of `graph` as a front end does, an update
+/// every `every` poses, each compared with `optimize()` of the same graph.
+fn every_poses<P: GraphPose<D>, const D: usize>(
+    graph: &PoseGraph<P, D>,
+    every: usize,
+    upto: usize,
+) -> Vec<Step> {
+    let mut due: Vec<Vec<usize>> = vec![Vec::new(); graph.len()];
+    for (k, e) in graph.edges().enumerate() {
+        due[e.from.max(e.to) as usize].push(k);
+    }
+    let options = Options::default();
+    let mut g = PoseGraph::<P, D>::new();
+    let mut steps = Vec::new();
+    for (k, due) in due.iter().enumerate().take(upto) {
+        g.add_pose(k as u64, *graph.pose(k as u64).unwrap())
+            .unwrap();
+        for e in due.iter().map(|&e| graph.edge(e).unwrap()) {
+            if e.loop_candidate {
+                g.add_loop_candidate(e.from, e.to, e.measurement, e.information, e.inliers)
+                    .unwrap();
+            } else {
+                g.add_edge(e.from, e.to, e.measurement, e.information)
+                    .unwrap();
+            }
+        }
+        if (k + 1) % every != 0 {
+            continue;
+        }
+        let u = g.update(&options).unwrap();
+        let b = g.optimize(&options).unwrap();
+        let inc = u.incremental().unwrap();
+        steps.push(Step {
+            poses: k + 1,
+            whole_job: (inc.solve == pgo::UpdateSolve::Batch).then(|| inc.reason.clone()),
+            accepted: (accepted(&u).len(), u.loops().len()),
+            mismatches: compare(&u, &b),
+        });
+    }
+    steps
+}
+
+/// The steps of `steps` that differ from the batch job.
+fn mismatched(steps: &[Step]) -> Vec<&Step> {
+    steps.iter().filter(|s| !s.mismatches.is_empty()).collect()
+}
+
+/// A young map whose first loops are all true and whose gate splits their
+/// counts (most near the largest count, which a feature count saturates
+/// at): no loop model can be fitted, and the model of nothing decides by
+/// the innovations alone. A sphere's first 220 poses, updated every 20:
+/// every candidate accepted (at 160 poses the gate keeps 7 of 25, and the
+/// loop model once accepted 4), every update the batch job.
+#[test]
+fn a_young_map_keeps_the_true_loops_its_gate_drops() {
+    let AnySimulation::Spatial(sim) = aliased_anywhere(World::Sphere3d, 8, 10) else {
+        unreachable!()
+    };
+    let steps = every_poses(&sim.noisy, 20, 220);
+    assert!(mismatched(&steps).is_empty(), "{steps:#?}");
+    // Every alias of this map is beyond its 288th pose.
+    let young: Vec<_> = (steps.iter())
+        .filter(|s| s.poses >= 80 && s.accepted.0 < s.accepted.1)
+        .collect();
+    assert!(young.is_empty(), "{young:#?}");
+}
+
+/// An update whose decisions reject a loop the last update accepted runs
+/// the whole job: the new evidence overturned the consensus the last
+/// decisions stood for, and the warm decisions from it can end at another
+/// fixed point than the batch job's annealing. A sphere with aliases in
+/// groups of 5, updated every 20 poses: at 220 poses the decisions from
+/// the last ones rejected two true loops that the update at 200 accepted
+/// (χ² 1.3 % above the batch job's, poses 4 % of the map's size apart).
+#[test]
+fn an_update_that_rejects_an_accepted_loop_runs_the_whole_job() {
+    let AnySimulation::Spatial(sim) = aliased_anywhere(World::Sphere3d, 3, 5) else {
+        unreachable!()
+    };
+    let steps = every_poses(&sim.noisy, 20, 220);
+    assert!(mismatched(&steps).is_empty(), "{steps:#?}");
+    let reversed = (steps.iter())
+        .filter(|s| {
+            s.whole_job
+                .as_ref()
+                .is_some_and(|r| r.contains("rejected a loop"))
+        })
+        .count();
+    assert!(reversed >= 1, "{steps:#?}");
+}
+
+/// An update whose decisions swing — a round flips back decisions the
+/// round before flipped, twice — runs the whole job (docs/method.md §7b).
+/// A grid with aliases in groups of 5, updated every 20 poses: the
+/// decisions from the last ones swing at 120 poses.
+#[test]
+fn an_update_whose_decisions_swing_runs_the_whole_job() {
+    let AnySimulation::Planar(sim) = aliased_anywhere(World::Grid2d, 21, 5) else {
+        unreachable!()
+    };
+    let steps = every_poses(&sim.noisy, 20, 140);
+    assert!(mismatched(&steps).is_empty(), "{steps:#?}");
+    let swung: Vec<usize> = (steps.iter())
+        .filter(|s| s.whole_job.as_ref().is_some_and(|r| r.contains("swung")))
+        .map(|s| s.poses)
+        .collect();
+    assert_eq!(swung, [120], "{steps:#?}");
+}
+
+/// The replays of aliases placed anywhere, wider than CI runs (96
+/// replays: a grid and a sphere, seeds 1–24, groups of 5 and 10, an update
+/// every 20 poses, each compared with the batch job; about 30 s in
+/// release): `cargo test --release --test update_equals_optimize --
+/// --ignored`. Prints every replay with a whole job or a mismatch and fails
+/// if more replays mismatch than the 6 known (all on the sphere: the warm
+/// decisions end at another fixed point of EM than the batch job's
+/// annealing; docs/method.md §7b).
+#[test]
+#[ignore]
+fn wider_aliased_replays() {
+    let mut mismatching = Vec::new();
+    for world in [World::Sphere3d, World::Grid2d] {
+        for seed in 1..=24u64 {
+            for group in [5usize, 10] {
+                let steps = match aliased_anywhere(world, seed, group) {
+                    AnySimulation::Planar(s) => every_poses(&s.noisy, 20, 400),
+                    AnySimulation::Spatial(s) => every_poses(&s.noisy, 20, 400),
+                };
+                let jobs: Vec<(usize, &String)> = (steps.iter())
+                    .filter_map(|s| s.whole_job.as_ref().map(|r| (s.poses, r)))
+                    .filter(|(p, _)| *p > 100)
+                    .collect();
+                let bad = mismatched(&steps);
+                if !jobs.is_empty() || !bad.is_empty() {
+                    eprintln!("{world:?} seed {seed} group {group}: whole jobs {jobs:?}");
+                }
+                for s in &bad {
+                    eprintln!("    at {}: {:?}", s.poses, s.mismatches);
+                }
+                if !bad.is_empty() {
+                    mismatching.push((world, seed, group));
+                }
+            }
+        }
+    }
+    eprintln!(
+        "{} of 96 replays differ from the batch job: {mismatching:?}",
+        mismatching.len()
+    );
+    assert!(mismatching.len() <= 6, "{mismatching:?}");
+}
