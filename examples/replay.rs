@@ -15,7 +15,7 @@
 //! the graph at that point (untimed): how far its χ² is above the optimum.
 //!
 //! Prints one line per update (poses, how it was solved, milliseconds) and
-//! the earlier decisions it changed with `-v`, and a summary: updates,
+//! the earlier decisions it changed (and, for a whole job, why) with `-v`, and a summary: updates,
 //! total and p99 time, how many of each kind, the gaps, and the final χ²
 //! and decisions against the batch ones (with `-v`, each decision that
 //! differs).
@@ -202,6 +202,9 @@ fn update(
             r.time.loop_model_s * 1e3,
             changes.len(),
         )?;
+        if let Some(i) = inc.filter(|i| i.solve == UpdateSolve::Batch) {
+            writeln!(out, "          why: {}", i.reason)?;
+        }
         for c in changes {
             let verb = if c.accepted { "accepted" } else { "rejected" };
             writeln!(
