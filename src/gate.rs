@@ -95,10 +95,6 @@ pub enum EmStart {
     /// The best split of the sorted `ln v` into two groups (1-D 2-means),
     /// with each group's mean, spread and share.
     TwoMeans,
-    /// The last fit of a growing set of counts (an incremental update), its
-    /// means moved with the change of the largest count
-    /// ([`learn_threshold_from`]).
-    Previous,
 }
 
 /// How the variance floor is chosen. Whatever the choice, the floor is at
@@ -487,32 +483,9 @@ pub struct ThresholdFit {
     pub threshold: Option<Threshold>,
     /// Why the fit is not trustworthy, or `None` when it is.
     pub degeneracy: Option<Degeneracy>,
-    /// The counts fitted by the last fit from the usual starts: this fit's
-    /// own [`ThresholdFit::fitted_counts`], unless EM started from the
-    /// previous fit ([`EmStart::Previous`]), whose number it carries on.
-    pub fresh_counts: usize,
 }
 
 impl ThresholdFit {
-    /// The start for a fit of `fitted` non-zero counts of largest count
-    /// `max` (variance floor `floor`) that grew from the counts of this
-    /// fit: its mixture, the means moved by `ln(old max / new max)` (the
-    /// counts are normalised by their maximum), unless there is none or
-    /// the counts have doubled since the last fit from the usual starts.
-    fn warm_start(&self, fitted: usize, max: u64, floor: f64) -> Option<NormalMixture> {
-        let mixture = self.mixture.as_ref()?;
-        if fitted >= 2 * self.fresh_counts {
-            return None;
-        }
-        let shift = (self.max_count as f64).ln() - (max as f64).ln();
-        let moved = mixture.components().map(|c| NormalComponent {
-            mean: c.mean + shift,
-            sigma: c.sigma.max(floor.sqrt()),
-            ..c
-        });
-        NormalMixture::new(moved.to_vec()).ok()
-    }
-
     /// Whether the counts failed a degeneracy check.
     pub fn is_degenerate(&self) -> bool {
         self.degeneracy.is_some()
@@ -536,24 +509,6 @@ impl ThresholdFit {
 /// assert!(t.keeps(150) && !t.keeps(32));
 /// ```
 pub fn learn_threshold(counts: &[u64], options: &MixtureOptions) -> ThresholdFit {
-    learn_threshold_from(counts, options, None)
-}
-
-/// [`learn_threshold`] for counts that grew from those `previous` was
-/// fitted to (an incremental update adds candidates, never removes them):
-/// EM starts from the previous fit alone ([`EmStart::Previous`]), which
-/// the few new counts move by a few iterations instead of the hundreds of
-/// three fresh starts. The usual starts run instead when there is no
-/// previous mixture, when that start collapses, and once the counts have
-/// doubled since the last fit from them ([`ThresholdFit::fresh_counts`]):
-/// a replay then fits from scratch a logarithmic number of times, and a
-/// local optimum is never carried over more than that doubling of the
-/// data it was chosen on.
-pub fn learn_threshold_from(
-    counts: &[u64],
-    options: &MixtureOptions,
-    previous: Option<&ThresholdFit>,
-) -> ThresholdFit {
     let zero_counts = counts.iter().filter(|&&c| c == 0).count();
     let max_count = counts.iter().copied().max().unwrap_or(0);
     let mut fit = ThresholdFit {
@@ -565,7 +520,6 @@ pub fn learn_threshold_from(
         separation: None,
         threshold: None,
         degeneracy: None,
-        fresh_counts: counts.len() - zero_counts,
     };
     if let Some(reason) = check_counts(counts, &fit, options) {
         fit.degeneracy = Some(reason);
@@ -574,13 +528,7 @@ pub fn learn_threshold_from(
 
     let y = log_normalized(counts, max_count);
     let floor = options.variance_floor.value(max_count);
-    let start = previous.and_then(|p| p.warm_start(fit.fitted_counts, max_count, floor));
-    let two = fit_two_normals_from(&y, floor, options, start);
-    if let (Some(p), Some(m)) = (previous, &two.mixture)
-        && m.start == EmStart::Previous
-    {
-        fit.fresh_counts = p.fresh_counts;
-    }
+    let two = fit_two_normals(&y, floor, options);
     fit.degeneracy = two.degeneracy;
     fit.threshold = two.crossing_log.map(|y| Threshold::from_log(y, max_count));
     fit.mixture = two.mixture;
@@ -607,27 +555,14 @@ pub struct TwoNormals {
 
 /// Fits [`TwoNormals`] to `y` with the variance floor `floor` (see
 /// [`MixtureOptions`] for the checks; "loop component" there means the
-/// component of the higher mean), running EM from `previous` alone when it
-/// gives a fit that did not collapse ([`EmStart::Previous`]), from the
-/// usual starts otherwise. The gate fits `ln(count / max)`; the robust
+/// component of the higher mean), EM run from the usual starts. The gate
+/// fits `ln(count / max)`; the robust
 /// back end fits the logs of the candidates' residuals ([`crate::robust`]).
-fn fit_two_normals_from(
-    y: &[f64],
-    floor: f64,
-    options: &MixtureOptions,
-    previous: Option<NormalMixture>,
-) -> TwoNormals {
+fn fit_two_normals(y: &[f64], floor: f64, options: &MixtureOptions) -> TwoNormals {
     let floor = floor.max(MIN_VARIANCE_FLOOR);
     let em = options.em(floor);
-    let warm =
-        previous.and_then(|m| best_fit(y, &[(EmStart::Previous, m)], &em, options.min_loop_size));
-    let starts = if warm.is_some() {
-        Vec::new()
-    } else {
-        em_starts(y, floor)
-    };
-    let best = warm
-        .or_else(|| best_fit(y, &starts, &em, options.min_loop_size))
+    let starts = em_starts(y, floor);
+    let best = best_fit(y, &starts, &em, options.min_loop_size)
         .and_then(|(start, fit)| LogNormalMixture::from_fit(start, fit, floor));
     let Some(mixture) = best else {
         return TwoNormals {
@@ -898,17 +833,6 @@ impl Rule {
     }
 }
 
-/// [`gate_from`] without a previous fit.
-#[cfg(test)]
-pub fn gate(
-    counts: &[Option<u64>],
-    mode: GateMode,
-    policy: DegeneratePolicy,
-    options: &MixtureOptions,
-) -> GateDecision {
-    gate_from(counts, mode, policy, options, None)
-}
-
 /// Applies the geometric-verification gate to loop-closure candidates.
 ///
 /// `counts[i]` is candidate `i`'s inlier count; `None` means the front end
@@ -922,22 +846,18 @@ pub fn gate(
 ///   degenerate, `policy` decides.
 /// * [`GateMode::Soft`]: learned as `Auto`, all kept unless degenerate (then
 ///   as `Auto`).
-///
-/// `previous`: the fit of the counts these grew from, if any
-/// ([`learn_threshold_from`]).
-pub fn gate_from(
+pub fn gate(
     counts: &[Option<u64>],
     mode: GateMode,
     policy: DegeneratePolicy,
     options: &MixtureOptions,
-    previous: Option<&ThresholdFit>,
 ) -> GateDecision {
     let (rule, fit) = match mode {
         GateMode::Off => (Rule::KeepAll, None),
         GateMode::Fixed(n) => (Rule::AtLeast(n), None),
         GateMode::Auto | GateMode::Soft => {
             let known: Vec<u64> = counts.iter().flatten().copied().collect();
-            let fit = learn_threshold_from(&known, options, previous);
+            let fit = learn_threshold(&known, options);
             let rule = match (mode, fit.is_degenerate()) {
                 (GateMode::Soft, false) => Rule::KeepAll,
                 _ => auto_rule(&fit, policy),

@@ -835,65 +835,12 @@ proptest! {
     }
 }
 
-/// Counts that grew from those of an earlier fit are fitted from that fit
-/// alone (one EM run instead of three), to the optimum the usual starts
-/// reach; once the counts have doubled since the last fresh fit the
-/// usual starts run again.
-#[test]
-fn a_grown_set_of_counts_is_fitted_from_the_previous_fit() {
-    // Both populations in every prefix, as candidates arrive in a replay.
-    let drawn = two_population_counts(7);
-    let all: Vec<u64> = (0..drawn.len())
-        .map(|k| drawn[k * 1019 % drawn.len()])
-        .collect();
-    let options = MixtureOptions::default();
-    let earlier = default_fit(&all[..1500]);
-    assert_eq!(earlier.fresh_counts, 1500);
-    // Ten more counts, one of them a new largest count (the means move).
-    let mut grown = all[..1510].to_vec();
-    grown.push(earlier.max_count + 40);
-    let warm = learn_threshold_from(&grown, &options, Some(&earlier));
-    let fresh = default_fit(&grown);
-    let (w, f) = (
-        warm.mixture.as_ref().unwrap(),
-        fresh.mixture.as_ref().unwrap(),
-    );
-    assert_eq!(w.start, EmStart::Previous);
-    assert_ne!(f.start, EmStart::Previous);
-    assert_eq!(warm.fresh_counts, 1500);
-    let (tw, tf) = (
-        warm.threshold.as_ref().unwrap().count,
-        fresh.threshold.as_ref().unwrap().count,
-    );
-    assert!((tw - tf).abs() <= 1e-4 * tf, "{tw} against {tf}");
-    assert!(w.log_likelihood >= f.log_likelihood - 1e-6);
-    assert!(w.iterations <= f.iterations, "{w:?} {f:?}");
-    // Doubled since the fresh fit: the usual starts again.
-    let small = default_fit(&all[..1000]);
-    let doubled = learn_threshold_from(&all[..2000], &options, Some(&small));
-    let d = doubled.mixture.as_ref().unwrap();
-    assert_ne!(d.start, EmStart::Previous);
-    assert_eq!(doubled.fresh_counts, 2000);
-}
-
-/// A previous fit without a mixture (degenerate counts) gives no start:
-/// the usual starts run.
-#[test]
-fn a_previous_fit_without_a_mixture_is_no_start() {
-    let options = MixtureOptions::default();
-    let few = default_fit(&[5, 6, 7]);
-    assert!(few.mixture.is_none());
-    let all = two_population_counts(3);
-    let fit = learn_threshold_from(&all[..1000], &options, Some(&few));
-    assert_ne!(fit.mixture.unwrap().start, EmStart::Previous);
-}
-
 #[test]
 fn two_normals_fit_two_well_separated_groups() {
     // ln of two well-separated groups.
     let mut y: Vec<f64> = (0..200).map(|i| (i % 20) as f64 * 0.1).collect();
     y.extend((0..20).map(|i| 10.0 + (i % 5) as f64 * 0.2));
-    let fit = fit_two_normals_from(&y, 1e-6, &MixtureOptions::default(), None);
+    let fit = fit_two_normals(&y, 1e-6, &MixtureOptions::default());
     assert!(fit.degeneracy.is_none());
     let t = fit.crossing_log.unwrap();
     assert!(t > 1.9 && t < 10.0);

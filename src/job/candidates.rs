@@ -2,7 +2,7 @@
 //! edges the initial guess trusts.
 
 use super::Settings;
-use crate::gate::{self, DegeneratePolicy, GateMode, ThresholdFit};
+use crate::gate::{self, DegeneratePolicy, GateMode};
 use crate::geometry::Pose;
 use crate::graph::{Graph, LoopCandidate, UnionFind};
 use crate::options::CandidateRule;
@@ -25,13 +25,11 @@ pub fn mark<P: Pose<D>, const D: usize>(graph: &mut Graph<P, D>, rule: Candidate
 /// The gate: learns `T_GV` from the candidates' counts, reports it, and
 /// returns every candidate with whether it passed and the posterior of the
 /// true-loop count component (when the counts were fitted and the mode
-/// uses them). `previous`: the fit of the last update of the same growing
-/// graph, if any ([`gate::learn_threshold_from`]).
+/// uses them).
 pub fn gate<P: Pose<D>, const D: usize>(
     graph: &Graph<P, D>,
     config: &Settings<'_>,
     report: &mut Report,
-    previous: Option<&ThresholdFit>,
 ) -> Vec<Candidate> {
     let edges: Vec<usize> = (0..graph.edges.len())
         .filter(|&k| graph.edges[k].is_candidate())
@@ -41,12 +39,11 @@ pub fn gate<P: Pose<D>, const D: usize>(
         .map(|&k| graph.edges[k].candidate.and_then(|c| c.inliers))
         .collect();
     report.loop_candidates = edges.len();
-    let decision = gate::gate_from(
+    let decision = gate::gate(
         &counts,
         config.options.gate.mode,
         config.options.gate.degenerate,
         &config.mixture,
-        previous,
     );
     report.gate = GateReport::new(&decision, &counts);
     if decision.degenerate && report.gate.counted > 0 {

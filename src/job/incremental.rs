@@ -484,7 +484,7 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     start: Instant,
 ) -> Result<Result<Resolved<P, D>, &'static str>, Error> {
     let solve_error = Error::from;
-    let candidates = candidates::gate(graph, config, report, warm.report.gate.fit.as_ref());
+    let candidates = candidates::gate(graph, config, report);
     let method = if candidates.iter().any(|c| c.kept) {
         config.options.robust.method
     } else {

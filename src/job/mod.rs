@@ -69,7 +69,7 @@ pub(crate) fn run<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     // Which edges are loop candidates, and what the gate makes of them.
     candidates::mark(graph, config.options.gate.candidates);
     let gating = Instant::now();
-    let candidates = candidates::gate(graph, config, report, None);
+    let candidates = candidates::gate(graph, config, report);
     report.time.gate_s = gating.elapsed().as_secs_f64();
     let method = if candidates.iter().any(|c| c.kept) {
         config.options.robust.method
