@@ -326,7 +326,7 @@ fn the_issue_47_replays_are_the_batch_job() {
 /// placed anywhere, in groups of `group` a 5–30 poses off, every group's
 /// counts like a true loop's (`pgo corrupt --wrong-mode aliased
 /// --alias-place anywhere --alias-offset 5,30 --true-like-counts 1.0
-/// --true-like-by-group`), and which of its edges are wrong.
+/// --true-like-by-group`), its `wrong` the aliases.
 fn aliased_anywhere(world: World, seed: u64, group: usize) -> AnySimulation {
     use pgo_sim::{AliasOffsets, AliasPlace, CorruptionOptions, corrupt};
     let sim = simulate(&SimulationOptions {
@@ -352,11 +352,13 @@ fn aliased_anywhere(world: World, seed: u64, group: usize) -> AnySimulation {
     let mut rng = StdRng::seed_from_u64(seed);
     match sim {
         AnySimulation::Planar(mut s) => {
-            s.noisy = corrupt(&s.noisy, &aliases, &mut rng).unwrap().graph;
+            let c = corrupt(&s.noisy, &aliases, &mut rng).unwrap();
+            (s.noisy, s.wrong) = (c.graph, c.wrong);
             AnySimulation::Planar(s)
         }
         AnySimulation::Spatial(mut s) => {
-            s.noisy = corrupt(&s.noisy, &aliases, &mut rng).unwrap().graph;
+            let c = corrupt(&s.noisy, &aliases, &mut rng).unwrap();
+            (s.noisy, s.wrong) = (c.graph, c.wrong);
             AnySimulation::Spatial(s)
         }
     }
@@ -364,34 +366,50 @@ fn aliased_anywhere(world: World, seed: u64, group: usize) -> AnySimulation {
 
 /// One update of [`every_poses`]: after how many poses, why it ran the
 /// whole job (`None`: it did not), how many of how many candidates it
-/// accepted, and how it differed from the batch job.
+/// accepted, how it differed from the batch job, and the true loops each
+/// rejected and wrong ones each accepted (update, then batch).
 #[derive(Debug)]
 struct Step {
     poses: usize,
     whole_job: Option<String>,
     accepted: (usize, usize),
     mismatches: Vec<String>,
+    errors: [(usize, usize); 2],
 }
 
-/// Replays the first `upto` poses of `graph` as a front end does, an update
-/// every `every` poses, each compared with `optimize()` of the same graph.
+/// The true loops `s` rejects and the wrong ones it accepts, `wrong[k]`
+/// whether its `k`-th candidate is wrong.
+fn errors<P>(s: &Solution<P>, wrong: &[bool]) -> (usize, usize) {
+    let (mut rejected, mut accepted) = (0, 0);
+    for (d, &w) in s.loops().iter().zip(wrong) {
+        rejected += usize::from(!w && !d.accepted);
+        accepted += usize::from(w && d.accepted);
+    }
+    (rejected, accepted)
+}
+
+/// Replays the first `upto` poses of `sim`'s graph as a front end does, an
+/// update every `every` poses, each compared with `optimize()` of the same
+/// graph.
 fn every_poses<P: GraphPose<D>, const D: usize>(
-    graph: &PoseGraph<P, D>,
+    sim: &Simulation<P, D>,
     every: usize,
     upto: usize,
 ) -> Vec<Step> {
+    let graph = &sim.noisy;
     let mut due: Vec<Vec<usize>> = vec![Vec::new(); graph.len()];
     for (k, e) in graph.edges().enumerate() {
         due[e.from.max(e.to) as usize].push(k);
     }
     let options = Options::default();
     let mut g = PoseGraph::<P, D>::new();
-    let mut steps = Vec::new();
+    let (mut steps, mut wrong) = (Vec::new(), Vec::new());
     for (k, due) in due.iter().enumerate().take(upto) {
         g.add_pose(k as u64, *graph.pose(k as u64).unwrap())
             .unwrap();
-        for e in due.iter().map(|&e| graph.edge(e).unwrap()) {
+        for (e, &w) in due.iter().map(|&e| (graph.edge(e).unwrap(), &sim.wrong[e])) {
             if e.loop_candidate {
+                wrong.push(w);
                 g.add_loop_candidate(e.from, e.to, e.measurement, e.information, e.inliers)
                     .unwrap();
             } else {
@@ -410,6 +428,7 @@ fn every_poses<P: GraphPose<D>, const D: usize>(
             whole_job: (inc.solve == pgo::UpdateSolve::Batch).then(|| inc.reason.clone()),
             accepted: (accepted(&u).len(), u.loops().len()),
             mismatches: compare(&u, &b),
+            errors: [errors(&u, &wrong), errors(&b, &wrong)],
         });
     }
     steps
@@ -431,7 +450,7 @@ fn a_young_map_keeps_the_true_loops_its_gate_drops() {
     let AnySimulation::Spatial(sim) = aliased_anywhere(World::Sphere3d, 8, 10) else {
         unreachable!()
     };
-    let steps = every_poses(&sim.noisy, 20, 220);
+    let steps = every_poses(&sim, 20, 220);
     assert!(mismatched(&steps).is_empty(), "{steps:#?}");
     // Every alias of this map is beyond its 288th pose.
     let young: Vec<_> = (steps.iter())
@@ -452,7 +471,7 @@ fn an_update_that_rejects_an_accepted_loop_runs_the_whole_job() {
     let AnySimulation::Spatial(sim) = aliased_anywhere(World::Sphere3d, 3, 5) else {
         unreachable!()
     };
-    let steps = every_poses(&sim.noisy, 20, 220);
+    let steps = every_poses(&sim, 20, 220);
     assert!(mismatched(&steps).is_empty(), "{steps:#?}");
     let reversed = (steps.iter())
         .filter(|s| {
@@ -473,7 +492,7 @@ fn an_update_whose_decisions_swing_runs_the_whole_job() {
     let AnySimulation::Planar(sim) = aliased_anywhere(World::Grid2d, 21, 5) else {
         unreachable!()
     };
-    let steps = every_poses(&sim.noisy, 20, 140);
+    let steps = every_poses(&sim, 20, 140);
     assert!(mismatched(&steps).is_empty(), "{steps:#?}");
     let swung: Vec<usize> = (steps.iter())
         .filter(|s| s.whole_job.as_ref().is_some_and(|r| r.contains("swung")))
@@ -486,10 +505,13 @@ fn an_update_whose_decisions_swing_runs_the_whole_job() {
 /// replays: a grid and a sphere, seeds 1–24, groups of 5 and 10, an update
 /// every 20 poses, each compared with the batch job; about 30 s in
 /// release): `cargo test --release --test update_equals_optimize --
-/// --ignored`. Prints every replay with a whole job or a mismatch and fails
-/// if more replays mismatch than the 6 known (all on the sphere: the warm
-/// decisions end at another fixed point of EM than the batch job's
-/// annealing; docs/method.md §7b).
+/// --ignored`. Prints every replay with a whole job or a mismatch, and at
+/// each mismatch the true loops the update and the batch job reject and
+/// the wrong ones they accept; fails if more replays mismatch than the 4
+/// known (all on the sphere, one update each, where the update has every
+/// decision right and the batch job rejects 1–9 true loops: EM's warm
+/// decisions end at another of its fixed points than the batch job's
+/// annealing, docs/method.md §7b).
 #[test]
 #[ignore]
 fn wider_aliased_replays() {
@@ -498,8 +520,8 @@ fn wider_aliased_replays() {
         for seed in 1..=24u64 {
             for group in [5usize, 10] {
                 let steps = match aliased_anywhere(world, seed, group) {
-                    AnySimulation::Planar(s) => every_poses(&s.noisy, 20, 400),
-                    AnySimulation::Spatial(s) => every_poses(&s.noisy, 20, 400),
+                    AnySimulation::Planar(s) => every_poses(&s, 20, 400),
+                    AnySimulation::Spatial(s) => every_poses(&s, 20, 400),
                 };
                 let jobs: Vec<(usize, &String)> = (steps.iter())
                     .filter_map(|s| s.whole_job.as_ref().map(|r| (s.poses, r)))
@@ -510,7 +532,11 @@ fn wider_aliased_replays() {
                     eprintln!("{world:?} seed {seed} group {group}: whole jobs {jobs:?}");
                 }
                 for s in &bad {
-                    eprintln!("    at {}: {:?}", s.poses, s.mismatches);
+                    let [(ut, uw), (bt, bw)] = s.errors;
+                    eprintln!(
+                        "    at {}: {:?}; true loops rejected / wrong accepted: update {ut} / {uw}, batch {bt} / {bw}",
+                        s.poses, s.mismatches
+                    );
                 }
                 if !bad.is_empty() {
                     mismatching.push((world, seed, group));
@@ -522,5 +548,5 @@ fn wider_aliased_replays() {
         "{} of 96 replays differ from the batch job: {mismatching:?}",
         mismatching.len()
     );
-    assert!(mismatching.len() <= 6, "{mismatching:?}");
+    assert!(mismatching.len() <= 4, "{mismatching:?}");
 }
