@@ -15,10 +15,10 @@
 //! the graph at that point (untimed): how far its χ² is above the optimum.
 //!
 //! Prints one line per update (poses, how it was solved, milliseconds) and
-//! the earlier decisions it changed (and, for a whole job, why) with `-v`, and a summary: updates,
-//! total and p99 time, how many of each kind, the gaps, and the final χ²
-//! and decisions against the batch ones (with `-v`, each decision that
-//! differs).
+//! the earlier decisions it changed (and, for a whole job, why) with `-v`,
+//! and a summary: updates, total and p99 time, how many of each kind, the
+//! gaps, and the final χ² and decisions against the batch ones (with `-v`,
+//! each decision that differs).
 
 use pgo::{AnyPoseGraph, AnySolution, Options, UpdateSolve};
 use std::collections::HashMap;
