@@ -403,6 +403,14 @@ fn new_loops_the_last_model_accepts_are_decided_in_one_round() {
         if inc.solve == UpdateSolve::Warm && inc.new_candidates > 0 {
             updates += 1;
             once += usize::from(s.report().robust.decisions == 1);
+            // Its report says where its time went: the gate learned again,
+            // the evaluation and, within it, the loop model's fit.
+            let t = &s.report().time;
+            assert!(t.gate_s > 0.0, "{t:?}");
+            assert!(
+                0.0 < t.loop_model_s && t.loop_model_s <= t.evaluation_s,
+                "{t:?}"
+            );
         }
     }
     assert!(updates >= 50, "{updates} updates with new candidates");

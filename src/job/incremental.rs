@@ -484,7 +484,9 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     start: Instant,
 ) -> Result<Result<Resolved<P, D>, &'static str>, Error> {
     let solve_error = Error::from;
+    let gating = Instant::now();
     let candidates = candidates::gate(graph, config, report);
+    report.time.gate_s = gating.elapsed().as_secs_f64();
     let method = if candidates.iter().any(|c| c.kept) {
         config.options.robust.method
     } else {
