@@ -105,6 +105,8 @@ pub struct BlockSystem<const D: usize> {
     /// (in units of `D²`).
     off: Vec<f64>,
     off_ptr: Vec<usize>,
+    /// The row position of each off-diagonal block.
+    off_row: Vec<u32>,
     /// Where each diagonal and off-diagonal block starts in the factor.
     diag_dest: Vec<usize>,
     off_dest: Vec<usize>,
@@ -122,6 +124,9 @@ pub struct BlockSystem<const D: usize> {
     /// system built early, e.g. to check the graph before the initial guess,
     /// costs little memory until it is used).
     factor: Vec<f64>,
+    /// Whether `factor` is the factorisation of the `H` assembled now (an
+    /// assembly since makes it the factor of an earlier `H`).
+    factor_current: bool,
     /// Where assembly and factorisation run.
     parallelism: Parallelism,
 }
@@ -184,6 +189,7 @@ impl<const D: usize> BlockSystem<D> {
             .flat_map(|(p, l)| l.iter().map(move |&q| (q, p)))
             .map(|(q, p)| symbolic.block_offset(q, p).0)
             .collect();
+        let off_row = later.iter().flatten().map(|&q| q as u32).collect();
         let n = n_blocks * D;
         Ok(Self {
             n_blocks,
@@ -192,6 +198,7 @@ impl<const D: usize> BlockSystem<D> {
             diag: vec![0.0; n_blocks * D * D],
             off: vec![0.0; n_off * D * D],
             off_ptr: later.into_starts(),
+            off_row,
             diag_dest,
             off_dest,
             undamped_diagonal: vec![0.0; n],
@@ -201,6 +208,7 @@ impl<const D: usize> BlockSystem<D> {
             lambda: 0.0,
             symbolic,
             factor: Vec::new(),
+            factor_current: false,
             parallelism,
         })
     }
@@ -322,6 +330,7 @@ impl<const D: usize> BlockSystem<D> {
 
     /// Sets `H` and `b` to zero before assembly.
     pub fn clear(&mut self) {
+        self.factor_current = false;
         self.diag.fill(0.0);
         self.off.fill(0.0);
         self.gradient.fill(0.0);
@@ -445,6 +454,7 @@ impl<const D: usize> BlockSystem<D> {
     /// `λ = 0` factorises `H` itself (Gauss–Newton).
     pub fn factorize(&mut self, lambda: f64) -> Result<(), LinearError> {
         self.lambda = lambda;
+        self.factor_current = false;
         if self.n_blocks == 0 {
             return Ok(());
         }
@@ -492,7 +502,10 @@ impl<const D: usize> BlockSystem<D> {
             }
         };
         match sym.factorize(&mut self.factor, zeroed, &load, &self.parallelism) {
-            Ok(()) => Ok(()),
+            Ok(()) => {
+                self.factor_current = true;
+                Ok(())
+            }
             Err(p) => {
                 let block = self.position.iter().position(|&q| q == p).unwrap_or(p);
                 Err(LinearError::NotPositiveDefinite { block })
@@ -501,7 +514,8 @@ impl<const D: usize> BlockSystem<D> {
     }
 
     /// Solves `(H + λ·diag H) δ = −b` with the last factorisation and writes
-    /// `δ` by variable block (`step[k·D + a]`).
+    /// `δ` by variable block (`step[k·D + a]`). After an assembly since that
+    /// factorisation the factor is of an earlier `H`, and `δ` is the chord step `−(H₀ + λ·diag H₀)⁻¹ b`.
     ///
     /// # Panics
     /// If no factorisation succeeded before.
@@ -638,10 +652,45 @@ impl<const D: usize> BlockSystem<D> {
 
     /// The decrease of χ² that the quadratic model predicts for `step`
     /// (as returned by [`Self::solve`]): `−2δᵀb − δᵀHδ`, which for the damped
-    /// solution equals `−δᵀb + λ·δᵀ diag(H) δ`.
+    /// solution of the current factor equals `−δᵀb + λ·δᵀ diag(H) δ`; for a
+    /// chord step (the factor of an earlier `H`) it is computed as it is.
     pub fn predicted_decrease(&self, step: &[f64]) -> f64 {
         let (dot_b, dot_d) = self.model_terms(step);
-        -dot_b + self.lambda * dot_d
+        if self.factor_current {
+            -dot_b + self.lambda * dot_d
+        } else {
+            -2.0 * dot_b - self.quadratic_form(step)
+        }
+    }
+
+    /// `δᵀHδ` for `step` by variable block.
+    fn quadratic_form(&self, step: &[f64]) -> f64 {
+        let mut by_position = vec![0.0; self.n_blocks * D];
+        for (block, &p) in self.position.iter().enumerate() {
+            by_position[p * D..p * D + D].copy_from_slice(&step[block * D..block * D + D]);
+        }
+        let x = |p: usize| &by_position[p * D..p * D + D];
+        let mut sum = 0.0;
+        for p in 0..self.n_blocks {
+            let (xp, h) = (x(p), &self.diag[p * D * D..][..D * D]);
+            // The lower triangle, column-major: the diagonal once, the rest twice.
+            for c in 0..D {
+                sum += xp[c] * h[c * D + c] * xp[c];
+                for r in c + 1..D {
+                    sum += 2.0 * xp[r] * h[c * D + r] * xp[c];
+                }
+            }
+            for k in self.off_ptr[p]..self.off_ptr[p + 1] {
+                let (xq, h) = (x(self.off_row[k] as usize), &self.off[k * D * D..][..D * D]);
+                // Rows of the later block `q`, columns of `p`, column-major.
+                for c in 0..D {
+                    for r in 0..D {
+                        sum += 2.0 * xq[r] * h[c * D + r] * xp[c];
+                    }
+                }
+            }
+        }
+        sum
     }
 
     /// The share of the damping in the quadratic model along `step` (as
@@ -838,6 +887,18 @@ mod tests {
         pairs.push((Some(3), None)); // an edge to a fixed vertex
         pairs.push((Some(0), None));
         let mut sys = BlockSystem::<2>::new(n, &pairs, Parallelism::sequential()).unwrap();
+        let (h, b) = assemble_random(&mut sys, &pairs, &mut rng);
+        (sys, h, b)
+    }
+
+    /// Assembles random edge terms on `pairs` into `sys` (cleared first)
+    /// and returns the dense `H` and `b`.
+    fn assemble_random(
+        sys: &mut BlockSystem<2>,
+        pairs: &[(Option<usize>, Option<usize>)],
+        rng: &mut StdRng,
+    ) -> (DMatrix<f64>, DVector<f64>) {
+        let n = sys.num_blocks();
         sys.clear();
         let mut h = DMatrix::zeros(2 * n, 2 * n);
         let mut b = DVector::zeros(2 * n);
@@ -866,7 +927,7 @@ mod tests {
                 }
             }
         }
-        (sys, h, b)
+        (h, b)
     }
 
     use std::ops::AddAssign;
@@ -887,6 +948,41 @@ mod tests {
             // Predicted decrease of the undamped model: −2δᵀb − δᵀHδ.
             let model = -2.0 * got.dot(&b) - got.dot(&(&h * &got));
             assert!((sys.predicted_decrease(&step) - model).abs() < 1e-9 * model.abs().max(1.0));
+        }
+    }
+
+    #[test]
+    fn a_chord_step_solves_with_the_old_factor_and_predicts_with_the_new_h() {
+        for seed in 0..5 {
+            let (mut sys, h0, _) = random_system(seed);
+            sys.factorize(0.0).unwrap();
+            // The same edges assembled again with other values: the factor
+            // is H₀'s.
+            let pairs: Vec<_> = sys
+                .edges
+                .iter()
+                .map(|e| {
+                    let block = |p: u32| {
+                        (p != NONE)
+                            .then(|| sys.position.iter().position(|&q| q == p as usize).unwrap())
+                    };
+                    (block(e.i), block(e.j))
+                })
+                .collect();
+            let mut rng = StdRng::seed_from_u64(seed + 100);
+            let (h, b) = assemble_random(&mut sys, &pairs, &mut rng);
+            let mut step = vec![0.0; 24];
+            sys.solve(&mut step);
+            let expected = h0.clone().cholesky().unwrap().solve(&(-&b));
+            let got = DVector::from_vec(step.clone());
+            assert!((&got - &expected).norm() < 1e-9 * expected.norm().max(1.0));
+            // The model at the new H: −2δᵀb − δᵀHδ.
+            let model = -2.0 * got.dot(&b) - got.dot(&(&h * &got));
+            let predicted = sys.predicted_decrease(&step);
+            assert!(
+                (predicted - model).abs() < 1e-9 * model.abs().max(1.0),
+                "seed {seed}: {predicted} vs {model}"
+            );
         }
     }
 

@@ -416,6 +416,7 @@ fn update_solver(
     if closing {
         let solver = SolveSettings {
             max_iterations,
+            reuse_factor: true,
             ..config.solver.clone()
         };
         return (solver, true);
@@ -426,6 +427,7 @@ fn update_solver(
             None => UPDATE_TOLERANCE,
         },
         model_tolerance: cap.map(|_| CAPPED_TOLERANCE),
+        reuse_factor: true,
         max_iterations,
         ..config.solver.clone()
     };

@@ -36,6 +36,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             objective,
             lambda: 0.0,
             rejected: 0,
+            reused_factor: false,
         }))
     }
 }

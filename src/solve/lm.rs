@@ -121,6 +121,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                     objective: new_objective,
                     lambda: damping.lambda,
                     rejected,
+                    reused_factor: false,
                 }));
             }
             if self.lightly_damped() && predicted <= self.options.relative_tolerance * objective {

@@ -11,6 +11,7 @@
 //! [`crate::geometry`] and per-edge weights `wₖ` (1 unless a robust method
 //! sets them). The gauge vertices are held fixed.
 
+mod chord;
 mod gn;
 pub mod init;
 mod innovation;
@@ -25,6 +26,7 @@ mod tests;
 use crate::geometry::Pose;
 use crate::graph::{Graph, VertexId};
 use crate::linear::{BlockSystem, LinearError, Parallelism};
+use chord::Chord;
 use lm::Damping;
 use normal::EdgeTerms;
 // The batches of a linearisation, also for the covariances' (`crate::covariance`).
@@ -87,6 +89,12 @@ pub struct SolveSettings {
     /// ([`StopReason::Crawling`]); off by default (EM's decisions use it
     /// for accepted sets that have not settled yet).
     pub crawl_tolerance: Option<f64>,
+    /// Take chord steps: after an undamped step, the next one is solved
+    /// with the same factor against the new gradient, and the matrix is
+    /// factorised again only where that step falls short
+    /// ([`chord`](self::chord)). Off by default; an incremental update's
+    /// solves, which start next to the optimum, use it.
+    pub reuse_factor: bool,
     /// Stop when this much time has passed; the best estimate so far is kept.
     pub time_limit: Option<Duration>,
     /// LM damping `λ` (relative to the diagonal of `H`) after the first
@@ -110,6 +118,7 @@ impl Default for SolveSettings {
             step_tolerance: 1e-12,
             model_tolerance: None,
             crawl_tolerance: None,
+            reuse_factor: false,
             time_limit: None,
             initial_lambda: 1e-6,
             threads: 0,
@@ -586,13 +595,21 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let mut best_objective = objective;
         // Every run starts undamped (see `Damping`).
         let mut damping = Damping::undamped();
+        let mut chord = Chord::default();
         let stop = loop {
             if let Some(reason) = self.stop_before_step(objective, &progress, observer) {
                 break reason;
             }
-            let outcome = match self.options.method {
-                Method::GaussNewton => self.gauss_newton_step(graph, weights, &mut progress)?,
-                Method::LevenbergMarquardt => self.levenberg_marquardt_step(
+            let chord_step = match chord.ready {
+                true => self.chord_step(graph, weights, objective, &mut progress),
+                false => None,
+            };
+            let outcome = match (chord_step, self.options.method) {
+                (Some(outcome), _) => outcome,
+                (None, Method::GaussNewton) => {
+                    self.gauss_newton_step(graph, weights, &mut progress)?
+                }
+                (None, Method::LevenbergMarquardt) => self.levenberg_marquardt_step(
                     graph,
                     weights,
                     objective,
@@ -612,6 +629,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             std::mem::swap(&mut graph.poses, &mut self.trial);
             let previous = objective;
             objective = step.objective;
+            chord.after(&step, previous, self.options.reuse_factor);
             if objective < best_objective {
                 best_objective = objective;
                 self.best.clone_from(&graph.poses);
@@ -737,6 +755,9 @@ struct Step {
     lambda: f64,
     /// Rejected LM trials before it.
     rejected: usize,
+    /// Whether it was solved with the factor of an earlier linearisation
+    /// (a chord step).
+    reused_factor: bool,
 }
 
 impl Step {

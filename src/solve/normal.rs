@@ -54,7 +54,7 @@ const TRUSTED_DAMPING_SHARE: f64 = 0.5;
 /// The smallest gain ratio (actual over predicted decrease) at which the
 /// model foresaw a step's decrease: the usual trust-region threshold of
 /// adequate agreement (Nocedal & Wright, Numerical Optimization, Alg. 4.1).
-const TRUSTED_GAIN_RATIO: f64 = 0.25;
+pub(super) const TRUSTED_GAIN_RATIO: f64 = 0.25;
 
 /// How a factorisation and solve for one trial step went.
 pub(super) enum Solved {

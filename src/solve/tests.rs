@@ -545,6 +545,58 @@ mod simulated {
     }
 
     #[test]
+    fn chord_steps_reach_the_same_optimum_with_fewer_factorisations() {
+        // The grid solved with a robust round's weights, then solved again
+        // from there with one more loop switched off (a nearby start, as
+        // an incremental update has): chord steps confirm the convergence
+        // with the last factor instead of new ones, and stop at the
+        // optimum the Gauss–Newton steps stop at.
+        let (mut g, mut weights) = simulated_grid();
+        let mut opt = Optimizer::new(&g, None, SolveSettings::default()).unwrap();
+        (opt.run(&mut g, Some(&weights), &mut |_: &IterationRecord| {})).unwrap();
+        let last_loop = (0..g.edges.len())
+            .rev()
+            .find(|&k| weights[k] == 1.0 && g.edges[k].from.abs_diff(g.edges[k].to) != 1);
+        weights[last_loop.unwrap()] = 0.0;
+        for method in [Method::LevenbergMarquardt, Method::GaussNewton] {
+            let runs: Vec<(Summary, Graph<Se2, 3>)> = [false, true]
+                .into_iter()
+                .map(|reuse_factor| {
+                    let mut h = g.clone();
+                    let options = SolveSettings {
+                        method,
+                        reuse_factor,
+                        ..Default::default()
+                    };
+                    let mut opt = Optimizer::new(&h, None, options).unwrap();
+                    let s = opt
+                        .run(&mut h, Some(&weights), &mut |_: &IterationRecord| {})
+                        .unwrap();
+                    assert!(s.converged(), "{method:?} {s:?}");
+                    (s, h)
+                })
+                .collect();
+            let (plain, chord) = (&runs[0].0, &runs[1].0);
+            assert!(
+                chord.factorizations < plain.factorizations,
+                "{method:?}: {} vs {} factorisations",
+                chord.factorizations,
+                plain.factorizations
+            );
+            assert!(chord.factorizations < chord.iterations, "{chord:?}");
+            let relative = chord.final_objective / plain.final_objective - 1.0;
+            assert!(relative.abs() < 1e-8, "{method:?}: {relative}");
+            let apart = (runs[0].1.poses.iter().zip(&runs[1].1.poses))
+                .map(|(p, q)| (p.x - q.x).hypot(p.y - q.y))
+                .fold(0.0, f64::max);
+            // Within the plain run's resolution: its last step's length
+            // (here a large-residual problem, converging linearly).
+            let resolution = plain.history.last().unwrap().step_max;
+            assert!(apart < resolution, "{method:?}: poses {apart} apart");
+        }
+    }
+
+    #[test]
     fn same_input_options_and_threads_give_the_same_bits() {
         // Large enough that a parallel sum split by work stealing would differ
         // between runs (it did in one run of two before the objective was
