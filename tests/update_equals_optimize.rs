@@ -513,10 +513,10 @@ fn an_update_whose_decisions_swing_runs_the_whole_job() {
 /// release): `cargo test --release --test update_equals_optimize --
 /// --ignored`. Prints every replay with a whole job or a mismatch, and at
 /// each mismatch the true loops the update and the batch job reject and
-/// the wrong ones they accept; fails if more replays mismatch than the 4
-/// known (all on the sphere, one update each, where the update has every
-/// decision right and the batch job rejects 1–9 true loops: EM's warm
-/// decisions end at another of its fixed points than the batch job's
+/// the wrong ones they accept; fails if more replays mismatch than the 2
+/// known (sphere seeds 18 and 23, one update each, where the update has
+/// every decision right and the batch job rejects 1 and 2 true loops: EM's
+/// warm decisions end at another of its fixed points than the batch job's
 /// annealing, docs/method.md §7b).
 #[test]
 #[ignore]
@@ -554,5 +554,28 @@ fn wider_aliased_replays() {
         "{} of 96 replays differ from the batch job: {mismatching:?}",
         mismatching.len()
     );
-    assert!(mismatching.len() <= 4, "{mismatching:?}");
+    assert!(mismatching.len() <= 2, "{mismatching:?}");
+}
+
+/// A cycle of the batch job's decision sets that a half step settles: on a
+/// simulated sphere's first 380 poses (40 aliases placed anywhere in
+/// groups of 5, every count true-like) the decisions swung between the set
+/// without 9 true loops and 3 aliases near them and the set with all 12,
+/// whose map rejects them all; the better fitting of the two left the 9
+/// true loops out. Added half at a time, by increasing `ν²`, the true loops
+/// go in first and the map with them rejects the aliases.
+#[test]
+fn a_cycle_of_decisions_is_settled_by_half_steps() {
+    let AnySimulation::Spatial(sim) = aliased_anywhere(World::Sphere3d, 8, 5) else {
+        unreachable!("a sphere is spatial")
+    };
+    let mut g = PoseGraph::<pgo::Se3, 6>::new();
+    let mut wrong = Vec::new();
+    for (k, due) in edges_due(&sim.noisy).iter().enumerate().take(380) {
+        let candidates = add_pose_and_edges(&mut g, &sim.noisy, k, due);
+        wrong.extend(candidates.iter().map(|&i| sim.wrong[i]));
+    }
+    let b = g.optimize(&Options::default()).unwrap();
+    // (true loops rejected, aliases accepted)
+    assert_eq!(errors(&b, &wrong), (0, 0));
 }

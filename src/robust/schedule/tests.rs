@@ -699,3 +699,35 @@ fn deleted_residuals_over_a_loose_chain_match_the_map_without_them() {
     assert!(refit < 1e-7, "{refit}");
     assert!((formula / refit - 1.0).abs() < 0.2, "{formula} {refit}");
 }
+
+#[test]
+fn a_half_step_adds_the_most_consistent_half_and_removes_the_least() {
+    let innov = |nu2: &[Option<f64>]| Innovations {
+        nu2: nu2.to_vec(),
+        exact: vec![true; nu2.len()],
+        joint: Vec::new(),
+    };
+    // Four to add (ν² 5, 2, 9, 3): the two smallest go in.
+    let last = [true, true, false, false, false, false];
+    let next = [true; 6];
+    let nu2 = [
+        Some(1.0),
+        Some(1.0),
+        Some(5.0),
+        Some(2.0),
+        Some(9.0),
+        Some(3.0),
+    ];
+    let half = half_step(&last, &next, &innov(&nu2)).unwrap();
+    assert_eq!(half, [true, true, false, true, false, true]);
+    // Three to remove (ν² 4, 8, 6): the two largest go out, and one
+    // nothing checks moves all the way.
+    let last = [true, true, true, true, false];
+    let next = [false, false, false, true, true];
+    let nu2 = [Some(4.0), Some(8.0), Some(6.0), Some(1.0), None];
+    let half = half_step(&last, &next, &innov(&nu2)).unwrap();
+    assert_eq!(half, [true, false, false, true, true]);
+    // One candidate to move: half way is the whole way.
+    let nu2 = [Some(1.0), Some(2.0)];
+    assert_eq!(half_step(&[true, false], &[true, true], &innov(&nu2)), None);
+}
