@@ -115,6 +115,14 @@ def quote(word):
     return '"%s"' % word if " " in word else shlex.quote(word)
 
 
+def in_repo(path):
+    """`path` relative to the repository when it lies inside it (results
+    record the paths they were given, which may be absolute)."""
+    full = os.path.abspath(path)
+    root = os.path.abspath(ROOT)
+    return os.path.relpath(full, root) if full.startswith(root + os.sep) else path
+
+
 def robust_command(args, out):
     """The bench_robust.py command that made a result file, from its args."""
     parts = [".venv/bin/python", "scripts/bench_robust.py"]
@@ -133,6 +141,8 @@ def robust_command(args, out):
             if value or key == "outliers":
                 parts.append(flag)
                 parts.extend(quote(str(v)) for v in value)
+        elif key == "peers_from" and value is not None:
+            parts.extend([flag, in_repo(value)])
         elif value is not None:
             parts.extend([flag, str(value)])
     parts.extend(["--out", out])
@@ -185,7 +195,7 @@ def robust_section(path, spec):
         out += ["The peers' results (and times) are those of the run in `%s` (the same command "
                 "without `--peers-from`) on the same files: no peer depends on pgo, so only pgo ran "
                 "again." %
-                data["args"]["peers_from"], ""]
+                in_repo(data["args"]["peers_from"]), ""]
     if "total_s" not in data:
         out += ["**Partial:** the run had not finished when this file was copied; cases in it: %d." %
                 len(results), ""]
@@ -293,12 +303,15 @@ def plain_scale_table(rows):
 ABLATION_LAYERS = ["all", "annealing", "decisions", "clusters", "agreement", "aliasing", "populations",
                    "search", "relaxation"]
 SWEEP_CMD = ("for s in 1 2 3; do for g in 1 5 10; do for t in 0.3 1.0; do "
-             ".venv/bin/python scripts/bench_robust.py --tools pgo --policies aliased "
+             ".venv/bin/python scripts/bench_robust.py --tools pgo \"GTSAM cauchy\" \"GTSAM gnc\" "
+             "\"GTSAM cauchy+gate\" \"GTSAM gnc+gate\" --policies aliased "
              "--alias-group-size $g --alias-true-like $t --outliers 300 --no-maxmix "
              "--scales calibrated published --seed $s "
-             "--only intel manhattan city10000 sphere2500 parking-garage "
+             "--only intel manhattan city10000 sphere2500 parking-garage --timeout 300 --gnc-rel-tol 1e-5 "
              "--out bench/results/aliasing_sweep/s${s}_g${g}_t${t}.json; done; done; done")
 SWEEP_NO_AGREEMENT_CMD = (SWEEP_CMD.replace("aliasing_sweep/", "aliasing_sweep_no_agreement/")
+                          .replace(" \"GTSAM cauchy\" \"GTSAM gnc\" \"GTSAM cauchy+gate\" \"GTSAM gnc+gate\"", "")
+                          .replace(" --timeout 300 --gnc-rel-tol 1e-5", "")
                           .replace("--out", "--pgo-flags \"--expert no-agreement\" --out"))
 
 # The issue's goal on every aliasing run: no wrong loop accepted, and the
@@ -306,8 +319,9 @@ SWEEP_NO_AGREEMENT_CMD = (SWEEP_CMD.replace("aliasing_sweep/", "aliasing_sweep_n
 SWEEP_MAP_GOAL = 0.5
 
 
-def sweep_runs(folder):
-    """Every pgo run of the sweep: (seed, group, share, case, information, result)."""
+def sweep_runs(folder, whole=False):
+    """Every pgo run of the sweep: (seed, group, share, case, information,
+    result), the result pgo's or (`whole`) the case's with every tool's."""
     runs = []
     for name in sorted(os.listdir(folder)) if os.path.isdir(folder) else []:
         if not name.endswith(".json"):
@@ -316,7 +330,7 @@ def sweep_runs(folder):
         a = data.get("args", {})
         for r in data["results"]:
             runs.append((a.get("seed"), a.get("alias_group_size"), a.get("alias_true_like"),
-                         r["case"], r["scale"], r["tools"].get("pgo", {})))
+                         r["case"], r["scale"], r if whole else r["tools"].get("pgo", {})))
     return runs
 
 
@@ -349,16 +363,16 @@ def sweep_section(folder, ablated):
     SWEEP_MAP_GOAL %), then the same sweep with `agreement` off (folder
     `ablated`)."""
     out = ["## Perceptual aliasing over groups, shares and seeds", "",
-           "pgo alone (the peers take minutes per case here) on 300 aliased candidates per case: "
-           "groups of 1, 5 and 10 candidates sharing an offset, a share of 0.3 or 1.0 of them with "
-           "counts drawn like a true loop's (at 1.0 the counts tell nothing: every candidate passed "
-           "verification alike), seeds 1 to 3, information calibrated and as published: 18 settings "
-           "per dataset and information. The goal: no wrong loop accepted and the map within %g %% "
-           "of its extent of the clean optimum, on every run." % SWEEP_MAP_GOAL, "",
-           "**Seeds 2 and 3 repeat seed 1 here.** The results below were made before "
-           "`scripts/bench_robust.py` put the seed in its files' names: the seeds of one share "
-           "ran the first seed's file. Re-running the command below makes them distinct.", "",
-           "Made by:", "", "```sh", SWEEP_CMD, "```", ""]
+           "`pgo corrupt --wrong-mode aliased` (aliases at revisited places, offsets 5–40 poses) with "
+           "300 aliased candidates per case: groups of 1, 5 and 10 candidates sharing an offset, a share "
+           "of 0.3 or 1.0 of them with counts drawn like a true loop's (at 1.0 the counts tell nothing: "
+           "every candidate passed verification alike), seeds 1 to 3, information calibrated and as "
+           "published: 18 settings per dataset and information. pgo and GTSAM's LM + Cauchy and "
+           "GNC-TLS, each alone and behind pgo's gate, run on every case, each peer within 300 s of "
+           "CPU time. The goal: no wrong loop accepted and the map within %g %% of its extent of the "
+           "clean optimum, on every run; and, against the best peer (the smallest map error), a map "
+           "error at most its own + %g and a precision at least its own." % (SWEEP_MAP_GOAL, PEER_MAP_SLACK),
+           "", "Made by:", "", "```sh", SWEEP_CMD, "```", ""]
     runs = sweep_runs(folder)
     if not runs:
         return out + ["**Not run yet.**", ""]
@@ -380,6 +394,7 @@ def sweep_section(folder, ablated):
             sum(r["fp"] for r in ok), sum(r["true"] - r["tp"] for r in ok),
             "%.3g" % max(r["ate_pct"] for r in ok) if ok else "–",
             sum(1 for r in ok if r.get("chi2_passed") is False), len(rs) - len(ok)))
+    out += sweep_peers(sweep_runs(folder, whole=True))
     misses = sweep_misses(runs)
     out += ["", "**Runs that miss the goal: %d of %d.**" % (len(misses), len(runs)), ""]
     if misses:
@@ -394,6 +409,25 @@ def sweep_section(folder, ablated):
                 s, g, t, c, sc, r["fp"], r["true"] - r["tp"], r["ate_pct"], test))
         out.append("")
     return out + sweep_ablated(ablated)
+
+
+def sweep_peers(cases):
+    """Against the peers, on the sweep's cases with any peer's result: how
+    many, and each case where the best peer does better (behind())."""
+    with_peers = [(s, g, t, c, sc, r, best_peer(r)) for s, g, t, c, sc, r in cases]
+    with_peers = [x for x in with_peers if x[6] is not None]
+    worse = [x for x in with_peers if behind(x[5]["tools"].get("pgo", {}), x[6][1])]
+    out = ["", "**Cases with the peers' results: %d of %d; a peer does better on %d.**"
+           % (len(with_peers), len(cases), len(worse)), ""]
+    if worse:
+        trip = lambda x: "%s / %s / %s" % (fmt(x.get("precision"), 3), fmt(x.get("recall"), 3),
+                                           fmt(x.get("ate_pct"), 3))
+        out += ["| seed | group | share | case | information | pgo P / R / ATE % | peer | "
+                "its P / R / ATE % |", "|---|---|---|---|---|---|---|---|"]
+        for s, g, t, c, sc, r, (name, b) in worse:
+            out.append("| %s | %s | %s | %s | %s | %s | %s | %s |" % (
+                s, g, t, c, sc, trip(r["tools"].get("pgo", {})), name, trip(b)))
+    return out
 
 
 PLACES_CMDS = [
