@@ -707,27 +707,31 @@ fn a_half_step_adds_the_most_consistent_half_and_removes_the_least() {
         exact: vec![true; nu2.len()],
         joint: Vec::new(),
     };
-    // Four to add (ν² 5, 2, 9, 3): the two smallest go in.
-    let last = [true, true, false, false, false, false];
-    let next = [true; 6];
-    let nu2 = [
-        Some(1.0),
-        Some(1.0),
-        Some(5.0),
-        Some(2.0),
-        Some(9.0),
-        Some(3.0),
-    ];
+    // Four to add (ν² 5, 2, 9, 3) to a set of five: the two smallest go in.
+    let last = [true, true, false, false, false, false, true, true, true];
+    let next = [true; 9];
+    let nu2 = [1.0, 1.0, 5.0, 2.0, 9.0, 3.0, 1.0, 1.0, 1.0].map(Some);
     let half = half_step(&last, &next, &innov(&nu2)).unwrap();
-    assert_eq!(half, [true, true, false, true, false, true]);
-    // Three to remove (ν² 4, 8, 6): the two largest go out, and one
-    // nothing checks moves all the way.
-    let last = [true, true, true, true, false];
-    let next = [false, false, false, true, true];
-    let nu2 = [Some(4.0), Some(8.0), Some(6.0), Some(1.0), None];
+    assert_eq!(
+        half,
+        [true, true, false, true, false, true, true, true, true]
+    );
+    // Three to remove (ν² 4, 8, 6) from a set of eight: the two largest go
+    // out, and one nothing checks moves all the way.
+    let last = [true, true, true, true, false, true, true, true, true];
+    let next = [false, false, false, true, true, true, true, true, true];
+    let mut nu2 = [4.0, 8.0, 6.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0].map(Some);
+    nu2[4] = None;
     let half = half_step(&last, &next, &innov(&nu2)).unwrap();
-    assert_eq!(half, [true, false, false, true, true]);
+    assert_eq!(
+        half,
+        [true, false, false, true, true, true, true, true, true]
+    );
     // One candidate to move: half way is the whole way.
     let nu2 = [Some(1.0), Some(2.0)];
     assert_eq!(half_step(&[true, false], &[true, true], &innov(&nu2)), None);
+    // A swing of as many candidates as both sets share: no half step.
+    let last = [true, true, false, false];
+    let nu2 = [Some(1.0); 4];
+    assert_eq!(half_step(&last, &[true; 4], &innov(&nu2)), None);
 }
