@@ -440,21 +440,12 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
         seen.push((std::mem::replace(&mut out.accepted, next), fit));
         if let Some(first) = seen.iter().position(|(s, _)| *s == out.accepted) {
             // Settled (a cycle of one set), or cycling.
-            let settled = first + 1 == seen.len();
-            if !settled && before_half.is_none() {
-                let last = &seen[seen.len() - 1].0;
-                if let Some(half) = half_step(last, &out.accepted, &out.innovations) {
-                    let best = (seen[first..].iter()).min_by(|a, b| a.1.total_cmp(&b.1));
-                    before_half = best.cloned();
-                    out.accepted = half;
-                    continue;
-                }
+            let cycle = &seen[first..];
+            if let Some(half) = half_step_out(cycle, &out, &mut before_half) {
+                out.accepted = half;
+                continue;
             }
-            let mut cycle = seen[first..].to_vec();
-            if !settled {
-                cycle.extend(before_half.take());
-            }
-            if keep_best(&cycle, &edges, weights) {
+            if keep_best(&with_before(cycle, before_half.take()), &edges, weights) {
                 converged = false;
             }
             break;
@@ -474,6 +465,39 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
         session.converge(weights)?;
     }
     Ok(out)
+}
+
+/// The sets to keep the best of at the end of `cycle`: a settled set (a
+/// cycle of one) stands; a cycle's sets compete with the best one before
+/// the half step, if any (`before`).
+fn with_before(
+    cycle: &[(Vec<bool>, f64)],
+    before: Option<(Vec<bool>, f64)>,
+) -> Vec<(Vec<bool>, f64)> {
+    let mut sets = cycle.to_vec();
+    if sets.len() > 1 {
+        sets.extend(before);
+    }
+    sets
+}
+
+/// The set of a half step out of `cycle` (the sets since the first one
+/// judged again, each with its fit; the last one's map judged, in `out`,
+/// the set `out.accepted`), if this is the decisions' first cycle
+/// (`before_half` empty; it then keeps the cycle's best-fitting set) and a
+/// [`half_step`] leads out of it.
+fn half_step_out(
+    cycle: &[(Vec<bool>, f64)],
+    out: &Decided,
+    before_half: &mut Option<(Vec<bool>, f64)>,
+) -> Option<Vec<bool>> {
+    if cycle.len() < 2 || before_half.is_some() {
+        return None;
+    }
+    let last = &cycle[cycle.len() - 1].0;
+    let half = half_step(last, &out.accepted, &out.innovations)?;
+    *before_half = cycle.iter().min_by(|a, b| a.1.total_cmp(&b.1)).cloned();
+    Some(half)
 }
 
 /// Half the way from the set `last` to the set `next` its map's model

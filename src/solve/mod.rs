@@ -600,18 +600,14 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             if let Some(reason) = self.stop_before_step(objective, &progress, observer) {
                 break reason;
             }
-            let chord_step = match chord.ready {
+            let outcome = match chord.ready {
                 true => self.chord_step(graph, weights, objective, &mut progress),
                 false => None,
             };
-            let outcome = match (chord_step, self.options.method) {
-                (Some(outcome), _) => outcome,
-                (None, Method::GaussNewton) => {
-                    self.gauss_newton_step(graph, weights, &mut progress)?
-                }
-                (None, Method::LevenbergMarquardt) => self.levenberg_marquardt_step(
-                    graph,
-                    weights,
+            let outcome = match outcome {
+                Some(outcome) => outcome,
+                None => self.method_step(
+                    (graph, weights),
                     objective,
                     &mut damping,
                     &mut progress,
@@ -651,6 +647,23 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             objective = best_objective;
         }
         Ok(progress.finish(stop, objective))
+    }
+
+    /// The method's step from the current linearisation at `objective`
+    /// (Gauss–Newton's, or Levenberg–Marquardt's with `damping`).
+    fn method_step(
+        &mut self,
+        (graph, weights): (&Graph<P, D>, Option<&[f64]>),
+        objective: f64,
+        damping: &mut Damping,
+        progress: &mut Progress,
+        observer: &mut dyn Observer,
+    ) -> Result<StepOutcome, SolveError> {
+        match self.options.method {
+            Method::GaussNewton => self.gauss_newton_step(graph, weights, progress),
+            Method::LevenbergMarquardt => self
+                .levenberg_marquardt_step(graph, weights, objective, damping, progress, observer),
+        }
     }
 
     /// The reason to stop after a step of damping `lambda` that took the
