@@ -105,7 +105,7 @@ pub struct BlockSystem<const D: usize> {
     /// (in units of `D²`).
     off: Vec<f64>,
     off_ptr: Vec<usize>,
-    /// The row position of each off-diagonal block.
+    /// The variable block of each off-diagonal block's rows.
     off_row: Vec<u32>,
     /// Where each diagonal and off-diagonal block starts in the factor.
     diag_dest: Vec<usize>,
@@ -189,7 +189,11 @@ impl<const D: usize> BlockSystem<D> {
             .flat_map(|(p, l)| l.iter().map(move |&q| (q, p)))
             .map(|(q, p)| symbolic.block_offset(q, p).0)
             .collect();
-        let off_row = later.iter().flatten().map(|&q| q as u32).collect();
+        let mut block_at = vec![0u32; n_blocks];
+        for (block, &p) in position.iter().enumerate() {
+            block_at[p] = block as u32;
+        }
+        let off_row = later.iter().flatten().map(|&q| block_at[q]).collect();
         let n = n_blocks * D;
         Ok(Self {
             n_blocks,
@@ -665,14 +669,10 @@ impl<const D: usize> BlockSystem<D> {
 
     /// `δᵀHδ` for `step` by variable block.
     fn quadratic_form(&self, step: &[f64]) -> f64 {
-        let mut by_position = vec![0.0; self.n_blocks * D];
-        for (block, &p) in self.position.iter().enumerate() {
-            by_position[p * D..p * D + D].copy_from_slice(&step[block * D..block * D + D]);
-        }
-        let x = |p: usize| &by_position[p * D..p * D + D];
+        let x = |block: usize| &step[block * D..block * D + D];
         let mut sum = 0.0;
-        for p in 0..self.n_blocks {
-            let (xp, h) = (x(p), &self.diag[p * D * D..][..D * D]);
+        for (block, &p) in self.position.iter().enumerate() {
+            let (xp, h) = (x(block), &self.diag[p * D * D..][..D * D]);
             // The lower triangle, column-major: the diagonal once, the rest twice.
             for c in 0..D {
                 sum += xp[c] * h[c * D + c] * xp[c];
@@ -682,7 +682,7 @@ impl<const D: usize> BlockSystem<D> {
             }
             for k in self.off_ptr[p]..self.off_ptr[p + 1] {
                 let (xq, h) = (x(self.off_row[k] as usize), &self.off[k * D * D..][..D * D]);
-                // Rows of the later block `q`, columns of `p`, column-major.
+                // Rows of the later block, columns of this one, column-major.
                 for c in 0..D {
                     for r in 0..D {
                         sum += 2.0 * xq[r] * h[c * D + r] * xp[c];

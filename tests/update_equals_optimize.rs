@@ -407,6 +407,14 @@ fn errors<P>(s: &Solution<P>, wrong: &[bool]) -> (usize, usize) {
     (rejected, accepted)
 }
 
+/// [`aliased_anywhere`] on the sphere.
+fn aliased_sphere(seed: u64, group: usize) -> Simulation<pgo::Se3, 6> {
+    match aliased_anywhere(World::Sphere3d, seed, group) {
+        AnySimulation::Spatial(sim) => sim,
+        AnySimulation::Planar(_) => unreachable!("a sphere is spatial"),
+    }
+}
+
 /// Replays the first `upto` poses of `sim`'s graph as a front end does, an
 /// update every `every` poses, each compared with `optimize()` of the same
 /// graph.
@@ -461,9 +469,7 @@ fn whole_jobs(steps: &[Step], why: &str) -> Vec<usize> {
 /// loop model once accepted 4), every update the batch job.
 #[test]
 fn a_young_map_keeps_the_true_loops_its_gate_drops() {
-    let AnySimulation::Spatial(sim) = aliased_anywhere(World::Sphere3d, 8, 10) else {
-        unreachable!()
-    };
+    let sim = aliased_sphere(8, 10);
     let steps = every_poses(&sim, 20, 220);
     assert!(mismatched(&steps).is_empty(), "{steps:#?}");
     // Every alias of this map is beyond its 288th pose.
@@ -482,9 +488,7 @@ fn a_young_map_keeps_the_true_loops_its_gate_drops() {
 /// (χ² 1.3 % above the batch job's, poses 4 % of the map's size apart).
 #[test]
 fn an_update_that_rejects_an_accepted_loop_runs_the_whole_job() {
-    let AnySimulation::Spatial(sim) = aliased_anywhere(World::Sphere3d, 3, 5) else {
-        unreachable!()
-    };
+    let sim = aliased_sphere(3, 5);
     let steps = every_poses(&sim, 20, 220);
     assert!(mismatched(&steps).is_empty(), "{steps:#?}");
     assert!(
@@ -566,9 +570,7 @@ fn wider_aliased_replays() {
 /// go in first and the map with them rejects the aliases.
 #[test]
 fn a_cycle_of_decisions_is_settled_by_half_steps() {
-    let AnySimulation::Spatial(sim) = aliased_anywhere(World::Sphere3d, 8, 5) else {
-        unreachable!("a sphere is spatial")
-    };
+    let sim = aliased_sphere(8, 5);
     let mut g = PoseGraph::<pgo::Se3, 6>::new();
     let mut wrong = Vec::new();
     for (k, due) in edges_due(&sim.noisy).iter().enumerate().take(380) {
