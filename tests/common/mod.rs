@@ -23,11 +23,15 @@ pub fn sample(name: &str) -> PathBuf {
     repository().join("g2o_samples").join(name)
 }
 
-/// A fresh, empty temporary directory for one test, named after the test
-/// file's crate, the process and `name`.
+/// A fresh, empty temporary directory, named after the test file's crate,
+/// the process, `name` and a count of the calls so far: tests run in
+/// parallel, and two that ask for the same `name` get two directories, so
+/// that neither can wipe the other's files.
 pub fn temp_dir(name: &str) -> PathBuf {
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let d = std::env::temp_dir().join(format!(
-        "pgo-{}-{}-{name}",
+        "pgo-{}-{}-{call}-{name}",
         env!("CARGO_CRATE_NAME"),
         std::process::id()
     ));
