@@ -15,6 +15,9 @@
 //! mismatch of every case is printed before the test fails.
 
 use pgo::{Cancel, GraphPose, Options, PoseGraph, Solution};
+
+mod common;
+use common::{add_pose_and_edges, edges_due};
 use pgo_sim::{
     AnySimulation, InlierModel, OutlierPolicy, Simulation, SimulationOptions, World, simulate,
 };
@@ -106,41 +109,6 @@ fn compare<P: GraphPose<D>, const D: usize>(u: &Solution<P>, b: &Solution<P>) ->
         ));
     }
     out
-}
-
-/// The edges of `graph` due at each pose, as a front end adds them: those
-/// whose later end it is.
-fn edges_due<P: GraphPose<D>, const D: usize>(graph: &PoseGraph<P, D>) -> Vec<Vec<usize>> {
-    let mut due: Vec<Vec<usize>> = vec![Vec::new(); graph.len()];
-    for (k, e) in graph.edges().enumerate() {
-        due[e.from.max(e.to) as usize].push(k);
-    }
-    due
-}
-
-/// Adds pose `k` of `graph` to `g`, then its edges `due` (indices into
-/// `graph`'s edges); returns those of them that are loop candidates.
-fn add_pose_and_edges<P: GraphPose<D>, const D: usize>(
-    g: &mut PoseGraph<P, D>,
-    graph: &PoseGraph<P, D>,
-    k: usize,
-    due: &[usize],
-) -> Vec<usize> {
-    g.add_pose(k as u64, *graph.pose(k as u64).unwrap())
-        .unwrap();
-    let mut candidates = Vec::new();
-    for &i in due {
-        let e = graph.edge(i).unwrap();
-        if e.loop_candidate {
-            candidates.push(i);
-            g.add_loop_candidate(e.from, e.to, e.measurement, e.information, e.inliers)
-                .unwrap();
-        } else {
-            g.add_edge(e.from, e.to, e.measurement, e.information)
-                .unwrap();
-        }
-    }
-    candidates
 }
 
 /// Replays `sim` (see the module doc), returning how many updates were

@@ -32,7 +32,7 @@ use crate::io::g2o::G2oPose;
 use crate::report::{
     DecisionChange, IncrementalReport, InitializationReport, OptimizerReport, Report, UpdateSolve,
 };
-use crate::robust::{self, RobustMethod, Test};
+use crate::robust::{self, Reason, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization, grow_tree};
 use crate::solve::{Observer, Optimizer, Ordering, Session, SolveSettings, Spare};
 use crate::stats::Chi2Test;
@@ -568,6 +568,12 @@ const REVERSED: &str = "EM's decisions rejected a loop the last update accepted:
 /// tries EM's second start, as `optimize()` does (docs/method.md §5).
 const FAILED: &str = "the update's map failed the χ² test: the whole job, with its second start";
 
+/// The reason of an update whose EM decisions did not settle (a loop
+/// `unsettled`): the whole job tries EM's second start, as `optimize()`
+/// does (docs/method.md §5).
+const UNSETTLED: &str =
+    "the update's decisions did not settle: the whole job, with its second start";
+
 /// Why the last decisions, in `warm`, are no start from which the robust
 /// solve `method` of `candidates` candidates reaches the batch job's
 /// decisions and map (`None`: they are). The batch job weighs the
@@ -655,22 +661,34 @@ pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         Ok(warm) => {
             let (mut solved, mut updated) = (graph.clone(), report.clone());
             // An exact update (not capped: that promises a latency, not
-            // the batch map) whose map fails the test.
-            let failed = |r: &Report| {
-                config.options.robust.method == RobustMethod::Em
-                    && config.options.solver.update_iterations.is_none()
-                    && r.chi2_test.as_ref().is_some_and(|t| !t.passed)
+            // the batch map) where the batch job would seek EM's second
+            // start: its map fails the test, or its decisions did not
+            // settle.
+            let second_start = |r: &Report| {
+                let exact = config.options.robust.method == RobustMethod::Em
+                    && config.options.solver.update_iterations.is_none();
+                if !exact {
+                    None
+                } else if r.chi2_test.as_ref().is_some_and(|t| !t.passed) {
+                    Some(FAILED)
+                } else if r.loops.iter().any(|l| l.reason == Reason::Unsettled) {
+                    Some(UNSETTLED)
+                } else {
+                    None
+                }
             };
             match update_graph(&mut solved, warm, config, &mut updated, observer)? {
-                Ok(_) if failed(&updated) => {
-                    whole(report, observer, &|g, r| after_fallback(g, warm, r, FAILED))
-                }
-                Ok(next) => Ok(Updated {
-                    graph: solved,
-                    report: updated,
-                    warm: next,
-                    initial: None,
-                }),
+                Ok(next) => match second_start(&updated) {
+                    Some(reason) => {
+                        whole(report, observer, &|g, r| after_fallback(g, warm, r, reason))
+                    }
+                    None => Ok(Updated {
+                        graph: solved,
+                        report: updated,
+                        warm: next,
+                        initial: None,
+                    }),
+                },
                 // No start to resume from, or EM's decisions swung: the
                 // whole job instead.
                 Err(reason) => whole(report, observer, &|g, r| after_fallback(g, warm, r, reason)),

@@ -60,15 +60,31 @@ const PARTIAL_ITERATIONS: usize = 5;
 /// Most reweighting rounds.
 const MAX_ROUNDS: usize = 100;
 
+/// When a reweighting is done.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Until {
+    /// The weights settle (each moves by at most 10⁻³ in a round), and the
+    /// map is solved to the job's tolerance at them: the kernel's answer.
+    Settled,
+    /// The held set — the candidates of weight ≥ ½ — is the same two
+    /// rounds in a row; the map is left where the last round's steps took
+    /// it. What a start of EM's decisions needs: they take the held set
+    /// and judge every candidate again by its innovation, so the weights'
+    /// slow creep inside their side of ½ buys them nothing
+    /// (docs/method.md §5).
+    HeldSetRepeats,
+}
+
 /// Reweights the candidates `edges` with `method`'s kernel of width `c`
-/// until the weights settle, writing them into `weights` (one per edge);
-/// returns the rounds taken and whether the budget cut it short.
+/// until the weights settle or the held set repeats (`until`), writing
+/// them into `weights` (one per edge); returns the rounds taken and
+/// whether the budget cut it short.
 pub fn reweight<P: Pose<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
     edges: &[usize],
-    method: RobustMethod,
-    c: f64,
+    (method, c): (RobustMethod, f64),
+    until: Until,
 ) -> Result<(usize, bool), SolveError> {
     let mut mu = None;
     for round in 0..MAX_ROUNDS {
@@ -108,6 +124,13 @@ pub fn reweight<P: Pose<D>, const D: usize>(
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
         let binary = new.iter().all(|&w| w == 0.0 || w == 1.0);
+        if until == Until::HeldSetRepeats {
+            let held = |w: &f64| *w >= 0.5;
+            if round > 0 && old.iter().map(held).eq(new.iter().map(held)) {
+                return Ok((round + 1, false));
+            }
+            continue;
+        }
         let settled = match mu {
             Some(m) => binary && moved <= WEIGHT_TOLERANCE || m > GNC_MU_MAX,
             None => moved <= WEIGHT_TOLERANCE,

@@ -347,8 +347,13 @@ pub fn solve<P: ChordalInit<D>, const D: usize>(
             out.cut_short = session.exhausted();
         }
         RobustMethod::Em => {
-            (out.rounds, out.cut_short) =
-                kernels::reweight(session, weights, &kept, RobustMethod::Cauchy, c)?;
+            (out.rounds, out.cut_short) = kernels::reweight(
+                session,
+                weights,
+                &kept,
+                (RobustMethod::Cauchy, c),
+                kernels::Until::Settled,
+            )?;
             // As EM does: the final map is solved with the accepted ones.
             for &k in &kept {
                 weights[k] = if weights[k] >= 0.5 { 1.0 } else { 0.0 };
@@ -359,7 +364,13 @@ pub fn solve<P: ChordalInit<D>, const D: usize>(
             }
         }
         kernel => {
-            (out.rounds, out.cut_short) = kernels::reweight(session, weights, &kept, kernel, c)?;
+            (out.rounds, out.cut_short) = kernels::reweight(
+                session,
+                weights,
+                &kept,
+                (kernel, c),
+                kernels::Until::Settled,
+            )?;
         }
     }
     for (k, cand) in candidates.iter().enumerate() {

@@ -157,3 +157,40 @@ pub fn candidate_labels<P: pgo::GraphPose<D>, const D: usize>(
         .map(|(_, &w)| w)
         .collect()
 }
+
+/// The edges of `graph` due at each pose, as a front end adds them: those
+/// whose later end it is.
+pub fn edges_due<P: pgo::GraphPose<D>, const D: usize>(
+    graph: &pgo::PoseGraph<P, D>,
+) -> Vec<Vec<usize>> {
+    let mut due: Vec<Vec<usize>> = vec![Vec::new(); graph.len()];
+    for (k, e) in graph.edges().enumerate() {
+        due[e.from.max(e.to) as usize].push(k);
+    }
+    due
+}
+
+/// Adds pose `k` of `graph` to `g`, then its edges `due` (indices into
+/// `graph`'s edges); returns those of them that are loop candidates.
+pub fn add_pose_and_edges<P: pgo::GraphPose<D>, const D: usize>(
+    g: &mut pgo::PoseGraph<P, D>,
+    graph: &pgo::PoseGraph<P, D>,
+    k: usize,
+    due: &[usize],
+) -> Vec<usize> {
+    g.add_pose(k as u64, *graph.pose(k as u64).unwrap())
+        .unwrap();
+    let mut candidates = Vec::new();
+    for &i in due {
+        let e = graph.edge(i).unwrap();
+        if e.loop_candidate {
+            candidates.push(i);
+            g.add_loop_candidate(e.from, e.to, e.measurement, e.information, e.inliers)
+                .unwrap();
+        } else {
+            g.add_edge(e.from, e.to, e.measurement, e.information)
+                .unwrap();
+        }
+    }
+    candidates
+}
