@@ -26,7 +26,8 @@
 //! fits what it keeps), and on torus3D with 300 aliases placed anywhere
 //! such an end kept 306 of 4,049 true loops and was 31.7 % off. Run always,
 //! the second start doubled the solver's factorisations on a graph of 10⁶
-//! poses for nothing (docs/method.md §5, "Only when the test fails").
+//! poses for nothing (docs/method.md §5, "When the test fails or the
+//! decisions did not settle").
 //!
 //! Each start ends at an accepted set `S` and its least-squares map `X_S`.
 //! The job keeps
@@ -208,9 +209,8 @@ fn summary<P: Pose<D>, const D: usize>(
 
 /// EM: the annealed start, then — when its map fails the χ² test or its
 /// decisions did not settle, the caller gave poses and budget is left —
-/// the kernel start from the
-/// caller's poses, and the better end (module doc) left in the session's
-/// graph and `weights`.
+/// the kernel start from the caller's poses, and the better end (module
+/// doc) left in the session's graph and `weights`.
 pub fn em<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
