@@ -118,12 +118,6 @@ pub fn reweight<P: Pose<D>, const D: usize>(
         for (&k, &w) in edges.iter().zip(&new) {
             weights[k] = w;
         }
-        let moved = old
-            .iter()
-            .zip(&new)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
-        let binary = new.iter().all(|&w| w == 0.0 || w == 1.0);
         if until == Until::HeldSetRepeats {
             let held = |w: &f64| *w >= 0.5;
             if round > 0 && old.iter().map(held).eq(new.iter().map(held)) {
@@ -131,6 +125,12 @@ pub fn reweight<P: Pose<D>, const D: usize>(
             }
             continue;
         }
+        let moved = old
+            .iter()
+            .zip(&new)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        let binary = new.iter().all(|&w| w == 0.0 || w == 1.0);
         let settled = match mu {
             Some(m) => binary && moved <= WEIGHT_TOLERANCE || m > GNC_MU_MAX,
             None => moved <= WEIGHT_TOLERANCE,

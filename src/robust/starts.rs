@@ -239,16 +239,7 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     let mut first = End::keep(session.graph, weights, job, (ended, annealed));
     session.graph.poses.copy_from_slice(given);
     let before = session.iterations();
-    let kernel = kernel_start(
-        session,
-        weights,
-        job,
-        share
-            * std::env::var("PGO_CAPX")
-                .ok()
-                .and_then(|v| v.parse::<usize>().ok())
-                .unwrap_or(1),
-    )?;
+    let kernel = kernel_start(session, weights, job, share)?;
     let used = session.iterations() - before;
     let Some(kernel) = kernel else {
         return unsettled(session, weights, first, used);
