@@ -74,6 +74,11 @@ struct CorruptArgs {
     /// Where to write which edges are wrong (CSV: edge,from,to,wrong).
     #[arg(long, value_name = "LABELS.csv")]
     labels: Option<PathBuf>,
+    /// Project information matrices that are not positive definite to the
+    /// nearest positive-definite ones instead of failing (the corrupted
+    /// graph carries the projected matrices).
+    #[arg(long)]
+    fix_information: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -334,7 +339,12 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
         say!("error: {message}");
         return ExitCode::from(2);
     }
-    let graph = match AnyPoseGraph::read_g2o(&args.input) {
+    let read = if args.fix_information {
+        AnyPoseGraph::read_g2o_repairing(&args.input)
+    } else {
+        AnyPoseGraph::read_g2o(&args.input)
+    };
+    let graph = match read {
         Ok(g) => g,
         Err(pgo::Error::Read(e)) => {
             say!("error: {e}");

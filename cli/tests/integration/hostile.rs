@@ -508,6 +508,26 @@ fn zero_and_negative_definite_information_is_rejected_or_projected_on_request() 
         "{}",
         report["warnings"]
     );
+    // `pgo corrupt` names the same option, and takes it.
+    let out = pgo(&["corrupt", &negative, "-o", "-"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("--fix-information"),
+        "{}",
+        stderr(&out)
+    );
+    let out = pgo(&[
+        "corrupt",
+        &negative,
+        "--wrong",
+        "1",
+        "-o",
+        "-",
+        "--fix-information",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let written = String::from_utf8(out.stdout).unwrap();
+    assert!(written.contains("EDGE_SE2 0 2 "), "{written}");
     let i3 = format!(
         "{SE3_V}EDGE_SE3:QUAT 0 1 1 0 0 0 0 0 1 {}\n",
         I6.replace('1', "-1")
