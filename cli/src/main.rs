@@ -355,6 +355,10 @@ fn corrupt(args: CorruptArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    graph
+        .read_warnings()
+        .iter()
+        .for_each(|w| say!("warning: {w}"));
     let options = CorruptionOptions {
         outliers: args.wrong,
         policy: args.placement.wrong_mode.into(),

@@ -526,8 +526,13 @@ fn zero_and_negative_definite_information_is_rejected_or_projected_on_request() 
         "--fix-information",
     ]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
-    let written = String::from_utf8(out.stdout).unwrap();
+    let written = String::from_utf8(out.stdout.clone()).unwrap();
     assert!(written.contains("EDGE_SE2 0 2 "), "{written}");
+    assert!(
+        stderr(&out).contains("warning: projected 1 information matrices"),
+        "{}",
+        stderr(&out)
+    );
     let i3 = format!(
         "{SE3_V}EDGE_SE3:QUAT 0 1 1 0 0 0 0 0 1 {}\n",
         I6.replace('1', "-1")
