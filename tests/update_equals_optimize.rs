@@ -485,11 +485,13 @@ fn an_update_whose_decisions_swing_runs_the_whole_job() {
 /// release): `cargo test --release --test update_equals_optimize --
 /// --ignored`. Prints every replay with a whole job or a mismatch, and at
 /// each mismatch the true loops the update and the batch job reject and
-/// the wrong ones they accept; fails if more replays mismatch than the 2
-/// known (sphere seeds 18 and 23, one update each, where the update has
-/// every decision right and the batch job rejects 1 and 2 true loops: EM's
-/// warm decisions end at another of its fixed points than the batch job's
-/// annealing, docs/method.md §7b).
+/// the wrong ones they accept; fails if more replays mismatch than the
+/// one known (sphere seed 18 at 240 poses, where the update accepts a true
+/// loop at posterior 0.51 and the batch job rejects it at 0.49: EM's warm
+/// decisions end at another of its fixed points than the batch job's
+/// annealing, docs/method.md §7b). Sphere seed 23 mismatched too until the
+/// gate stopped taking two neighbouring counts for a component
+/// (`gate::tests::two_neighbouring_counts_are_no_component`).
 #[test]
 #[ignore]
 fn wider_aliased_replays() {
@@ -526,7 +528,7 @@ fn wider_aliased_replays() {
         "{} of 96 replays differ from the batch job: {mismatching:?}",
         mismatching.len()
     );
-    assert!(mismatching.len() <= 2, "{mismatching:?}");
+    assert!(mismatching.len() <= 1, "{mismatching:?}");
 }
 
 /// A cycle of the batch job's decision sets that a half step settles: on a

@@ -189,15 +189,25 @@ impl NormalMixture {
 
     /// Whether a fit to `n` values ended in a useless place: a component
     /// with less than one value's worth of weight (`π_k n < 1`), or one
-    /// pinned at the variance `floor` (sitting on a single tied value)
-    /// while holding fewer than `min_size` values.
-    pub fn is_collapsed(&self, n: usize, floor: f64, min_size: f64) -> bool {
+    /// holding fewer than `min_size` values that sits on a single tied
+    /// value or two neighbouring ones: pinned at the variance `floor`, or
+    /// no wider than `spacing(μ_k)`, the gap between neighbouring values
+    /// the data can take near its mean (0 for continuous data; for integer
+    /// counts on a log scale, one count's step there). Two neighbouring
+    /// counts are as good as tied at the resolution of a count: a component
+    /// on them has the density of that step, not of a population.
+    pub fn is_collapsed(
+        &self,
+        n: usize,
+        (floor, spacing): (f64, &dyn Fn(f64) -> f64),
+        min_size: f64,
+    ) -> bool {
         if !self.components.iter().all(NormalComponent::is_finite) {
             return true;
         }
         self.components.iter().any(|c| {
             let size = c.weight * n as f64;
-            let pinned = c.sigma * c.sigma <= floor * AT_FLOOR;
+            let pinned = c.sigma * c.sigma <= floor * AT_FLOOR || c.sigma <= spacing(c.mean);
             size < 1.0 || (pinned && size < min_size)
         })
     }
@@ -612,15 +622,15 @@ pub fn kmeans_start(y: &[f64], k: usize, floor: f64) -> Option<NormalMixture> {
 
 /// Runs EM from every start and keeps the result with the highest
 /// log-likelihood (the earlier start on ties) among those that did not
-/// collapse ([`NormalMixture::is_collapsed`] with `min_size`) and have a
-/// finite log-likelihood. The winner's components are sorted by mean; its
-/// start's label comes with it. `None` when every start failed or
-/// collapsed.
+/// collapse ([`NormalMixture::is_collapsed`] with `min_size` and the
+/// data's `spacing`) and have a finite log-likelihood. The winner's
+/// components are sorted by mean; its start's label comes with it. `None`
+/// when every start failed or collapsed.
 pub fn best_fit<S: Copy>(
     y: &[f64],
     starts: &[(S, NormalMixture)],
     options: &EmOptions,
-    min_size: f64,
+    (min_size, spacing): (f64, &dyn Fn(f64) -> f64),
 ) -> Option<(S, EmFit)> {
     let mut best: Option<(S, EmFit)> = None;
     for (label, start) in starts {
@@ -628,7 +638,9 @@ pub fn best_fit<S: Copy>(
             continue;
         };
         fit.mixture = fit.mixture.sorted_by_mean();
-        if fit.mixture.is_collapsed(y.len(), options.floor(), min_size)
+        if fit
+            .mixture
+            .is_collapsed(y.len(), (options.floor(), spacing), min_size)
             || !fit.log_likelihood.is_finite()
         {
             continue;

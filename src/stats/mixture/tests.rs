@@ -78,7 +78,7 @@ fn three_well_separated_components_are_recovered() {
     let y = sample(&mut rng, &truth, n);
     let starts = data_starts(&y, 3);
     assert_eq!(starts.len(), 2);
-    let (_, fit) = best_fit(&y, &starts, &OPTIONS, 3.0).unwrap();
+    let (_, fit) = best_fit(&y, &starts, &OPTIONS, (3.0, &|_| 0.0)).unwrap();
     assert!(fit.converged, "{fit:?}");
     let got = fit.mixture.components();
     assert_eq!(got.len(), 3);
@@ -104,7 +104,7 @@ fn three_well_separated_components_are_recovered() {
     let weights: f64 = got.iter().map(|c| c.weight).sum();
     assert!((weights - 1.0).abs() < 1e-12);
     // Three components explain these data better than two, by BIC.
-    let (_, two) = best_fit(&y, &data_starts(&y, 2), &OPTIONS, 3.0).unwrap();
+    let (_, two) = best_fit(&y, &data_starts(&y, 2), &OPTIONS, (3.0, &|_| 0.0)).unwrap();
     let size = n as f64;
     assert!(bic(3, size, fit.log_likelihood) < bic(2, size, two.log_likelihood));
 }
@@ -271,12 +271,12 @@ fn e_step_survives_values_far_from_every_component() {
 fn collapse_and_the_start_helpers() {
     let m = mixture(&[(0.99, -2.0, 0.5), (0.01, 0.0, 0.01)]);
     // 0.01 · 100 = 1 value at the floor: a collapse onto one value.
-    assert!(m.is_collapsed(100, 1e-4, 3.0));
+    assert!(m.is_collapsed(100, (1e-4, &|_| 0.0), 3.0));
     // The same spike holding 10 values is a component.
-    assert!(!m.is_collapsed(1000, 1e-4, 3.0));
+    assert!(!m.is_collapsed(1000, (1e-4, &|_| 0.0), 3.0));
     // Less than one value's worth of weight, floor or not.
     let light = mixture(&[(0.9995, -2.0, 0.5), (0.0005, 0.0, 0.3)]);
-    assert!(light.is_collapsed(1000, 1e-4, 3.0));
+    assert!(light.is_collapsed(1000, (1e-4, &|_| 0.0), 3.0));
     let sorted = [-3.0, -2.9, -2.8, -0.2, -0.1];
     assert_eq!(two_means_split(&sorted).map(|s| s.0), Some(3));
     assert_eq!(two_means_split(&[-1.0, -1.0]), None);
@@ -330,16 +330,23 @@ fn collapsed_fits_lose_even_with_a_higher_likelihood() {
         spike_run.log_likelihood > broad_run.log_likelihood,
         "{spike_run:?} {broad_run:?}"
     );
-    assert!(spike_run.mixture.is_collapsed(y.len(), 1e-6, 3.0));
+    assert!(
+        spike_run
+            .mixture
+            .is_collapsed(y.len(), (1e-6, &|_| 0.0), 3.0)
+    );
     let (label, _) = best_fit(
         &y,
         &[("spike", spike.clone()), ("broad", broad)],
         &options,
-        3.0,
+        (3.0, &|_| 0.0),
     )
     .unwrap();
     assert_eq!(label, "broad");
-    assert_eq!(best_fit(&y, &[("spike", spike)], &options, 3.0), None);
+    assert_eq!(
+        best_fit(&y, &[("spike", spike)], &options, (3.0, &|_| 0.0)),
+        None
+    );
 }
 
 #[test]
