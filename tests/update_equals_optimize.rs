@@ -479,25 +479,27 @@ fn an_update_whose_decisions_swing_runs_the_whole_job() {
     assert_eq!(whole_jobs(&steps, "swung"), [120], "{steps:#?}");
 }
 
-/// The replays of aliases placed anywhere, wider than CI runs (96
-/// replays: a grid and a sphere, seeds 1–24, groups of 5 and 10, an update
-/// every 20 poses, each compared with the batch job; about 30 s in
+/// The replays of aliases placed anywhere, wider than CI runs (192
+/// replays: a grid and a sphere, seeds 1–48, groups of 5 and 10, an update
+/// every 20 poses, each compared with the batch job; about a minute in
 /// release): `cargo test --release --test update_equals_optimize --
-/// --ignored`. Prints every replay with a whole job or a mismatch, and at
-/// each mismatch the true loops the update and the batch job reject and
-/// the wrong ones they accept; fails if more replays mismatch than the
-/// one known (sphere seed 18 at 240 poses, where the update accepts a true
-/// loop at posterior 0.51 and the batch job rejects it at 0.49: EM's warm
-/// decisions end at another of its fixed points than the batch job's
-/// annealing, docs/method.md §7b). Sphere seed 23 mismatched too until the
-/// gate stopped taking two neighbouring counts for a component
-/// (`gate::tests::two_neighbouring_counts_are_no_component`).
+/// --ignored`. Prints every replay with a whole job or a mismatch, at each
+/// mismatch the true loops the update and the batch job reject and the
+/// wrong ones they accept, and the totals of those over every step. Fails
+/// if more replays mismatch than the 6 known (docs/method.md §7b: at one
+/// update each, EM's warm decisions end at another of its fixed points
+/// than the batch job's annealing), or if the totals grow: 68 aliases
+/// accepted, 9 or 10 at a step, at 7 steps of young grids (40–100 poses),
+/// by the update and the batch job alike.
 #[test]
 #[ignore]
 fn wider_aliased_replays() {
     let mut mismatching = Vec::new();
+    // True loops rejected and wrong ones accepted, summed over every step:
+    // by the updates, by the batch jobs.
+    let mut totals = [(0, 0), (0, 0)];
     for world in [World::Sphere3d, World::Grid2d] {
-        for seed in 1..=24u64 {
+        for seed in 1..=48u64 {
             for group in [5usize, 10] {
                 let steps = match aliased_anywhere(world, seed, group) {
                     AnySimulation::Planar(s) => every_poses(&s, 20, 400),
@@ -518,17 +520,25 @@ fn wider_aliased_replays() {
                         s.poses, s.mismatches
                     );
                 }
+                for s in &steps {
+                    for (total, (t, w)) in totals.iter_mut().zip(s.errors) {
+                        (total.0, total.1) = (total.0 + t, total.1 + w);
+                    }
+                }
                 if !bad.is_empty() {
                     mismatching.push((world, seed, group));
                 }
             }
         }
     }
+    let [(ut, uw), (bt, bw)] = totals;
     eprintln!(
-        "{} of 96 replays differ from the batch job: {mismatching:?}",
+        "{} of 192 replays differ from the batch job: {mismatching:?}\n\
+         over every step, true loops rejected / wrong accepted: updates {ut} / {uw}, batch jobs {bt} / {bw}",
         mismatching.len()
     );
-    assert!(mismatching.len() <= 1, "{mismatching:?}");
+    assert!(mismatching.len() <= 6, "{mismatching:?}");
+    assert!(uw <= 68 && bw <= 68 && ut <= 304 && bt <= 295, "{totals:?}");
 }
 
 /// A cycle of the batch job's decision sets that a half step settles: on a
