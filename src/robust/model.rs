@@ -105,6 +105,23 @@ pub struct Evidence {
 /// Most populations of wrong loops: aliasing a few poses off, local
 /// mismatches, random matches across the map.
 pub const MAX_WRONG_POPULATIONS: usize = 3;
+/// How many loops' worth of the file's scale a population of true loops
+/// holds at most ([`file_scale_weight`]): one, as the two rates start
+/// from a uniform prior's one candidate each way.
+const FILE_SCALE_LOOPS: f64 = 1.0;
+
+/// The weight of the file's scale in the true loops' sums when EM holds
+/// `n` true loops: [`FILE_SCALE_LOOPS`] with none, less by an eighth for
+/// each up to [`super::MIN_CANDIDATES`], and none from there on, where
+/// the loops alone fit a mean and a spread. Without it two loops of a
+/// young map at `ν²` 0.5 and 1.0 set a scale 0.15 of the file's, under
+/// which its six other true loops, `χ²₆` as the file states it, became a
+/// "wrong population"; with a weight that stays, however small, a
+/// posterior of a map of 1,600 true loops 0.002 below ½ went over it
+/// and the map ended 25 % off (docs/method.md §4).
+fn file_scale_weight(n: f64) -> f64 {
+    FILE_SCALE_LOOPS * (1.0 - n / super::MIN_CANDIDATES as f64).max(0.0)
+}
 /// EM iterations at most; the fit stops earlier when the log-likelihood
 /// improves by less than [`TOLERANCE`].
 const MAX_ITERATIONS: usize = 500;
@@ -238,6 +255,25 @@ impl Sums {
             None => {
                 self.wrong = self.wrong + 1.0 - r[0];
                 self.uncounted += 1.0;
+            }
+        }
+    }
+
+    /// The true loops' mean and spread (at least `floor`, the spread of
+    /// `ln χ²_dof`), their sums joined by [`file_scale_weight`] loops of
+    /// `ln χ²_dof` at the file's information (its mean and variance).
+    /// With a pinned mean only the variance gets them.
+    fn true_moments(&self, floor: f64, dof: usize) -> (f64, f64) {
+        let (n, s1, s2) = self.columns[0];
+        let kappa = file_scale_weight(n);
+        let file_mean = ln_chi2_mean(dof);
+        let n = n + kappa;
+        match self.pinned {
+            Some(mean) => (mean, ((s2 + kappa * floor * floor) / n).sqrt().max(floor)),
+            None => {
+                let mean = (s1 + kappa * file_mean) / n;
+                let second = (s2 + kappa * (file_mean * file_mean + floor * floor)) / n;
+                (mean, (second - mean * mean).max(0.0).sqrt().max(floor))
             }
         }
     }
@@ -393,7 +429,7 @@ impl LoopModel {
             sums.columns[0].1 += yi;
             sums.columns[0].2 += yi * yi;
         }
-        let (mean, sigma) = sums.moments(0, floor);
+        let (mean, sigma) = sums.true_moments(floor, dof);
         Self {
             true_loops: Population {
                 weight: 1.0,
@@ -534,7 +570,7 @@ impl LoopModel {
     /// The parameters that maximise the expected log-likelihood under the
     /// responsibilities summed in `sums`.
     fn m_step(sums: &Sums, k: usize, (floor, dof): (f64, usize), span: f64) -> Self {
-        let (mean, sigma) = sums.moments(0, floor);
+        let (mean, sigma) = sums.true_moments(floor, dof);
         let true_loops = Population {
             weight: 1.0,
             mean,
@@ -1094,6 +1130,32 @@ mod tests {
         let e = (truth.iter().chain(&wrong)).map(|&v| ev(None, v)).collect();
         let labels = (0..50).map(|k| k < 20).collect();
         (e, labels)
+    }
+
+    /// A young simulated sphere's 8 candidates, all true loops (6-D
+    /// innovations, counts that say nothing): EM started from the two most
+    /// consistent, as an update resumed from them, keeps all eight. With
+    /// nothing but their own two to learn from, the true loops' scale was
+    /// 0.15 of the file's and the other six, `χ²₆` at the file's scale, a
+    /// "wrong population".
+    #[test]
+    fn two_true_loops_do_not_set_the_scale_of_a_young_map() {
+        let nu2 = [0.49, 1.04, 2.43, 3.28, 4.83, 6.64, 8.60, 10.54];
+        let e: Vec<Evidence> = nu2.iter().map(|&v| ev(None, v)).collect();
+        for start in [vec![true; 8], (0..8).map(|k| k < 2).collect()] {
+            let m = LoopModel::fit(
+                &e,
+                &start,
+                (6, Scale::Learned),
+                &Layers::default(),
+                &Parallelism::sequential(),
+            );
+            let kept = e.iter().filter(|x| m.posterior(x) >= 0.5).count();
+            assert_eq!(kept, 8, "{m:?}");
+        }
+        // From eight loops on the fit is theirs alone.
+        assert_eq!(file_scale_weight(8.0), 0.0);
+        assert_eq!(file_scale_weight(0.0), FILE_SCALE_LOOPS);
     }
 
     #[test]
