@@ -49,10 +49,11 @@
 //! is accepted (saturated inlier counts at the top are a real case), and its
 //! width is then the variance floor. One with fewer counts that sits on one
 //! value or two neighbouring ones (no wider than a count's step at its
-//! mean) is a collapse, not a component, and loses to the other starts. With very few distinct values (say,
-//! counts 1 to 5 only) the logarithm spreads them unevenly and the checks
-//! can accept a split that reflects the discreteness rather than two
-//! populations; such counts carry too little information for any threshold.
+//! mean) is a collapse, not a component, and loses to the other starts.
+//! With very few distinct values (say, counts 1 to 5 only) the logarithm
+//! spreads them unevenly and the checks can accept a split that reflects
+//! the discreteness rather than two populations; such counts carry too
+//! little information for any threshold.
 
 use crate::stats::mixture::{
     EmFit, EmOptions, MIN_VARIANCE_FLOOR, NormalComponent, NormalMixture, best_fit, bic,

@@ -278,21 +278,16 @@ impl Sums {
         }
     }
 
-    /// Population `j`'s weighted mean and standard deviation (at least
-    /// `floor`).
+    /// Wrong population `j`'s (`j ≥ 1`) weighted mean and standard
+    /// deviation (at least `floor`); the true loops' are
+    /// [`Self::true_moments`].
     fn moments(&self, j: usize, floor: f64) -> (f64, f64) {
         let (n, s1, s2) = self.columns[j];
-        match self.pinned {
-            Some(mean) if j == 0 => {
-                let sigma = if n > 0.0 { (s2 / n).sqrt() } else { 0.0 };
-                (mean, sigma.max(floor))
-            }
-            _ if n <= 0.0 => (0.0, floor),
-            _ => {
-                let mean = s1 / n;
-                (mean, (s2 / n - mean * mean).max(0.0).sqrt().max(floor))
-            }
+        if n <= 0.0 {
+            return (0.0, floor);
         }
+        let mean = s1 / n;
+        (mean, (s2 / n - mean * mean).max(0.0).sqrt().max(floor))
     }
 }
 
