@@ -314,6 +314,10 @@ def run_pgo(args, path, flags, out_g2o):
         "time": r["time"]["initialize_s"] + r["time"]["solve_s"],
         "wall_s": wall,
         "chi2_passed": (r.get("chi2_test") or {}).get("passed"),
+        # Candidates whose decisions did not settle, and the report's
+        # warnings (one of which says so).
+        "unsettled": sum(1 for l in r["loops"] if l["reason"] == "unsettled"),
+        "warnings": r.get("warnings", []),
         "gate_threshold": r["gate"].get("threshold"),
         "degenerate": r["gate"].get("degenerate"),
         "rounds": r["robust"]["rounds"],

@@ -5,7 +5,7 @@ use super::{Error, Settings};
 use crate::graph::Graph;
 use crate::io::g2o::G2oPose;
 use crate::report::{InitializationReport, LoopReport, OptimizerReport, Report, RobustReport};
-use crate::robust::{self, Candidate, Outcome, RobustMethod, Test};
+use crate::robust::{self, Candidate, Outcome, Reason, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization, initialize as init_poses};
 use crate::solve::{
     Budget, Observer, Optimizer, PhaseTimes, Session, SolveError, SolveSettings, Summary,
@@ -221,6 +221,18 @@ impl Run<'_> {
                 }
             })
             .collect();
+        let unsettled = (outcome.reasons.iter())
+            .filter(|&&r| r == Reason::Unsettled)
+            .count();
+        if unsettled > 0 {
+            report.warnings.push(format!(
+                "the loop decisions did not settle: {unsettled} of {} candidates were accepted \
+                 on some of the maps the decisions visited and rejected on others (reason \
+                 `unsettled`); the map is that of the best-fitting of those sets, and may hold \
+                 wrong loops or lack true ones",
+                candidates.len()
+            ));
+        }
     }
 }
 
