@@ -138,8 +138,9 @@ pub struct SolverOptions {
     )]
     pub init: Initialization,
     /// Most LM/GN iterations in all, robust reweighting rounds included.
-    /// Without it, each solve stops after 100 and the robust rounds are
-    /// bounded by their own limits.
+    /// Without it, each solve stops after 100 (the last one, whose map the
+    /// job returns, carries on to convergence, at most 1,000 more) and the
+    /// robust rounds are bounded by their own limits.
     #[cfg_attr(
         feature = "clap",
         arg(id = "max-iters", long = "max-iters", value_name = "N", value_parser = parse_max_iters)

@@ -307,6 +307,12 @@ pub struct RobustReport {
     /// one start).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub starts: Vec<crate::robust::StartEnd>,
+    /// EM: whether its decisions did not settle at the last map they
+    /// judged, which EM's second start and an update's whole job follow.
+    /// A set kept from a cycle is reported as judged at its own map, where
+    /// its loops can be `unsettled` though this is false.
+    #[serde(skip)]
+    pub unsettled: bool,
 }
 
 impl RobustReport {

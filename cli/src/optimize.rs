@@ -369,6 +369,17 @@ fn finish(args: &OptimizeArgs, report: &Report, said: &[String]) -> ExitCode {
         );
         return ExitCode::from(BUDGET_STATUS);
     }
+    let unsettled = (report.loops.iter())
+        .filter(|l| l.reason == pgo::Reason::Unsettled)
+        .count();
+    if unsettled > 0 {
+        say!(
+            "pgo: the loop decisions did not settle ({unsettled} candidates `unsettled`): the map \
+             written rests on decisions its loop model does not confirm (exit status \
+             {BUDGET_STATUS})"
+        );
+        return ExitCode::from(BUDGET_STATUS);
+    }
     ExitCode::SUCCESS
 }
 

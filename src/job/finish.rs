@@ -113,6 +113,13 @@ impl Run<'_> {
         let solver = self.solver.clone();
         let mut session = Session::new(optimizer, graph, solver, budget, observer);
         let outcome = weigh(&mut session, weights, self.c::<D>(), &test)?;
+        // The map returned converges unless the caller bounded the work
+        // (a budget, or an update's own iteration cap).
+        let own_limit = config.options.solver.max_iterations.is_none()
+            && session.options.max_iterations == SolveSettings::default().max_iterations;
+        if own_limit && !outcome.cut_short && !outcome.swung {
+            session.finish_converging(&*weights)?;
+        }
         let phases = session.phases();
         let summary = session.finish(outcome.cut_short);
         if graph.poses.iter().any(|p| !p.is_finite()) {
@@ -195,6 +202,7 @@ impl Run<'_> {
             model: outcome.model.clone(),
             search: outcome.search.clone(),
             starts: outcome.starts.clone(),
+            unsettled: !outcome.settled,
         };
         report.time.relaxation_s = phases.relaxation.as_secs_f64();
         report.time.evaluation_s = phases.evaluation.as_secs_f64();

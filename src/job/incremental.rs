@@ -32,7 +32,7 @@ use crate::io::g2o::G2oPose;
 use crate::report::{
     DecisionChange, IncrementalReport, InitializationReport, OptimizerReport, Report, UpdateSolve,
 };
-use crate::robust::{self, Reason, RobustMethod, Test};
+use crate::robust::{self, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization, grow_tree};
 use crate::solve::{Observer, Optimizer, Ordering, Session, SolveSettings, Spare};
 use crate::stats::Chi2Test;
@@ -671,7 +671,7 @@ pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                     None
                 } else if r.chi2_test.as_ref().is_some_and(|t| !t.passed) {
                     Some(FAILED)
-                } else if r.loops.iter().any(|l| l.reason == Reason::Unsettled) {
+                } else if r.robust.unsettled {
                     Some(UNSETTLED)
                 } else {
                     None

@@ -33,6 +33,7 @@ pub use starts::StartEnd;
 use crate::geometry::Pose;
 use crate::solve::init::ChordalInit;
 use crate::solve::{Session, SolveError};
+use innovation::Innovations;
 use serde::Serialize;
 
 /// A robust method for loop candidates.
@@ -269,6 +270,11 @@ pub struct Outcome {
     /// EM: where each of its starts ended ([`starts`]; empty with one
     /// start).
     pub starts: Vec<StartEnd>,
+    /// EM: whether the decisions settled at the last map they judged (no
+    /// candidate its model accepts and the set rejects, or the reverse).
+    /// A set kept from a cycle is reported as judged at its own map, where
+    /// its candidates may be `unsettled` though this holds.
+    pub settled: bool,
 }
 
 impl Outcome {
@@ -290,6 +296,7 @@ impl Outcome {
             cut_short: false,
             swung: false,
             starts: Vec::new(),
+            settled: true,
         }
     }
 }
@@ -598,28 +605,55 @@ fn record(
         .iter()
         .flat_map(|s| s.removed.iter().flat_map(|r| r.loops.iter().copied()))
         .collect();
+    // Whether the decisions settled at the last map they judged: what the
+    // job does next (EM's second start, an update's whole job) follows it.
+    let (innovations, model) = (&decided.innovations, &decided.model);
+    out.settled = (0..candidates.len()).all(|k| {
+        let judged = reason(k, (innovations, model), &decided, candidates, &removed);
+        judged.0 != Reason::Unsettled
+    });
+    // The report's judgement, at the map kept.
+    let (innovations, model) = match &decided.at_own_map {
+        Some((i, m)) => (i, m),
+        None => (innovations, model),
+    };
     for k in 0..candidates.len() {
-        let e = decided.innovations.evidence(candidates, k);
-        out.innovations[k] = decided.innovations.nu2.get(k).copied().flatten();
-        out.posteriors[k] = decided.model.as_ref().map(|m| match &e {
-            Some(e) => m.posterior(e),
-            None => m.prior(candidates[k].count_posterior),
-        });
-        let consistent = out.posteriors[k].is_some_and(|p| p >= 0.5);
-        out.reasons[k] = if removed.contains(&k) {
-            Reason::ExplainsChi2
-        } else if !candidates[k].kept && !decided.rescue {
-            Reason::Dropped
-        } else if e.is_none() {
-            Reason::Unchecked
-        } else if consistent != decided.accepted[k] {
-            Reason::Unsettled
-        } else if consistent {
-            Reason::Consistent
-        } else {
-            Reason::Inconsistent
-        };
+        let judged = reason(k, (innovations, model), &decided, candidates, &removed);
+        (out.reasons[k], out.posteriors[k]) = judged;
+        out.innovations[k] = innovations.nu2.get(k).copied().flatten();
     }
-    out.model = decided.model;
+    out.model = model.clone();
     out.search = search;
+}
+
+/// Candidate `k`'s reason and posterior under the loop `model` with
+/// `innovations`, against the set `decided` accepted (`removed`: the loops
+/// the χ² search took out).
+fn reason(
+    k: usize,
+    (innovations, model): (&Innovations, &Option<LoopModel>),
+    decided: &schedule::Decided,
+    candidates: &[Candidate],
+    removed: &[usize],
+) -> (Reason, Option<f64>) {
+    let e = innovations.evidence(candidates, k);
+    let posterior = model.as_ref().map(|m| match &e {
+        Some(e) => m.posterior(e),
+        None => m.prior(candidates[k].count_posterior),
+    });
+    let consistent = posterior.is_some_and(|p| p >= 0.5);
+    let reason = if removed.contains(&k) {
+        Reason::ExplainsChi2
+    } else if !candidates[k].kept && !decided.rescue {
+        Reason::Dropped
+    } else if e.is_none() {
+        Reason::Unchecked
+    } else if consistent != decided.accepted[k] {
+        Reason::Unsettled
+    } else if consistent {
+        Reason::Consistent
+    } else {
+        Reason::Inconsistent
+    };
+    (reason, posterior)
 }

@@ -224,6 +224,10 @@ pub struct Decided {
     pub model: Option<LoopModel>,
     /// The innovations at the last evaluation.
     pub innovations: Innovations,
+    /// The innovations and loop model at the map of the set kept, when
+    /// that set was kept from a cycle and so last judged on another set's
+    /// map: what the report says of each candidate.
+    pub at_own_map: Option<(Innovations, Option<LoopModel>)>,
     /// The cluster of each candidate.
     pub clusters: Vec<Vec<usize>>,
     /// Whether a cluster's members are also judged against the map with
@@ -291,6 +295,7 @@ impl Decided {
             accepted: edges.iter().map(|&k| held(weights[k])).collect(),
             model: None,
             innovations: Innovations::default(),
+            at_own_map: None,
             clusters: if layers.clusters {
                 clusters(&ends)
             } else {
@@ -329,6 +334,26 @@ impl Decided {
             self.relaxed_starts += usize::from(relaxed_start(session, weights)?);
         }
         session.converge_unless_crawling(weights, DECIDING_TOLERANCE)
+    }
+
+    /// The set kept, from a cycle, judged at its own map (it was last
+    /// judged on another set's): the report's innovations, posteriors and
+    /// reasons are those ([`Decided::at_own_map`]); what the job does next
+    /// still follows the decisions' last judgement.
+    fn judge_at_own_map<P: Pose<D>, const D: usize>(
+        &mut self,
+        session: &mut Session<'_, P, D>,
+        weights: &[f64],
+        judging: (&[Candidate], &[usize]),
+        how: &Deciding<'_>,
+    ) -> Result<(), SolveError> {
+        let kept = self.accepted.clone();
+        let (innovations, model) = (self.innovations.clone(), self.model.clone());
+        self.evaluate(session, weights, judging, how)?;
+        let own = std::mem::replace(&mut self.innovations, innovations);
+        self.at_own_map = Some((own, std::mem::replace(&mut self.model, model)));
+        self.accepted = kept;
+        Ok(())
     }
 
     /// One evaluation of the map in the session's graph (the least-squares
@@ -406,6 +431,8 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
     let (mut converged, mut again) = (false, false);
     // The best set of a cycle a half step left ([`half_step`]), with its fit.
     let mut before_half: Option<(Vec<bool>, f64)> = None;
+    // The set whose map the last evaluation judged.
+    let mut judged = out.accepted.clone();
     while out.decisions < MAX_DECISIONS {
         for (&k, &a) in edges.iter().zip(&out.accepted) {
             weights[k] = if a { 1.0 } else { 0.0 };
@@ -415,6 +442,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             out.cut_short = true;
             break;
         }
+        judged.clone_from(&out.accepted);
         let next = out.evaluate(session, weights, (candidates, &edges), how)?;
         if session.exhausted() {
             // No budget left to solve another set: the set kept is the one
@@ -464,6 +492,9 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
     }
     if !converged && !out.cut_short && !out.swung {
         session.converge(weights)?;
+    }
+    if out.accepted != judged && !out.cut_short && !out.swung && layers.decisions {
+        out.judge_at_own_map(session, weights, (candidates, &edges), how)?;
     }
     Ok(out)
 }
