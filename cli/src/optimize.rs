@@ -357,15 +357,22 @@ fn finish(args: &OptimizeArgs, report: &Report, said: &[String]) -> ExitCode {
         );
         return ExitCode::from(CHI2_FAILED_STATUS);
     }
+    // Without `--max-iters`, only a last solve that did not converge within
+    // its own limit (ten times each solve's) stops at the iteration limit.
     let budget = match report.optimizer.stop_reason {
-        pgo::StopReason::TimeLimit => Some("--time-limit"),
-        pgo::StopReason::MaxIterations => Some("--max-iters"),
+        pgo::StopReason::TimeLimit => Some("--time-limit stopped the job before it finished"),
+        pgo::StopReason::MaxIterations if args.options.solver.max_iterations.is_some() => {
+            Some("--max-iters stopped the job before it finished")
+        }
+        pgo::StopReason::MaxIterations => {
+            Some("the last solve did not converge within its iteration limit")
+        }
         _ => None,
     };
-    if let Some(option) = budget {
+    if let Some(what) = budget {
         say!(
-            "pgo: {option} stopped the job before it finished: the best map so far was written, \
-             its loop decisions and χ² verdict unfinished (exit status {BUDGET_STATUS})"
+            "pgo: {what}: the best map so far was written, its loop decisions and χ² verdict \
+             unfinished (exit status {BUDGET_STATUS})"
         );
         return ExitCode::from(BUDGET_STATUS);
     }
