@@ -203,6 +203,9 @@ class Result:
     @property
     def cancelled(self) -> bool:
         """Whether a Cancel token stopped the job (the best map so far)."""
+    @property
+    def warnings(self) -> List[str]:
+        """The job's warnings (report["warnings"]): e.g. that the loop decisions did not settle (loops with reason "unsettled")."""
     def certificate(self) -> Dict[str, Any]:
         """Certificate of global optimality of the map (certified, eta, cost, map_cost, gap_bound, max_translation_change, max_rotation_change, lambda_min, lambda_min_bounds, eigenvector_poses, time)."""
     def write_g2o(self, path: Union[str, os.PathLike[str]]) -> None:

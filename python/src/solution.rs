@@ -167,6 +167,14 @@ impl Solution {
         self.solution.cancelled()
     }
 
+    /// The job's warnings (`report["warnings"]`), e.g. that the loop
+    /// decisions did not settle (loops with reason "unsettled"), that no
+    /// candidate was accepted, or why there is no χ² test.
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.solution.report().warnings.clone()
+    }
+
     /// A certificate of global optimality of the map over its edges, as a
     /// dict (the report's "certificate" of `pgo optimize --certify`):
     /// `certified`, `eta`, `cost` (isotropic cost of the certified map),
