@@ -439,14 +439,7 @@ fn aliased_torus(n: u64) -> Option<(PoseGraph3, Vec<bool>)> {
     let Ok(AnyPoseGraph::Spatial(mut torus)) = read("torus3D.g2o")? else {
         panic!("torus3D is a 3D file");
     };
-    let aliased = CorruptionOptions {
-        group_size: 10,
-        true_like_share: 1.0,
-        true_like_by_group: true,
-        alias_place: AliasPlace::Anywhere,
-        alias_offsets: AliasOffsets { min: 5, max: 50 },
-        ..corruption(300, OutlierPolicy::Aliased)
-    };
+    let aliased = anywhere_in_groups(300, 1.0);
     torus.compose_missing_poses();
     let rng = &mut StdRng::seed_from_u64(1_000_003);
     let corruption = pgo_sim::corrupt(&torus, &aliased, rng).expect("corrupt");
@@ -550,6 +543,21 @@ fn corruption(outliers: usize, policy: OutlierPolicy) -> CorruptionOptions {
         policy,
         inliers: Some(InlierModel::default()),
         ..CorruptionOptions::default()
+    }
+}
+
+/// The options of the places sweep's aliases (`bench_robust.py
+/// --alias-place anywhere --alias-by-group`): `outliers` aliases in groups
+/// of 10 placed anywhere, 5–50 poses off, a share `true_like` of the groups
+/// with counts drawn like a true loop's.
+fn anywhere_in_groups(outliers: usize, true_like: f64) -> CorruptionOptions {
+    CorruptionOptions {
+        group_size: 10,
+        true_like_share: true_like,
+        true_like_by_group: true,
+        alias_place: AliasPlace::Anywhere,
+        alias_offsets: AliasOffsets { min: 5, max: 50 },
+        ..corruption(outliers, OutlierPolicy::Aliased)
     }
 }
 
@@ -672,14 +680,7 @@ fn loops_that_fit_their_stated_noise_are_kept_without_wrong_ones() {
 /// decisions did not settle.
 #[test]
 fn decisions_that_swing_end_no_worse_than_they_began() {
-    let aliased = CorruptionOptions {
-        group_size: 10,
-        true_like_share: 0.5,
-        true_like_by_group: true,
-        alias_place: AliasPlace::Anywhere,
-        alias_offsets: AliasOffsets { min: 5, max: 50 },
-        ..corruption(30, OutlierPolicy::Aliased)
-    };
+    let aliased = anywhere_in_groups(30, 0.5);
     for calibrated in [None, Some(1.0)] {
         let Some((r, wrong)) = corrupted_and_decided("MIT.g2o", &aliased, 1_000_024, calibrated)
         else {
@@ -703,14 +704,7 @@ fn decisions_that_swing_end_no_worse_than_they_began() {
 /// unconverged (exit status 4, naming a `--max-iters` it was not given).
 #[test]
 fn the_map_returned_is_converged() {
-    let aliased = CorruptionOptions {
-        group_size: 10,
-        true_like_share: 0.5,
-        true_like_by_group: true,
-        alias_place: AliasPlace::Anywhere,
-        alias_offsets: AliasOffsets { min: 5, max: 50 },
-        ..corruption(300, OutlierPolicy::Aliased)
-    };
+    let aliased = anywhere_in_groups(300, 0.5);
     let Some((r, wrong)) = corrupted_and_decided("CSAIL.g2o", &aliased, 1_000_011, None) else {
         return;
     };

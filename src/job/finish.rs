@@ -202,7 +202,7 @@ impl Run<'_> {
             model: outcome.model.clone(),
             search: outcome.search.clone(),
             starts: outcome.starts.clone(),
-            unsettled: !outcome.settled,
+            unsettled: outcome.unsettled,
         };
         report.time.relaxation_s = phases.relaxation.as_secs_f64();
         report.time.evaluation_s = phases.evaluation.as_secs_f64();

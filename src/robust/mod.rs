@@ -270,11 +270,12 @@ pub struct Outcome {
     /// EM: where each of its starts ended ([`starts`]; empty with one
     /// start).
     pub starts: Vec<StartEnd>,
-    /// EM: whether the decisions settled at the last map they judged (no
-    /// candidate its model accepts and the set rejects, or the reverse).
+    /// EM: whether the decisions did not settle at the last map they
+    /// judged (a candidate its model accepts and the set rejects, or the
+    /// reverse): what EM's second start and an update's whole job follow.
     /// A set kept from a cycle is reported as judged at its own map, where
-    /// its candidates may be `unsettled` though this holds.
-    pub settled: bool,
+    /// its candidates can be `unsettled` though this is false.
+    pub unsettled: bool,
 }
 
 impl Outcome {
@@ -296,7 +297,7 @@ impl Outcome {
             cut_short: false,
             swung: false,
             starts: Vec::new(),
-            settled: true,
+            unsettled: false,
         }
     }
 }
@@ -605,23 +606,24 @@ fn record(
         .iter()
         .flat_map(|s| s.removed.iter().flat_map(|r| r.loops.iter().copied()))
         .collect();
-    // Whether the decisions settled at the last map they judged: what the
-    // job does next (EM's second start, an update's whole job) follows it.
-    let (innovations, model) = (&decided.innovations, &decided.model);
-    out.settled = (0..candidates.len()).all(|k| {
-        let judged = reason(k, (innovations, model), &decided, candidates, &removed);
-        judged.0 != Reason::Unsettled
-    });
+    let last = (&decided.innovations, &decided.model);
     // The report's judgement, at the map kept.
     let (innovations, model) = match &decided.at_own_map {
         Some((i, m)) => (i, m),
-        None => (innovations, model),
+        None => last,
     };
     for k in 0..candidates.len() {
         let judged = reason(k, (innovations, model), &decided, candidates, &removed);
         (out.reasons[k], out.posteriors[k]) = judged;
         out.innovations[k] = innovations.nu2.get(k).copied().flatten();
     }
+    // Whether the decisions did not settle at the last map they judged:
+    // the report's reasons when that map is the one kept.
+    out.unsettled = match decided.at_own_map {
+        None => out.reasons.contains(&Reason::Unsettled),
+        Some(_) => (0..candidates.len())
+            .any(|k| reason(k, last, &decided, candidates, &removed).0 == Reason::Unsettled),
+    };
     out.model = model.clone();
     out.search = search;
 }

@@ -227,7 +227,7 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     };
     let mut ended = summary(session.graph, weights, job, Start::Annealed);
     ended.iterations = share;
-    let settled = annealed.settled;
+    let settled = !annealed.unsettled;
     if ended.passed == Some(true) && settled {
         // A map that passes the χ² test, at decisions that settled, is not
         // second-guessed (module doc).

@@ -34,7 +34,7 @@ fn no_file_in_the_datasets_makes_pgo_panic() {
 /// MIT with 30 aliases placed anywhere as seed 23 of the MIT sweep in
 /// docs/benchmarks.md makes it (the decisions swing between 6 and 40
 /// accepted loops and keep the 7 they started from; 33 candidates
-/// `unsettled`). The same map without the aliases settles and exits 0.
+/// `unsettled`). MIT itself, whose loops are trusted edges, exits 0.
 #[test]
 fn decisions_that_did_not_settle_exit_4() {
     let Some(dir) = datasets() else { return };
