@@ -694,6 +694,44 @@ fn decisions_that_swing_end_no_worse_than_they_began() {
     }
 }
 
+/// A failed test the χ² search cannot explain ends at the passing set of
+/// least truncated least squares `J` that the decisions solved (from any
+/// start), not at a passing map of a few loops: sphere2500 with 300
+/// aliases in groups of 10 placed anywhere, half the groups with
+/// true-like counts, its information as published (seed 6 of
+/// `bench_robust.py --alias-place anywhere`). The decisions ran away from
+/// the annealed set of 2,369 true loops and 11 aliases to 242 aliases, and
+/// the test failed; the search's restart kept a map of one loop, which
+/// passes, and the job returned it: 16 % off. The annealed and the kernel
+/// start's sets pass, and the kernel's is kept: 2,442 true loops and the
+/// 11 aliases, 0.44 % off, with the warning that the decisions did not
+/// settle. About five minutes in release: `cargo test --release --test
+/// datasets -- --ignored`.
+#[test]
+#[ignore]
+fn a_failed_test_ends_at_the_passing_set_that_leaves_out_least() {
+    let aliased = anywhere_in_groups(300, 0.5);
+    let Some((r, wrong)) = corrupted_and_decided("sphere2500.g2o", &aliased, 1_000_007, None)
+    else {
+        return;
+    };
+    let count = |wrong_ones: bool| {
+        (r.loops.iter().zip(&wrong))
+            .filter(|(l, w)| l.accepted && **w == wrong_ones)
+            .count()
+    };
+    let true_loops = wrong.iter().filter(|w| !**w).count();
+    assert!(
+        count(false) + 10 >= true_loops,
+        "{} of {true_loops}",
+        count(false)
+    );
+    assert!(count(true) <= 11, "{} aliases", count(true));
+    assert!(r.chi2_test.as_ref().is_some_and(|t| t.passed));
+    let warned = r.warnings.iter().any(|w| w.contains("did not settle"));
+    assert!(warned, "{:?}", r.warnings);
+}
+
 /// The map a job returns is converged, not cut at the limit of 100
 /// iterations each solve of the robust methods has: CSAIL with 300
 /// aliases in groups of 10 placed anywhere, half the groups with

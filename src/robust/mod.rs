@@ -31,6 +31,7 @@ pub use search::{MAX_REMOVALS, Search, Suspect, Test};
 pub use starts::StartEnd;
 
 use crate::geometry::Pose;
+use crate::graph::Graph;
 use crate::solve::init::ChordalInit;
 use crate::solve::{Session, SolveError};
 use innovation::Innovations;
@@ -497,18 +498,28 @@ fn settle<P: ChordalInit<D>, const D: usize>(
         relax: chordal,
         swing,
     };
-    let (mut decided, mut search) = decide_and_explain(session, (weights, candidates), &how, test)?;
+    let mut passing = search::Passing::default();
+    let (mut decided, mut search) = decide_and_explain(
+        session,
+        (weights, candidates),
+        &how,
+        test,
+        &mut |g: &Graph<P, D>, w: &[f64], set: &[bool]| {
+            passing.record((g, w), candidates, set, test);
+        },
+    )?;
     if decided.swung {
         out.swung = true;
         out.decisions = decided.decisions;
         return Ok(());
     }
     // A failed test no cluster explains: decide again from the trusted
-    // edges' map, with the scale learned and with the file's.
+    // edges' map, with the scale learned and with the file's; then end at
+    // the passing set of least `J` of all the decisions solved.
+    let unexplained = search.as_ref().is_some_and(|s| !s.suspects.is_empty())
+        && search::verdict(session, weights, test) == Some(false);
     for scale in [Scale::Learned, Scale::File] {
-        if search.as_ref().is_none_or(|s| s.suspects.is_empty())
-            || search::verdict(session, weights, test) != Some(false)
-        {
+        if !unexplained || search::verdict(session, weights, test) != Some(false) {
             break;
         }
         let restarted = search::restart(
@@ -518,13 +529,11 @@ fn settle<P: ChordalInit<D>, const D: usize>(
             &mut decided,
             test,
             |session, weights| {
-                let how = schedule::Deciding {
-                    scale,
-                    layers,
-                    relax: chordal,
-                    swing: Swing::Continue,
+                let how = schedule::Deciding { scale, ..how };
+                let mut solved = |g: &Graph<P, D>, w: &[f64], set: &[bool]| {
+                    passing.record((g, w), candidates, set, test);
                 };
-                schedule::decide(session, weights, candidates, &how)
+                schedule::decide(session, weights, candidates, &how, &mut solved)
             },
         )?;
         if restarted {
@@ -534,7 +543,55 @@ fn settle<P: ChordalInit<D>, const D: usize>(
             }
         }
     }
+    if unexplained && !decided.cut_short && !session.exhausted() {
+        end_passing(session, weights, job, (&mut decided, &mut search), &passing)?;
+    }
     record(out, decided, search, candidates);
+    Ok(())
+}
+
+/// Ends the decisions of a failed test no cluster explained at the passing
+/// set of least `J` they solved ([`search::Passing::best`]), if that is
+/// not the set they end at and its map passes.
+fn end_passing<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    job: &Job<'_, P, D>,
+    (decided, search): (&mut schedule::Decided, &mut Option<Search>),
+    passing: &search::Passing,
+) -> Result<(), SolveError> {
+    let Some(best) = passing.best(job.c) else {
+        return Ok(());
+    };
+    let passes = search::verdict(session, weights, job.test) == Some(true);
+    if best == decided.accepted.as_slice() && passes {
+        return Ok(());
+    }
+    let saved = (
+        session.graph.poses.clone(),
+        weights.to_vec(),
+        decided.clone(),
+    );
+    let how = schedule::Deciding {
+        scale: Scale::Learned,
+        layers: job.layers,
+        relax: job.chordal,
+        swing: Swing::Continue,
+    };
+    let edges: Vec<usize> = job.candidates.iter().map(|c| c.edge).collect();
+    decided.adopt(session, weights, (job.candidates, &edges), best, &how)?;
+    if search::verdict(session, weights, job.test) != Some(true) {
+        // Solved again, its map fails after all: the decisions' end stands.
+        session.graph.poses = saved.0;
+        weights.copy_from_slice(&saved.1);
+        *decided = saved.2;
+        return Ok(());
+    }
+    if let Some(s) = search {
+        s.suspects.clear();
+        s.removed.retain(|r| r.loops.iter().all(|&k| !best[k]));
+        s.restarted = false;
+    }
     Ok(())
 }
 
@@ -549,13 +606,14 @@ fn decide_and_explain<P: ChordalInit<D>, const D: usize>(
     (weights, candidates): (&mut [f64], &[Candidate]),
     how: &schedule::Deciding<'_>,
     test: &Test<'_, P, D>,
+    solved: &mut schedule::SetSolved<'_, P, D>,
 ) -> Result<(schedule::Decided, Option<Search>), SolveError> {
     let layers = how.layers;
     let mut judged = candidates.to_vec();
     let mut removed: Vec<Suspect> = Vec::new();
     let mut before: Option<schedule::Decided> = None;
     loop {
-        let mut decided = schedule::decide(session, weights, &judged, how)?;
+        let mut decided = schedule::decide(session, weights, &judged, how, solved)?;
         if let Some(b) = &before {
             decided.count_work_of(b);
         }

@@ -356,6 +356,32 @@ impl Decided {
         Ok(())
     }
 
+    /// Ends the decisions at `set` instead (one flag per candidate, with
+    /// their `edges`): solved as a decision is, to the job's tolerance, and
+    /// judged at its own map.
+    pub fn adopt<P: ChordalInit<D>, const D: usize>(
+        &mut self,
+        session: &mut Session<'_, P, D>,
+        weights: &mut [f64],
+        (candidates, edges): (&[Candidate], &[usize]),
+        set: &[bool],
+        how: &Deciding<'_>,
+    ) -> Result<(), SolveError> {
+        for (&k, &a) in edges.iter().zip(set) {
+            weights[k] = if a { 1.0 } else { 0.0 };
+        }
+        self.accepted = set.to_vec();
+        if !self.solve(session, weights, how, false)? {
+            session.converge(weights)?;
+        }
+        self.cut_short |= session.exhausted();
+        if !self.cut_short {
+            self.evaluate(session, weights, (candidates, edges), how)?;
+            self.at_own_map = None;
+        }
+        Ok(())
+    }
+
     /// One evaluation of the map in the session's graph (the least-squares
     /// map of the set in `weights`): the innovations of the `candidates`
     /// (with their `edges`) and the loop model, kept in these decisions;
@@ -410,15 +436,21 @@ pub struct Deciding<'a> {
     pub swing: Swing,
 }
 
+/// What [`decide`] shows of each set it solves: the map in the graph, the
+/// weights it was solved with, and the set (one flag per candidate).
+pub type SetSolved<'s, P, const D: usize> = dyn FnMut(&Graph<P, D>, &[f64], &[bool]) + 's;
+
 /// The decisions by innovation (step 2 of the module doc), starting from
 /// the candidates of weight ≥ ½ in `weights`; leaves the final weights (1
 /// accepted, 0 not) in `weights` and the least-squares map of the accepted
-/// set in the session's graph.
+/// set in the session's graph. Each set solved, with its map, is shown to
+/// `solved`.
 pub fn decide<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
     candidates: &[Candidate],
     how: &Deciding<'_>,
+    solved: &mut SetSolved<'_, P, D>,
 ) -> Result<Decided, SolveError> {
     let (layers, swing) = (how.layers, how.swing);
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
@@ -442,6 +474,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
             out.cut_short = true;
             break;
         }
+        solved(session.graph, weights, &out.accepted);
         judged.clone_from(&out.accepted);
         let next = out.evaluate(session, weights, (candidates, &edges), how)?;
         if session.exhausted() {
@@ -492,6 +525,7 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
     }
     if !converged && !out.cut_short && !out.swung {
         session.converge(weights)?;
+        solved(session.graph, weights, &out.accepted);
     }
     if out.accepted != judged && !out.cut_short && !out.swung && layers.decisions {
         out.judge_at_own_map(session, weights, (candidates, &edges), how)?;

@@ -27,20 +27,25 @@
 //! left of a failure is reported as the suspects.
 //!
 //! When no cluster explains it, the decisions may have started from a map
-//! the wrong loops had already bent (most candidates wrong, their counts
-//! no help): every innovation is then measured against a wrong map.
+//! the wrong loops had already bent (most candidates wrong, their counts no
+//! help): every innovation is then measured against a wrong map.
 //! [`restart`] decides once more from the map of the trusted edges alone,
 //! which no candidate shaped — with the scale learned, then with the true
 //! loops' innovations centred where the file's information puts them
 //! ([`super::Scale::File`], as the χ² test takes it: when wrong loops are
-//! the majority, a learned scale fits them instead) — and keeps that end
-//! only if its map passes the test. One that still fails explains nothing:
-//! with information the file states too tight (every loop a little off),
-//! fewer loops always fail by less, and keeping the end that fails least
-//! would throw away true loops to shrink `D²`.
+//! the majority, a learned scale fits them instead). Of every set the
+//! decisions solved on the way — the first decisions' and the restarts' —
+//! those whose maps passed the test are kept ([`Passing`]), and the job
+//! ends at the one of least truncated least squares `J`
+//! ([`Passing::best`]): a failed test is resolved when any set considered
+//! resolves it, and among those by how much each leaves out for its fit,
+//! since a map of a few loops passes with ease. A set that fails explains
+//! nothing: with information the file states too tight (every loop a
+//! little off), fewer loops always fail by less, and keeping the end that
+//! fails least would throw away true loops to shrink `D²`.
 
 use super::innovation::{Evaluation, through_wide_chains};
-use super::schedule::Decided;
+use super::schedule::{Decided, objective};
 use super::{Candidate, Layers};
 use crate::geometry::Pose;
 use crate::graph::Graph;
@@ -85,6 +90,74 @@ pub struct Search {
 
 /// The test of the map in the session's graph with `weights`.
 pub type Test<'t, P, const D: usize> = dyn Fn(&Graph<P, D>, &[f64]) -> Option<Chi2Test> + 't;
+
+/// The sets the decisions solved whose maps passed the χ² test, from
+/// every start of the decisions: where a failed test that no cluster
+/// explains ends (module doc, [`Passing::best`]).
+#[derive(Default)]
+pub struct Passing {
+    sets: Vec<PassingSet>,
+}
+
+/// A set whose map passed, and what ranks it.
+struct PassingSet {
+    /// One flag per candidate.
+    accepted: Vec<bool>,
+    /// `Σ eᵀΩe` over the edges its map was solved with.
+    fit: f64,
+    /// The candidates it leaves out.
+    left_out: usize,
+    /// Its test's residual degrees of freedom and `D²/K`.
+    dof: i64,
+    scale: f64,
+}
+
+impl Passing {
+    /// Records the set `accepted` of the `candidates` if its map (in
+    /// `graph`, solved with `weights`) passes `test`; of a set solved
+    /// twice, the better fitting map counts.
+    pub fn record<P: Pose<D>, const D: usize>(
+        &mut self,
+        (graph, weights): (&Graph<P, D>, &[f64]),
+        candidates: &[Candidate],
+        accepted: &[bool],
+        test: &Test<'_, P, D>,
+    ) {
+        let Some(t) = test(graph, weights).filter(|t| t.passed && t.dof_residual > 0) else {
+            return;
+        };
+        let set = PassingSet {
+            accepted: accepted.to_vec(),
+            fit: objective(graph, weights, candidates, 0.0),
+            left_out: (candidates.iter())
+                .filter(|c| weights[c.edge] < 0.5)
+                .count(),
+            dof: t.dof_residual,
+            scale: t.d2 / t.dof_residual as f64,
+        };
+        match self.sets.iter_mut().find(|s| s.accepted == accepted) {
+            Some(s) if set.fit < s.fit => *s = set,
+            Some(_) => {}
+            None => self.sets.push(set),
+        }
+    }
+
+    /// The passing set of least truncated least squares `J` (the objective
+    /// EM's starts are ranked by, [`super::starts`]) with kernel width `c`:
+    /// `Σ eᵀΩe + s²·c²` per candidate left out, `s²` the `D²/K` of the
+    /// passing map with the most residual degrees of freedom (the closest
+    /// estimate of the file's information scale among maps consistent with
+    /// it). Every map here passes: what tells them apart is how much each
+    /// leaves out, and a map of a few loops passes with ease (the restart
+    /// from the trusted edges' map can end at one: sphere2500 with 300
+    /// aliases placed anywhere, docs/method.md §7).
+    pub fn best(&self, c: f64) -> Option<&[bool]> {
+        let s2 = self.sets.iter().max_by_key(|s| s.dof)?.scale;
+        let j = |s: &PassingSet| s.fit + s2 * c * c * s.left_out as f64;
+        let best = self.sets.iter().min_by(|a, b| j(a).total_cmp(&j(b)))?;
+        Some(&best.accepted)
+    }
+}
 
 /// The search of the module doc, from the decisions `decided`; updates
 /// them (and `weights`, and the map) for every cluster it removes. `None`
@@ -446,6 +519,45 @@ mod tests {
         let t = Chi2Test::new(5585.3, 10_899, 5400, DofConvention::Residual, 0.05).unwrap();
         assert!(!t.passed);
         t
+    }
+
+    fn passing(accepted: usize, of: usize, fit: f64, dof: i64) -> PassingSet {
+        PassingSet {
+            accepted: (0..of).map(|k| k < accepted).collect(),
+            fit,
+            left_out: of - accepted,
+            dof,
+            scale: fit / dof as f64,
+        }
+    }
+
+    #[test]
+    fn of_the_passing_sets_the_one_that_leaves_out_least_for_its_fit_ends_a_failure() {
+        // sphere2500 with 300 aliases placed anywhere (docs/method.md §7):
+        // the restart's end of one loop passes with D² 0.3 on 6 degrees of
+        // freedom; the annealed set of 2,380 passes with 1,432 on 14,280.
+        let c = 6.19;
+        let mut sets = Passing::default();
+        sets.sets.push(passing(1, 2750, 0.3, 6));
+        sets.sets.push(passing(2380, 2750, 1432.0, 14_280));
+        // J: 0.3 + 0.1·c²·2749 ≈ 10 533 against 1432 + 0.1·c²·370 ≈ 2850.
+        assert_eq!(
+            sets.best(c).map(|s| s.iter().filter(|&&a| a).count()),
+            Some(2380)
+        );
+        // The price of a loop left out is on the scale of the map with the
+        // most degrees of freedom, not the few loops' 0.05.
+        let lone = Passing {
+            sets: vec![passing(1, 2750, 0.3, 6)],
+        };
+        assert_eq!(lone.best(c).map(|s| s.len()), Some(2750));
+        // A set that fits much worse for a few loops more loses.
+        sets.sets.push(passing(2390, 2750, 9000.0, 14_340));
+        assert_eq!(
+            sets.best(c).map(|s| s.iter().filter(|&&a| a).count()),
+            Some(2380)
+        );
+        assert!(Passing::default().best(c).is_none());
     }
 
     #[test]

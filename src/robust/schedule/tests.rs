@@ -223,7 +223,7 @@ fn the_decisions_end_on_a_map_solved_to_the_jobs_tolerance() {
         let layers = Layers::default();
         let swing = Swing::Continue;
         let how = deciding(&layers, false, swing);
-        let decided = decide(&mut s, w, &candidates, &how);
+        let decided = decide(&mut s, w, &candidates, &how, &mut |_, _, _| {});
         (decided.unwrap(), s.finish(false).unwrap())
     });
     assert!(summary.history.iter().any(|r| r.lambda > 0.0));
@@ -258,6 +258,7 @@ fn the_model_is_fitted_on_exact_innovations() {
                 w,
                 &candidates,
                 &deciding(&layers, false, Swing::Continue),
+                &mut |_, _, _| {},
             )
             .unwrap()
         },
@@ -580,7 +581,8 @@ fn a_restart_that_still_fails_is_undone_but_its_work_is_counted() {
             &chi2_test,
             |s, w| {
                 let swing = Swing::Continue;
-                let again = decide(s, w, candidates, &deciding(layers, true, swing))?;
+                let how = deciding(layers, true, swing);
+                let again = decide(s, w, candidates, &how, &mut |_, _, _| {})?;
                 made = (again.decisions, again.relaxations);
                 Ok(again)
             },
