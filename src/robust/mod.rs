@@ -552,7 +552,9 @@ fn settle<P: ChordalInit<D>, const D: usize>(
 
 /// Ends the decisions of a failed test no cluster explained at the passing
 /// set of least `J` they solved ([`search::Passing::best`]), if that is
-/// not the set they end at and its map passes.
+/// not the set they end at, its `J` is lower than their end's (a map that
+/// fails by chance, as one correct map in `1/α` does, keeps its loops and
+/// its suspects), and its map passes when solved again.
 fn end_passing<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -560,11 +562,12 @@ fn end_passing<P: ChordalInit<D>, const D: usize>(
     (decided, search): (&mut schedule::Decided, &mut Option<Search>),
     passing: &search::Passing,
 ) -> Result<(), SolveError> {
-    let Some(best) = passing.best(job.c) else {
+    let Some((best, j, price)) = passing.best(job.c) else {
         return Ok(());
     };
     let passes = search::verdict(session, weights, job.test) == Some(true);
-    if best == decided.accepted.as_slice() && passes {
+    let end = schedule::objective(session.graph, weights, job.candidates, price);
+    if best == decided.accepted.as_slice() || (!passes && end <= j) {
         return Ok(());
     }
     let saved = (

@@ -37,9 +37,11 @@
 //! decisions solved on the way — the first decisions' and the restarts' —
 //! those whose maps passed the test are kept ([`Passing`]), and the job
 //! ends at the one of least truncated least squares `J`
-//! ([`Passing::best`]): a failed test is resolved when any set considered
-//! resolves it, and among those by how much each leaves out for its fit,
-//! since a map of a few loops passes with ease. A set that fails explains
+//! ([`Passing::best`]) if that is lower than the failing end's own `J`: a
+//! failed test is resolved when a set considered resolves it, and among
+//! those by how much each leaves out for its fit, since a map of a few
+//! loops passes with ease; but a correct map fails by chance once in
+//! `1/α`, and leaving true loops out to pass costs more than it saves. A set that fails explains
 //! nothing: with information the file states too tight (every loop a
 //! little off), fewer loops always fail by less, and keeping the end that
 //! fails least would throw away true loops to shrink `D²`.
@@ -150,12 +152,14 @@ impl Passing {
     /// it). Every map here passes: what tells them apart is how much each
     /// leaves out, and a map of a few loops passes with ease (the restart
     /// from the trusted edges' map can end at one: sphere2500 with 300
-    /// aliases placed anywhere, docs/method.md §7).
-    pub fn best(&self, c: f64) -> Option<&[bool]> {
-        let s2 = self.sets.iter().max_by_key(|s| s.dof)?.scale;
-        let j = |s: &PassingSet| s.fit + s2 * c * c * s.left_out as f64;
+    /// aliases placed anywhere, docs/method.md §7). Returns the set, its
+    /// `J`, and the price `s²·c²` of a candidate left out, by which another
+    /// map's `J` compares with it.
+    pub fn best(&self, c: f64) -> Option<(&[bool], f64, f64)> {
+        let price = self.sets.iter().max_by_key(|s| s.dof)?.scale * c * c;
+        let j = |s: &PassingSet| s.fit + price * s.left_out as f64;
         let best = self.sets.iter().min_by(|a, b| j(a).total_cmp(&j(b)))?;
-        Some(&best.accepted)
+        Some((&best.accepted, j(best), price))
     }
 }
 
@@ -540,23 +544,17 @@ mod tests {
         let mut sets = Passing::default();
         sets.sets.push(passing(1, 2750, 0.3, 6));
         sets.sets.push(passing(2380, 2750, 1432.0, 14_280));
-        // J: 0.3 + 0.1·c²·2749 ≈ 10 533 against 1432 + 0.1·c²·370 ≈ 2850.
-        assert_eq!(
-            sets.best(c).map(|s| s.iter().filter(|&&a| a).count()),
-            Some(2380)
-        );
+        // J: 0.3 + 0.1·c²·2749 ≈ 10 560 against 1432 + 0.1·c²·370 ≈ 2854.
+        let accepted = |p: &Passing| p.best(c).map(|b| b.0.iter().filter(|&&a| a).count());
+        assert_eq!(accepted(&sets), Some(2380));
         // The price of a loop left out is on the scale of the map with the
-        // most degrees of freedom, not the few loops' 0.05.
-        let lone = Passing {
-            sets: vec![passing(1, 2750, 0.3, 6)],
-        };
-        assert_eq!(lone.best(c).map(|s| s.len()), Some(2750));
+        // most degrees of freedom (0.1), not the one loop's 0.05.
+        let (_, j, price) = sets.best(c).unwrap();
+        assert!((price - 1432.0 / 14_280.0 * c * c).abs() < 1e-9, "{price}");
+        assert!((j - 1432.0 - 370.0 * price).abs() < 1e-6, "{j}");
         // A set that fits much worse for a few loops more loses.
         sets.sets.push(passing(2390, 2750, 9000.0, 14_340));
-        assert_eq!(
-            sets.best(c).map(|s| s.iter().filter(|&&a| a).count()),
-            Some(2380)
-        );
+        assert_eq!(accepted(&sets), Some(2380));
         assert!(Passing::default().best(c).is_none());
     }
 
