@@ -31,7 +31,6 @@ pub use search::{MAX_REMOVALS, Search, Suspect, Test};
 pub use starts::StartEnd;
 
 use crate::geometry::Pose;
-use crate::graph::Graph;
 use crate::solve::init::ChordalInit;
 use crate::solve::{Session, SolveError};
 use innovation::Innovations;
@@ -504,9 +503,7 @@ fn settle<P: ChordalInit<D>, const D: usize>(
         (weights, candidates),
         &how,
         test,
-        &mut |g: &Graph<P, D>, w: &[f64], set: &[bool]| {
-            passing.record((g, w), candidates, set, test);
-        },
+        &mut passing.recording(candidates, test),
     )?;
     if decided.swung {
         out.swung = true;
@@ -530,9 +527,7 @@ fn settle<P: ChordalInit<D>, const D: usize>(
             test,
             |session, weights| {
                 let how = schedule::Deciding { scale, ..how };
-                let mut solved = |g: &Graph<P, D>, w: &[f64], set: &[bool]| {
-                    passing.record((g, w), candidates, set, test);
-                };
+                let mut solved = passing.recording(candidates, test);
                 schedule::decide(session, weights, candidates, &how, &mut solved)
             },
         )?;
@@ -544,7 +539,8 @@ fn settle<P: ChordalInit<D>, const D: usize>(
         }
     }
     if unexplained && !decided.cut_short && !session.exhausted() {
-        end_passing(session, weights, job, (&mut decided, &mut search), &passing)?;
+        let ending = (&mut decided, &mut search);
+        end_passing(session, weights, (job, &how), ending, &passing)?;
     }
     record(out, decided, search, candidates);
     Ok(())
@@ -558,7 +554,7 @@ fn settle<P: ChordalInit<D>, const D: usize>(
 fn end_passing<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
-    job: &Job<'_, P, D>,
+    (job, how): (&Job<'_, P, D>, &schedule::Deciding<'_>),
     (decided, search): (&mut schedule::Decided, &mut Option<Search>),
     passing: &search::Passing,
 ) -> Result<(), SolveError> {
@@ -575,14 +571,8 @@ fn end_passing<P: ChordalInit<D>, const D: usize>(
         weights.to_vec(),
         decided.clone(),
     );
-    let how = schedule::Deciding {
-        scale: Scale::Learned,
-        layers: job.layers,
-        relax: job.chordal,
-        swing: Swing::Continue,
-    };
     let edges: Vec<usize> = job.candidates.iter().map(|c| c.edge).collect();
-    decided.adopt(session, weights, (job.candidates, &edges), best, &how)?;
+    decided.adopt(session, weights, (job.candidates, &edges), best, how)?;
     if search::verdict(session, weights, job.test) != Some(true) {
         // Solved again, its map fails after all: the decisions' end stands.
         session.graph.poses = saved.0;

@@ -677,10 +677,14 @@ pub(super) fn objective<P: Pose<D>, const D: usize>(
     candidates: &[Candidate],
     price: f64,
 ) -> f64 {
-    let left_out = (candidates.iter())
+    graph.chi2_where(|k| weights[k] > 0.0) + price * left_out(weights, candidates) as f64
+}
+
+/// How many of the `candidates` `weights` leave out (weight below ½).
+pub(super) fn left_out(weights: &[f64], candidates: &[Candidate]) -> usize {
+    (candidates.iter())
         .filter(|c| weights[c.edge] < 0.5)
-        .count();
-    graph.chi2_where(|k| weights[k] > 0.0) + price * left_out as f64
+        .count()
 }
 
 /// The misfit per residual degree of freedom of the map in `graph` with

@@ -41,13 +41,14 @@
 //! failed test is resolved when a set considered resolves it, and among
 //! those by how much each leaves out for its fit, since a map of a few
 //! loops passes with ease; but a correct map fails by chance once in
-//! `1/α`, and leaving true loops out to pass costs more than it saves. A set that fails explains
-//! nothing: with information the file states too tight (every loop a
-//! little off), fewer loops always fail by less, and keeping the end that
-//! fails least would throw away true loops to shrink `D²`.
+//! `1/α`, and leaving true loops out to pass costs more than it saves. A
+//! set that fails explains nothing: with information the file states too
+//! tight (every loop a little off), fewer loops always fail by less, and
+//! keeping the end that fails least would throw away true loops to shrink
+//! `D²`.
 
 use super::innovation::{Evaluation, through_wide_chains};
-use super::schedule::{Decided, objective};
+use super::schedule::{Decided, left_out, objective};
 use super::{Candidate, Layers};
 use crate::geometry::Pose;
 use crate::graph::Graph;
@@ -131,9 +132,7 @@ impl Passing {
         let set = PassingSet {
             accepted: accepted.to_vec(),
             fit: objective(graph, weights, candidates, 0.0),
-            left_out: (candidates.iter())
-                .filter(|c| weights[c.edge] < 0.5)
-                .count(),
+            left_out: left_out(weights, candidates),
             dof: t.dof_residual,
             scale: t.d2 / t.dof_residual as f64,
         };
@@ -142,6 +141,16 @@ impl Passing {
             Some(_) => {}
             None => self.sets.push(set),
         }
+    }
+
+    /// What [`super::schedule::decide`] is to show each set it solves to:
+    /// [`Passing::record`] of the `candidates` under `test`.
+    pub fn recording<'r, P: Pose<D>, const D: usize>(
+        &'r mut self,
+        candidates: &'r [Candidate],
+        test: &'r Test<'_, P, D>,
+    ) -> impl FnMut(&Graph<P, D>, &[f64], &[bool]) + 'r {
+        move |g, w, set| self.record((g, w), candidates, set, test)
     }
 
     /// The passing set of least truncated least squares `J` (the objective
