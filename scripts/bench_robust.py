@@ -318,6 +318,8 @@ def run_pgo(args, path, flags, out_g2o):
         # Candidates whose decisions did not settle, and the report's
         # warnings (one of which says so).
         "unsettled": sum(1 for l in r["loops"] if l["reason"] == "unsettled"),
+        # Accepted clusters a passing map cannot vouch for (each warns).
+        "doubtful": len(r["robust"].get("doubtful", [])),
         "warnings": r.get("warnings", []),
         "gate_threshold": r["gate"].get("threshold"),
         "degenerate": r["gate"].get("degenerate"),

@@ -15,7 +15,9 @@ use std::path::Path;
 pub use crate::gate::{
     Degeneracy, DegeneratePolicy, EmStart, GateMode, LogNormalMixture, Separation, TwoNormals,
 };
-pub use crate::robust::{Layers, LoopModel, Reason, RobustMethod, Search, Suspect};
+pub use crate::robust::{
+    DOUBT_MOVE, Doubt, Layers, LoopModel, Reason, RobustMethod, Search, Suspect,
+};
 pub use crate::solve::init::Initialization;
 pub use crate::solve::{StopReason, Timing};
 pub use crate::stats::{Chi2Test, DofConvention};
@@ -313,6 +315,11 @@ pub struct RobustReport {
     /// its loops can be `unsettled` though this is false.
     #[serde(skip)]
     pub unsettled: bool,
+    /// EM: the accepted clusters of a passing map whose errors share one
+    /// offset and without which the map would move by more than
+    /// [`DOUBT_MOVE`] of its size — what a place mistaken
+    /// for another looks like (docs/method.md §7).
+    pub doubtful: Vec<Doubt>,
 }
 
 impl RobustReport {

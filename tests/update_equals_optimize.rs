@@ -5,7 +5,8 @@
 //! between them; after **every** update that was not cancelled, the
 //! update's solution is compared with `optimize()` of the same graph:
 //!
-//! * the same accepted set and the same χ² verdict;
+//! * the same accepted set, the same χ² verdict and the same doubtful
+//!   clusters;
 //! * χ² within 10⁻⁶ of the batch's, relatively;
 //! * every position within 10⁻⁶ of the map's size (the diagonal of the
 //!   batch map's bounding box) and every rotation within 10⁻⁶ rad.
@@ -77,6 +78,17 @@ fn compare<P: GraphPose<D>, const D: usize>(u: &Solution<P>, b: &Solution<P>) ->
             "verdict {:?} vs batch {:?}",
             u.passed(),
             b.passed()
+        ));
+    }
+    let doubtful = |s: &Solution<P>| -> Vec<Vec<usize>> {
+        let robust = &s.report().robust;
+        robust.doubtful.iter().map(|d| d.loops.clone()).collect()
+    };
+    if doubtful(u) != doubtful(b) {
+        out.push(format!(
+            "doubtful clusters {:?} vs batch {:?}",
+            doubtful(u),
+            doubtful(b)
         ));
     }
     let (cu, cb) = (u.chi2(), b.chi2());

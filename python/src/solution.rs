@@ -168,8 +168,9 @@ impl Solution {
     }
 
     /// The job's warnings (`report["warnings"]`), e.g. that the loop
-    /// decisions did not settle (loops with reason "unsettled"), that no
-    /// candidate was accepted, or why there is no χ² test.
+    /// decisions did not settle (loops with reason "unsettled"), that an
+    /// accepted cluster is doubtful (`report["robust"]["doubtful"]`), that
+    /// no candidate was accepted, or why there is no χ² test.
     #[getter]
     fn warnings(&self) -> Vec<String> {
         self.solution.report().warnings.clone()

@@ -5,7 +5,7 @@ use super::{Error, Settings};
 use crate::graph::Graph;
 use crate::io::g2o::G2oPose;
 use crate::report::{InitializationReport, LoopReport, OptimizerReport, Report, RobustReport};
-use crate::robust::{self, Candidate, Outcome, Reason, RobustMethod, Test};
+use crate::robust::{self, Candidate, Doubt, Outcome, Reason, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization, initialize as init_poses};
 use crate::solve::{
     Budget, Observer, Optimizer, PhaseTimes, Session, SolveError, SolveSettings, Summary,
@@ -203,6 +203,7 @@ impl Run<'_> {
             search: outcome.search.clone(),
             starts: outcome.starts.clone(),
             unsettled: outcome.unsettled,
+            doubtful: outcome.doubtful.clone(),
         };
         report.time.relaxation_s = phases.relaxation.as_secs_f64();
         report.time.evaluation_s = phases.evaluation.as_secs_f64();
@@ -241,7 +242,29 @@ impl Run<'_> {
                 candidates.len()
             ));
         }
+        for doubt in &outcome.doubtful {
+            report.warnings.push(doubt_warning(doubt, &report.loops));
+        }
     }
+}
+
+/// The warning of a doubtful cluster ([`crate::robust::Doubt`]): its loops
+/// by their ends, and what it does to the map.
+fn doubt_warning(doubt: &Doubt, loops: &[LoopReport]) -> String {
+    let ends = |k: usize| format!("{}–{}", loops[k].from, loops[k].to);
+    let (first, last) = (doubt.loops[0], doubt.loops[doubt.loops.len() - 1]);
+    format!(
+        "{} accepted loops ({} … {}) err by one common offset beyond their own noise \
+         (F = {:.1}, p = {:.1e}), and that offset moves a pose by {:.1} % of the map's size. \
+         One place mistaken for another looks like this; check them (`robust.doubtful` in \
+         the JSON report)",
+        doubt.loops.len(),
+        ends(first),
+        ends(last),
+        doubt.common_offset_f,
+        doubt.p_value,
+        100.0 * doubt.map_moves
+    )
 }
 
 /// The χ² test over the edges the map was solved with (weight ≥ ½), each at

@@ -76,6 +76,13 @@ pub struct Innovations {
     /// map was solved with: by how much `Σ eᵀΩe` of the map would drop
     /// without them (0 when it has none; `None` when `S` is singular).
     pub joint: Vec<Option<f64>>,
+    /// Each cluster's share of `joint` that one offset common to its
+    /// members in the map explains (`None` with fewer than two of them, or
+    /// no joint statistic).
+    pub common: Vec<Option<f64>>,
+    /// The candidates the map was solved with, as the evaluation judged
+    /// them.
+    pub accepted: Vec<bool>,
 }
 
 impl Innovations {
@@ -192,6 +199,8 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             nu2: vec![None; edges.len()],
             exact: vec![true; edges.len()],
             joint: Vec::with_capacity(clusters.len()),
+            common: Vec::with_capacity(clusters.len()),
+            accepted: accepted.to_vec(),
         };
         // In the map first, then the others.
         let groups: Vec<(Vec<usize>, usize)> = (clusters.iter())
@@ -204,14 +213,76 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             })
             .collect();
         let judged = self.judge_all(edges, &groups, exact);
-        for ((members, _), (nu2, joint, exact)) in groups.iter().zip(judged) {
+        for ((members, _), (nu2, (joint, common), exact)) in groups.iter().zip(judged) {
             for (&k, v) in members.iter().zip(nu2) {
                 out.nu2[k] = v;
                 out.exact[k] = exact;
             }
             out.joint.push(joint);
+            out.common.push(common);
         }
         out
+    }
+
+    /// How far the errors of a cluster's members, all in the map, share
+    /// one offset ([`CommonOffset`]): `members` index the candidates
+    /// `edges`. `None` where a covariance is singular or nothing else
+    /// checks the cluster (`S` singular).
+    pub fn common_offset(&self, edges: &[usize], members: &[usize]) -> Option<CommonOffset> {
+        let lin = self.linearise(edges, members);
+        let system = self.optimizer.system();
+        let mut scratch = GroupScratch::default();
+        let gram = match &self.inverse {
+            Some(inverse) => system.propagate_group_cheaper(inverse, &lin.jacobians, &mut scratch),
+            None => system.propagate_group_solved(&lin.jacobians, &mut scratch),
+        };
+        let sigma = (lin.covariances.iter().copied()).collect::<Option<Vec<_>>>()?;
+        let n = D * members.len();
+        // S = Σ_A − M_AA = L·Lᵀ and y = L⁻¹·e_A: e_Aᵀ·S⁻¹·e_A = |y|².
+        let l = cholesky_of_s(&sigma, &gram, n)?;
+        let mut y = faer::Mat::from_fn(n, 1, |r, _| lin.errors[r / D][r % D]);
+        solve_lower_triangular_in_place(l.as_ref(), y.as_mut(), Par::Seq);
+        let joint = y.col(0).iter().map(|v| v * v).sum::<f64>();
+        let (common, mut fitted) = common_part::<D>(l.as_ref(), y.as_ref())?;
+        // J_Aᵀ·S⁻¹·U·b̂ by variable block, S⁻¹·U·b̂ = L⁻ᵀ·ŷ: H⁻¹ of it is
+        // the move the common offset makes the map (module doc).
+        solve_upper_triangular_in_place(l.transpose(), fitted.as_mut(), Par::Seq);
+        let mut gradient = vec![0.0; self.step.len()];
+        for (m, jacobian) in lin.jacobians.iter().enumerate() {
+            let s_inv_e = SVector::<f64, D>::from_fn(|a, _| fitted[(D * m + a, 0)]);
+            for (b, j) in jacobian {
+                if let Some(b) = b {
+                    let g = j.transpose() * s_inv_e;
+                    (gradient[b * D..b * D + D].iter_mut().zip(g.iter()))
+                        .for_each(|(x, v)| *x += v);
+                }
+            }
+        }
+        Some(CommonOffset {
+            joint,
+            common,
+            members: members.len(),
+            gradient,
+        })
+    }
+
+    /// The largest distance a pose's position moves, to first order, when
+    /// the common offset of `offset` leaves the members' errors: the part
+    /// `δ = H⁻¹·J_Aᵀ·S⁻¹·U·b̂` of the map's move without the cluster
+    /// (`H⁻¹·J_Aᵀ·S⁻¹·e_A`, module doc) that the offset makes, each pose
+    /// retracted by its block of `δ`.
+    pub fn largest_move(&mut self, offset: &CommonOffset) -> f64 {
+        let mut delta = offset.gradient.clone();
+        // The system's solve gives −H⁻¹·g from its factorisation of H.
+        self.optimizer.solve_factored(&mut delta);
+        let graph = self.graph;
+        (graph.poses.iter().zip(&self.block))
+            .filter_map(|(pose, b)| {
+                let b = (*b)?;
+                let step = SVector::<f64, D>::from_fn(|a, _| -delta[b * D + a]);
+                Some((pose.retract(&step).position() - pose.position()).norm())
+            })
+            .fold(0.0, f64::max)
     }
 
     /// Whether it took the selected inverse ([`Evaluation::for_clusters`]).
@@ -315,14 +386,15 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
                     let nu2 = lin.covariances[0]
                         .and_then(|c| (c + bound).cholesky())
                         .map(|c| lin.errors[0].dot(&c.solve(&lin.errors[0])));
-                    return (vec![nu2], Some(0.0), false);
+                    return (vec![nu2], (Some(0.0), None), false);
                 };
                 gram
             }
             Some(inverse) => system.propagate_group_cheaper(inverse, &lin.jacobians, scratch),
         };
-        let (nu2, joint) = judge_cluster(&lin.errors, &lin.covariances, &gram, (a, self.within));
-        (nu2, joint, true)
+        let (nu2, joint, common) =
+            judge_cluster(&lin.errors, &lin.covariances, &gram, (a, self.within));
+        (nu2, (joint, common), true)
     }
 }
 
@@ -405,9 +477,29 @@ fn joined_without<P: Pose<D>, const D: usize>(
     })
 }
 
-/// A cluster's members' `ν²`, its joint statistic, and whether the `ν²`
-/// are exact ([`Innovations`]).
-type Judged = (Vec<Option<f64>>, Option<f64>, bool);
+/// A cluster's errors, all its members in the map, split into the part
+/// one offset shared by every member explains and the rest
+/// ([`Evaluation::common_offset`]), with what the move of the map that
+/// the offset makes is found from ([`Evaluation::largest_move`]).
+#[derive(Clone, Debug)]
+pub struct CommonOffset {
+    /// `e_Aᵀ·S⁻¹·e_A`: by how much `Σ eᵀΩe` drops without the cluster
+    /// (χ² with `D·members` degrees of freedom for true loops).
+    pub joint: f64,
+    /// The share of `joint` one offset common to every member explains
+    /// (χ² with `D` degrees of freedom for true loops, whose errors are
+    /// independent; the rest has `D·(members − 1)`).
+    pub common: f64,
+    /// The members.
+    pub members: usize,
+    /// `J_Aᵀ·S⁻¹·U·b̂` by variable block (`b̂` the offset, `U` the stacked
+    /// identities).
+    gradient: Vec<f64>,
+}
+
+/// A cluster's members' `ν²`, its joint statistic and common offset's
+/// share of it, and whether the `ν²` are exact ([`Innovations`]).
+type Judged = (Vec<Option<f64>>, (Option<f64>, Option<f64>), bool);
 
 /// Candidates linearised at the map: what their innovations are made of.
 struct Linearised<const D: usize> {
@@ -416,29 +508,57 @@ struct Linearised<const D: usize> {
     covariances: Vec<Option<SMatrix<f64, D, D>>>,
 }
 
-/// A cluster's members' `ν²` (the first `a` in the map) and its joint
-/// statistic; with `within`, each member's the larger of that and its `ν²`
-/// against the map with the members that agree better
-/// ([`against_better`]).
+/// The part of `y = L⁻¹·e_A` (`S = L·Lᵀ` the covariance of the stacked
+/// errors `e_A` of a cluster's members in the map) that one offset `b`
+/// shared by every member explains: with `e_A = U·b + noise`, `U` the
+/// stacked `D×D` identities, the projection `ŷ` of `y` on the columns of
+/// `L⁻¹·U`. Returns `|ŷ|²` (at most `|y|²`) and `ŷ`; `None` where those
+/// columns are degenerate.
+fn common_part<const D: usize>(
+    l: faer::MatRef<'_, f64>,
+    y: faer::MatRef<'_, f64>,
+) -> Option<(f64, faer::Mat<f64>)> {
+    let n = y.nrows();
+    let mut u = faer::Mat::from_fn(n, D, |r, c| if r % D == c { 1.0 } else { 0.0 });
+    solve_lower_triangular_in_place(l, u.as_mut(), Par::Seq);
+    let utu = DMatrix::from_fn(D, D, |a, b| {
+        (0..n).map(|i| u[(i, a)] * u[(i, b)]).sum::<f64>()
+    });
+    let uty = DVector::from_fn(D, |a, _| (0..n).map(|i| u[(i, a)] * y[(i, 0)]).sum::<f64>());
+    let b = utu.cholesky()?.solve(&uty);
+    let fitted = faer::Mat::from_fn(n, 1, |r, _| (0..D).map(|c| u[(r, c)] * b[c]).sum::<f64>());
+    let total = (0..n).map(|i| y[(i, 0)] * y[(i, 0)]).sum::<f64>();
+    Some((b.dot(&uty).clamp(0.0, total), fitted))
+}
+
+/// A cluster's members' `ν²` (the first `a` in the map), its joint
+/// statistic, and with two or more members in the map the share of it one
+/// common offset explains ([`common_part`]); with `within`, each member's
+/// `ν²` the larger of that and its `ν²` against the map with the members
+/// that agree better ([`against_better`]).
 fn judge_cluster<const D: usize>(
     errors: &[nalgebra::SVector<f64, D>],
     covariances: &[Option<SMatrix<f64, D, D>>],
     gram: &DMatrix<f64>,
     (a, within): (usize, bool),
-) -> (Vec<Option<f64>>, Option<f64>) {
+) -> (Vec<Option<f64>>, Option<f64>, Option<f64>) {
     let m = errors.len();
     let Some(sigma) = covariances.iter().copied().collect::<Option<Vec<_>>>() else {
-        return (vec![None; m], None);
+        return (vec![None; m], None, None);
     };
     let (na, nr) = (D * a, D * (m - a));
     let e_a = DVector::from_iterator(na, errors[..a].iter().flat_map(|e| e.iter().copied()));
     // S = Σ_A − M_AA = L·Lᵀ; y = L⁻¹·e_A, so e_Aᵀ·S⁻¹·e_A = |y|².
     let Some(l) = cholesky_of_s(&sigma[..a], gram, na) else {
-        return (vec![None; m], None);
+        return (vec![None; m], None, None);
     };
     let mut y = faer::Mat::from_fn(na, 1, |r, _| e_a[r]);
     solve_lower_triangular_in_place(l.as_ref(), y.as_mut(), Par::Seq);
     let joint = y.col(0).iter().map(|v| v * v).sum::<f64>();
+    let common = (a >= 2)
+        .then(|| common_part::<D>(l.as_ref(), y.as_ref()))
+        .flatten()
+        .map(|(share, _)| share);
     let mut s_inv_e = y.clone();
     solve_upper_triangular_in_place(l.transpose(), s_inv_e.as_mut(), Par::Seq);
     let s_inv_e = DVector::from_fn(na, |r, _| s_inv_e[(r, 0)]);
@@ -481,7 +601,8 @@ fn judge_cluster<const D: usize>(
     } else {
         nu2
     };
-    (nu2, Some(joint).filter(|j| j.is_finite()))
+    let joint = Some(joint).filter(|j| j.is_finite());
+    (nu2, joint, common.filter(|_| joint.is_some()))
 }
 
 /// Each member's `ν²` made the larger of `apart` (against the map without
@@ -628,7 +749,7 @@ mod tests {
         let hinv = 1.0 / 3.0;
         let gram = DMatrix::from_element(3, 3, hinv);
         // Cluster {z1, z2} in the map, z3 out.
-        let (nu2, joint) = judge_cluster(&errors, &cov, &gram, (2, true));
+        let (nu2, joint, _) = judge_cluster(&errors, &cov, &gram, (2, true));
         // Without z1 and z2 the map is the prior alone: x = 0 with variance
         // 1, so each innovation is z²/(1 + 1). z1 and z2 agree with it
         // better than z3 does, so z3 is also judged against the map with
@@ -654,7 +775,7 @@ mod tests {
         let x = (z_true + z_wrong) / h;
         let errors = [Vector1::new(x - z_true), Vector1::new(x - z_wrong)];
         let gram = DMatrix::from_element(2, 2, 1.0 / h);
-        let (nu2, _) = judge_cluster(&errors, &[Some(Matrix1::new(1.0)); 2], &gram, (2, true));
+        let (nu2, _, _) = judge_cluster(&errors, &[Some(Matrix1::new(1.0)); 2], &gram, (2, true));
         let with_true = 1.0 / (1.0 / prior + 1.0);
         let want = [0.0, z_wrong.powi(2) / (1.0 + with_true)];
         for (v, want) in nu2.iter().zip(want) {
@@ -667,12 +788,26 @@ mod tests {
     fn a_cluster_nothing_else_checks_has_no_innovation() {
         // One loop is the only tie: H⁻¹ gives it M = Σ, S = 0.
         let errors = [Vector1::new(0.3)];
-        let (nu2, joint) = judge_cluster(
+        let (nu2, joint, _) = judge_cluster(
             &errors,
             &[Some(Matrix1::new(2.0))],
             &DMatrix::from_element(1, 1, 2.0),
             (1, true),
         );
         assert_eq!((nu2, joint), (vec![None], None));
+    }
+
+    #[test]
+    fn a_common_offset_explains_what_the_members_share_and_nothing_else() {
+        // S = I: two 3-D members with the same error share all of it;
+        // opposite errors share none; otherwise the mean's share, 2·|mean|².
+        let l = faer::Mat::<f64>::identity(6, 6);
+        let share = |e: [f64; 6]| {
+            let y = faer::Mat::from_fn(6, 1, |r, _| e[r]);
+            common_part::<3>(l.as_ref(), y.as_ref()).unwrap().0
+        };
+        assert!((share([1.0, 2.0, 3.0, 1.0, 2.0, 3.0]) - 28.0).abs() < 1e-12);
+        assert!(share([1.0, 0.0, 0.0, -1.0, 0.0, 0.0]).abs() < 1e-12);
+        assert!((share([2.0, 0.0, 0.0, 0.0, 0.0, 0.0]) - 2.0).abs() < 1e-12);
     }
 }

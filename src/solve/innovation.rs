@@ -50,6 +50,12 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         Ok(block)
     }
 
+    /// `−H⁻¹·g` for `g` by variable block (replaced in place), `H` the
+    /// normal matrix of the last [`Self::factor_at`].
+    pub(crate) fn solve_factored(&mut self, g: &mut [f64]) {
+        self.system.solve_many(g, 1);
+    }
+
     /// The Gauss–Newton step `δ = −H⁻¹·b` left at the poses of the last
     /// [`Self::factor_at`] (by variable block, `δ[k·D + a]`): what separates
     /// them from the exact least-squares map of their linearisation. A

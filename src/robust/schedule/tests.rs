@@ -707,7 +707,7 @@ fn a_half_step_adds_the_most_consistent_half_and_removes_the_least() {
     let innov = |nu2: &[Option<f64>]| Innovations {
         nu2: nu2.to_vec(),
         exact: vec![true; nu2.len()],
-        joint: Vec::new(),
+        ..Innovations::default()
     };
     // Four to add (ν² 5, 2, 9, 3) to a set of five: the two smallest go in.
     let last = [true, true, false, false, false, false, true, true, true];
