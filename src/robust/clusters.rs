@@ -7,7 +7,8 @@
 //! finds the map agreeing with it. So a candidate is judged against the map
 //! made without its whole cluster.
 
-use crate::graph::UnionFind;
+use crate::geometry::Pose;
+use crate::graph::{Graph, UnionFind};
 
 /// Candidates whose ends are at most this many poses apart, at both ends,
 /// are in one cluster: consecutive keyframes are 1 apart, and 2 lets a run
@@ -20,6 +21,18 @@ pub const NEIGHBOURHOOD: u64 = 2;
 /// judged piece by piece, each against a map the rest of the run still
 /// bends).
 pub const MAX_CLUSTER: usize = 32;
+
+/// The clusters of the candidate edges `edges` of `graph` (indices into
+/// `edges`, as [`clusters`] gives them for their end ids).
+pub fn of_edges<P: Pose<D>, const D: usize>(
+    graph: &Graph<P, D>,
+    edges: &[usize],
+) -> Vec<Vec<usize>> {
+    let ends: Vec<(u64, u64)> = (edges.iter())
+        .map(|&k| (graph.id(graph.edges[k].from), graph.id(graph.edges[k].to)))
+        .collect();
+    clusters(&ends)
+}
 
 /// The clusters of candidates with end ids `ends` (in any order): lists of
 /// indices into `ends`, each in increasing order, every index in exactly

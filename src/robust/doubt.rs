@@ -30,7 +30,7 @@
 //! offset makes, for a person or the front end to check. Only a passing
 //! map whose decisions settled is examined (docs/method.md §7).
 
-use super::clusters::clusters;
+use super::clusters;
 use super::innovation::{Evaluation, Innovations};
 use super::{Candidate, Layers};
 use crate::geometry::Pose;
@@ -127,30 +127,28 @@ pub fn doubtful<P: Pose<D>, const D: usize>(
     }
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
     let tested: Vec<Vec<usize>> = match known {
-        Some(known) => {
-            let level = alpha / known.len().max(1) as f64;
-            (known.iter())
-                .filter(|o| offset_test(o.joint, o.common, (D, o.loops.len())).1 < level)
-                .map(|o| o.loops.clone())
-                .collect()
-        }
-        None => {
-            let ends: Vec<(u64, u64)> = (edges.iter())
-                .map(|&k| (graph.id(graph.edges[k].from), graph.id(graph.edges[k].to)))
-                .collect();
-            (clusters(&ends).into_iter())
-                .map(|c| c.into_iter().filter(|&k| accepted[k]).collect::<Vec<_>>())
-                .filter(|c| c.len() >= 2)
-                .collect()
-        }
+        Some(known) => known.iter().map(|o| o.loops.clone()).collect(),
+        None => (clusters::of_edges(graph, &edges).into_iter())
+            .map(|c| c.into_iter().filter(|&k| accepted[k]).collect::<Vec<_>>())
+            .filter(|c| c.len() >= 2)
+            .collect(),
     };
-    if tested.is_empty() {
+    let level = alpha / tested.len().max(1) as f64;
+    // With the offsets known, only those that stand out are evaluated.
+    let evaluated: Vec<Vec<usize>> = match known {
+        Some(known) => (known.iter())
+            .filter(|o| offset_test(o.joint, o.common, (D, o.loops.len())).1 < level)
+            .map(|o| o.loops.clone())
+            .collect(),
+        None => tested,
+    };
+    if evaluated.is_empty() {
         return Ok(Vec::new());
     }
-    let level = alpha / known.map_or(tested.len(), <[Offset]>::len) as f64;
-    let mut eval = Evaluation::for_clusters(session.optimizer, graph, weights, (&edges, &tested))?;
+    let mut eval =
+        Evaluation::for_clusters(session.optimizer, graph, weights, (&edges, &evaluated))?;
     let mut doubts = Vec::new();
-    for members in tested {
+    for members in evaluated {
         let Some(offset) = eval.common_offset(&edges, &members) else {
             continue;
         };

@@ -230,22 +230,16 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     /// checks the cluster (`S` singular).
     pub fn common_offset(&self, edges: &[usize], members: &[usize]) -> Option<CommonOffset> {
         let lin = self.linearise(edges, members);
-        let system = self.optimizer.system();
-        let mut scratch = GroupScratch::default();
-        let gram = match &self.inverse {
-            Some(inverse) => system.propagate_group_cheaper(inverse, &lin.jacobians, &mut scratch),
-            None => system.propagate_group_solved(&lin.jacobians, &mut scratch),
-        };
+        let gram = self.gram(&lin.jacobians, &mut GroupScratch::default());
         let sigma = (lin.covariances.iter().copied()).collect::<Option<Vec<_>>>()?;
-        let n = D * members.len();
-        // S = Σ_A − M_AA = L·Lᵀ and y = L⁻¹·e_A: e_Aᵀ·S⁻¹·e_A = |y|².
-        let l = cholesky_of_s(&sigma, &gram, n)?;
-        let mut y = faer::Mat::from_fn(n, 1, |r, _| lin.errors[r / D][r % D]);
-        solve_lower_triangular_in_place(l.as_ref(), y.as_mut(), Par::Seq);
-        let joint = y.col(0).iter().map(|v| v * v).sum::<f64>();
-        let (common, mut fitted) = common_part::<D>(l.as_ref(), y.as_ref())?;
-        // J_Aᵀ·S⁻¹·U·b̂ by variable block, S⁻¹·U·b̂ = L⁻ᵀ·ŷ: H⁻¹ of it is
-        // the move the common offset makes the map (module doc).
+        let l = cholesky_of_s(&sigma, &gram, D * members.len())?;
+        let (y, joint) = whiten(l.as_ref(), &lin.errors);
+        let (common, u, b) = common_part::<D>(l.as_ref(), y.as_ref())?;
+        // J_Aᵀ·S⁻¹·U·b̂ by variable block, S⁻¹·U·b̂ = L⁻ᵀ·ŷ with ŷ = L⁻¹·U·b̂:
+        // H⁻¹ of it is the move the common offset makes the map (module doc).
+        let mut fitted = faer::Mat::from_fn(y.nrows(), 1, |r, _| {
+            (0..D).map(|c| u[(r, c)] * b[c]).sum::<f64>()
+        });
         solve_upper_triangular_in_place(l.transpose(), fitted.as_mut(), Par::Seq);
         let mut gradient = vec![0.0; self.step.len()];
         for (m, jacobian) in lin.jacobians.iter().enumerate() {
@@ -363,6 +357,17 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         lin
     }
 
+    /// `J·H⁻¹·Jᵀ` of the stacked `jacobians`: from the selected inverse or
+    /// the sparse solves, whichever costs less, when the evaluation holds
+    /// it; otherwise by the solves.
+    fn gram(&self, jacobians: &[EdgeJacobian<D>], scratch: &mut GroupScratch) -> DMatrix<f64> {
+        let system = self.optimizer.system();
+        match &self.inverse {
+            Some(inverse) => system.propagate_group_cheaper(inverse, jacobians, scratch),
+            None => system.propagate_group_solved(jacobians, scratch),
+        }
+    }
+
     /// One cluster's members (the first `a` in the map): their `ν²`, the
     /// joint statistic, and whether they are exact. A lone candidate
     /// outside the map off the factor's pattern gets a lower bound unless
@@ -378,7 +383,6 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         let lin = self.linearise(edges, members);
         let system = self.optimizer.system();
         let gram = match &self.inverse {
-            None => system.propagate_group_solved(&lin.jacobians, scratch),
             Some(inverse) if a == 0 && members.len() == 1 && !exact => {
                 // Its bound unless its blocks of H⁻¹ are on the pattern.
                 let Some(gram) = system.propagate_group_selected(inverse, &lin.jacobians, 0) else {
@@ -390,7 +394,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
                 };
                 gram
             }
-            Some(inverse) => system.propagate_group_cheaper(inverse, &lin.jacobians, scratch),
+            _ => self.gram(&lin.jacobians, scratch),
         };
         let (nu2, joint, common) =
             judge_cluster(&lin.errors, &lin.covariances, &gram, (a, self.within));
@@ -508,16 +512,28 @@ struct Linearised<const D: usize> {
     covariances: Vec<Option<SMatrix<f64, D, D>>>,
 }
 
+/// `y = L⁻¹·e` and `|y|²` for the stacked `errors` `e` (`S = L·Lᵀ` their
+/// covariance): `eᵀ·S⁻¹·e`.
+fn whiten<const D: usize>(
+    l: faer::MatRef<'_, f64>,
+    errors: &[SVector<f64, D>],
+) -> (faer::Mat<f64>, f64) {
+    let mut y = faer::Mat::from_fn(D * errors.len(), 1, |r, _| errors[r / D][r % D]);
+    solve_lower_triangular_in_place(l, y.as_mut(), Par::Seq);
+    let norm2 = y.col(0).iter().map(|v| v * v).sum::<f64>();
+    (y, norm2)
+}
+
 /// The part of `y = L⁻¹·e_A` (`S = L·Lᵀ` the covariance of the stacked
 /// errors `e_A` of a cluster's members in the map) that one offset `b`
 /// shared by every member explains: with `e_A = U·b + noise`, `U` the
-/// stacked `D×D` identities, the projection `ŷ` of `y` on the columns of
-/// `L⁻¹·U`. Returns `|ŷ|²` (at most `|y|²`) and `ŷ`; `None` where those
-/// columns are degenerate.
+/// stacked `D×D` identities, the projection `ŷ = L⁻¹·U·b̂` of `y` on the
+/// columns of `L⁻¹·U`. Returns `|ŷ|²` (at most `|y|²`), `L⁻¹·U` and `b̂`;
+/// `None` where those columns are degenerate.
 fn common_part<const D: usize>(
     l: faer::MatRef<'_, f64>,
     y: faer::MatRef<'_, f64>,
-) -> Option<(f64, faer::Mat<f64>)> {
+) -> Option<(f64, faer::Mat<f64>, DVector<f64>)> {
     let n = y.nrows();
     let mut u = faer::Mat::from_fn(n, D, |r, c| if r % D == c { 1.0 } else { 0.0 });
     solve_lower_triangular_in_place(l, u.as_mut(), Par::Seq);
@@ -526,9 +542,8 @@ fn common_part<const D: usize>(
     });
     let uty = DVector::from_fn(D, |a, _| (0..n).map(|i| u[(i, a)] * y[(i, 0)]).sum::<f64>());
     let b = utu.cholesky()?.solve(&uty);
-    let fitted = faer::Mat::from_fn(n, 1, |r, _| (0..D).map(|c| u[(r, c)] * b[c]).sum::<f64>());
     let total = (0..n).map(|i| y[(i, 0)] * y[(i, 0)]).sum::<f64>();
-    Some((b.dot(&uty).clamp(0.0, total), fitted))
+    Some((b.dot(&uty).clamp(0.0, total), u, b))
 }
 
 /// A cluster's members' `ν²` (the first `a` in the map), its joint
@@ -547,18 +562,15 @@ fn judge_cluster<const D: usize>(
         return (vec![None; m], None, None);
     };
     let (na, nr) = (D * a, D * (m - a));
-    let e_a = DVector::from_iterator(na, errors[..a].iter().flat_map(|e| e.iter().copied()));
     // S = Σ_A − M_AA = L·Lᵀ; y = L⁻¹·e_A, so e_Aᵀ·S⁻¹·e_A = |y|².
     let Some(l) = cholesky_of_s(&sigma[..a], gram, na) else {
         return (vec![None; m], None, None);
     };
-    let mut y = faer::Mat::from_fn(na, 1, |r, _| e_a[r]);
-    solve_lower_triangular_in_place(l.as_ref(), y.as_mut(), Par::Seq);
-    let joint = y.col(0).iter().map(|v| v * v).sum::<f64>();
+    let (y, joint) = whiten(l.as_ref(), &errors[..a]);
     let common = (a >= 2)
         .then(|| common_part::<D>(l.as_ref(), y.as_ref()))
         .flatten()
-        .map(|(share, _)| share);
+        .map(|(share, _, _)| share);
     let mut s_inv_e = y.clone();
     solve_upper_triangular_in_place(l.transpose(), s_inv_e.as_mut(), Par::Seq);
     let s_inv_e = DVector::from_fn(na, |r, _| s_inv_e[(r, 0)]);

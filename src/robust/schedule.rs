@@ -19,7 +19,7 @@
 //!    posterior is ≥ ½, and the map solved again, until the set repeats. The
 //!    map returned is the least-squares map of the accepted loops.
 
-use super::clusters::clusters;
+use super::clusters;
 use super::innovation::{Evaluation, Innovations, through_wide_chains};
 use super::kernels::{GNC_MU_STEP, cauchy_weight};
 use super::model::{Evidence, LoopModel, Scale};
@@ -284,22 +284,15 @@ impl Decided {
         weights: &[f64],
         layers: &Layers,
     ) -> Self {
-        let ends: Vec<(u64, u64)> = edges
-            .iter()
-            .map(|&k| {
-                let e = &graph.edges[k];
-                (graph.id(e.from), graph.id(e.to))
-            })
-            .collect();
         Self {
             accepted: edges.iter().map(|&k| held(weights[k])).collect(),
             model: None,
             innovations: Innovations::default(),
             at_own_map: None,
             clusters: if layers.clusters {
-                clusters(&ends)
+                clusters::of_edges(graph, edges)
             } else {
-                (0..ends.len()).map(|k| vec![k]).collect()
+                (0..edges.len()).map(|k| vec![k]).collect()
             },
             within: layers.agreement,
             decisions: 0,
