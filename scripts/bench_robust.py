@@ -320,6 +320,7 @@ def run_pgo(args, path, flags, out_g2o):
         "unsettled": sum(1 for l in r["loops"] if l["reason"] == "unsettled"),
         # Accepted clusters a passing map cannot vouch for (each warns).
         "doubtful": len(r["robust"].get("doubtful", [])),
+        "held_back": len(r["robust"].get("held_back", [])),
         "warnings": r.get("warnings", []),
         "gate_threshold": r["gate"].get("threshold"),
         "degenerate": r["gate"].get("degenerate"),

@@ -16,7 +16,7 @@ pub use crate::gate::{
     Degeneracy, DegeneratePolicy, EmStart, GateMode, LogNormalMixture, Separation, TwoNormals,
 };
 pub use crate::robust::{
-    DOUBT_MOVE, Doubt, Layers, LoopModel, Reason, RobustMethod, Search, Suspect,
+    DOUBT_MOVE, Doubt, HeldBack, Layers, LoopModel, Reason, RobustMethod, Search, Suspect,
 };
 pub use crate::solve::init::Initialization;
 pub use crate::solve::{StopReason, Timing};
@@ -320,6 +320,11 @@ pub struct RobustReport {
     /// [`DOUBT_MOVE`] of its size — what a place mistaken
     /// for another looks like (docs/method.md §7).
     pub doubtful: Vec<Doubt>,
+    /// EM: the rejected loops of a passing map, by cluster, whose
+    /// innovations speak for a true loop and whose inlier counts alone kept
+    /// them out, and whose addition would move the map by more than
+    /// [`DOUBT_MOVE`] of its size (docs/method.md §7).
+    pub held_back: Vec<HeldBack>,
 }
 
 impl RobustReport {

@@ -5,8 +5,8 @@
 //! between them; after **every** update that was not cancelled, the
 //! update's solution is compared with `optimize()` of the same graph:
 //!
-//! * the same accepted set, the same χ² verdict and the same doubtful
-//!   clusters;
+//! * the same accepted set, the same χ² verdict, the same doubtful
+//!   clusters and the same loops held back by their counts;
 //! * χ² within 10⁻⁶ of the batch's, relatively;
 //! * every position within 10⁻⁶ of the map's size (the diagonal of the
 //!   batch map's bounding box) and every rotation within 10⁻⁶ rad.
@@ -89,6 +89,17 @@ fn compare<P: GraphPose<D>, const D: usize>(u: &Solution<P>, b: &Solution<P>) ->
             "doubtful clusters {:?} vs batch {:?}",
             doubtful(u),
             doubtful(b)
+        ));
+    }
+    let held_back = |s: &Solution<P>| -> Vec<Vec<usize>> {
+        let robust = &s.report().robust;
+        robust.held_back.iter().map(|h| h.loops.clone()).collect()
+    };
+    if held_back(u) != held_back(b) {
+        out.push(format!(
+            "loops held back {:?} vs batch {:?}",
+            held_back(u),
+            held_back(b)
         ));
     }
     let (cu, cb) = (u.chi2(), b.chi2());

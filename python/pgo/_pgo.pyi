@@ -205,7 +205,7 @@ class Result:
         """Whether a Cancel token stopped the job (the best map so far)."""
     @property
     def warnings(self) -> List[str]:
-        """The job's warnings (report["warnings"]): e.g. that the loop decisions did not settle (loops with reason "unsettled"), or an accepted cluster the map cannot vouch for (report["robust"]["doubtful"])."""
+        """The job's warnings (report["warnings"]): e.g. that the loop decisions did not settle (loops with reason "unsettled"), an accepted cluster the map cannot vouch for (report["robust"]["doubtful"]), or rejected loops kept out by their counts alone that would move the map (report["robust"]["held_back"])."""
     def certificate(self) -> Dict[str, Any]:
         """Certificate of global optimality of the map (certified, eta, cost, map_cost, gap_bound, max_translation_change, max_rotation_change, lambda_min, lambda_min_bounds, eigenvector_poses, time)."""
     def write_g2o(self, path: Union[str, os.PathLike[str]]) -> None:

@@ -170,7 +170,9 @@ impl Solution {
     /// The job's warnings (`report["warnings"]`), e.g. that the loop
     /// decisions did not settle (loops with reason "unsettled"), that an
     /// accepted cluster is doubtful (`report["robust"]["doubtful"]`), that
-    /// no candidate was accepted, or why there is no χ² test.
+    /// rejected loops were kept out by their counts alone
+    /// (`report["robust"]["held_back"]`), that no candidate was accepted,
+    /// or why there is no χ² test.
     #[getter]
     fn warnings(&self) -> Vec<String> {
         self.solution.report().warnings.clone()

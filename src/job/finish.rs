@@ -5,7 +5,7 @@ use super::{Error, Settings};
 use crate::graph::Graph;
 use crate::io::g2o::G2oPose;
 use crate::report::{InitializationReport, LoopReport, OptimizerReport, Report, RobustReport};
-use crate::robust::{self, Candidate, Doubt, Outcome, Reason, RobustMethod, Test};
+use crate::robust::{self, Candidate, Doubt, HeldBack, Outcome, Reason, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization, initialize as init_poses};
 use crate::solve::{
     Budget, Observer, Optimizer, PhaseTimes, Session, SolveError, SolveSettings, Summary,
@@ -204,6 +204,7 @@ impl Run<'_> {
             starts: outcome.starts.clone(),
             unsettled: outcome.unsettled,
             doubtful: outcome.doubtful.clone(),
+            held_back: outcome.held_back.clone(),
         };
         report.time.relaxation_s = phases.relaxation.as_secs_f64();
         report.time.evaluation_s = phases.evaluation.as_secs_f64();
@@ -245,6 +246,9 @@ impl Run<'_> {
         for doubt in &outcome.doubtful {
             report.warnings.push(doubt_warning(doubt, &report.loops));
         }
+        for held in &outcome.held_back {
+            report.warnings.push(held_back_warning(held, &report.loops));
+        }
     }
 }
 
@@ -264,6 +268,32 @@ fn doubt_warning(doubt: &Doubt, loops: &[LoopReport]) -> String {
         doubt.common_offset_f,
         doubt.p_value,
         100.0 * doubt.map_moves
+    )
+}
+
+/// The warning of loops held back by their counts
+/// ([`crate::robust::HeldBack`]): the loops by their ends, and what adding
+/// them would do to the map.
+fn held_back_warning(held: &HeldBack, loops: &[LoopReport]) -> String {
+    let ends = |k: usize| format!("{}–{}", loops[k].from, loops[k].to);
+    let (first, last) = (held.loops[0], held.loops[held.loops.len() - 1]);
+    let (listed, verbs) = match held.loops.len() {
+        1 => (
+            format!("1 rejected loop ({})", ends(first)),
+            ["fits", "was", "its inlier count", "it"],
+        ),
+        n => (
+            format!("{n} rejected loops ({} … {})", ends(first), ends(last)),
+            ["fit", "were", "their inlier counts", "they"],
+        ),
+    };
+    let [fit, were, counts, they] = verbs;
+    format!(
+        "{listed} {fit} the map as a true loop does but {were} kept out by {counts} alone; \
+         added, {they} would move a pose by {:.1} % of the map's size. A true loop that \
+         verification scored low looks like this; check them (`robust.held_back` in the JSON \
+         report)",
+        100.0 * held.map_moves
     )
 }
 

@@ -27,8 +27,21 @@
 //! small; an alias group's offset is what bends the map. A cluster that
 //! does both is *doubtful*: the map is kept — the decisions and the χ²
 //! test hold it — and the report names the cluster, with the move its
-//! offset makes, for a person or the front end to check. Only a passing
-//! map whose decisions settled is examined (docs/method.md §7).
+//! offset makes, for a person or the front end to check.
+//!
+//! The other way round, true loops can be *held back*: rejected although
+//! their innovations speak for a true loop (the likelihood ratio of the
+//! innovation alone above 1), because their inlier counts look like a
+//! wrong loop's. The gate's count model is fitted to what may be a few
+//! dozen counts, and a narrow true-loop component can put a true loop's
+//! modest count at a posterior of 10⁻⁷; where the map's odometry is loose
+//! the innovation cannot outweigh that. Such candidates of one cluster are
+//! named when adding them would move the map, to first order (a Kalman
+//! update, [`Evaluation::adding`]), by more than [`DOUBT_MOVE`] of its
+//! size: the map then rests on the counts alone.
+//!
+//! Only a passing map whose decisions settled is examined (docs/method.md
+//! §7).
 
 use super::clusters;
 use super::innovation::{Evaluation, Innovations};
@@ -63,6 +76,18 @@ pub struct Doubt {
     /// clusters tested.
     pub p_value: f64,
     /// The largest move of a pose's position that the common offset makes
+    /// (to first order), as a share of the map's size.
+    pub map_moves: f64,
+}
+
+/// Candidates of one cluster held back by their counts (module doc).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeldBack {
+    /// The candidates (indices among the loop candidates), all rejected,
+    /// each with an innovation whose likelihood ratio speaks for a true
+    /// loop.
+    pub loops: Vec<usize>,
+    /// The largest move of a pose's position that adding them would make
     /// (to first order), as a share of the map's size.
     pub map_moves: f64,
 }
@@ -156,7 +181,7 @@ pub fn doubtful<P: Pose<D>, const D: usize>(
         if p_value >= level {
             continue;
         }
-        let map_moves = eval.largest_move(&offset) / size;
+        let map_moves = eval.largest_move(offset.gradient()) / size;
         if map_moves > DOUBT_MOVE {
             doubts.push(Doubt {
                 loops: members,
@@ -167,6 +192,49 @@ pub fn doubtful<P: Pose<D>, const D: usize>(
         }
     }
     Ok(doubts)
+}
+
+/// The candidates held back by their counts (module doc) of the map in the
+/// session's graph, solved with the edges of non-zero `weights`: of the
+/// candidates `held` marks (rejected, their innovations speaking for a
+/// true loop), those of each cluster together whose addition would move
+/// the map by more than [`DOUBT_MOVE`] of its size. With the clusters
+/// layer off, each candidate alone.
+pub fn held_back<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &[f64],
+    (candidates, held): (&[Candidate], &[bool]),
+    layers: &Layers,
+) -> Result<Vec<HeldBack>, SolveError> {
+    let graph = &*session.graph;
+    let size = map_size(graph.poses.iter().map(|p| p.position()));
+    if size <= 0.0 || !held.contains(&true) {
+        return Ok(Vec::new());
+    }
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    let groups: Vec<Vec<usize>> = if layers.clusters {
+        (clusters::of_edges(graph, &edges).into_iter())
+            .map(|c| c.into_iter().filter(|&k| held[k]).collect::<Vec<_>>())
+            .filter(|c| !c.is_empty())
+            .collect()
+    } else {
+        (0..held.len())
+            .filter(|&k| held[k])
+            .map(|k| vec![k])
+            .collect()
+    };
+    let mut eval = Evaluation::for_clusters(session.optimizer, graph, weights, (&edges, &groups))?;
+    let mut held_back = Vec::new();
+    for loops in groups {
+        let Some(g) = eval.adding(&edges, &loops) else {
+            continue;
+        };
+        let map_moves = eval.largest_move(&g) / size;
+        if map_moves > DOUBT_MOVE {
+            held_back.push(HeldBack { loops, map_moves });
+        }
+    }
+    Ok(held_back)
 }
 
 /// The F statistic of one offset shared by `members` errors of dimension

@@ -241,32 +241,57 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             (0..D).map(|c| u[(r, c)] * b[c]).sum::<f64>()
         });
         solve_upper_triangular_in_place(l.transpose(), fitted.as_mut(), Par::Seq);
+        Some(CommonOffset {
+            joint,
+            common,
+            members: members.len(),
+            gradient: self.gradient(&lin.jacobians, fitted.as_ref()),
+        })
+    }
+
+    /// `J_Rᵀ·C⁻¹·e_R` by variable block for candidates `members` (indices
+    /// of `edges`) outside the map, `C = Σ_R + J_R·H⁻¹·J_Rᵀ` the
+    /// covariance of their errors `e_R`: `H⁻¹` of it is how the map would
+    /// move, to first order, were they added to it (a Kalman update).
+    /// `None` where a covariance is singular.
+    pub fn adding(&self, edges: &[usize], members: &[usize]) -> Option<Vec<f64>> {
+        let lin = self.linearise(edges, members);
+        let mut c = self.gram(&lin.jacobians, &mut GroupScratch::default());
+        for (m, sigma) in lin.covariances.iter().enumerate() {
+            let mut block = c.view_mut((D * m, D * m), (D, D));
+            block += (*sigma)?;
+        }
+        let e = DVector::from_fn(D * members.len(), |r, _| lin.errors[r / D][r % D]);
+        let c_inv_e = c.cholesky()?.solve(&e);
+        let v = faer::Mat::from_fn(c_inv_e.len(), 1, |r, _| c_inv_e[r]);
+        Some(self.gradient(&lin.jacobians, v.as_ref()))
+    }
+
+    /// `Jᵀ·v` by variable block for the stacked `jacobians` of some
+    /// candidates and a vector `v` of their stacked error dimensions.
+    fn gradient(&self, jacobians: &[EdgeJacobian<D>], v: faer::MatRef<'_, f64>) -> Vec<f64> {
         let mut gradient = vec![0.0; self.step.len()];
-        for (m, jacobian) in lin.jacobians.iter().enumerate() {
-            let s_inv_e = SVector::<f64, D>::from_fn(|a, _| fitted[(D * m + a, 0)]);
+        for (m, jacobian) in jacobians.iter().enumerate() {
+            let v_m = SVector::<f64, D>::from_fn(|a, _| v[(D * m + a, 0)]);
             for (b, j) in jacobian {
                 if let Some(b) = b {
-                    let g = j.transpose() * s_inv_e;
+                    let g = j.transpose() * v_m;
                     (gradient[b * D..b * D + D].iter_mut().zip(g.iter()))
                         .for_each(|(x, v)| *x += v);
                 }
             }
         }
-        Some(CommonOffset {
-            joint,
-            common,
-            members: members.len(),
-            gradient,
-        })
+        gradient
     }
 
-    /// The largest distance a pose's position moves, to first order, when
-    /// the common offset of `offset` leaves the members' errors: the part
-    /// `δ = H⁻¹·J_Aᵀ·S⁻¹·U·b̂` of the map's move without the cluster
-    /// (`H⁻¹·J_Aᵀ·S⁻¹·e_A`, module doc) that the offset makes, each pose
-    /// retracted by its block of `δ`.
-    pub fn largest_move(&mut self, offset: &CommonOffset) -> f64 {
-        let mut delta = offset.gradient.clone();
+    /// The largest distance a pose's position moves, to first order, by
+    /// `δ = H⁻¹·g` (`g` by variable block: [`CommonOffset::gradient`] for
+    /// the part of the map's move without a cluster,
+    /// `H⁻¹·J_Aᵀ·S⁻¹·e_A` of the module doc, that its common offset makes;
+    /// [`Self::adding`] for the move candidates outside the map would
+    /// make), each pose retracted by its block of `δ`.
+    pub fn largest_move(&mut self, g: &[f64]) -> f64 {
+        let mut delta = g.to_vec();
         // The system's solve gives −H⁻¹·g from its factorisation of H.
         self.optimizer.solve_factored(&mut delta);
         let graph = self.graph;
@@ -499,6 +524,14 @@ pub struct CommonOffset {
     /// `J_Aᵀ·S⁻¹·U·b̂` by variable block (`b̂` the offset, `U` the stacked
     /// identities).
     gradient: Vec<f64>,
+}
+
+impl CommonOffset {
+    /// `J_Aᵀ·S⁻¹·U·b̂` by variable block: `H⁻¹` of it is the move of the
+    /// map the offset makes ([`Evaluation::largest_move`]).
+    pub fn gradient(&self) -> &[f64] {
+        &self.gradient
+    }
 }
 
 /// A cluster's members' `ν²`, its joint statistic and common offset's

@@ -26,7 +26,7 @@ mod schedule;
 mod search;
 mod starts;
 
-pub use doubt::{DOUBT_MOVE, Doubt};
+pub use doubt::{DOUBT_MOVE, Doubt, HeldBack};
 pub use model::{LoopModel, Scale};
 pub use schedule::{Proposal, Swing};
 pub use search::{MAX_REMOVALS, Search, Suspect, Test};
@@ -281,6 +281,9 @@ pub struct Outcome {
     /// EM: the accepted clusters of a passing map that the map cannot
     /// vouch for ([`doubt`]).
     pub doubtful: Vec<Doubt>,
+    /// EM: the rejected candidates of a passing map that their counts
+    /// alone kept out and that would move it ([`doubt`]).
+    pub held_back: Vec<HeldBack>,
     /// EM: the common offsets of the clusters at the map kept, from the
     /// decisions' evaluation of it, with the set it judged.
     offsets: Option<(Vec<bool>, Vec<doubt::Offset>)>,
@@ -307,6 +310,7 @@ impl Outcome {
             starts: Vec::new(),
             unsettled: false,
             doubtful: Vec::new(),
+            held_back: Vec::new(),
             offsets: None,
         }
     }
@@ -359,7 +363,7 @@ pub fn solve<P: ChordalInit<D>, const D: usize>(
     match method {
         RobustMethod::Em if n >= MIN_CANDIDATES => {
             out = starts::em(session, weights, job)?;
-            out.doubtful = doubts(session, weights, job, &out);
+            (out.doubtful, out.held_back) = doubts(session, weights, job, &out);
         }
         RobustMethod::None => {
             session.converge(weights)?;
@@ -482,7 +486,7 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
         if out.swung {
             return Ok((out, false));
         }
-        out.doubtful = doubts(session, weights, job, &out);
+        (out.doubtful, out.held_back) = doubts(session, weights, job, &out);
     }
     for (k, cand) in candidates.iter().enumerate() {
         out.weights[k] = weights[cand.edge];
@@ -491,8 +495,9 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
     Ok((out, false))
 }
 
-/// The doubtful clusters ([`doubt`]) of EM's end in the session (the
-/// accepted set in `weights`), when its map passes the χ² test, its
+/// The doubtful clusters and the candidates held back by their counts
+/// ([`doubt`]) of EM's end in the session (the accepted set in `weights`,
+/// the evaluation of it in `out`), when its map passes the χ² test, its
 /// decisions settled and the budget did not cut it short. Where a
 /// candidate is `unsettled` the map already warns that its decisions are
 /// unconfirmed, and the loops it holds wrongly bend the true clusters
@@ -505,12 +510,12 @@ fn doubts<P: Pose<D>, const D: usize>(
     weights: &[f64],
     job: &Job<'_, P, D>,
     out: &Outcome,
-) -> Vec<Doubt> {
+) -> (Vec<Doubt>, Vec<HeldBack>) {
     let test = (job.test)(session.graph, weights);
     let settled = !out.unsettled && !out.reasons.contains(&Reason::Unsettled);
     let finished = !out.cut_short && !session.exhausted();
     let Some(t) = test.filter(|t| t.passed && settled && finished) else {
-        return Vec::new();
+        return (Vec::new(), Vec::new());
     };
     let accepted: Vec<bool> = (job.candidates.iter())
         .map(|c| weights[c.edge] >= 0.5)
@@ -519,10 +524,26 @@ fn doubts<P: Pose<D>, const D: usize>(
         .filter(|(set, _)| *set == accepted)
         .map(|(_, offsets)| offsets.as_slice());
     let ends = (job.candidates, accepted.as_slice());
-    doubt::doubtful(session, weights, ends, (job.layers, t.alpha), known).unwrap_or_else(|e| {
-        log::debug!("no doubtful clusters sought: {e}");
-        Vec::new()
-    })
+    let doubtful = doubt::doubtful(session, weights, ends, (job.layers, t.alpha), known)
+        .unwrap_or_else(|e| {
+            log::debug!("no doubtful clusters sought: {e}");
+            Vec::new()
+        });
+    // Rejected by the posterior although the innovation alone speaks for a
+    // true loop: the count decided.
+    let held: Vec<bool> = (0..job.candidates.len())
+        .map(|k| {
+            let speaks = (out.model.as_ref().zip(out.innovations[k]))
+                .is_some_and(|(m, nu2)| nu2 > 0.0 && m.ln_likelihood_ratio(nu2.ln()) > 0.0);
+            out.reasons[k] == Reason::Inconsistent && speaks
+        })
+        .collect();
+    let held_back = doubt::held_back(session, weights, (job.candidates, &held), job.layers)
+        .unwrap_or_else(|e| {
+            log::debug!("no candidates held back sought: {e}");
+            Vec::new()
+        });
+    (doubtful, held_back)
 }
 
 /// EM from an accepted set: decisions by innovation until the set repeats

@@ -737,3 +737,55 @@ fn a_half_step_adds_the_most_consistent_half_and_removes_the_least() {
     let nu2 = [Some(1.0); 4];
     assert_eq!(half_step(&last, &[true; 4], &innov(&nu2)), None);
 }
+
+/// The move a candidate outside the map would make, to first order
+/// ([`Evaluation::adding`], the Kalman update of the map by it), is the
+/// move of the map solved with it: the walk's loop between its first and
+/// last pose, added to its odometry, which errs in heading, and one other
+/// loop.
+#[test]
+fn adding_a_loop_moves_the_map_as_solving_with_it_does() {
+    let (mut g, candidates) = walk();
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    // Odometry that errs by 0.01 rad a step.
+    for e in g.edges.iter_mut().filter(|e| e.to == e.from + 1) {
+        let z = e.measurement;
+        e.measurement = Se2::new(z.x, z.y, z.theta + 0.01);
+    }
+    let mut weights = vec![1.0; g.edges.len()];
+    // Odometry and one loop (3–9): the first loop, 0–15, out, with the
+    // others.
+    for k in [0, 1, 2, 4] {
+        weights[edges[k]] = 0.0;
+    }
+    let (predicted, before) = with_session(
+        &mut g,
+        &mut weights,
+        SolveSettings::default(),
+        |mut s, w| {
+            s.converge(w).unwrap();
+            let mut eval = Evaluation::new(s.optimizer, s.graph, w).unwrap();
+            let g = eval.adding(&edges, &[0]).unwrap();
+            (eval.largest_move(&g), s.graph.poses.clone())
+        },
+    );
+    weights[edges[0]] = 1.0;
+    let after = with_session(
+        &mut g,
+        &mut weights,
+        SolveSettings::default(),
+        |mut s, w| {
+            s.converge(w).unwrap();
+            s.graph.poses.clone()
+        },
+    );
+    let moved = (before.iter().zip(&after))
+        .map(|(a, b)| (a.position() - b.position()).norm())
+        .fold(0.0, f64::max);
+    // 0.158 predicted, 0.155 solved.
+    assert!(moved > 0.1, "{moved}");
+    assert!(
+        (predicted / moved - 1.0).abs() < 0.05,
+        "{predicted} {moved}"
+    );
+}
