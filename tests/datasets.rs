@@ -768,7 +768,7 @@ fn an_accepted_alias_group_that_bends_a_passing_map_is_doubtful() {
 /// (seed 13 of the places sweep over more seeds,
 /// `scripts/bench_aliasing_sweep.sh`). The gate's count model, fitted to
 /// 50 counts, has a narrow true-loop component (σ 0.24 in `ln n`) that
-/// puts true loops of 51–109 inliers at priors of 10⁻⁷–10⁻²; their
+/// puts true loops of 51–109 inliers at priors of 2·10⁻⁷–0.06; their
 /// innovations (ν² 0.7–4.7) speak for them, but MIT's loose odometry makes
 /// that evidence too weak to outweigh the counts. The map passes its test
 /// without six of its 20 true loops, 3.3 % off; the report names the true

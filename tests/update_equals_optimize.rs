@@ -80,27 +80,19 @@ fn compare<P: GraphPose<D>, const D: usize>(u: &Solution<P>, b: &Solution<P>) ->
             b.passed()
         ));
     }
-    let doubtful = |s: &Solution<P>| -> Vec<Vec<usize>> {
+    // The loops of each doubtful cluster, and of each cluster held back.
+    let named = |s: &Solution<P>| -> [Vec<Vec<usize>>; 2] {
         let robust = &s.report().robust;
-        robust.doubtful.iter().map(|d| d.loops.clone()).collect()
+        [
+            robust.doubtful.iter().map(|d| d.loops.clone()).collect(),
+            robust.held_back.iter().map(|h| h.loops.clone()).collect(),
+        ]
     };
-    if doubtful(u) != doubtful(b) {
-        out.push(format!(
-            "doubtful clusters {:?} vs batch {:?}",
-            doubtful(u),
-            doubtful(b)
-        ));
-    }
-    let held_back = |s: &Solution<P>| -> Vec<Vec<usize>> {
-        let robust = &s.report().robust;
-        robust.held_back.iter().map(|h| h.loops.clone()).collect()
-    };
-    if held_back(u) != held_back(b) {
-        out.push(format!(
-            "loops held back {:?} vs batch {:?}",
-            held_back(u),
-            held_back(b)
-        ));
+    let kinds = ["doubtful clusters", "loops held back"];
+    for ((kind, nu), nb) in kinds.iter().zip(named(u)).zip(named(b)) {
+        if nu != nb {
+            out.push(format!("{kind} {nu:?} vs batch {nb:?}"));
+        }
     }
     let (cu, cb) = (u.chi2(), b.chi2());
     let rel = (cu - cb).abs() / cb.abs().max(f64::MIN_POSITIVE);
