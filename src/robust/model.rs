@@ -620,7 +620,7 @@ impl LoopModel {
             )
         };
         let table = LogChi2::of(self.dof);
-        let truth = self.true_loops(&table);
+        let truth = self.true_loops(&table).blended();
         let wrong_loops: Vec<(f64, f64, f64)> = self.wrong_loops.iter().map(constants).collect();
         let mut terms = [0.0; MAX_WRONG_POPULATIONS + 1];
         // `ln π` and `ln(1 − π)` of each distinct count posterior.

@@ -114,3 +114,26 @@ fn ln_chi2_sigma_is_the_root_of_trigamma_at_half_the_dof() {
     let s = ln_chi2_sigma(3);
     assert!((s * s - (PI * PI / 2.0 - 4.0)).abs() < 1e-10);
 }
+
+#[test]
+fn the_blended_row_is_the_density_it_was_blended_from() {
+    for dof in [3, 6] {
+        let table = LogChi2::of(dof);
+        // Spreads on a row of the table, between two, and beyond it.
+        let floor = ln_chi2_sigma(dof);
+        for sigma in [floor, floor + 0.013, 1.7, 2.9, 5.0] {
+            let density = table.with(0.4, sigma);
+            let blended = density.blended();
+            for i in 0..=2000 {
+                let y = -30.0 + 0.0271 * i as f64;
+                let (a, b) = (density.ln(y), blended.ln(y));
+                if a.is_finite() || b.is_finite() {
+                    assert!(
+                        (a - b).abs() <= 1e-12 * a.abs().max(1.0),
+                        "{dof} {sigma} {y}: {a} {b}"
+                    );
+                }
+            }
+        }
+    }
+}
