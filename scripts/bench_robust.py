@@ -303,7 +303,7 @@ def run_pgo(args, path, flags, out_g2o):
     # Exit status 3: the result failed its χ² test; 4: its loop decisions
     # did not settle (`unsettled` below); the output is written either way.
     stdout, err, wall = run([args.pgo, "optimize", path, "--json", "-q", "-o", out_g2o] + flags + [t for f in args.pgo_flags for t in shlex.split(f)],
-                            args.timeout, ok=(0, 3, 4), cpu_limit=args.timeout)
+                            args.timeout, ok=(0, 3, 4, 5), cpu_limit=args.timeout)
     if err:
         return {"error": err, "wall_s": wall}
     r = json.loads(stdout)

@@ -558,11 +558,13 @@ def places_section(folder):
     silent = sum(1 for p in pgos if "f1" in p and p["ate_pct"] > SWEEP_MAP_GOAL
                  and p.get("chi2_passed") and not warns(p))
     out += ["", "**pgo meets the absolute goal on %d of %d cases; a peer does better on %d; "
-            "%d end more than %.1f %% off with a passing test and no warning.**"
+            "%d end more than %.1f %% off with exit status 0 (a passing test, no loop unsettled, "
+            "doubtful or held back).**"
             % (goal, len(runs), len(worse), silent, SWEEP_MAP_GOAL), ""]
     if worse:
-        out += ["Cases where a peer does better (pgo warns: decisions that did not settle, "
-                "doubtful clusters, or loops held back by their counts, docs/method.md §7):", "",
+        out += ["Cases where a peer does better (pgo warns: decisions that did not settle, exit "
+                "status 4; doubtful clusters or loops held back by their counts, exit status 5; "
+                "docs/method.md §7):", "",
                 "| place | seed | group | dataset | information | pgo P / R / ATE % | pgo warns | peer "
                 "| its P / R / ATE % |",
                 "|---|---|---|---|---|---|---|---|---|"]
@@ -609,8 +611,8 @@ def mit_seeds_section(folder):
     goal = lambda p: ok(p) and p["precision"] >= 0.99 and p["recall"] >= 0.97 and p["ate_pct"] <= SWEEP_MAP_GOAL
     out += ["| group | information | runs | pgo meets the goal | a peer better | some peer "
             "meets the goal | wrong loops accepted | true loops rejected | largest map error "
-            "(ATE, %) | more than 0.5 % off, exit 0, no warning (decisions settled, no doubtful "
-            "cluster, no loop held back) |",
+            "(ATE, %) | more than 0.5 % off with exit status 0 (a passing test, no loop "
+            "unsettled, doubtful or held back) |",
             "|---|---|---|---|---|---|---|---|---|---|"]
     missed = []
     for group in sorted({g for _, _, g, *_ in runs}):

@@ -89,6 +89,14 @@ const INTERRUPTED_STATUS: u8 = 130;
 /// best so far, its decisions and χ² verdict those of an unfinished job.
 const BUDGET_STATUS: u8 = 4;
 
+/// The exit status of `pgo optimize` when the map passed its χ² test with
+/// settled decisions but the evidence questions some of them: an accepted
+/// cluster is doubtful (`robust.doubtful`) or rejected loops were held back
+/// by their counts alone (`robust.held_back`), either moving the map by
+/// over 1 % of its size. The map is written; a script can tell it from a
+/// map nothing questions.
+const QUESTIONED_STATUS: u8 = 5;
+
 /// Why `pgo optimize` failed.
 #[derive(Debug, thiserror::Error)]
 pub enum Failure {
@@ -277,9 +285,35 @@ fn write_covariances(
     Ok(())
 }
 
+/// The decisions of a finished job the evidence questions (the accepted
+/// loops of doubtful clusters, the rejected loops held back by their
+/// counts), in words; `None` when there are none.
+fn questioned(report: &Report) -> Option<String> {
+    let loops = |n: usize| if n == 1 { "loop" } else { "loops" };
+    let doubtful: usize = (report.robust.doubtful.iter()).map(|d| d.loops.len()).sum();
+    let held: usize = (report.robust.held_back.iter())
+        .map(|h| h.loops.len())
+        .sum();
+    let mut parts = Vec::new();
+    if doubtful > 0 {
+        parts.push(format!(
+            "{doubtful} accepted {} in doubtful clusters",
+            loops(doubtful)
+        ));
+    }
+    if held > 0 {
+        parts.push(format!(
+            "{held} rejected {} held back by their counts",
+            loops(held)
+        ));
+    }
+    (!parts.is_empty()).then(|| parts.join(" and "))
+}
+
 /// `pgo optimize`: checks the files, runs the job with Ctrl-C as its
 /// cancellation, prints the summary (and the JSON report), and ends with
-/// the exit status: 3 when the χ² test failed, 130 when interrupted.
+/// the exit status: 3 when the χ² test failed, 4 when the job did not
+/// finish, 5 when its decisions are questioned, 130 when interrupted.
 pub fn command(args: OptimizeArgs) -> ExitCode {
     if let Err(message) = check_optimize_files(&args) {
         say!("error: {message}");
@@ -386,6 +420,14 @@ fn finish(args: &OptimizeArgs, report: &Report, said: &[String]) -> ExitCode {
              {BUDGET_STATUS})"
         );
         return ExitCode::from(BUDGET_STATUS);
+    }
+    if let Some(questioned) = questioned(report) {
+        say!(
+            "pgo: the map passed its χ² test, but the evidence questions {questioned}: \
+             reversing those decisions would move the map by over 1 % of its size \
+             (robust.doubtful, robust.held_back; exit status {QUESTIONED_STATUS})"
+        );
+        return ExitCode::from(QUESTIONED_STATUS);
     }
     ExitCode::SUCCESS
 }

@@ -534,7 +534,7 @@ fn doubts<P: Pose<D>, const D: usize>(
     let held: Vec<bool> = (0..job.candidates.len())
         .map(|k| {
             let speaks = (out.model.as_ref().zip(out.innovations[k]))
-                .is_some_and(|(m, nu2)| nu2 > 0.0 && m.ln_likelihood_ratio(nu2.ln()) > 0.0);
+                .is_some_and(|(m, nu2)| nu2 > 0.0 && m.speaks_for_a_true_loop(nu2.ln()));
             out.reasons[k] == Reason::Inconsistent && speaks
         })
         .collect();
