@@ -183,73 +183,97 @@ impl Run<'_> {
             report.optimizer.initial_chi2 = initial_chi2;
             report.optimizer.final_chi2 = final_chi2;
         }
-        let accepted = outcome.accepted.iter().filter(|&&a| a).count();
-        report.robust = RobustReport {
-            method,
-            c,
-            rounds: outcome.rounds,
-            relaxations: outcome.relaxations,
-            decisions: outcome.decisions,
-            relaxed_starts: outcome.relaxed_starts,
-            clusters: outcome.clusters,
-            accepted_loops: accepted,
-            rejected_loops: candidates.len() - accepted,
-            rescued_loops: candidates
-                .iter()
-                .zip(&outcome.accepted)
-                .filter(|(c, a)| **a && !c.kept)
-                .count(),
-            model: outcome.model.clone(),
-            search: outcome.search.clone(),
-            starts: outcome.starts.clone(),
-            unsettled: outcome.unsettled,
-            doubtful: outcome.doubtful.clone(),
-            held_back: outcome.held_back.clone(),
-        };
+        report.robust = robust_report(outcome, candidates, (method, c));
         report.time.relaxation_s = phases.relaxation.as_secs_f64();
         report.time.evaluation_s = phases.evaluation.as_secs_f64();
         report.time.loop_model_s = phases.model.as_secs_f64();
-        report.loops = candidates
-            .iter()
-            .enumerate()
-            .map(|(k, cand)| {
-                let e = &graph.edges[cand.edge];
-                LoopReport {
-                    from: graph.id(e.from),
-                    to: graph.id(e.to),
-                    inliers: e.candidate.and_then(|c| c.inliers),
-                    kept: cand.kept,
-                    accepted: outcome.accepted[k],
-                    weight: outcome.weights[k],
-                    prior: outcome
-                        .model
-                        .as_ref()
-                        .map(|m| m.prior(cand.count_posterior)),
-                    posterior: outcome.posteriors[k],
-                    innovation: outcome.innovations[k],
-                    reason: outcome.reasons[k],
-                }
-            })
-            .collect();
-        let unsettled = (outcome.reasons.iter())
-            .filter(|&&r| r == Reason::Unsettled)
-            .count();
-        if unsettled > 0 {
-            report.warnings.push(format!(
-                "the loop decisions did not settle: {unsettled} of {} candidates were accepted \
-                 on some of the maps the decisions visited and rejected on others (reason \
-                 `unsettled`); the map is that of the best-fitting of those sets, and may hold \
-                 wrong loops or lack true ones",
-                candidates.len()
-            ));
-        }
-        for doubt in &outcome.doubtful {
-            report.warnings.push(doubt_warning(doubt, &report.loops));
-        }
-        for held in &outcome.held_back {
-            report.warnings.push(held_back_warning(held, &report.loops));
-        }
+        report.loops = loop_reports(graph, candidates, outcome);
+        let warnings = decision_warnings(outcome, &report.loops);
+        report.warnings.extend(warnings);
     }
+}
+
+/// What the robust back end did, from its `outcome` on `candidates`
+/// (`method` at kernel width `c`).
+fn robust_report(
+    outcome: &Outcome,
+    candidates: &[Candidate],
+    (method, c): (RobustMethod, f64),
+) -> RobustReport {
+    let accepted = outcome.accepted.iter().filter(|&&a| a).count();
+    RobustReport {
+        method,
+        c,
+        rounds: outcome.rounds,
+        relaxations: outcome.relaxations,
+        decisions: outcome.decisions,
+        relaxed_starts: outcome.relaxed_starts,
+        clusters: outcome.clusters,
+        accepted_loops: accepted,
+        rejected_loops: candidates.len() - accepted,
+        rescued_loops: (candidates.iter().zip(&outcome.accepted))
+            .filter(|(c, a)| **a && !c.kept)
+            .count(),
+        model: outcome.model.clone(),
+        search: outcome.search.clone(),
+        starts: outcome.starts.clone(),
+        unsettled: outcome.unsettled,
+        doubtful: outcome.doubtful.clone(),
+        held_back: outcome.held_back.clone(),
+    }
+}
+
+/// One entry per loop candidate, in file order: its ends, count, gate and
+/// decision, as the `outcome` left them.
+fn loop_reports<P: G2oPose<D>, const D: usize>(
+    graph: &Graph<P, D>,
+    candidates: &[Candidate],
+    outcome: &Outcome,
+) -> Vec<LoopReport> {
+    (candidates.iter().enumerate())
+        .map(|(k, cand)| {
+            let e = &graph.edges[cand.edge];
+            LoopReport {
+                from: graph.id(e.from),
+                to: graph.id(e.to),
+                inliers: e.candidate.and_then(|c| c.inliers),
+                kept: cand.kept,
+                accepted: outcome.accepted[k],
+                weight: outcome.weights[k],
+                prior: (outcome.model.as_ref()).map(|m| m.prior(cand.count_posterior)),
+                posterior: outcome.posteriors[k],
+                innovation: outcome.innovations[k],
+                reason: outcome.reasons[k],
+            }
+        })
+        .collect()
+}
+
+/// The warnings about the loop decisions of `outcome`: that they did not
+/// settle, each doubtful cluster, each cluster held back (`loops` name
+/// them by their ends).
+fn decision_warnings(outcome: &Outcome, loops: &[LoopReport]) -> Vec<String> {
+    let mut warnings = Vec::new();
+    let unsettled = (outcome.reasons.iter())
+        .filter(|&&r| r == Reason::Unsettled)
+        .count();
+    if unsettled > 0 {
+        warnings.push(format!(
+            "the loop decisions did not settle: {unsettled} of {} candidates were accepted \
+             on some of the maps the decisions visited and rejected on others (reason \
+             `unsettled`); the map is that of the best-fitting of those sets, and may hold \
+             wrong loops or lack true ones",
+            loops.len()
+        ));
+    }
+    warnings.extend(outcome.doubtful.iter().map(|d| doubt_warning(d, loops)));
+    warnings.extend(
+        outcome
+            .held_back
+            .iter()
+            .map(|h| held_back_warning(h, loops)),
+    );
+    warnings
 }
 
 /// The warning of a doubtful cluster ([`crate::robust::Doubt`]): its loops
