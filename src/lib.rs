@@ -92,7 +92,7 @@ pub use options::{
     ROBUST_C_RANGE, RobustOptions, SolverOptions, TestOptions,
 };
 pub use pose_graph::{AnyPoseGraph, Edge, GraphPose, PoseGraph, PoseGraph2, PoseGraph3};
-pub use report::{DecisionChange, IncrementalReport, UpdateSolve};
+pub use report::{DecisionChange, IncrementalReport, MapStatus, UpdateSolve};
 pub use robust::{LoopModel, RobustMethod};
 pub use solution::{AnySolution, LoopDecision, Reason, Solution};
 pub use solve::Method as SolverMethod;

@@ -136,6 +136,7 @@ impl sealed::Sealed<6> for Se3 {
 /// assert!(decided(a).accepted && decided(b).accepted);
 /// assert!(!decided(wrong).accepted);
 /// assert_eq!(solution.passed(), Some(true)); // the χ² test of the map
+/// assert_eq!(solution.status(), pgo::MapStatus::Ok); // and nothing questions it
 /// let end = solution.pose(8).unwrap();
 /// assert!(end.x.abs() < 1e-6 && end.y.abs() < 1e-6);
 /// # Ok::<(), pgo::Error>(())

@@ -493,6 +493,55 @@ impl Default for OptimizerReport {
     }
 }
 
+/// How far a finished job's map can be taken as it is — what `pgo
+/// optimize`'s exit status says of it (0, 3, 4, 5, 130), for callers of
+/// the library ([`Report::status`]). The first that applies, in this order:
+/// cancelled, χ² test failed, unfinished, unsettled, questioned, ok.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MapStatus {
+    /// Nothing questions the map: the job finished, its χ² test passed
+    /// (or there is none: the warnings say why), its loop decisions
+    /// settled and the evidence questions none of them. Exit status 0.
+    Ok,
+    /// The χ² test failed: the map does not fit its measurements (the
+    /// report's `robust.search` names the suspects). Exit status 3.
+    Chi2Failed,
+    /// An iteration or time limit stopped the job before it finished — a
+    /// budget (`max_iterations`, `time_limit`; an update's `update_iters`
+    /// on purpose) or the last solve's own limit: the best map so far, its
+    /// decisions and χ² verdict unfinished. Exit status 4.
+    Unfinished,
+    /// The loop decisions did not settle (candidates
+    /// [`Reason::Unsettled`]): the map rests on decisions its loop model
+    /// does not confirm. Exit status 4.
+    Unsettled,
+    /// The map passed its χ² test with settled decisions, but the evidence
+    /// questions some: a doubtful cluster ([`RobustReport::doubtful`]) or
+    /// loops held back by their counts ([`RobustReport::held_back`]),
+    /// either of which reversed would move the map by over
+    /// [`DOUBT_MOVE`] of its size. Exit status 5.
+    Questioned,
+    /// A cancellation ([`crate::Cancel`]) stopped the job: the best map so
+    /// far. Exit status 130 (Ctrl-C).
+    Cancelled,
+}
+
+impl MapStatus {
+    /// Its name in snake case (`"ok"`, `"chi2_failed"`, `"unfinished"`,
+    /// `"unsettled"`, `"questioned"`, `"cancelled"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Ok => "ok",
+            Self::Chi2Failed => "chi2_failed",
+            Self::Unfinished => "unfinished",
+            Self::Unsettled => "unsettled",
+            Self::Questioned => "questioned",
+            Self::Cancelled => "cancelled",
+        }
+    }
+}
+
 impl Report {
     /// A report of a graph (read from `input`, with what the reader
     /// noticed, or built in memory), before anything ran.
@@ -523,6 +572,25 @@ impl Report {
             time: JobTime::default(),
             incremental: None,
             certificate: None,
+        }
+    }
+
+    /// How far the map can be taken as it is ([`MapStatus`]).
+    pub fn status(&self) -> MapStatus {
+        let stop = self.optimizer.stop_reason;
+        let robust = &self.robust;
+        if stop == StopReason::Cancelled {
+            MapStatus::Cancelled
+        } else if self.chi2_test.as_ref().is_some_and(|t| !t.passed) {
+            MapStatus::Chi2Failed
+        } else if matches!(stop, StopReason::MaxIterations | StopReason::TimeLimit) {
+            MapStatus::Unfinished
+        } else if self.loops.iter().any(|l| l.reason == Reason::Unsettled) {
+            MapStatus::Unsettled
+        } else if !robust.doubtful.is_empty() || !robust.held_back.is_empty() {
+            MapStatus::Questioned
+        } else {
+            MapStatus::Ok
         }
     }
 

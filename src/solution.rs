@@ -7,7 +7,7 @@ use crate::error::Error;
 use crate::geometry::{Pose, Se2, Se3};
 use crate::graph::{self, VertexId};
 use crate::io::g2o::{self, FileText, G2oPose};
-use crate::report::{IncrementalReport, Report};
+use crate::report::{IncrementalReport, MapStatus, Report};
 pub use crate::robust::Reason;
 use crate::solve::StopReason;
 use crate::stats::Chi2Test;
@@ -303,6 +303,30 @@ impl<P> Solution<P> {
     /// update kept the graph's earlier state.
     pub fn cancelled(&self) -> bool {
         self.report.optimizer.stop_reason == StopReason::Cancelled
+    }
+
+    /// How far the map can be taken as it is — what `pgo optimize`'s exit
+    /// status says ([`MapStatus`]): [`MapStatus::Ok`] when nothing
+    /// questions it.
+    ///
+    /// ```
+    /// use pgo::{MapStatus, Options, PoseGraph2, Se2};
+    /// let mut graph = PoseGraph2::new();
+    /// let step = Se2::new(1.0, 0.0, 0.0);
+    /// for k in 0..4 {
+    ///     graph.add_pose(k, Se2::new(k as f64, 0.1, 0.0))?;
+    /// }
+    /// for k in 1..4 {
+    ///     graph.add_edge(k - 1, k, step, pgo::nalgebra::Matrix3::identity())?;
+    /// }
+    /// let solution = graph.optimize(&Options::default())?;
+    /// // A chain has no χ² test (no redundancy), and nothing questions it.
+    /// assert_eq!(solution.passed(), None);
+    /// assert_eq!(solution.status(), MapStatus::Ok);
+    /// # Ok::<(), pgo::Error>(())
+    /// ```
+    pub fn status(&self) -> MapStatus {
+        self.report.status()
     }
 
     /// The initial guess the solve started from ([`crate::Initialization`]),
@@ -631,6 +655,11 @@ impl AnySolution {
     /// See [`Solution::cancelled`].
     pub fn cancelled(&self) -> bool {
         either!(self, |s| s.cancelled())
+    }
+
+    /// See [`Solution::status`].
+    pub fn status(&self) -> MapStatus {
+        either!(self, |s| s.status())
     }
 
     /// See [`Solution::report`].

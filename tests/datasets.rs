@@ -7,8 +7,8 @@
 
 use pgo::report::{LoopReport, Report};
 use pgo::{
-    AnyPoseGraph, AnySolution, Error, GateMode, Initialization, Options, Pose, PoseGraph,
-    PoseGraph2, PoseGraph3, RobustMethod, Se2,
+    AnyPoseGraph, AnySolution, Error, GateMode, Initialization, MapStatus, Options, Pose,
+    PoseGraph, PoseGraph2, PoseGraph3, RobustMethod, Se2,
 };
 use pgo_sim::{
     AliasOffsets, AliasPlace, CorruptionOptions, ErrorCoordinates, InlierModel, OutlierPolicy,
@@ -691,6 +691,7 @@ fn decisions_that_swing_end_no_worse_than_they_began() {
         assert_eq!((kept, kept_true, accepted), (7, 7, 7), "{calibrated:?}");
         let warned = r.warnings.iter().any(|w| w.contains("did not settle"));
         assert!(warned, "{:?}", r.warnings);
+        assert_eq!(r.status(), MapStatus::Unsettled);
     }
 }
 
@@ -760,6 +761,7 @@ fn an_accepted_alias_group_that_bends_a_passing_map_is_doubtful() {
     assert!(doubtful[0].map_moves > 0.05, "{doubtful:?}");
     let warned = r.warnings.iter().any(|w| w.contains("one common offset"));
     assert!(warned, "{:?}", r.warnings);
+    assert_eq!(r.status(), MapStatus::Questioned);
 }
 
 /// True loops that verification scored low are named when the map would
@@ -800,6 +802,7 @@ fn true_loops_kept_out_by_their_counts_alone_are_named_when_they_would_move_the_
     );
     let warned = r.warnings.iter().any(|w| w.contains("kept out by"));
     assert!(warned, "{:?}", r.warnings);
+    assert_eq!(r.status(), MapStatus::Questioned);
 }
 
 /// True clusters whose errors share an offset — a real map's scan

@@ -4,7 +4,8 @@
 
 use pgo::report::Report;
 use pgo::{
-    AnyPoseGraph, DegeneratePolicy, GateMode, Options, Pose, PoseGraph2, Reason, RobustMethod, Se2,
+    AnyPoseGraph, DegeneratePolicy, GateMode, MapStatus, Options, Pose, PoseGraph2, Reason,
+    RobustMethod, Se2,
 };
 use pgo_sim::{InlierModel, OutlierPolicy, SimulationOptions};
 use std::path::{Path, PathBuf};
@@ -93,7 +94,9 @@ fn degenerate_counts_are_flagged_before_optimisation_or_fail_the_chi2_test() {
         );
         if robust == RobustMethod::None {
             assert!(fp > 0 && !passed);
+            assert_eq!(r.status(), MapStatus::Chi2Failed);
         } else {
+            assert_eq!(r.status(), MapStatus::Ok);
             let (tp, _, _) = counts(&r, &wrong);
             assert_eq!((tp, fp), (8, 0));
             let unsettled = r.loops.iter().filter(|l| l.reason == Reason::Unsettled);
@@ -640,4 +643,31 @@ fn young_maps_keep_their_loops() {
             "grid2d with an outlier, {n} poses"
         );
     }
+}
+
+/// A report's status is the first of cancelled, χ² failed, unfinished,
+/// unsettled and questioned that applies — `pgo optimize`'s exit statuses
+/// 130, 3, 4, 4 and 5 — and ok otherwise.
+#[test]
+fn the_status_is_the_first_thing_that_questions_the_map() {
+    let mut r = run(&sample("aliased.g2o"), &Options::default());
+    assert_eq!(r.status(), MapStatus::Ok, "{:?}", r.warnings);
+    r.robust.held_back.push(pgo::report::HeldBack {
+        loops: vec![0],
+        map_moves: 0.02,
+    });
+    assert_eq!(r.status(), MapStatus::Questioned);
+    r.loops[0].reason = Reason::Unsettled;
+    assert_eq!(r.status(), MapStatus::Unsettled);
+    r.optimizer.stop_reason = pgo::StopReason::MaxIterations;
+    assert_eq!(r.status(), MapStatus::Unfinished);
+    r.chi2_test.as_mut().expect("a χ² test").passed = false;
+    assert_eq!(r.status(), MapStatus::Chi2Failed);
+    r.optimizer.stop_reason = pgo::StopReason::Cancelled;
+    assert_eq!(r.status(), MapStatus::Cancelled);
+    let names: Vec<&str> = [MapStatus::Ok, MapStatus::Chi2Failed, MapStatus::Cancelled]
+        .iter()
+        .map(|s| s.name())
+        .collect();
+    assert_eq!(names, ["ok", "chi2_failed", "cancelled"]);
 }

@@ -114,7 +114,11 @@ static int report(const PgoResult *result, size_t right, size_t wrong) {
     check(pgo_result_chi2(result, &chi2), "pgo_result_chi2");
     check(pgo_result_verdict(result, &verdict), "pgo_result_verdict");
     printf("chi2 %.4f, chi2 test %s\n", chi2, verdict == 1 ? "passed" : verdict == 0 ? "failed" : "not run");
-    return failures + (loops == 2 ? 0 : 1) + (verdict == 1 ? 0 : 1);
+    /* What a caller checks before using the map: nothing questions it. */
+    PgoMapStatus status;
+    check(pgo_result_status(result, &status), "pgo_result_status");
+    printf("map status %s\n", status == PGO_MAP_OK ? "ok" : "questioned or unfinished");
+    return failures + (loops == 2 ? 0 : 1) + (verdict == 1 ? 0 : 1) + (status == PGO_MAP_OK ? 0 : 1);
 }
 
 /* Prints pose 8's standard deviations, alone and relative to pose 4; the

@@ -152,6 +152,45 @@ typedef enum PgoUpdateSolve {
 } PgoUpdateSolve;
 
 /**
+ * How far a result's map can be taken as it is, as `pgo optimize`'s exit
+ * status says it (`pgo_result_status`): the first that applies, from
+ * `PGO_MAP_CANCELLED` back to `PGO_MAP_QUESTIONED`, else `PGO_MAP_OK`.
+ */
+typedef enum PgoMapStatus {
+  /**
+   * Nothing questions the map: the job finished, its χ² test passed
+   * (or there is none), its loop decisions settled and the evidence
+   * questions none (exit status 0).
+   */
+  PGO_MAP_OK = 0,
+  /**
+   * The χ² test failed (exit status 3).
+   */
+  PGO_MAP_CHI2_FAILED,
+  /**
+   * An iteration or time limit stopped the job before it finished: the
+   * best map so far (exit status 4).
+   */
+  PGO_MAP_UNFINISHED,
+  /**
+   * The loop decisions did not settle (loops `"unsettled"`; exit
+   * status 4).
+   */
+  PGO_MAP_UNSETTLED,
+  /**
+   * Passed with settled decisions, but a doubtful cluster or loops held
+   * back by their counts would each move the map by over 1 % (the
+   * report's `robust.doubtful`, `robust.held_back`; exit status 5).
+   */
+  PGO_MAP_QUESTIONED,
+  /**
+   * A `PgoCancel` token stopped the job: the best map so far (exit
+   * status 130).
+   */
+  PGO_MAP_CANCELLED,
+} PgoMapStatus;
+
+/**
  * A cancellation token (opaque): pass it to `pgo_graph_optimize_with` or
  * `pgo_graph_update_with`, and call `pgo_cancel_request` from any thread
  * (a watchdog, a ROS 2 callback, a signal-handling thread) to stop that
@@ -1004,6 +1043,17 @@ enum PgoStatus pgo_result_d2(const struct PgoResult *result, double *out);
  * `result` is NULL or a live result; `out` is NULL or writable.
  */
 enum PgoStatus pgo_result_verdict(const struct PgoResult *result, int32_t *out);
+
+/**
+ * Stores at `*out` how far the result's map can be taken as it is
+ * (`PgoMapStatus`; `PGO_MAP_OK` when nothing questions it).
+ *
+ * Errors: `PGO_ERR_INVALID_ARGUMENT`.
+ *
+ * # Safety
+ * `result` is NULL or a live result; `out` is NULL or writable.
+ */
+enum PgoStatus pgo_result_status(const struct PgoResult *result, enum PgoMapStatus *out);
 
 /**
  * Stores at `*out` whether a `PgoCancel` token stopped the job (the

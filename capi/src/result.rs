@@ -7,7 +7,7 @@ use crate::cancel::{PgoCancel, Watch};
 use crate::graph::PgoGraph;
 use crate::options::PgoOptions;
 use crate::status::{Failure, PgoStatus, borrow, borrow_mut, out_ptr, status, text, value};
-use pgo::{AnySolution, DecisionChange, LoopDecision, Options, Reason, UpdateSolve};
+use pgo::{AnySolution, DecisionChange, LoopDecision, MapStatus, Options, Reason, UpdateSolve};
 use std::ffi::{CStr, CString, c_char};
 use std::ptr;
 use std::sync::{Mutex, OnceLock};
@@ -604,6 +604,62 @@ pub unsafe extern "C" fn pgo_result_d2(result: *const PgoResult, out: *mut f64) 
 pub unsafe extern "C" fn pgo_result_verdict(result: *const PgoResult, out: *mut i32) -> PgoStatus {
     // SAFETY: the caller's contract.
     unsafe { get(result, out, |s| s.passed().map_or(-1, i32::from)) }
+}
+
+/// How far a result's map can be taken as it is, as `pgo optimize`'s exit
+/// status says it (`pgo_result_status`): the first that applies, from
+/// `PGO_MAP_CANCELLED` back to `PGO_MAP_QUESTIONED`, else `PGO_MAP_OK`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PgoMapStatus {
+    /// Nothing questions the map: the job finished, its χ² test passed
+    /// (or there is none), its loop decisions settled and the evidence
+    /// questions none (exit status 0).
+    PgoMapOk = 0,
+    /// The χ² test failed (exit status 3).
+    PgoMapChi2Failed,
+    /// An iteration or time limit stopped the job before it finished: the
+    /// best map so far (exit status 4).
+    PgoMapUnfinished,
+    /// The loop decisions did not settle (loops `"unsettled"`; exit
+    /// status 4).
+    PgoMapUnsettled,
+    /// Passed with settled decisions, but a doubtful cluster or loops held
+    /// back by their counts would each move the map by over 1 % (the
+    /// report's `robust.doubtful`, `robust.held_back`; exit status 5).
+    PgoMapQuestioned,
+    /// A `PgoCancel` token stopped the job: the best map so far (exit
+    /// status 130).
+    PgoMapCancelled,
+}
+
+impl From<MapStatus> for PgoMapStatus {
+    fn from(status: MapStatus) -> Self {
+        match status {
+            MapStatus::Ok => Self::PgoMapOk,
+            MapStatus::Chi2Failed => Self::PgoMapChi2Failed,
+            MapStatus::Unfinished => Self::PgoMapUnfinished,
+            MapStatus::Unsettled => Self::PgoMapUnsettled,
+            MapStatus::Questioned => Self::PgoMapQuestioned,
+            MapStatus::Cancelled => Self::PgoMapCancelled,
+        }
+    }
+}
+
+/// Stores at `*out` how far the result's map can be taken as it is
+/// (`PgoMapStatus`; `PGO_MAP_OK` when nothing questions it).
+///
+/// Errors: `PGO_ERR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `result` is NULL or a live result; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pgo_result_status(
+    result: *const PgoResult,
+    out: *mut PgoMapStatus,
+) -> PgoStatus {
+    // SAFETY: the caller's contract.
+    unsafe { get(result, out, |s| s.status().into()) }
 }
 
 /// Stores at `*out` whether a `PgoCancel` token stopped the job (the

@@ -692,6 +692,9 @@ fn assert_same(r: *const PgoResult, expected: &AnySolution, ids: &[u64]) {
     );
     assert!(close(d2, expected.d2().unwrap_or(f64::NAN)), "D² {d2}");
     assert_eq!(verdict, expected.passed().map_or(-1, i32::from));
+    let mut status = PgoMapStatus::PgoMapCancelled;
+    unsafe { ok(pgo_result_status(r, &mut status)) };
+    assert_eq!(status, PgoMapStatus::from(expected.status()));
 }
 
 /// Built through C, read through C, and read by the library: one job.
@@ -1328,10 +1331,13 @@ fn a_replay_through_c_is_the_librarys_and_ends_with_the_batch_job() {
     }
 }
 
-/// Whether a result says a token stopped its job.
+/// Whether a result says a token stopped its job (and its status agrees).
 fn cancelled(r: *const PgoResult) -> bool {
     let mut c = false;
     ok(unsafe { pgo_result_cancelled(r, &mut c) });
+    let mut status = PgoMapStatus::PgoMapOk;
+    ok(unsafe { pgo_result_status(r, &mut status) });
+    assert_eq!(c, status == PgoMapStatus::PgoMapCancelled);
     c
 }
 
@@ -1350,6 +1356,12 @@ fn a_cancelled_token_stops_jobs_and_an_update_keeps_the_earlier_state() {
         );
         assert_fails(
             pgo_result_cancelled(ptr::null(), &mut requested),
+            PgoStatus::PgoErrInvalidArgument,
+            "result is NULL",
+        );
+        let mut status = PgoMapStatus::PgoMapOk;
+        assert_fails(
+            pgo_result_status(ptr::null(), &mut status),
             PgoStatus::PgoErrInvalidArgument,
             "result is NULL",
         );

@@ -287,8 +287,8 @@ fn write_covariances(
 
 /// The decisions of a finished job the evidence questions (the accepted
 /// loops of doubtful clusters, the rejected loops held back by their
-/// counts), in words; `None` when there are none.
-fn questioned(report: &Report) -> Option<String> {
+/// counts), in words.
+fn questioned(report: &Report) -> String {
     let loops = |n: usize| if n == 1 { "loop" } else { "loops" };
     let doubtful: usize = (report.robust.doubtful.iter()).map(|d| d.loops.len()).sum();
     let held: usize = (report.robust.held_back.iter())
@@ -307,7 +307,7 @@ fn questioned(report: &Report) -> Option<String> {
             loops(held)
         ));
     }
-    (!parts.is_empty()).then(|| parts.join(" and "))
+    parts.join(" and ")
 }
 
 /// `pgo optimize`: checks the files, runs the job with Ctrl-C as its
@@ -379,57 +379,66 @@ fn finish(args: &OptimizeArgs, report: &Report, said: &[String]) -> ExitCode {
             }
         }
     }
-    if report.optimizer.stop_reason == pgo::StopReason::Cancelled {
-        say!(
-            "pgo: interrupted: the best map so far was written (exit status {INTERRUPTED_STATUS})"
-        );
-        return ExitCode::from(INTERRUPTED_STATUS);
-    }
-    if report.chi2_test.as_ref().is_some_and(|t| !t.passed) {
-        say!(
-            "pgo: the χ² test FAILED: the map does not fit its measurements (exit status {CHI2_FAILED_STATUS})"
-        );
-        return ExitCode::from(CHI2_FAILED_STATUS);
-    }
-    // Without `--max-iters`, only a last solve that did not converge within
-    // its own limit (ten times each solve's) stops at the iteration limit.
-    let budget = match report.optimizer.stop_reason {
-        pgo::StopReason::TimeLimit => Some("--time-limit stopped the job before it finished"),
-        pgo::StopReason::MaxIterations if args.options.solver.max_iterations.is_some() => {
-            Some("--max-iters stopped the job before it finished")
+    match status_line(args, report) {
+        None => ExitCode::SUCCESS,
+        Some((status, line)) => {
+            say!("{line} (exit status {status})");
+            ExitCode::from(status)
         }
-        pgo::StopReason::MaxIterations => {
-            Some("the last solve did not converge within its iteration limit")
+    }
+}
+
+/// The exit status of a job that ran and the line saying why, from its
+/// report's [`pgo::MapStatus`]; `None` for success.
+fn status_line(args: &OptimizeArgs, report: &Report) -> Option<(u8, String)> {
+    let (status, line) = match report.status() {
+        pgo::MapStatus::Ok => return None,
+        pgo::MapStatus::Cancelled => (
+            INTERRUPTED_STATUS,
+            "pgo: interrupted: the best map so far was written".to_owned(),
+        ),
+        pgo::MapStatus::Chi2Failed => (
+            CHI2_FAILED_STATUS,
+            "pgo: the χ² test FAILED: the map does not fit its measurements".to_owned(),
+        ),
+        pgo::MapStatus::Unfinished => {
+            // Without `--max-iters`, only a last solve that did not converge
+            // within its own limit (ten times each solve's) stops at the
+            // iteration limit.
+            let what = match report.optimizer.stop_reason {
+                pgo::StopReason::TimeLimit => "--time-limit stopped the job before it finished",
+                _ if args.options.solver.max_iterations.is_some() => {
+                    "--max-iters stopped the job before it finished"
+                }
+                _ => "the last solve did not converge within its iteration limit",
+            };
+            let line = format!(
+                "pgo: {what}: the best map so far was written, its loop decisions and χ² verdict \
+                 unfinished"
+            );
+            (BUDGET_STATUS, line)
         }
-        _ => None,
+        pgo::MapStatus::Unsettled => {
+            let unsettled = (report.loops.iter())
+                .filter(|l| l.reason == pgo::Reason::Unsettled)
+                .count();
+            let line = format!(
+                "pgo: the loop decisions did not settle ({unsettled} candidates `unsettled`): the \
+                 map written rests on decisions its loop model does not confirm"
+            );
+            (BUDGET_STATUS, line)
+        }
+        pgo::MapStatus::Questioned => {
+            let line = format!(
+                "pgo: the map passed its χ² test, but the evidence questions {}: reversing those \
+                 decisions would move the map by over 1 % of its size; see robust.doubtful and \
+                 robust.held_back in the JSON report",
+                questioned(report)
+            );
+            (QUESTIONED_STATUS, line)
+        }
     };
-    if let Some(what) = budget {
-        say!(
-            "pgo: {what}: the best map so far was written, its loop decisions and χ² verdict \
-             unfinished (exit status {BUDGET_STATUS})"
-        );
-        return ExitCode::from(BUDGET_STATUS);
-    }
-    let unsettled = (report.loops.iter())
-        .filter(|l| l.reason == pgo::Reason::Unsettled)
-        .count();
-    if unsettled > 0 {
-        say!(
-            "pgo: the loop decisions did not settle ({unsettled} candidates `unsettled`): the map \
-             written rests on decisions its loop model does not confirm (exit status \
-             {BUDGET_STATUS})"
-        );
-        return ExitCode::from(BUDGET_STATUS);
-    }
-    if let Some(questioned) = questioned(report) {
-        say!(
-            "pgo: the map passed its χ² test, but the evidence questions {questioned}: \
-             reversing those decisions would move the map by over 1 % of its size \
-             (robust.doubtful, robust.held_back; exit status {QUESTIONED_STATUS})"
-        );
-        return ExitCode::from(QUESTIONED_STATUS);
-    }
-    ExitCode::SUCCESS
+    Some((status, line))
 }
 
 /// [`check_files`] for `pgo optimize`: the input (`-`: stdin) and

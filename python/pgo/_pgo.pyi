@@ -204,6 +204,9 @@ class Result:
     def cancelled(self) -> bool:
         """Whether a Cancel token stopped the job (the best map so far)."""
     @property
+    def status(self) -> str:
+        """How far the map can be taken as it is, as `pgo optimize`'s exit status says: "ok" (0), "chi2_failed" (3), "unfinished" (4), "unsettled" (4), "questioned" (a doubtful cluster or loops held back, 5) or "cancelled" (130)."""
+    @property
     def warnings(self) -> List[str]:
         """The job's warnings (report["warnings"]): e.g. that the loop decisions did not settle (loops with reason "unsettled"), an accepted cluster the map cannot vouch for (report["robust"]["doubtful"]), or rejected loops kept out by their counts alone that would move the map (report["robust"]["held_back"])."""
     def certificate(self) -> Dict[str, Any]:

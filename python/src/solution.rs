@@ -167,6 +167,18 @@ impl Solution {
         self.solution.cancelled()
     }
 
+    /// How far the map can be taken as it is, as `pgo optimize`'s exit
+    /// status says it: "ok" (nothing questions it, exit 0), "chi2_failed"
+    /// (3), "unfinished" (an iteration or time limit stopped the job, 4),
+    /// "unsettled" (the loop decisions did not settle, 4), "questioned"
+    /// (a doubtful cluster or loops held back by their counts, 5) or
+    /// "cancelled" (130); the first that applies, in that order from
+    /// "cancelled" back to "questioned".
+    #[getter]
+    fn status(&self) -> &'static str {
+        self.solution.status().name()
+    }
+
     /// The job's warnings (`report["warnings"]`), e.g. that the loop
     /// decisions did not settle (loops with reason "unsettled"), that an
     /// accepted cluster is doubtful (`report["robust"]["doubtful"]`), that

@@ -82,4 +82,5 @@ def test_alpha_changes_the_verdict_not_the_decisions(grid, default):
     for k, pose in default.poses.items():
         assert all(abs(a - b) <= 1e-6 * max(1.0, abs(a)) for a, b in zip(strict.poses[k], pose))
     assert (default.verdict, strict.verdict) == ("passed", "failed")
+    assert (default.status, strict.status) == ("ok", "chi2_failed")
     assert strict.passed is False
