@@ -317,10 +317,12 @@ impl Solution {
             .verdict()
             .map_or("None".to_owned(), |v| format!("'{v}'"));
         format!(
-            "Result(poses={}, loops={}, accepted={accepted}, chi2={}, verdict={verdict})",
+            "Result(poses={}, loops={}, accepted={accepted}, chi2={}, verdict={verdict}, \
+             status='{}')",
             self.solution.ids().len(),
             loops.len(),
-            self.solution.chi2()
+            self.solution.chi2(),
+            self.status()
         )
     }
 }

@@ -85,6 +85,7 @@ def test_result_poses_array_and_accessors():
     assert loop["accepted"] and loop["weight"] >= 0.5 and isinstance(loop["reason"], str)
     assert isinstance(result.report, dict) and len(result.report["loops"]) == 1
     assert repr(result).startswith("Result(poses=6, loops=1, accepted=1, chi2=")
+    assert repr(result).endswith(", status='ok')")
 
 
 def test_3d_poses_array_is_n_by_7():
