@@ -702,8 +702,7 @@ impl LoopModel {
     /// on the stated information's when theirs is smaller
     /// ([`Self::decisive_ratio`]).
     fn kernel_edge(&self) -> f64 {
-        let c = super::default_c(super::RobustMethod::Em, self.dof);
-        (self.true_loops.mean - ln_chi2_mean(self.dof)).max(0.0) + 2.0 * c.ln()
+        (self.true_loops.mean - ln_chi2_mean(self.dof)).max(0.0) + 2.0 * em_c(self.dof).ln()
     }
 
     /// Tabulates the running minimum of the likelihood ratio from the true
@@ -798,6 +797,20 @@ impl LoopModel {
             let x = l.exp();
             x / (1.0 + x)
         }
+    }
+}
+
+/// EM's kernel width for innovations of dimension `dof`
+/// ([`super::default_c`]), its χ² quantile computed once per dimension:
+/// the decisions and the checks after them ask for it per candidate.
+fn em_c(dof: usize) -> f64 {
+    const CACHED: usize = 24;
+    static C: [std::sync::OnceLock<f64>; CACHED + 1] =
+        [const { std::sync::OnceLock::new() }; CACHED + 1];
+    let width = || super::default_c(super::RobustMethod::Em, dof);
+    match C.get(dof) {
+        Some(cell) => *cell.get_or_init(width),
+        None => width(),
     }
 }
 
