@@ -43,18 +43,10 @@ fn decisions_that_did_not_settle_exit_4() {
     let mit = dir.join("MIT.g2o");
     let aliased = mit_aliased(&dir, &work, 1_000_024, 10);
     let out = work.join("out.g2o");
-    let o = pgo(&[
-        "optimize",
-        aliased.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
-    let said: Vec<_> = (stderr(&o).lines())
-        .filter(|l| l.starts_with("pgo: the loop decisions did not settle"))
-        .map(str::to_owned)
-        .collect();
-    assert_eq!(said.len(), 1, "{}", stderr(&o));
+    let (code, said, err) =
+        optimize_saying(&aliased, &out, "pgo: the loop decisions did not settle");
+    assert_eq!(code, Some(4), "{err}");
+    assert_eq!(said.len(), 1, "{err}");
     assert!(out.exists());
     let o = pgo(&[
         "optimize",
@@ -111,22 +103,29 @@ fn questioned_decisions_exit_5() {
     ] {
         let aliased = mit_aliased(&dir, &work, seed, 20);
         let out = work.join("out.g2o");
-        let o = pgo(&[
-            "optimize",
-            aliased.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-        ]);
-        assert_eq!(o.status.code(), Some(5), "{seed}: {}", stderr(&o));
-        let err = stderr(&o);
-        let said: Vec<_> = (err.lines())
-            .filter(|l| {
-                l.starts_with("pgo: the map passed its χ² test, but the evidence questions")
-            })
-            .collect();
+        let questioned = "pgo: the map passed its χ² test, but the evidence questions";
+        let (code, said, err) = optimize_saying(&aliased, &out, questioned);
+        assert_eq!(code, Some(5), "{seed}: {err}");
         assert_eq!(said.len(), 1, "{seed}: {err}");
         assert!(said[0].contains(says), "{seed}: {}", said[0]);
         assert!(said[0].ends_with("exit status 5)"), "{}", said[0]);
         assert!(out.exists());
     }
+}
+
+/// `pgo optimize INPUT -o OUT`: its exit status, the lines of its stderr
+/// that start with `prefix`, and all of its stderr.
+fn optimize_saying(input: &Path, out: &Path, prefix: &str) -> (Option<i32>, Vec<String>, String) {
+    let o = pgo(&[
+        "optimize",
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let err = stderr(&o);
+    let said = (err.lines())
+        .filter(|l| l.starts_with(prefix))
+        .map(str::to_owned)
+        .collect();
+    (o.status.code(), said, err)
 }
