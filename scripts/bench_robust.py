@@ -321,6 +321,7 @@ def run_pgo(args, path, flags, out_g2o):
         # Accepted clusters a passing map cannot vouch for (each warns).
         "doubtful": len(r["robust"].get("doubtful", [])),
         "held_back": len(r["robust"].get("held_back", [])),
+        "outlying": len(r["robust"].get("outlying", [])),
         "warnings": r.get("warnings", []),
         "gate_threshold": r["gate"].get("threshold"),
         "degenerate": r["gate"].get("degenerate"),

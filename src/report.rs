@@ -16,7 +16,7 @@ pub use crate::gate::{
     Degeneracy, DegeneratePolicy, EmStart, GateMode, LogNormalMixture, Separation, TwoNormals,
 };
 pub use crate::robust::{
-    DOUBT_MOVE, Doubt, HeldBack, Layers, LoopModel, Reason, RobustMethod, Search, Suspect,
+    DOUBT_MOVE, Doubt, HeldBack, Layers, LoopModel, Outlying, Reason, RobustMethod, Search, Suspect,
 };
 pub use crate::solve::init::Initialization;
 pub use crate::solve::{StopReason, Timing};
@@ -325,6 +325,11 @@ pub struct RobustReport {
     /// them out, and whose addition would move the map by more than
     /// [`DOUBT_MOVE`] of its size (docs/method.md §7).
     pub held_back: Vec<HeldBack>,
+    /// EM: the accepted loops of a passing map, by cluster, whose
+    /// innovations lie beyond what its true loops reach (at the χ² test's
+    /// α over the loops tested) and whose removal would move the map by
+    /// more than [`DOUBT_MOVE`] of its size (docs/method.md §7).
+    pub outlying: Vec<Outlying>,
 }
 
 impl RobustReport {
@@ -517,10 +522,11 @@ pub enum MapStatus {
     /// does not confirm. Exit status 4.
     Unsettled,
     /// The map passed its χ² test with settled decisions, but the evidence
-    /// questions some: a doubtful cluster ([`RobustReport::doubtful`]) or
-    /// loops held back by their counts ([`RobustReport::held_back`]),
-    /// either of which reversed would move the map by over
-    /// [`DOUBT_MOVE`] of its size. Exit status 5.
+    /// questions some: a doubtful cluster ([`RobustReport::doubtful`]),
+    /// loops held back by their counts ([`RobustReport::held_back`]) or
+    /// accepted loops beyond the true loops' reach
+    /// ([`RobustReport::outlying`]), any of which reversed would move the
+    /// map by over [`DOUBT_MOVE`] of its size. Exit status 5.
     Questioned,
     /// A cancellation ([`crate::Cancel`]) stopped the job: the best map so
     /// far. Exit status 130 (Ctrl-C).
@@ -587,7 +593,10 @@ impl Report {
             MapStatus::Unfinished
         } else if self.loops.iter().any(|l| l.reason == Reason::Unsettled) {
             MapStatus::Unsettled
-        } else if !robust.doubtful.is_empty() || !robust.held_back.is_empty() {
+        } else if !(robust.doubtful.is_empty()
+            && robust.held_back.is_empty()
+            && robust.outlying.is_empty())
+        {
             MapStatus::Questioned
         } else {
             MapStatus::Ok

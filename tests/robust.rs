@@ -106,6 +106,7 @@ fn degenerate_counts_are_flagged_before_optimisation_or_fail_the_chi2_test() {
             // loops' population lies further out), but no true loop falls
             // there — beyond EM's kernel on the true loops' scale.
             assert!(r.robust.held_back.is_empty(), "{:?}", r.robust.held_back);
+            assert!(r.robust.outlying.is_empty(), "{:?}", r.robust.outlying);
         }
     }
 }
@@ -652,6 +653,14 @@ fn young_maps_keep_their_loops() {
 fn the_status_is_the_first_thing_that_questions_the_map() {
     let mut r = run(&sample("aliased.g2o"), &Options::default());
     assert_eq!(r.status(), MapStatus::Ok, "{:?}", r.warnings);
+    r.robust.outlying.push(pgo::report::Outlying {
+        loops: vec![0],
+        p_value: 0.01,
+        map_moves: 0.02,
+    });
+    assert_eq!(r.status(), MapStatus::Questioned);
+    r.robust.outlying.clear();
+    assert_eq!(r.status(), MapStatus::Ok);
     r.robust.held_back.push(pgo::report::HeldBack {
         loops: vec![0],
         map_moves: 0.02,

@@ -6,7 +6,8 @@
 //! update's solution is compared with `optimize()` of the same graph:
 //!
 //! * the same accepted set, the same χ² verdict, the same doubtful
-//!   clusters and the same loops held back by their counts;
+//!   clusters, the same loops held back by their counts and the same
+//!   outlying accepted loops;
 //! * χ² within 10⁻⁶ of the batch's, relatively;
 //! * every position within 10⁻⁶ of the map's size (the diagonal of the
 //!   batch map's bounding box) and every rotation within 10⁻⁶ rad.
@@ -80,15 +81,17 @@ fn compare<P: GraphPose<D>, const D: usize>(u: &Solution<P>, b: &Solution<P>) ->
             b.passed()
         ));
     }
-    // The loops of each doubtful cluster, and of each cluster held back.
-    let named = |s: &Solution<P>| -> [Vec<Vec<usize>>; 2] {
+    // The loops of each doubtful cluster, of each cluster held back, and
+    // of each outlying cluster.
+    let named = |s: &Solution<P>| -> [Vec<Vec<usize>>; 3] {
         let robust = &s.report().robust;
         [
             robust.doubtful.iter().map(|d| d.loops.clone()).collect(),
             robust.held_back.iter().map(|h| h.loops.clone()).collect(),
+            robust.outlying.iter().map(|o| o.loops.clone()).collect(),
         ]
     };
-    let kinds = ["doubtful clusters", "loops held back"];
+    let kinds = ["doubtful clusters", "loops held back", "outlying loops"];
     for ((kind, nu), nb) in kinds.iter().zip(named(u)).zip(named(b)) {
         if nu != nb {
             out.push(format!("{kind} {nu:?} vs batch {nb:?}"));

@@ -178,9 +178,10 @@ typedef enum PgoMapStatus {
    */
   PGO_MAP_UNSETTLED,
   /**
-   * Passed with settled decisions, but a doubtful cluster or loops held
-   * back by their counts would each move the map by over 1 % (the
-   * report's `robust.doubtful`, `robust.held_back`; exit status 5).
+   * Passed with settled decisions, but a doubtful cluster, loops held
+   * back by their counts or outlying accepted loops would each move the
+   * map by over 1 % (the report's `robust.doubtful`, `robust.held_back`,
+   * `robust.outlying`; exit status 5).
    */
   PGO_MAP_QUESTIONED,
   /**

@@ -624,9 +624,10 @@ pub enum PgoMapStatus {
     /// The loop decisions did not settle (loops `"unsettled"`; exit
     /// status 4).
     PgoMapUnsettled,
-    /// Passed with settled decisions, but a doubtful cluster or loops held
-    /// back by their counts would each move the map by over 1 % (the
-    /// report's `robust.doubtful`, `robust.held_back`; exit status 5).
+    /// Passed with settled decisions, but a doubtful cluster, loops held
+    /// back by their counts or outlying accepted loops would each move the
+    /// map by over 1 % (the report's `robust.doubtful`, `robust.held_back`,
+    /// `robust.outlying`; exit status 5).
     PgoMapQuestioned,
     /// A `PgoCancel` token stopped the job: the best map so far (exit
     /// status 130).

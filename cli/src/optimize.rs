@@ -91,8 +91,9 @@ const BUDGET_STATUS: u8 = 4;
 
 /// The exit status of `pgo optimize` when the map passed its χ² test with
 /// settled decisions but the evidence questions some of them: an accepted
-/// cluster is doubtful (`robust.doubtful`) or rejected loops were held back
-/// by their counts alone (`robust.held_back`), either moving the map by
+/// cluster is doubtful (`robust.doubtful`), rejected loops were held back
+/// by their counts alone (`robust.held_back`) or accepted loops err beyond
+/// the true loops' reach (`robust.outlying`), any of them moving the map by
 /// over 1 % of its size. The map is written; a script can tell it from a
 /// map nothing questions.
 const QUESTIONED_STATUS: u8 = 5;
@@ -287,26 +288,24 @@ fn write_covariances(
 
 /// The decisions of a finished job the evidence questions (the accepted
 /// loops of doubtful clusters, the rejected loops held back by their
-/// counts), in words.
+/// counts, the outlying accepted loops), in words.
 fn questioned(report: &Report) -> String {
-    let loops = |n: usize| if n == 1 { "loop" } else { "loops" };
-    let doubtful: usize = (report.robust.doubtful.iter()).map(|d| d.loops.len()).sum();
-    let held: usize = (report.robust.held_back.iter())
-        .map(|h| h.loops.len())
-        .sum();
-    let mut parts = Vec::new();
-    if doubtful > 0 {
-        parts.push(format!(
-            "{doubtful} accepted {} in doubtful clusters",
-            loops(doubtful)
-        ));
-    }
-    if held > 0 {
-        parts.push(format!(
-            "{held} rejected {} held back by their counts",
-            loops(held)
-        ));
-    }
+    let robust = &report.robust;
+    let doubtful: usize = robust.doubtful.iter().map(|d| d.loops.len()).sum();
+    let held: usize = robust.held_back.iter().map(|h| h.loops.len()).sum();
+    let outlying: usize = robust.outlying.iter().map(|o| o.loops.len()).sum();
+    let parts: Vec<String> = [
+        (doubtful, "accepted", "in doubtful clusters"),
+        (held, "rejected", "held back by their counts"),
+        (outlying, "accepted", "beyond the true loops' reach"),
+    ]
+    .into_iter()
+    .filter(|&(n, _, _)| n > 0)
+    .map(|(n, decided, what)| {
+        let loops = if n == 1 { "loop" } else { "loops" };
+        format!("{n} {decided} {loops} {what}")
+    })
+    .collect();
     parts.join(" and ")
 }
 
@@ -431,8 +430,8 @@ fn status_line(args: &OptimizeArgs, report: &Report) -> Option<(u8, String)> {
         pgo::MapStatus::Questioned => {
             let line = format!(
                 "pgo: the map passed its χ² test, but the evidence questions {}: reversing those \
-                 decisions would move the map by over 1 % of its size; see robust.doubtful and \
-                 robust.held_back in the JSON report",
+                 decisions would move the map by over 1 % of its size; see robust.doubtful, \
+                 robust.held_back and robust.outlying in the JSON report",
                 questioned(report)
             );
             (QUESTIONED_STATUS, line)

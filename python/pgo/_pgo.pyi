@@ -205,10 +205,10 @@ class Result:
         """Whether a Cancel token stopped the job (the best map so far)."""
     @property
     def status(self) -> str:
-        """How far the map can be taken as it is, as `pgo optimize`'s exit status says: "ok" (0), "chi2_failed" (3), "unfinished" (4), "unsettled" (4), "questioned" (a doubtful cluster or loops held back, 5) or "cancelled" (130)."""
+        """How far the map can be taken as it is, as `pgo optimize`'s exit status says: "ok" (0), "chi2_failed" (3), "unfinished" (4), "unsettled" (4), "questioned" (a doubtful cluster, loops held back or outlying accepted loops, 5) or "cancelled" (130)."""
     @property
     def warnings(self) -> List[str]:
-        """The job's warnings (report["warnings"]): e.g. that the loop decisions did not settle (loops with reason "unsettled"), an accepted cluster the map cannot vouch for (report["robust"]["doubtful"]), or rejected loops kept out by their counts alone that would move the map (report["robust"]["held_back"])."""
+        """The job's warnings (report["warnings"]): e.g. that the loop decisions did not settle (loops with reason "unsettled"), an accepted cluster the map cannot vouch for (report["robust"]["doubtful"]), rejected loops kept out by their counts alone that would move the map (report["robust"]["held_back"]), or accepted loops beyond the true loops' reach that move it (report["robust"]["outlying"])."""
     def certificate(self) -> Dict[str, Any]:
         """Certificate of global optimality of the map (certified, eta, cost, map_cost, gap_bound, max_translation_change, max_rotation_change, lambda_min, lambda_min_bounds, eigenvector_poses, time)."""
     def write_g2o(self, path: Union[str, os.PathLike[str]]) -> None:

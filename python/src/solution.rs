@@ -171,7 +171,8 @@ impl Solution {
     /// status says it: "ok" (nothing questions it, exit 0), "chi2_failed"
     /// (3), "unfinished" (an iteration or time limit stopped the job, 4),
     /// "unsettled" (the loop decisions did not settle, 4), "questioned"
-    /// (a doubtful cluster or loops held back by their counts, 5) or
+    /// (a doubtful cluster, loops held back by their counts or outlying
+    /// accepted loops, 5) or
     /// "cancelled" (130); the first that applies, in that order from
     /// "cancelled" back to "questioned".
     #[getter]
@@ -183,7 +184,9 @@ impl Solution {
     /// decisions did not settle (loops with reason "unsettled"), that an
     /// accepted cluster is doubtful (`report["robust"]["doubtful"]`), that
     /// rejected loops were kept out by their counts alone
-    /// (`report["robust"]["held_back"]`), that no candidate was accepted,
+    /// (`report["robust"]["held_back"]`), that accepted loops err beyond
+    /// the true loops' reach (`report["robust"]["outlying"]`), that no
+    /// candidate was accepted,
     /// or why there is no χ² test.
     #[getter]
     fn warnings(&self) -> Vec<String> {

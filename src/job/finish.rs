@@ -5,7 +5,9 @@ use super::{Error, Settings};
 use crate::graph::Graph;
 use crate::io::g2o::G2oPose;
 use crate::report::{InitializationReport, LoopReport, OptimizerReport, Report, RobustReport};
-use crate::robust::{self, Candidate, Doubt, HeldBack, Outcome, Reason, RobustMethod, Test};
+use crate::robust::{
+    self, Candidate, Doubt, HeldBack, Outcome, Outlying, Reason, RobustMethod, Test,
+};
 use crate::solve::init::{ChordalInit, Initialization, initialize as init_poses};
 use crate::solve::{
     Budget, Observer, Optimizer, PhaseTimes, Session, SolveError, SolveSettings, Summary,
@@ -220,6 +222,7 @@ fn robust_report(
         unsettled: outcome.unsettled,
         doubtful: outcome.doubtful.clone(),
         held_back: outcome.held_back.clone(),
+        outlying: outcome.outlying.clone(),
     }
 }
 
@@ -273,6 +276,7 @@ fn decision_warnings(outcome: &Outcome, loops: &[LoopReport]) -> Vec<String> {
             .iter()
             .map(|h| held_back_warning(h, loops)),
     );
+    warnings.extend(outcome.outlying.iter().map(|o| outlying_warning(o, loops)));
     warnings
 }
 
@@ -318,6 +322,29 @@ fn held_back_warning(held: &HeldBack, loops: &[LoopReport]) -> String {
          verification scored low looks like this; check them (`robust.held_back` in the JSON \
          report)",
         100.0 * held.map_moves
+    )
+}
+
+/// The warning of accepted loops beyond the true loops' reach
+/// ([`crate::robust::Outlying`]): the loops by their ends, and what
+/// removing them would do to the map.
+fn outlying_warning(outlying: &Outlying, loops: &[LoopReport]) -> String {
+    let ends = |k: usize| format!("{}–{}", loops[k].from, loops[k].to);
+    let (first, last) = (outlying.loops[0], outlying.loops[outlying.loops.len() - 1]);
+    let (listed, them) = match outlying.loops.len() {
+        1 => (format!("1 accepted loop ({}) errs", ends(first)), "it"),
+        n => (
+            format!("{n} accepted loops ({} … {}) err", ends(first), ends(last)),
+            "them",
+        ),
+    };
+    format!(
+        "{listed} by more than any true loop of this map should (p = {:.1e} over the \
+         accepted loops), and removing {them} would move a pose by {:.1} % of the map's size. \
+         A wrong loop the map has bent to fit looks like this; check them \
+         (`robust.outlying` in the JSON report)",
+        outlying.p_value,
+        100.0 * outlying.map_moves
     )
 }
 

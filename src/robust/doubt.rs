@@ -45,8 +45,10 @@
 
 use super::clusters;
 use super::innovation::{Evaluation, Innovations};
+use super::model::LoopModel;
 use super::{Candidate, Layers};
 use crate::geometry::Pose;
+use crate::graph::Graph;
 use crate::solve::{Session, SolveError};
 use serde::Serialize;
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
@@ -88,6 +90,22 @@ pub struct HeldBack {
     /// loop.
     pub loops: Vec<usize>,
     /// The largest move of a pose's position that adding them would make
+    /// (to first order), as a share of the map's size.
+    pub map_moves: f64,
+}
+
+/// Accepted candidates of one cluster whose innovations lie beyond what
+/// the true loops reach, and that move the map (module doc).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Outlying {
+    /// The candidates (indices among the loop candidates), all accepted.
+    pub loops: Vec<usize>,
+    /// The chance that some true loop among the accepted candidates tested
+    /// has an innovation as large as the largest of these: their least
+    /// upper-tail probability under the true loops' fitted density, times
+    /// the candidates tested (at most 1).
+    pub p_value: f64,
+    /// The largest move of a pose's position that removing them would make
     /// (to first order), as a share of the map's size.
     pub map_moves: f64,
 }
@@ -212,17 +230,7 @@ pub fn held_back<P: Pose<D>, const D: usize>(
         return Ok(Vec::new());
     }
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
-    let groups: Vec<Vec<usize>> = if layers.clusters {
-        (clusters::of_edges(graph, &edges).into_iter())
-            .map(|c| c.into_iter().filter(|&k| held[k]).collect::<Vec<_>>())
-            .filter(|c| !c.is_empty())
-            .collect()
-    } else {
-        (0..held.len())
-            .filter(|&k| held[k])
-            .map(|k| vec![k])
-            .collect()
-    };
+    let groups = of_clusters(graph, &edges, held, layers.clusters);
     let mut eval = Evaluation::for_clusters(session.optimizer, graph, weights, (&edges, &groups))?;
     let mut held_back = Vec::new();
     for loops in groups {
@@ -235,6 +243,91 @@ pub fn held_back<P: Pose<D>, const D: usize>(
         }
     }
     Ok(held_back)
+}
+
+/// The outlying candidates (module doc) of the map in the session's graph,
+/// solved with the edges of non-zero `weights`: of the `accepted`
+/// candidates with an innovation (`nu2`), `K` of them, those whose upper
+/// tail under the true loops' density of `model` is below `alpha / K`
+/// (the χ² test's α over the candidates tested), outside the clusters
+/// already named `doubtful`; of each cluster together (each alone with the
+/// clusters layer off), those whose removal would move the map by more
+/// than [`DOUBT_MOVE`] of its size.
+pub fn outlying<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &[f64],
+    (candidates, accepted): (&[Candidate], &[bool]),
+    (nu2, model): (&[Option<f64>], &LoopModel),
+    (layers, alpha, doubtful): (&Layers, f64, &[Doubt]),
+) -> Result<Vec<Outlying>, SolveError> {
+    let graph = &*session.graph;
+    let size = map_size(graph.poses.iter().map(|p| p.position()));
+    let mut tested: Vec<(usize, f64)> = (0..candidates.len())
+        .filter(|&k| accepted[k])
+        .filter_map(|k| nu2[k].filter(|&v| v > 0.0).map(|v| (k, v)))
+        .collect();
+    let named: Vec<usize> = doubtful.iter().flat_map(|d| d.loops.clone()).collect();
+    let level = alpha / tested.len().max(1) as f64;
+    // From the largest innovation down, while the tail stays below the level.
+    tested.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let mut p_value = vec![1.0; candidates.len()];
+    for &(k, v) in &tested {
+        let tail = model.true_upper_tail(v.ln());
+        if tail >= level {
+            break;
+        }
+        if !named.contains(&k) {
+            p_value[k] = tail * tested.len() as f64;
+        }
+    }
+    let flagged: Vec<bool> = p_value.iter().map(|&p| p < alpha).collect();
+    if size <= 0.0 || !flagged.contains(&true) {
+        return Ok(Vec::new());
+    }
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    let groups = of_clusters(graph, &edges, &flagged, layers.clusters);
+    let mut eval = Evaluation::for_clusters(session.optimizer, graph, weights, (&edges, &groups))?;
+    let mut outlying = Vec::new();
+    for loops in groups {
+        let Some(g) = eval.removing(&edges, &loops) else {
+            continue;
+        };
+        let map_moves = eval.largest_move(&g) / size;
+        let p_value = loops.iter().map(|&k| p_value[k]).fold(1.0, f64::min);
+        log::debug!(
+            "outlying loops {loops:?}: p = {p_value:.2e}, removing them moves the map by {:.2} %",
+            100.0 * map_moves
+        );
+        if map_moves > DOUBT_MOVE {
+            outlying.push(Outlying {
+                loops,
+                p_value,
+                map_moves,
+            });
+        }
+    }
+    Ok(outlying)
+}
+
+/// The candidates `marked` grouped by their clusters among the candidates
+/// `edges` of `graph`, or each alone without the clusters layer.
+fn of_clusters<P: Pose<D>, const D: usize>(
+    graph: &Graph<P, D>,
+    edges: &[usize],
+    marked: &[bool],
+    clusters: bool,
+) -> Vec<Vec<usize>> {
+    if clusters {
+        (clusters::of_edges(graph, edges).into_iter())
+            .map(|c| c.into_iter().filter(|&k| marked[k]).collect::<Vec<_>>())
+            .filter(|c| !c.is_empty())
+            .collect()
+    } else {
+        (0..marked.len())
+            .filter(|&k| marked[k])
+            .map(|k| vec![k])
+            .collect()
+    }
 }
 
 /// The F statistic of one offset shared by `members` errors of dimension

@@ -249,6 +249,22 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         })
     }
 
+    /// `J_Aᵀ·S⁻¹·e_A` by variable block for candidates `members` (indices
+    /// of `edges`) in the map, `S = Σ_A − J_A·H⁻¹·J_Aᵀ`: `H⁻¹` of it is how
+    /// the map would move, to first order, without them (module doc).
+    /// `None` where a covariance is singular or nothing else checks them
+    /// (`S` singular).
+    pub fn removing(&self, edges: &[usize], members: &[usize]) -> Option<Vec<f64>> {
+        let lin = self.linearise(edges, members);
+        let gram = self.gram(&lin.jacobians, &mut GroupScratch::default());
+        let sigma = (lin.covariances.iter().copied()).collect::<Option<Vec<_>>>()?;
+        let l = cholesky_of_s(&sigma, &gram, D * members.len())?;
+        // S⁻¹·e_A = L⁻ᵀ·L⁻¹·e_A.
+        let (mut s_inv_e, _) = whiten(l.as_ref(), &lin.errors);
+        solve_upper_triangular_in_place(l.transpose(), s_inv_e.as_mut(), Par::Seq);
+        Some(self.gradient(&lin.jacobians, s_inv_e.as_ref()))
+    }
+
     /// `J_Rᵀ·C⁻¹·e_R` by variable block for candidates `members` (indices
     /// of `edges`) outside the map, `C = Σ_R + J_R·H⁻¹·J_Rᵀ` the
     /// covariance of their errors `e_R`: `H⁻¹` of it is how the map would

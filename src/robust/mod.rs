@@ -26,7 +26,7 @@ mod schedule;
 mod search;
 mod starts;
 
-pub use doubt::{DOUBT_MOVE, Doubt, HeldBack};
+pub use doubt::{DOUBT_MOVE, Doubt, HeldBack, Outlying};
 pub use model::{LoopModel, Scale};
 pub use schedule::{Proposal, Swing};
 pub use search::{MAX_REMOVALS, Search, Suspect, Test};
@@ -284,6 +284,9 @@ pub struct Outcome {
     /// EM: the rejected candidates of a passing map that their counts
     /// alone kept out and that would move it ([`doubt`]).
     pub held_back: Vec<HeldBack>,
+    /// EM: the accepted candidates of a passing map whose innovations lie
+    /// beyond the true loops' and that move it ([`doubt`]).
+    pub outlying: Vec<Outlying>,
     /// EM: the common offsets of the clusters at the map kept, from the
     /// decisions' evaluation of it, with the set it judged.
     offsets: Option<(Vec<bool>, Vec<doubt::Offset>)>,
@@ -311,6 +314,7 @@ impl Outcome {
             unsettled: false,
             doubtful: Vec::new(),
             held_back: Vec::new(),
+            outlying: Vec::new(),
             offsets: None,
         }
     }
@@ -363,7 +367,7 @@ pub fn solve<P: ChordalInit<D>, const D: usize>(
     match method {
         RobustMethod::Em if n >= MIN_CANDIDATES => {
             out = starts::em(session, weights, job)?;
-            (out.doubtful, out.held_back) = doubts(session, weights, job, &out);
+            doubts(session, weights, job, &mut out);
         }
         RobustMethod::None => {
             session.converge(weights)?;
@@ -486,7 +490,7 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
         if out.swung {
             return Ok((out, false));
         }
-        (out.doubtful, out.held_back) = doubts(session, weights, job, &out);
+        doubts(session, weights, job, &mut out);
     }
     for (k, cand) in candidates.iter().enumerate() {
         out.weights[k] = weights[cand.edge];
@@ -495,27 +499,28 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
     Ok((out, false))
 }
 
-/// The doubtful clusters and the candidates held back by their counts
-/// ([`doubt`]) of EM's end in the session (the accepted set in `weights`,
-/// the evaluation of it in `out`), when its map passes the χ² test, its
-/// decisions settled and the budget did not cut it short. Where a
-/// candidate is `unsettled` the map already warns that its decisions are
-/// unconfirmed, and the loops it holds wrongly bend the true clusters
-/// around them, whose offsets then stand out by the dozen (sphere2500
-/// seed 6 of the places sweep, published: 44 clusters of 1,351 loops, 11
-/// of them the aliases). They advise: a factorisation that fails
-/// here (the map was just solved with the same edges) finds none.
+/// The doubtful clusters, the candidates held back by their counts and
+/// the outlying accepted candidates ([`doubt`]) of EM's end in the session
+/// (the accepted set in `weights`, the evaluation of it in `out`), when its
+/// map passes the χ² test, its decisions settled and the budget did not
+/// cut it short; they are written into `out`. Where a candidate is
+/// `unsettled` the map already warns that its decisions are unconfirmed,
+/// and the loops it holds wrongly bend the true clusters around them,
+/// whose offsets then stand out by the dozen (sphere2500 seed 6 of the
+/// places sweep, published: 44 clusters of 1,351 loops, 11 of them the
+/// aliases). They advise: a factorisation that fails here (the map was
+/// just solved with the same edges) finds none.
 fn doubts<P: Pose<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &[f64],
     job: &Job<'_, P, D>,
-    out: &Outcome,
-) -> (Vec<Doubt>, Vec<HeldBack>) {
+    out: &mut Outcome,
+) {
     let test = (job.test)(session.graph, weights);
     let settled = !out.unsettled && !out.reasons.contains(&Reason::Unsettled);
     let finished = !out.cut_short && !session.exhausted();
     let Some(t) = test.filter(|t| t.passed && settled && finished) else {
-        return (Vec::new(), Vec::new());
+        return;
     };
     let accepted: Vec<bool> = (job.candidates.iter())
         .map(|c| weights[c.edge] >= 0.5)
@@ -524,26 +529,35 @@ fn doubts<P: Pose<D>, const D: usize>(
         .filter(|(set, _)| *set == accepted)
         .map(|(_, offsets)| offsets.as_slice());
     let ends = (job.candidates, accepted.as_slice());
-    let doubtful = doubt::doubtful(session, weights, ends, (job.layers, t.alpha), known)
+    let advise = |what: &str, e: SolveError| log::debug!("no {what} sought: {e}");
+    out.doubtful = doubt::doubtful(session, weights, ends, (job.layers, t.alpha), known)
         .unwrap_or_else(|e| {
-            log::debug!("no doubtful clusters sought: {e}");
+            advise("doubtful clusters", e);
             Vec::new()
         });
+    let Some(model) = out.model.as_ref() else {
+        return;
+    };
     // Rejected by the posterior although the innovation alone speaks for a
     // true loop: the count decided.
     let held: Vec<bool> = (0..job.candidates.len())
         .map(|k| {
-            let speaks = (out.model.as_ref().zip(out.innovations[k]))
-                .is_some_and(|(m, nu2)| nu2 > 0.0 && m.speaks_for_a_true_loop(nu2.ln()));
+            let speaks = (out.innovations[k])
+                .is_some_and(|nu2| nu2 > 0.0 && model.speaks_for_a_true_loop(nu2.ln()));
             out.reasons[k] == Reason::Inconsistent && speaks
         })
         .collect();
-    let held_back = doubt::held_back(session, weights, (job.candidates, &held), job.layers)
+    out.held_back = doubt::held_back(session, weights, (job.candidates, &held), job.layers)
         .unwrap_or_else(|e| {
-            log::debug!("no candidates held back sought: {e}");
+            advise("candidates held back", e);
             Vec::new()
         });
-    (doubtful, held_back)
+    let tests = (job.layers, t.alpha, out.doubtful.as_slice());
+    out.outlying = doubt::outlying(session, weights, ends, (&out.innovations, model), tests)
+        .unwrap_or_else(|e| {
+            advise("outlying candidates", e);
+            Vec::new()
+        });
 }
 
 /// EM from an accepted set: decisions by innovation until the set repeats

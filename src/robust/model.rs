@@ -754,6 +754,12 @@ impl LoopModel {
         self.true_loops(&LogChi2::of(self.dof)).ln(y).exp()
     }
 
+    /// `P(Y ≥ y)` for a true loop's `y = ln ν²`: the share of true loops
+    /// whose innovations are at least as large.
+    pub fn true_upper_tail(&self, y: f64) -> f64 {
+        self.true_loops(&LogChi2::of(self.dof)).upper_tail(y)
+    }
+
     /// The wrong loops' density of `y = ln ν²`, `f_wrong(y)` (all their
     /// populations, or uniform over the span without one).
     pub fn wrong_density(&self, y: f64) -> f64 {

@@ -17,6 +17,7 @@
 //! table of it, computed once per dimension ([`LogChi2::of`]).
 
 use super::mixture::log_normal_pdf;
+use statrs::function::erf::erfc;
 use statrs::function::gamma::ln_gamma;
 use std::sync::OnceLock;
 
@@ -211,6 +212,11 @@ impl Density<'_> {
 }
 
 impl Density<'_> {
+    /// `P(Y ≥ y)`: the mass of the density from `y` up.
+    pub fn upper_tail(&self, y: f64) -> f64 {
+        self.blended().upper_tail(y)
+    }
+
     /// This density with its two rows of the table blended into one, for
     /// evaluating it at many `y`: the same `ln f` up to rounding (linear
     /// interpolation between the rows and between the columns commute), at
@@ -245,6 +251,69 @@ impl Blended {
             Blended::Row { row, mean } => row_at(row, y - mean),
         }
     }
+
+    /// `P(Y ≥ y)`: the mass of the density from `y` up, integrated exactly
+    /// over the piecewise log-linear `ln f` that [`Blended::ln`] evaluates
+    /// (the line beyond the table's last column included), at most 1.
+    pub fn upper_tail(&self, y: f64) -> f64 {
+        match self {
+            Blended::Normal { mean, sigma } => {
+                0.5 * erfc((y - mean) / (sigma * std::f64::consts::SQRT_2))
+            }
+            Blended::Row { row, mean } => row_upper_tail(row, y - mean).min(1.0),
+        }
+    }
+}
+
+/// `∫ₓ^∞ f` of one row's piecewise log-linear `ln f` ([`row_at`]): each
+/// step from `x` on exactly, then the line beyond the last column (a tail
+/// falling as `e^{b·x}`, `b < 0`, has mass `f/|b|` beyond).
+fn row_upper_tail(row: &[f64], x: f64) -> f64 {
+    let n = row.len();
+    let right = -LEFT + (n - 1) as f64 * STEP;
+    let slope = (row[n - 1] - row[n - 2]) / STEP;
+    let beyond = |from: f64| {
+        let f = row_at(row, from).exp();
+        match f {
+            0.0 => 0.0,
+            _ if slope < 0.0 => f / -slope,
+            _ => f64::INFINITY,
+        }
+    };
+    if x >= right {
+        return beyond(x);
+    }
+    // ∫ of e^{ln f} over [a, b] where ln f runs linearly from la to lb.
+    let segment = |(a, la): (f64, f64), (b, lb): (f64, f64)| {
+        let (fa, fb) = (la.exp(), lb.exp());
+        let d = lb - la;
+        if fa == 0.0 && fb == 0.0 {
+            0.0
+        } else if d.abs() < 1e-9 {
+            (b - a) * 0.5 * (fa + fb)
+        } else {
+            (b - a) * (fb - fa) / d
+        }
+    };
+    let first = ((x + LEFT) / STEP).floor().max(0.0) as usize + 1;
+    let column = |j: usize| -LEFT + j as f64 * STEP;
+    // Below the table the line through its first two columns, as `row_at`.
+    let start = x.max(-LEFT);
+    let mut mass = if x < -LEFT {
+        let slope = (row[1] - row[0]) / STEP;
+        if slope > 0.0 {
+            (row[0].exp() - row_at(row, x).exp()) / slope
+        } else {
+            f64::INFINITY
+        }
+    } else {
+        0.0
+    };
+    mass += segment((start, row_at(row, start)), (column(first), row[first]));
+    for j in first..n - 1 {
+        mass += segment((column(j), row[j]), (column(j + 1), row[j + 1]));
+    }
+    mass + beyond(right)
 }
 
 /// One row's `ln f` at `x = y − mean`: linear between columns, continued

@@ -137,3 +137,50 @@ fn the_blended_row_is_the_density_it_was_blended_from() {
         }
     }
 }
+
+#[test]
+fn the_upper_tail_of_one_scale_is_the_chi2_survival_function() {
+    use statrs::distribution::ContinuousCDF;
+    for dof in [3, 6] {
+        let table = LogChi2::of(dof);
+        let chi2 = ChiSquared::new(dof as f64).unwrap();
+        let ln_s2: f64 = -2.3;
+        let density = table.with(ln_s2 + ln_chi2_mean(dof), ln_chi2_sigma(dof));
+        // From the bulk far out into the tail where the loop model tests
+        // the accepted loops (10⁻⁸).
+        for y in [-6.0, -3.0, -1.0, 0.0, 0.5, 1.0, 1.5, 2.0] {
+            let exact = chi2.sf((y - ln_s2).exp());
+            let got = density.upper_tail(y);
+            assert!(
+                (got / exact - 1.0).abs() < 2e-2,
+                "{dof} {y}: {got} against {exact}"
+            );
+        }
+        assert!((density.upper_tail(-40.0) - 1.0).abs() < 1e-3);
+    }
+}
+
+#[test]
+fn the_upper_tail_is_the_mass_above_and_falls_with_y() {
+    for dof in [3, 6] {
+        let table = LogChi2::of(dof);
+        for sigma in [1.2, 2.0, 4.5] {
+            let density = table.with(1.0, sigma);
+            // The midpoint rule on ln f from y up, against the tail.
+            let h = 1e-3;
+            let mut previous = f64::INFINITY;
+            for y in [-3.0, 0.0, 1.0, 3.0, 5.0, 8.0] {
+                let mass: f64 = (0..40_000)
+                    .map(|i| (table.ln_density(y + (i as f64 + 0.5) * h, 1.0, sigma)).exp() * h)
+                    .sum();
+                let tail = density.upper_tail(y);
+                assert!(
+                    (tail - mass).abs() < 1e-4 * mass.max(1e-3),
+                    "{dof} {sigma} {y}: {tail} against {mass}"
+                );
+                assert!(tail < previous);
+                previous = tail;
+            }
+        }
+    }
+}
