@@ -262,22 +262,15 @@ pub fn outlying<P: Pose<D>, const D: usize>(
 ) -> Result<Vec<Outlying>, SolveError> {
     let graph = &*session.graph;
     let size = map_size(graph.poses.iter().map(|p| p.position()));
-    let mut tested: Vec<(usize, f64)> = (0..candidates.len())
+    let tested: Vec<(usize, f64)> = (0..candidates.len())
         .filter(|&k| accepted[k])
         .filter_map(|k| nu2[k].filter(|&v| v > 0.0).map(|v| (k, v)))
         .collect();
     let named: Vec<usize> = doubtful.iter().flat_map(|d| d.loops.clone()).collect();
-    let level = alpha / tested.len().max(1) as f64;
-    // From the largest innovation down, while the tail stays below the level.
-    tested.sort_by(|a, b| b.1.total_cmp(&a.1));
     let mut p_value = vec![1.0; candidates.len()];
-    for &(k, v) in &tested {
-        let tail = model.true_upper_tail(v.ln());
-        if tail >= level {
-            break;
-        }
+    for (k, p) in model.beyond_reach(&tested, alpha) {
         if !named.contains(&k) {
-            p_value[k] = tail * tested.len() as f64;
+            p_value[k] = p;
         }
     }
     let flagged: Vec<bool> = p_value.iter().map(|&p| p < alpha).collect();

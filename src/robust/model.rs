@@ -760,6 +760,25 @@ impl LoopModel {
         self.true_loops(&LogChi2::of(self.dof)).upper_tail(y)
     }
 
+    /// The candidates among `tested` (each its index and `ν²`), all taken
+    /// as true loops, whose innovations lie beyond the true loops' reach:
+    /// their upper tail ([`Self::true_upper_tail`]) below `alpha` over the
+    /// number tested (Bonferroni: were they all true, the largest would
+    /// fall there with a chance of at most `alpha`). Each with its
+    /// p-value, that number times its tail; the largest innovation first.
+    pub fn beyond_reach(&self, tested: &[(usize, f64)], alpha: f64) -> Vec<(usize, f64)> {
+        let n = tested.len() as f64;
+        let mut by_size: Vec<(usize, f64)> = (tested.iter().copied())
+            .filter(|&(_, nu2)| nu2 > 0.0)
+            .collect();
+        by_size.sort_by(|a, b| b.1.total_cmp(&a.1));
+        // From the largest down, while the tails stay below the level.
+        (by_size.into_iter())
+            .map(|(k, nu2)| (k, n * self.true_upper_tail(nu2.ln())))
+            .take_while(|&(_, p)| p < alpha)
+            .collect()
+    }
+
     /// The wrong loops' density of `y = ln ν²`, `f_wrong(y)` (all their
     /// populations, or uniform over the span without one).
     pub fn wrong_density(&self, y: f64) -> f64 {
@@ -923,6 +942,32 @@ mod tests {
         for (x, t) in e.iter().zip(&truth) {
             assert_eq!(m.posterior(x) >= 0.5, *t, "{x:?} {m:?}");
         }
+    }
+
+    #[test]
+    fn only_an_innovation_no_true_loop_reaches_is_beyond_reach() {
+        let (e, truth) = population();
+        let m = fitted(&e);
+        let true_loops: Vec<(usize, f64)> = (e.iter().zip(&truth).enumerate())
+            .filter(|(_, (_, t))| **t)
+            .map(|(k, (x, _))| (k, x.innovation))
+            .collect();
+        // The 400 true loops alone: none, their largest at the 1 − 1/800
+        // quantile of their own density.
+        assert_eq!(m.beyond_reach(&true_loops, 0.05), vec![], "{m:?}");
+        // With one at the 1 − 10⁻³ quantile of 0.5·χ²₃ (one in a thousand
+        // true loops lies beyond it; 401 tested): not beyond reach either.
+        let mut tested = true_loops.clone();
+        let q = ChiSquared::new(3.0).unwrap().inverse_cdf(1.0 - 1e-3);
+        tested.push((1_000, 0.5 * q));
+        assert_eq!(m.beyond_reach(&tested, 0.05), vec![], "{m:?}");
+        // An alias accepted among them (ν² 60, where 0.5·χ²₃ falls once in
+        // 10²⁴): beyond reach, and first, however small α.
+        tested.push((400 + 40, e[440].innovation));
+        let beyond = m.beyond_reach(&tested, 1e-6);
+        assert_eq!(beyond.len(), 1, "{beyond:?}");
+        assert_eq!(beyond[0].0, 440);
+        assert!(beyond[0].1 < 1e-12, "{beyond:?}");
     }
 
     #[test]
