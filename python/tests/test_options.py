@@ -84,3 +84,12 @@ def test_alpha_changes_the_verdict_not_the_decisions(grid, default):
     assert (default.verdict, strict.verdict) == ("passed", "failed")
     assert (default.status, strict.status) == ("ok", "chi2_failed")
     assert strict.passed is False
+
+
+def test_a_map_nothing_questions_names_no_loop(default):
+    # The report's three checks of a passing map (docs/method.md §7) are
+    # lists, empty where the status is "ok".
+    robust = default.report["robust"]
+    assert default.status == "ok"
+    for check in ("doubtful", "held_back", "outlying"):
+        assert robust[check] == [], check
