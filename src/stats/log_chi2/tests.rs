@@ -147,7 +147,7 @@ fn the_upper_tail_of_one_scale_is_the_chi2_survival_function() {
         let ln_s2: f64 = -2.3;
         let density = table.with(ln_s2 + ln_chi2_mean(dof), ln_chi2_sigma(dof));
         // From the bulk far out into the tail where the loop model tests
-        // the accepted loops (10⁻⁸).
+        // the accepted loops (χ² tails down to 10⁻¹⁵).
         for y in [-6.0, -3.0, -1.0, 0.0, 0.5, 1.0, 1.5, 2.0] {
             let exact = chi2.sf((y - ln_s2).exp());
             let got = density.upper_tail(y);
