@@ -40,6 +40,18 @@
 //! update, [`Evaluation::adding`]), by more than [`DOUBT_MOVE`] of its
 //! size: the map then rests on the counts alone.
 //!
+//! And an accepted loop can be *outlying*: its innovation beyond what the
+//! map's true loops reach, though the likelihood ratio favours a true loop
+//! there because the wrong loops' population lies further out still. If
+//! the `K` accepted loops are all true, their log innovations are `K`
+//! draws from the true loops' fitted density, and the largest has an
+//! upper tail below `α / K` with a chance of at most `α` (the χ² test's;
+//! [`LoopModel::beyond_reach`]). A lone alias accepted among thousands of
+//! true loops shows this way, where no cluster has members to test an
+//! offset with. Those of one cluster are named when removing them would
+//! move the map, to first order (the deleted residuals' move,
+//! [`Evaluation::removing`]), by more than [`DOUBT_MOVE`] of its size.
+//!
 //! Only a passing map whose decisions settled is examined (docs/method.md
 //! §7).
 
@@ -103,7 +115,7 @@ pub struct Outlying {
     /// The chance that some true loop among the accepted candidates tested
     /// has an innovation as large as the largest of these: their least
     /// upper-tail probability under the true loops' fitted density, times
-    /// the candidates tested (at most 1).
+    /// the candidates tested; below the χ² test's α.
     pub p_value: f64,
     /// The largest move of a pose's position that removing them would make
     /// (to first order), as a share of the map's size.
