@@ -5,7 +5,7 @@ robust kernels on pose graphs with wrong loop closures, in one run.
 usage: .venv/bin/python scripts/bench_robust.py [--only NAME ...] [--policies random local grouped aliased]
            [--alias-group-size 5] [--alias-true-like 0.5] [--outliers 100 1000] [--maxmix | --no-maxmix] [--scales published calibrated overconfident]
            [--tools TOOL ...] [--timeout 300] [--seed 1] [--out bench-out/robust.json]
-           [--peers-from EARLIER.json]
+           [--peers-from EARLIER.json] [--keep-reports]
 
 Run it with the Python of the peers' virtual environment (scripts/setup_peers.sh
 makes .venv; numpy and the peers' peerlib are imported). CI does not run it.
@@ -306,6 +306,11 @@ def run_pgo(args, path, flags, out_g2o):
                             args.timeout, ok=(0, 3, 4, 5), cpu_limit=args.timeout)
     if err:
         return {"error": err, "wall_s": wall}
+    if args.keep_reports and not flags:
+        # The default run's whole report, beside its input (for
+        # scripts/tail_shape_scan.py).
+        with open(path + ".report.json", "w") as f:
+            f.write(stdout)
     r = json.loads(stdout)
     return {
         "weights": [l["weight"] for l in r["loops"]],
@@ -495,6 +500,9 @@ def main():
                          "defaults to 1e-9; GTSAM's own default is 1e-5)")
     ap.add_argument("--pgo-flags", nargs="*", default=[], help="extra flags for every pgo run (e.g. --robust-c 4)")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--keep-reports", action="store_true",
+                    help="keep the JSON report of each default pgo run beside its input in --work "
+                         "(INPUT.report.json)")
     ap.add_argument("--peers-from", default=None, metavar="JSON",
                     help="take the peers' results from an earlier --out file of the same cases "
                          "(same --policies, --outliers, --only, --seed and alias options) instead of "

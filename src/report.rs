@@ -312,7 +312,8 @@ pub struct RobustReport {
     /// EM: whether its decisions did not settle at the last map they
     /// judged, which EM's second start and an update's whole job follow.
     /// A set kept from a cycle is reported as judged at its own map, where
-    /// its loops can be `unsettled` though this is false.
+    /// its loops can be `unsettled` though this is false — unless that map
+    /// disputes as many candidates as it confirms of the set.
     #[serde(skip)]
     pub unsettled: bool,
     /// EM: the accepted clusters of a passing map whose errors share one

@@ -18,7 +18,9 @@
 //! The second start is sought only when the annealed end's map fails the
 //! χ² test (or there is no test), or its decisions did not settle (some
 //! candidate is [`super::Reason::Unsettled`]: the model at the map kept
-//! accepts it and the set kept rejects it, or the reverse). A map that
+//! accepts it and the set kept rejects it, or the reverse; for a set kept
+//! from a cycle, when its own map disputes as many candidates as it
+//! confirms, [`Outcome::unsettled`]). A map that
 //! passes, at decisions that settled, is consistent with the information
 //! of its edges, the test the method's answer rests on, and a fixed point
 //! of the decisions; it stands. A map that passes but leaves out loops its
