@@ -709,6 +709,7 @@ def beyond_section(results):
         trip = lambda x: "%s / %s / %s" % (fmt(x.get("precision"), 3), fmt(x.get("recall"), 3),
                                            fmt(x.get("ate_pct"), 3))
         met = late = 0
+        rows = []
         for name, r in runs:
             p, b = r["tools"].get("pgo", {}), best_peer(r)
             is_late = b is not None and behind(p, b[1])
@@ -717,9 +718,10 @@ def beyond_section(results):
             late += is_late
             if ok and not is_late:
                 continue
-            out.append("| %s | %s | %s | %s | %s | %s | %s |" % (
+            rows.append("| %s | %s | %s | %s | %s | %s | %s |" % (
                 name, r["scale"], trip(p), exit_status(p), b[0] if b else "none finished",
                 trip(b[1]) if b else "", "**yes**" if is_late else "no"))
+        out += rows or ["| (none: every run meets the goal, no peer better) | | | | | | |"]
         out += ["", "**pgo meets the absolute goal on %d of %d runs; a peer does better on %d.**" % (
             met, len(runs), late), ""]
     return out
