@@ -767,27 +767,19 @@ fn record(
     out.search = search;
 }
 
-/// Whether the model at the map of a set kept from a cycle disputes at
-/// least as many candidates (`reasons`, [`Reason::Unsettled`]) as it
-/// confirms of the set (`accepted`): the half step's test of a swing that
-/// is no local conflict ([`schedule`]). Such a set is no fixed point of
-/// the decisions near it, and is treated as one that did not settle (EM's
-/// second start, an update's whole job). On torus3D with 300 aliases in
-/// groups of 10 placed anywhere, half of them with true-like counts (seed
-/// 5 of the 3D exploration in docs/benchmarks.md, information as
-/// published), the χ² search's restart swung between 3 and 4,213 loops
-/// (178 aliases) and kept the 3, whose map passes: at that map 4,194 true
-/// loops are `unsettled`. On MIT seed 31 of the MIT sweep (30 aliases,
-/// published) the set kept holds 16 loops and its map disputes 14: a
-/// local conflict, and the second start there takes 20 aliases (32 % off
-/// instead of 1.0 %).
+/// Whether the model at the map of a set kept from a cycle (`accepted`)
+/// disputes at least as many candidates (`reasons`, [`Reason::Unsettled`])
+/// as it confirms of the set: the half step's test of a swing that is no
+/// local conflict ([`schedule::swings_most`]). Such a set is no fixed point
+/// of the decisions near it, and is treated as one that did not settle
+/// (EM's second start, an update's whole job; docs/method.md §5, "A
+/// cycle").
 fn disputed(reasons: &[Reason], accepted: &[bool]) -> bool {
-    let unsettled = |k: usize| reasons[k] == Reason::Unsettled;
-    let disputed = (0..reasons.len()).filter(|&k| unsettled(k)).count();
-    let confirmed = (0..reasons.len())
-        .filter(|&k| accepted[k] && !unsettled(k))
-        .count();
-    disputed > 0 && disputed >= confirmed
+    // The set the model at that map accepts.
+    let judged: Vec<bool> = (accepted.iter().zip(reasons))
+        .map(|(&a, &r)| a != (r == Reason::Unsettled))
+        .collect();
+    judged != accepted && schedule::swings_most(accepted, &judged)
 }
 
 /// Candidate `k`'s reason and posterior under the loop `model` with

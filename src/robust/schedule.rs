@@ -607,9 +607,7 @@ fn half_step(last: &[bool], next: &[bool], innov: &Innovations) -> Option<Vec<bo
             (true, Some(v)) => remove.push((-v, k)),
         }
     }
-    let shared = last.iter().zip(next).filter(|&(&a, &b)| a && b).count();
-    let disputed = last.iter().zip(next).filter(|&(a, b)| a != b).count();
-    if add.len() + remove.len() < 2 || disputed >= shared {
+    if add.len() + remove.len() < 2 || swings_most(last, next) {
         return None;
     }
     for (moves, to) in [(&mut add, true), (&mut remove, false)] {
@@ -619,6 +617,14 @@ fn half_step(last: &[bool], next: &[bool], innov: &Innovations) -> Option<Vec<bo
         }
     }
     (half != next).then_some(half)
+}
+
+/// Whether the sets `last` and `next` dispute at least as many candidates
+/// as they share: a swing of most of the accepted loops, no local conflict.
+pub(super) fn swings_most(last: &[bool], next: &[bool]) -> bool {
+    let shared = last.iter().zip(next).filter(|&(&a, &b)| a && b).count();
+    let disputed = last.iter().zip(next).filter(|&(a, b)| a != b).count();
+    disputed >= shared
 }
 
 /// Of the sets of a cycle (each map of which judges the next set), each
