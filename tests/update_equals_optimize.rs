@@ -497,6 +497,25 @@ fn an_update_whose_decisions_swing_runs_the_whole_job() {
     assert_eq!(whole_jobs(&steps, "swung"), [300], "{steps:#?}");
 }
 
+/// An update whose map holds loops back by their counts runs the whole
+/// job: EM from the last decisions can hold back there true loops that
+/// the annealing accepts. A sphere with aliases placed anywhere in groups
+/// of 5, updated every 20 poses: at 260 poses the update held back nine
+/// true loops in six clusters that the batch job accepts (poses 8.5 % of
+/// the map's size apart).
+#[test]
+fn an_update_that_holds_loops_back_runs_the_whole_job() {
+    let AnySimulation::Spatial(sim) = aliased_anywhere(World::Sphere3d, 30, 5) else {
+        unreachable!()
+    };
+    let steps = every_poses(&sim, 20, 260);
+    assert!(mismatched(&steps).is_empty(), "{steps:#?}");
+    assert!(
+        whole_jobs(&steps, "holds loops back").contains(&260),
+        "{steps:#?}"
+    );
+}
+
 /// The replays of aliases placed anywhere, wider than CI runs (192
 /// replays: a grid and a sphere, seeds 1–48, groups of 5 and 10, an update
 /// every 20 poses, each compared with the batch job; about a minute in
@@ -504,7 +523,7 @@ fn an_update_whose_decisions_swing_runs_the_whole_job() {
 /// --ignored`. Prints every replay with a whole job or a mismatch, at each
 /// mismatch the true loops the update and the batch job reject and the
 /// wrong ones they accept, and the totals of those over every step. Fails
-/// if more replays mismatch than the 6 known (docs/method.md §7b: at one
+/// if more replays mismatch than the 5 known (docs/method.md §7b: at one
 /// or two updates each, EM's warm decisions end at another of its fixed
 /// points than the batch job's annealing), if any step accepts an alias,
 /// or if the true loops rejected over every step grow.
@@ -554,9 +573,9 @@ fn wider_aliased_replays() {
          over every step, true loops rejected / wrong accepted: updates {ut} / {uw}, batch jobs {bt} / {bw}",
         mismatching.len()
     );
-    assert!(mismatching.len() <= 6, "{mismatching:?}");
+    assert!(mismatching.len() <= 5, "{mismatching:?}");
     assert_eq!((uw, bw), (0, 0), "aliases accepted");
-    assert!(ut <= 285 && bt <= 287, "{totals:?}");
+    assert!(ut <= 274 && bt <= 285, "{totals:?}");
 }
 
 /// A cycle of the batch job's decision sets that a half step settles: on a
