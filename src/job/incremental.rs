@@ -23,7 +23,11 @@
 //!    loop: [`untrusted_start`]) the whole job runs instead, and so it
 //!    does where EM's decisions from the last ones swung or rejected a
 //!    loop the last update accepted: the new evidence overturned the
-//!    consensus the last decisions stood for.
+//!    consensus the last decisions stood for. An exact update whose map
+//!    fails its test, whose decisions did not settle or that holds loops
+//!    back by their counts runs the whole job too: the batch job would
+//!    seek EM's second start there, or its annealing may accept what the
+//!    warm decisions held back.
 
 use super::{Error, Settings, candidates, finish};
 use crate::geometry::Pose;
@@ -669,10 +673,11 @@ pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         Ok(warm) => {
             let (mut solved, mut updated) = (graph.clone(), report.clone());
             // An exact update (not capped: that promises a latency, not
-            // the batch map) where the batch job would seek EM's second
-            // start: its map fails the test, or its decisions did not
-            // settle.
-            let second_start = |r: &Report| {
+            // the batch map) whose map the batch job could end elsewhere:
+            // it would seek EM's second start (the map fails the test, or
+            // the decisions did not settle), or the warm decisions hold
+            // loops back that its annealing may accept.
+            let whole_job = |r: &Report| {
                 let exact = config.options.robust.method == RobustMethod::Em
                     && config.options.solver.update_iterations.is_none();
                 if !exact {
@@ -688,7 +693,7 @@ pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 }
             };
             match update_graph(&mut solved, warm, config, &mut updated, observer)? {
-                Ok(next) => match second_start(&updated) {
+                Ok(next) => match whole_job(&updated) {
                     Some(reason) => {
                         whole(report, observer, &|g, r| after_fallback(g, warm, r, reason))
                     }
