@@ -89,8 +89,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 CLEAN = ["intel", "manhattan", "city10000", "sphere2500", "parking-garage", "torus3D",
          # real maps beyond the five: few loops (MIT: 20), two sessions
-         # (ais2klinik), an office and a drive (CSAIL, kitti_00), a 3D building
-         "MIT", "ais2klinik", "CSAIL", "kitti_00", "cubicle"]
+         # (ais2klinik), an office and drives (CSAIL, kitti_00; kitti_02 and
+         # kitti_05 with 43 and 66 loops), a 3D building
+         "MIT", "ais2klinik", "CSAIL", "kitti_00", "cubicle", "kitti_02", "kitti_05"]
 MAXMIX_BASES = ["manhattanOlson3500", "manhattanG2O3500", "city10000", "sphere2500"]
 MAXMIX_KINDS = ["n1000-randm", "n1000-local", "n100-grp10", "n100-lgr10"]
 PGO_TOOLS = {
@@ -519,6 +520,9 @@ def main():
         return
     args.work = os.path.abspath(args.work)
     os.makedirs(args.work, exist_ok=True)
+    # The results' folder too: a run of many minutes must not end unable
+    # to write them.
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     sys.path.insert(0, args.peers)
     unknown = set(args.tools) - set(PGO_TOOLS) - set(PEER_TOOLS)
     if unknown:

@@ -674,11 +674,19 @@ EXPLORATION_CMD = (
 
 
 SCATTERED_CMD = (
-    "for name in CSAIL intel MIT kitti_00; do for s in 13 14 15 16 17; do "
+    "for name in CSAIL intel MIT kitti_00 kitti_02 kitti_05; do for s in 13 14 15 16 17; do "
     ".venv/bin/python scripts/bench_robust.py --policies aliased --alias-place anywhere "
     "--alias-offset 5,50 --alias-by-group --alias-group-size 1 --alias-true-like 1.0 --outliers 300 "
     "--no-maxmix --scales calibrated published --seed $s --only $name --timeout 300 "
     "--work bench-out/exploration_scattered --out bench/results/exploration_scattered/s${s}_${name}.json; "
+    "done; done")
+
+DRIVES_CMD = (
+    "for name in kitti_02 kitti_05; do for s in 13 14 15 16 17; do "
+    ".venv/bin/python scripts/bench_robust.py --policies aliased --alias-place anywhere "
+    "--alias-offset 5,50 --alias-by-group --alias-group-size 10 --alias-true-like 0.5 --outliers 300 "
+    "--no-maxmix --scales calibrated published --seed $s --only $name --timeout 300 "
+    "--work bench-out/exploration_drives --out bench/results/exploration_drives/s${s}_${name}.json; "
     "done; done")
 
 TORUS_CMD = (
@@ -689,7 +697,12 @@ TORUS_CMD = (
 
 BEYOND = [("exploration_scattered", "Scattered aliases whose counts tell nothing", SCATTERED_CMD,
            "300 aliases placed anywhere one by one (groups of 1), every count drawn like a true "
-           "loop's, seeds 13–17, on four real 2D maps (MIT: 20 true loops against 300 aliases)"),
+           "loop's, seeds 13–17, on six real 2D maps (MIT: 20 true loops against 300 aliases; "
+           "kitti_02 and kitti_05, drives with 43 and 66)"),
+          ("exploration_drives", "Aliases in groups on drives with few loops", DRIVES_CMD,
+           "300 aliases in groups of 10 placed anywhere, half the groups with true-like counts "
+           "(the setting of the exploration of docs/method.md §4), seeds 13–17, on kitti_02 and "
+           "kitti_05: drives with 43 and 66 true loops"),
           ("exploration_3d", "A 3D grid with aliases in groups", TORUS_CMD,
            "torus3D with 300 aliases in groups of 10 placed anywhere, half the groups with "
            "true-like counts, seed 5")]

@@ -474,6 +474,79 @@ fn an_end_whose_decisions_did_not_settle_meets_the_second_start() {
     );
 }
 
+/// A run of true loops the decisions left out, which the loop model calls
+/// a wrong population that the file's information calls consistent,
+/// meets EM's second start: kitti_02 (43 true loops in three places) with
+/// 300 aliases placed anywhere one by one, every count true-like (seed 13
+/// of the scattered exploration in docs/benchmarks.md), information as
+/// published. The annealed end keeps the 28 loops of one place; the 15 of
+/// the other two fit its map only at `ν²` 8–17 on 3 dof and make a
+/// population of their own within EM's kernel (30.7), and that map passed
+/// its test 1.19 % off. The kernel start's end keeps all 43 and no alias,
+/// and ranks first.
+#[test]
+fn a_wrong_population_the_file_calls_consistent_meets_the_second_start() {
+    let scattered = CorruptionOptions {
+        group_size: 1,
+        ..anywhere_in_groups(300, 1.0)
+    };
+    let Some((r, wrong)) = corrupted_and_decided("kitti_02.g2o", &scattered, 1_000_014, None)
+    else {
+        return;
+    };
+    assert_eq!(true_loops_kept(&r, &wrong), (43, 43));
+    let starts = &r.robust.starts;
+    assert!(
+        starts.len() == 2 && starts[0].passed == Some(true) && starts[1].chosen,
+        "{starts:?}"
+    );
+}
+
+/// The same map replayed by a front end: an update every 500 poses (and
+/// after the last) gives the batch job's decisions at each, and at the end
+/// all 43 true loops and no alias. (Up to 4,500 poses each update runs the
+/// whole job, for a failed test, decisions that swung or no model to
+/// resume from; the last resumes from the 4,500-pose job's decisions.)
+#[test]
+fn updates_of_a_map_with_such_a_population_are_the_batch_job() {
+    let Some(Ok(AnyPoseGraph::Planar(mut kitti))) = read("kitti_02.g2o") else {
+        return;
+    };
+    kitti.compose_missing_poses();
+    let scattered = CorruptionOptions {
+        group_size: 1,
+        ..anywhere_in_groups(300, 1.0)
+    };
+    let rng = &mut StdRng::seed_from_u64(1_000_014);
+    let corruption = pgo_sim::corrupt(&kitti, &scattered, rng).expect("corrupt");
+    let file = temp_dir("scattered-kitti").join("kitti.g2o");
+    corruption.graph.write_g2o(&file).expect("write");
+    let full = PoseGraph2::read_g2o(&file).expect("read");
+    let decided =
+        |s: &pgo::Solution<Se2>| -> Vec<bool> { s.loops().iter().map(|l| l.accepted).collect() };
+    let (options, mut g, mut wrong) = (Options::default(), PoseGraph2::new(), Vec::new());
+    let due = edges_due(&full);
+    for (k, edges) in due.iter().enumerate() {
+        let added = add_pose_and_edges(&mut g, &full, k, edges);
+        wrong.extend(added.iter().map(|&i| corruption.wrong[i]));
+        if (k + 1) % 500 != 0 && k + 1 != due.len() {
+            continue;
+        }
+        let u = g.update(&options).unwrap();
+        let b = g.optimize(&options).unwrap();
+        let reason = u.incremental().map(|i| i.reason.clone());
+        assert_eq!(decided(&u), decided(&b), "at {} poses ({reason:?})", k + 1);
+    }
+    let last = g.update(&options).unwrap();
+    let kept = (decided(&last).iter().zip(&wrong))
+        .filter(|&(&a, &w)| a && !w)
+        .count();
+    let aliases = (decided(&last).iter().zip(&wrong))
+        .filter(|&(&a, &w)| a && w)
+        .count();
+    assert_eq!((kept, aliases), (43, 0));
+}
+
 /// The report of `optimize()` on [`aliased_torus`]'s first `n` poses (with
 /// the true loops it accepted), checked to keep every true loop and no
 /// alias, from the second of two starts.

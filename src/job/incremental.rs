@@ -578,6 +578,13 @@ const FAILED: &str = "the update's map failed the χ² test: the whole job, with
 const UNSETTLED: &str =
     "the update's decisions did not settle: the whole job, with its second start";
 
+/// The reason of an update whose loop model calls a population of
+/// candidates wrong that the file's information calls consistent: the
+/// whole job tries EM's second start, as `optimize()` does
+/// (docs/method.md §5).
+const WITHIN_KERNEL: &str = "the update's model calls wrong a population the information calls consistent: \
+     the whole job, with its second start";
+
 /// The reason of an update whose map holds loops back by their counts
 /// (true-looking innovations, counts that call them wrong): EM from the
 /// last decisions can hold there a run of true loops the annealing
@@ -686,6 +693,8 @@ pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                     Some(FAILED)
                 } else if r.robust.unsettled {
                     Some(UNSETTLED)
+                } else if (r.robust.model.as_ref()).is_some_and(|m| m.wrong_within_kernel()) {
+                    Some(WITHIN_KERNEL)
                 } else if !r.robust.held_back.is_empty() {
                     Some(HELD_BACK)
                 } else {
