@@ -673,27 +673,23 @@ EXPLORATION_CMD = (
     "300 --work bench-out/exploration --out bench/results/exploration/s${s}_${name}.json; done; done")
 
 
-SCATTERED_CMD = (
-    "for name in CSAIL intel MIT kitti_00 kitti_02 kitti_05; do for s in 13 14 15 16 17; do "
-    ".venv/bin/python scripts/bench_robust.py --policies aliased --alias-place anywhere "
-    "--alias-offset 5,50 --alias-by-group --alias-group-size 1 --alias-true-like 1.0 --outliers 300 "
-    "--no-maxmix --scales calibrated published --seed $s --only $name --timeout 300 "
-    "--work bench-out/exploration_scattered --out bench/results/exploration_scattered/s${s}_${name}.json; "
-    "done; done")
+def beyond_cmd(names, seeds, group, true_like, folder):
+    """The command of one wider exploration: 300 aliases placed anywhere,
+    in groups of `group` of which a share `true_like` has true-like
+    counts, every peer, both scales."""
+    return (
+        "for name in %s; do for s in %s; do "
+        ".venv/bin/python scripts/bench_robust.py --policies aliased --alias-place anywhere "
+        "--alias-offset 5,50 --alias-by-group --alias-group-size %d --alias-true-like %s --outliers 300 "
+        "--no-maxmix --scales calibrated published --seed $s --only $name --timeout 300 "
+        "--work bench-out/%s --out bench/results/%s/s${s}_${name}.json; "
+        "done; done" % (" ".join(names), " ".join(map(str, seeds)), group, true_like, folder, folder))
 
-DRIVES_CMD = (
-    "for name in kitti_02 kitti_05; do for s in 13 14 15 16 17; do "
-    ".venv/bin/python scripts/bench_robust.py --policies aliased --alias-place anywhere "
-    "--alias-offset 5,50 --alias-by-group --alias-group-size 10 --alias-true-like 0.5 --outliers 300 "
-    "--no-maxmix --scales calibrated published --seed $s --only $name --timeout 300 "
-    "--work bench-out/exploration_drives --out bench/results/exploration_drives/s${s}_${name}.json; "
-    "done; done")
 
-TORUS_CMD = (
-    "for s in 5; do .venv/bin/python scripts/bench_robust.py --policies aliased --alias-place "
-    "anywhere --alias-offset 5,50 --alias-by-group --alias-group-size 10 --alias-true-like 0.5 "
-    "--outliers 300 --no-maxmix --scales calibrated published --seed $s --only torus3D --timeout 300 "
-    "--work bench-out/exploration_3d --out bench/results/exploration_3d/s${s}_torus3D.json; done")
+SCATTERED_CMD = beyond_cmd(["CSAIL", "intel", "MIT", "kitti_00", "kitti_02", "kitti_05"],
+                           range(13, 18), 1, "1.0", "exploration_scattered")
+DRIVES_CMD = beyond_cmd(["kitti_02", "kitti_05"], range(13, 18), 10, "0.5", "exploration_drives")
+TORUS_CMD = beyond_cmd(["torus3D"], [5], 10, "0.5", "exploration_3d")
 
 BEYOND = [("exploration_scattered", "Scattered aliases whose counts tell nothing", SCATTERED_CMD,
            "300 aliases placed anywhere one by one (groups of 1), every count drawn like a true "

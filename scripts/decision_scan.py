@@ -22,25 +22,14 @@ import sys
 import tempfile
 import time
 
+from bench_robust import read_labels
+
 
 def labels_of(path):
     stem = path[:-len(".g2o")]
     if stem.endswith(".cal"):
         stem = stem[:-len(".cal")]
     return stem + ".labels.csv"
-
-
-def read_labels(path):
-    """Whether each edge with |from - to| != 1 is wrong, in file order (the
-    order of the report's loops)."""
-    wrong = []
-    with open(path) as f:
-        next(f)
-        for line in f:
-            _, a, b, w = line.strip().split(",")
-            if abs(int(a) - int(b)) != 1:
-                wrong.append(w == "1")
-    return wrong
 
 
 def run(binary, path, timeout):
@@ -53,7 +42,8 @@ def run(binary, path, timeout):
         report = json.loads(p.stdout)
     except json.JSONDecodeError:
         return {"exit": p.returncode, "error": p.stderr.strip()[-300:]}
-    wrong = read_labels(labels_of(path))
+    # In file order, the order of the report's loops.
+    wrong = [w for _, _, w in read_labels(labels_of(path))]
     loops = report["loops"]
     if len(loops) != len(wrong):
         return {"exit": p.returncode, "error": "%d loops in the report, %d in the labels" % (len(loops), len(wrong))}

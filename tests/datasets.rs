@@ -486,14 +486,11 @@ fn an_end_whose_decisions_did_not_settle_meets_the_second_start() {
 /// and ranks first.
 #[test]
 fn a_wrong_population_the_file_calls_consistent_meets_the_second_start() {
-    let scattered = CorruptionOptions {
-        group_size: 1,
-        ..anywhere_in_groups(300, 1.0)
-    };
-    let Some((r, wrong)) = corrupted_and_decided("kitti_02.g2o", &scattered, 1_000_014, None)
-    else {
+    let Some((kitti, edge_wrong)) = scattered_kitti_02() else {
         return;
     };
+    let wrong = candidate_labels(&kitti, &edge_wrong);
+    let r = kitti.optimize(&Options::default()).unwrap().into_report();
     assert_eq!(true_loops_kept(&r, &wrong), (43, 43));
     let starts = &r.robust.starts;
     assert!(
@@ -509,8 +506,41 @@ fn a_wrong_population_the_file_calls_consistent_meets_the_second_start() {
 /// resume from; the last resumes from the 4,500-pose job's decisions.)
 #[test]
 fn updates_of_a_map_with_such_a_population_are_the_batch_job() {
-    let Some(Ok(AnyPoseGraph::Planar(mut kitti))) = read("kitti_02.g2o") else {
+    let Some((full, edge_wrong)) = scattered_kitti_02() else {
         return;
+    };
+    let decided =
+        |s: &pgo::Solution<Se2>| -> Vec<bool> { s.loops().iter().map(|l| l.accepted).collect() };
+    let (options, mut g, mut wrong) = (Options::default(), PoseGraph2::new(), Vec::new());
+    let due = edges_due(&full);
+    for (k, edges) in due.iter().enumerate() {
+        let added = add_pose_and_edges(&mut g, &full, k, edges);
+        wrong.extend(added.iter().map(|&i| edge_wrong[i]));
+        if (k + 1) % 500 != 0 && k + 1 != due.len() {
+            continue;
+        }
+        let u = g.update(&options).unwrap();
+        let b = g.optimize(&options).unwrap();
+        let reason = u.incremental().map(|i| i.reason.clone());
+        assert_eq!(decided(&u), decided(&b), "at {} poses ({reason:?})", k + 1);
+    }
+    let last = decided(&g.update(&options).unwrap());
+    let accepted = |wrong_ones: bool| {
+        (last.iter().zip(&wrong))
+            .filter(|&(&a, &w)| a && w == wrong_ones)
+            .count()
+    };
+    assert_eq!((accepted(false), accepted(true)), (43, 0));
+}
+
+/// kitti_02 with 300 aliases placed anywhere one by one, every count
+/// true-like, planted as `pgo corrupt --seed 1000014` plants them (seed 13
+/// of the scattered exploration in docs/benchmarks.md; information as
+/// published), written and read back; with whether each of its edges is a
+/// wrong candidate (`None` without the datasets).
+fn scattered_kitti_02() -> Option<(PoseGraph2, Vec<bool>)> {
+    let Ok(AnyPoseGraph::Planar(mut kitti)) = read("kitti_02.g2o")? else {
+        panic!("kitti_02 is a 2D file");
     };
     kitti.compose_missing_poses();
     let scattered = CorruptionOptions {
@@ -521,30 +551,8 @@ fn updates_of_a_map_with_such_a_population_are_the_batch_job() {
     let corruption = pgo_sim::corrupt(&kitti, &scattered, rng).expect("corrupt");
     let file = temp_dir("scattered-kitti").join("kitti.g2o");
     corruption.graph.write_g2o(&file).expect("write");
-    let full = PoseGraph2::read_g2o(&file).expect("read");
-    let decided =
-        |s: &pgo::Solution<Se2>| -> Vec<bool> { s.loops().iter().map(|l| l.accepted).collect() };
-    let (options, mut g, mut wrong) = (Options::default(), PoseGraph2::new(), Vec::new());
-    let due = edges_due(&full);
-    for (k, edges) in due.iter().enumerate() {
-        let added = add_pose_and_edges(&mut g, &full, k, edges);
-        wrong.extend(added.iter().map(|&i| corruption.wrong[i]));
-        if (k + 1) % 500 != 0 && k + 1 != due.len() {
-            continue;
-        }
-        let u = g.update(&options).unwrap();
-        let b = g.optimize(&options).unwrap();
-        let reason = u.incremental().map(|i| i.reason.clone());
-        assert_eq!(decided(&u), decided(&b), "at {} poses ({reason:?})", k + 1);
-    }
-    let last = g.update(&options).unwrap();
-    let kept = (decided(&last).iter().zip(&wrong))
-        .filter(|&(&a, &w)| a && !w)
-        .count();
-    let aliases = (decided(&last).iter().zip(&wrong))
-        .filter(|&(&a, &w)| a && w)
-        .count();
-    assert_eq!((kept, aliases), (43, 0));
+    let read = PoseGraph2::read_g2o(&file).expect("read");
+    Some((read, corruption.wrong))
 }
 
 /// The report of `optimize()` on [`aliased_torus`]'s first `n` poses (with

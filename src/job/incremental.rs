@@ -587,10 +587,8 @@ const WITHIN_KERNEL: &str = "the update's model calls wrong a population the inf
 
 /// The reason of an update whose map holds loops back by their counts
 /// (true-looking innovations, counts that call them wrong): EM from the
-/// last decisions can hold there a run of true loops the annealing
-/// accepts (a sphere with aliases placed anywhere,
-/// `tests/update_equals_optimize.rs`: nine true loops held back in six
-/// clusters, poses 8.5 % of the map's size apart).
+/// last decisions can hold there a run of true loops that the batch job's
+/// annealing accepts (docs/method.md §7b).
 const HELD_BACK: &str = "the update's map holds loops back by their counts: the whole job";
 
 /// Why the last decisions, in `warm`, are no start from which the robust

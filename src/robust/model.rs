@@ -800,12 +800,9 @@ impl LoopModel {
     /// Whether a population of wrong loops lies within EM's kernel on the
     /// true loops' scale or the information's as stated
     /// ([`Self::kernel_edge`]): candidates the model calls wrong that the
-    /// file calls consistent. A run of true loops the decisions left out
-    /// (a place whose loops fit the map only with another place's) can
-    /// look so: on a drive of 43 true loops in three places (kitti_02 with
-    /// 300 scattered aliases, information as published) the 15 of two
-    /// places made such a population at `ν²` 8–17 on 3 dof, against EM's
-    /// kernel at 30.7 (docs/method.md §5).
+    /// file calls consistent — as a run of true loops the decisions left
+    /// out can look (a place whose loops fit the map only with another
+    /// place's; docs/method.md §5).
     pub fn wrong_within_kernel(&self) -> bool {
         let edge = self.kernel_edge();
         self.wrong_loops.iter().any(|p| p.mean <= edge)

@@ -26,9 +26,9 @@
 //! a run of true loops the decisions left out can look so). A map that
 //! passes, at decisions that settled, with no such population, is
 //! consistent with the information of its edges, the test the method's
-//! answer rests on, and a fixed point of the decisions; it stands. A map that passes but leaves out loops its
-//! own model accepts is neither: the test cannot see loops left out (a map
-//! fits what it keeps), and on torus3D with 300 aliases placed anywhere
+//! answer rests on, and a fixed point of the decisions; it stands. A map
+//! that passes but leaves out loops its own model accepts is neither: the
+//! test cannot see loops left out (a map fits what it keeps), and on torus3D with 300 aliases placed anywhere
 //! such an end kept 306 of 4,049 true loops and was 31.7 % off. Run always,
 //! the second start doubled the solver's factorisations on a graph of 10⁶
 //! poses for nothing (docs/method.md §5, "When the test fails or the
