@@ -347,12 +347,16 @@ def replay(name, every=50):
         previous = result
     # The whole job again only while the map is too young for EM to resume
     # from (too few candidates, no loop model yet), and once EM's decisions
-    # were resumed only where they swung (the documented fall-backs).
+    # were resumed only where they swung or, once per loop, where an
+    # accepted loop lies beyond the information as stated (the batch job's
+    # second start looks at it): the documented fall-backs.
     assert kinds[0][0] == "batch", kinds
     solves = [s for s, _ in kinds]
     assert "warm" in solves, kinds
     resumed = solves.index("warm")
-    assert all(s != "batch" or "swung" in why for s, why in kinds[resumed:]), kinds
+    later = [why for s, why in kinds[resumed:] if s == "batch"]
+    assert all("swung" in why or "calls an outlier" in why for why in later), kinds
+    assert sum("calls an outlier" in why for why in later) <= 1, kinds
     return graph, previous, changes
 
 

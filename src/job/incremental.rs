@@ -24,17 +24,21 @@
 //!    does where EM's decisions from the last ones swung or rejected a
 //!    loop the last update accepted: the new evidence overturned the
 //!    consensus the last decisions stood for. An exact update whose map
-//!    fails its test, whose decisions did not settle or that holds loops
-//!    back by their counts runs the whole job too: the batch job would
-//!    seek EM's second start there, or its annealing may accept what the
-//!    warm decisions held back.
+//!    fails its test, whose decisions did not settle, whose model calls
+//!    wrong a population the information calls consistent, that accepts
+//!    a loop the information calls an outlier (once per such loop: the
+//!    loops the last whole job's two starts kept are remembered) or that
+//!    holds loops back by their counts runs the whole job too: the batch
+//!    job would seek EM's second start there, or its annealing may accept
+//!    what the warm decisions held back.
 
 use super::{Error, Settings, candidates, finish};
 use crate::geometry::Pose;
-use crate::graph::Graph;
+use crate::graph::{Graph, VertexId};
 use crate::io::g2o::G2oPose;
 use crate::report::{
-    DecisionChange, IncrementalReport, InitializationReport, OptimizerReport, Report, UpdateSolve,
+    DecisionChange, IncrementalReport, InitializationReport, LoopReport, OptimizerReport, Report,
+    UpdateSolve,
 };
 use crate::robust::{self, RobustMethod, Test};
 use crate::solve::init::{ChordalInit, Initialization, grow_tree};
@@ -100,6 +104,10 @@ pub(crate) struct Warm<P: Pose<D>, const D: usize> {
     /// The last optimiser's allocation and preparations, for the next
     /// update's.
     spare: Spare<P, D>,
+    /// The accepted loops beyond the information as stated
+    /// ([`beyond_stated`]) that the last whole job's two starts kept: an
+    /// update that accepts only these does not run the whole job again.
+    examined: Vec<(VertexId, VertexId)>,
 }
 
 impl<P: Pose<D>, const D: usize> Warm<P, D> {
@@ -119,6 +127,11 @@ impl<P: Pose<D>, const D: usize> Warm<P, D> {
             converged: report.optimizer.converged,
             settled: report.optimizer.converged,
             spare: Spare::default(),
+            examined: if report.robust.starts.len() > 1 {
+                beyond_stated(report)
+            } else {
+                Vec::new()
+            },
         }
     }
 }
@@ -171,6 +184,7 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
         let mut next = Warm::after(graph, report, warm.ordering.clone());
         next.settled = warm.settled;
         next.spare = std::mem::take(&mut warm.spare);
+        next.examined = warm.examined.clone();
         return Ok(Ok(next));
     }
     let spare = std::mem::take(&mut warm.spare);
@@ -205,6 +219,7 @@ pub(crate) fn update_graph<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     let mut next = Warm::after(graph, report, ordering);
     next.settled &= strict;
     next.spare = spare;
+    next.examined = warm.examined.clone();
     Ok(Ok(next))
 }
 
@@ -585,6 +600,32 @@ const UNSETTLED: &str =
 const WITHIN_KERNEL: &str = "the update's model calls wrong a population the information calls consistent: \
      the whole job, with its second start";
 
+/// The reason of an update whose model accepts a candidate that the file's
+/// information calls an outlier: the whole job tries EM's second start, as
+/// `optimize()` does (docs/method.md §5).
+const BEYOND_STATED: &str = "the update accepts a loop the information calls an outlier: \
+     the whole job, with its second start";
+
+/// The accepted loops of `report` beyond the reach of the information as
+/// stated ([`crate::robust::LoopModel::stated_bound`]), by their ends.
+fn beyond_stated(report: &Report) -> Vec<(VertexId, VertexId)> {
+    let (Some(model), Some(test)) = (report.robust.model.as_ref(), report.chi2_test.as_ref())
+    else {
+        return Vec::new();
+    };
+    let accepted: Vec<(&LoopReport, f64)> = (report.loops.iter())
+        .filter(|l| l.accepted)
+        .filter_map(|l| l.innovation.filter(|&v| v > 0.0).map(|v| (l, v)))
+        .collect();
+    let Some(bound) = model.stated_bound(accepted.len(), test.alpha) else {
+        return Vec::new();
+    };
+    (accepted.into_iter())
+        .filter(|&(_, nu2)| nu2 > bound)
+        .map(|(l, _)| (l.from, l.to))
+        .collect()
+}
+
 /// The reason of an update whose map holds loops back by their counts
 /// (true-looking innovations, counts that call them wrong): EM from the
 /// last decisions can hold there a run of true loops that the batch job's
@@ -679,10 +720,11 @@ pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
             let (mut solved, mut updated) = (graph.clone(), report.clone());
             // An exact update (not capped: that promises a latency, not
             // the batch map) whose map the batch job could end elsewhere:
-            // it would seek EM's second start (the map fails the test, or
-            // the decisions did not settle), or the warm decisions hold
-            // loops back that its annealing may accept.
-            let whole_job = |r: &Report| {
+            // it would seek EM's second start (the map fails the test, the
+            // decisions did not settle, or the model disagrees with the
+            // information as stated where no whole job has looked), or the
+            // warm decisions hold loops back that its annealing may accept.
+            let whole_job = |r: &Report, examined: &[(VertexId, VertexId)]| {
                 let exact = config.options.robust.method == RobustMethod::Em
                     && config.options.solver.update_iterations.is_none();
                 if !exact {
@@ -693,6 +735,8 @@ pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                     Some(UNSETTLED)
                 } else if (r.robust.model.as_ref()).is_some_and(|m| m.wrong_within_kernel()) {
                     Some(WITHIN_KERNEL)
+                } else if (beyond_stated(r).iter()).any(|l| !examined.contains(l)) {
+                    Some(BEYOND_STATED)
                 } else if !r.robust.held_back.is_empty() {
                     Some(HELD_BACK)
                 } else {
@@ -700,7 +744,7 @@ pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 }
             };
             match update_graph(&mut solved, warm, config, &mut updated, observer)? {
-                Ok(next) => match whole_job(&updated) {
+                Ok(next) => match whole_job(&updated, &next.examined) {
                     Some(reason) => {
                         whole(report, observer, &|g, r| after_fallback(g, warm, r, reason))
                     }

@@ -808,6 +808,31 @@ impl LoopModel {
         self.wrong_loops.iter().any(|p| p.mean <= edge)
     }
 
+    /// The largest `ν²` of `k` accepted true loops that the information as
+    /// the file states it allows, on the true loops' scale where that is
+    /// larger: `max(s², 1)·χ²_D(1 − α/k)` (Bonferroni: were the `k` all
+    /// true loops of that scale, the largest would lie beyond with a
+    /// chance of at most `alpha`). An accepted loop beyond it is one the
+    /// model accepts and the file calls an outlier — the mirror of
+    /// [`Self::wrong_within_kernel`], as an alias can look where it has
+    /// bent the map and widened the true loops' fitted spread around
+    /// itself (docs/method.md §5). `None` for `k` = 0.
+    pub fn stated_bound(&self, k: usize, alpha: f64) -> Option<f64> {
+        let scale = (self.true_loops.mean - ln_chi2_mean(self.dof))
+            .exp()
+            .max(1.0);
+        let bound = crate::stats::chi2_critical(self.dof as u64, alpha / k as f64).ok()?;
+        Some(scale * bound)
+    }
+
+    /// Whether some of the accepted candidates' innovations `accepted`
+    /// (`ν²`) lies beyond [`Self::stated_bound`] for as many.
+    pub fn accepts_beyond_stated(&self, accepted: &[f64], alpha: f64) -> bool {
+        let largest = accepted.iter().copied().fold(0.0, f64::max);
+        self.stated_bound(accepted.len(), alpha)
+            .is_some_and(|bound| largest > bound)
+    }
+
     /// The least prior at which a candidate with log innovation `y` is
     /// accepted: where its posterior is ½, `1 / (1 + f_true/f_wrong)` with the
     /// non-increasing likelihood ratio ([`Self::ln_likelihood_ratio`]).
@@ -979,6 +1004,39 @@ mod tests {
         assert_eq!(beyond.len(), 1, "{beyond:?}");
         assert_eq!(beyond[0].0, 440);
         assert!(beyond[0].1 < 1e-12, "{beyond:?}");
+    }
+
+    #[test]
+    fn an_accepted_innovation_the_stated_information_calls_an_outlier_is_told() {
+        // True loops at half the stated scale: the bound is the stated
+        // information's, χ²₃(1 − 0.05/K).
+        let (e, truth) = population();
+        let m = fitted(&e);
+        let mut tested: Vec<f64> = (e.iter().zip(&truth))
+            .filter(|(_, t)| **t)
+            .map(|(x, _)| x.innovation)
+            .collect();
+        assert!(!m.accepts_beyond_stated(&tested, 0.05), "{m:?}");
+        let bound = |k: usize| {
+            ChiSquared::new(3.0)
+                .unwrap()
+                .inverse_cdf(1.0 - 0.05 / k as f64)
+        };
+        tested.push(1.05 * bound(401));
+        assert!(m.accepts_beyond_stated(&tested, 0.05), "{m:?}");
+        tested.pop();
+        tested.push(0.95 * bound(401));
+        assert!(!m.accepts_beyond_stated(&tested, 0.05), "{m:?}");
+        // True loops at ten times the stated scale: the bound is theirs.
+        let mut e = gaussian_loops(400, 10.0, Some(0.999));
+        e.extend((0..40).map(|k| ev(Some(0.01), (14.0 + (k % 7) as f64 * 0.5).exp())));
+        let m = fitted(&e);
+        let mut tested: Vec<f64> = e[..400].iter().map(|x| x.innovation).collect();
+        tested.push(3.0 * bound(401));
+        assert!(!m.accepts_beyond_stated(&tested, 0.05), "{m:?}");
+        tested.push(30.0 * bound(402));
+        assert!(m.accepts_beyond_stated(&tested, 0.05), "{m:?}");
+        assert!(!m.accepts_beyond_stated(&[], 0.05));
     }
 
     #[test]

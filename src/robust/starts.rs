@@ -23,8 +23,11 @@
 //! confirms, [`Outcome::unsettled`]), or its loop model calls a
 //! population of candidates wrong that the information as the file states
 //! it calls consistent ([`super::model::LoopModel::wrong_within_kernel`]:
-//! a run of true loops the decisions left out can look so). A map that
-//! passes, at decisions that settled, with no such population, is
+//! a run of true loops the decisions left out can look so), or accepts a
+//! candidate that information calls an outlier
+//! ([`super::model::LoopModel::accepts_beyond_stated`]: aliases that bent
+//! the map widen the true loops' fitted spread until it reaches them). A
+//! map that passes, at decisions that settled, with neither, is
 //! consistent with the information of its edges, the test the method's
 //! answer rests on, and a fixed point of the decisions; it stands. A map
 //! that passes but leaves out loops its own model accepts is neither: the
@@ -212,8 +215,9 @@ fn summary<P: Pose<D>, const D: usize>(
     }
 }
 
-/// EM: the annealed start, then — when its map fails the χ² test or its
-/// decisions did not settle, the caller gave poses and budget is left —
+/// EM: the annealed start, then — when its map fails the χ² test, its
+/// decisions did not settle or its model disagrees with the information as
+/// stated (module doc), the caller gave poses and budget is left —
 /// the kernel start from the caller's poses, and the better end (module
 /// doc) left in the session's graph and `weights`.
 pub fn em<P: ChordalInit<D>, const D: usize>(
@@ -233,9 +237,16 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     let mut ended = summary(session.graph, weights, job, Start::Annealed);
     ended.iterations = share;
     // Decisions that settled, with no population called wrong that the
-    // file calls consistent (module doc).
-    let settled =
-        !annealed.unsettled && !(annealed.model.as_ref()).is_some_and(|m| m.wrong_within_kernel());
+    // file calls consistent and no loop accepted that it calls an outlier
+    // (module doc).
+    let alpha = (job.test)(session.graph, weights).map(|t| t.alpha);
+    let settled = !annealed.unsettled
+        && !(annealed.model.as_ref()).is_some_and(|m| {
+            m.wrong_within_kernel()
+                || alpha.is_some_and(|a| {
+                    m.accepts_beyond_stated(&accepted_innovations(job, weights, &annealed), a)
+                })
+        });
     if ended.passed == Some(true) && settled {
         // A map that passes the χ² test, at decisions that settled, is not
         // second-guessed (module doc).
@@ -280,6 +291,19 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     ends.sort_by_key(|e| e.start != Start::Annealed);
     out.starts = ends;
     Ok(out)
+}
+
+/// The squared innovations of the candidates `weights` accepts, as `out`
+/// judged them.
+fn accepted_innovations<P: Pose<D>, const D: usize>(
+    job: &Job<'_, P, D>,
+    weights: &[f64],
+    out: &Outcome,
+) -> Vec<f64> {
+    (job.candidates.iter().zip(&out.innovations))
+        .filter(|(c, _)| weights[c.edge] >= 0.5)
+        .filter_map(|(_, nu2)| nu2.filter(|&v| v > 0.0))
+        .collect()
 }
 
 /// The annealed end `first` back in the session's graph and `weights`,
