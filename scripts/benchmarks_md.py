@@ -805,10 +805,7 @@ def exit_status_section(results):
             "Results recorded before the check for outlying accepted loops have no `outlying` "
             "field; run again with it on the same files (all but two that took over 300 s), it flags "
             "none of them (docs/method.md §7, "
-            "\"Accepted loops beyond the true loops' reach\"). Its later test on the information as "
-            "stated was run again on the groups sweep's 180 files and the outlier benchmarks' files "
-            "of intel, manhattan, city10000 and parking-garage: no exit status changes there "
-            "(docs/method.md §7, \"On the information as stated, too\").", ""]
+            "\"Accepted loops beyond the true loops' reach\").", ""]
     return out
 
 
