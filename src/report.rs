@@ -327,9 +327,8 @@ pub struct RobustReport {
     /// [`DOUBT_MOVE`] of its size (docs/method.md §7).
     pub held_back: Vec<HeldBack>,
     /// EM: the accepted loops of a passing map, by cluster, whose
-    /// innovations lie beyond what its true loops reach or the information
-    /// as stated allows (at the χ² test's α over the loops tested) and
-    /// whose removal would move the map by
+    /// innovations lie beyond what its true loops reach (at the χ² test's
+    /// α over the loops tested) and whose removal would move the map by
     /// more than [`DOUBT_MOVE`] of its size (docs/method.md §7).
     pub outlying: Vec<Outlying>,
 }

@@ -48,11 +48,7 @@
 //! upper tail below `α / K` with a chance of at most `α` (the χ² test's;
 //! [`LoopModel::beyond_reach`]). A lone alias accepted among thousands of
 //! true loops shows this way, where no cluster has members to test an
-//! offset with. The same holds of the information as the file states it,
-//! on the true loops' scale where that is larger
-//! ([`LoopModel::beyond_stated`]): aliases that bent the map widen the
-//! true loops' fitted spread around themselves until their own tail
-//! reaches them, but not the stated one. Those of one cluster are named when removing them would
+//! offset with. Those of one cluster are named when removing them would
 //! move the map, to first order (the deleted residuals' move,
 //! [`Evaluation::removing`]), by more than [`DOUBT_MOVE`] of its size.
 //!
@@ -118,9 +114,8 @@ pub struct Outlying {
     pub loops: Vec<usize>,
     /// The chance that some true loop among the accepted candidates tested
     /// has an innovation as large as the largest of these: their least
-    /// upper-tail probability under the true loops' fitted density or the
-    /// information as stated, times the candidates tested; below the χ²
-    /// test's α.
+    /// upper-tail probability under the true loops' fitted density, times
+    /// the candidates tested; below the χ² test's α.
     pub p_value: f64,
     /// The largest move of a pose's position that removing them would make
     /// (to first order), as a share of the map's size.
@@ -265,8 +260,7 @@ pub fn held_back<P: Pose<D>, const D: usize>(
 /// The outlying candidates (module doc) of the map in the session's graph,
 /// solved with the edges of non-zero `weights`: of the `accepted`
 /// candidates with an innovation (`nu2`), `K` of them, those whose upper
-/// tail under the true loops' density of `model`, or under the information
-/// as stated, is below `alpha / K`
+/// tail under the true loops' density of `model` is below `alpha / K`
 /// (the χ² test's α over the candidates tested), outside the clusters
 /// already named `doubtful`; of each cluster together (each alone with the
 /// clusters layer off), those whose removal would move the map by more
@@ -285,11 +279,10 @@ pub fn outlying<P: Pose<D>, const D: usize>(
         .filter_map(|k| nu2[k].filter(|&v| v > 0.0).map(|v| (k, v)))
         .collect();
     let named: Vec<usize> = doubtful.iter().flat_map(|d| d.loops.clone()).collect();
-    let mut p_value = vec![1.0_f64; candidates.len()];
-    let beyond = model.beyond_reach(&tested, alpha).into_iter();
-    for (k, p) in beyond.chain(model.beyond_stated(&tested, alpha)) {
+    let mut p_value = vec![1.0; candidates.len()];
+    for (k, p) in model.beyond_reach(&tested, alpha) {
         if !named.contains(&k) {
-            p_value[k] = p_value[k].min(p);
+            p_value[k] = p;
         }
     }
     let flagged: Vec<bool> = p_value.iter().map(|&p| p < alpha).collect();

@@ -825,28 +825,6 @@ impl LoopModel {
         Some(scale * bound)
     }
 
-    /// The candidates among `tested` (each its index and `ν²`), all taken
-    /// as true loops, that the information as stated calls outliers: the
-    /// upper tail of `χ²_D` at `ν²/max(s², 1)` ([`Self::stated_bound`]'s
-    /// scale) below `alpha` over the number tested. Each with its p-value,
-    /// that number times its tail; the largest innovation first.
-    pub fn beyond_stated(&self, tested: &[(usize, f64)], alpha: f64) -> Vec<(usize, f64)> {
-        use statrs::distribution::{ChiSquared, ContinuousCDF};
-        let Ok(chi2) = ChiSquared::new(self.dof as f64) else {
-            return Vec::new();
-        };
-        let scale = (self.true_loops.mean - ln_chi2_mean(self.dof))
-            .exp()
-            .max(1.0);
-        let n = tested.len() as f64;
-        let mut by_size = tested.to_vec();
-        by_size.sort_by(|a, b| b.1.total_cmp(&a.1));
-        (by_size.into_iter())
-            .map(|(k, nu2)| (k, n * chi2.sf(nu2 / scale)))
-            .take_while(|&(_, p)| p < alpha)
-            .collect()
-    }
-
     /// Whether some of the accepted candidates' innovations `accepted`
     /// (`ν²`) lies beyond [`Self::stated_bound`] for as many.
     pub fn accepts_beyond_stated(&self, accepted: &[f64], alpha: f64) -> bool {
@@ -1059,12 +1037,6 @@ mod tests {
         tested.push(30.0 * bound(402));
         assert!(m.accepts_beyond_stated(&tested, 0.05), "{m:?}");
         assert!(!m.accepts_beyond_stated(&[], 0.05));
-        // Which: only the last, its p-value `K·P(χ²₃ > ν²/s²)` below α.
-        let pairs: Vec<(usize, f64)> = tested.iter().copied().enumerate().collect();
-        let beyond = m.beyond_stated(&pairs, 0.05);
-        assert_eq!(beyond.len(), 1, "{beyond:?}");
-        assert_eq!(beyond[0].0, 401);
-        assert!(beyond[0].1 < 0.05, "{beyond:?}");
     }
 
     #[test]
