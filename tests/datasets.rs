@@ -509,11 +509,7 @@ fn a_wrong_population_the_file_calls_consistent_meets_the_second_start() {
 /// largest out, keeps every true loop, and ranks first (0.82 % off).
 #[test]
 fn an_accepted_loop_the_information_calls_an_outlier_meets_the_second_start() {
-    let scattered = CorruptionOptions {
-        group_size: 1,
-        ..anywhere_in_groups(300, 1.0)
-    };
-    let Some((r, wrong)) = corrupted_and_decided("CSAIL.g2o", &scattered, 1_000_016, None) else {
+    let Some((r, wrong)) = corrupted_and_decided("CSAIL.g2o", &scattered(), 1_000_016, None) else {
         return;
     };
     let starts = &r.robust.starts;
@@ -574,16 +570,21 @@ fn scattered_kitti_02() -> Option<(PoseGraph2, Vec<bool>)> {
         panic!("kitti_02 is a 2D file");
     };
     kitti.compose_missing_poses();
-    let scattered = CorruptionOptions {
-        group_size: 1,
-        ..anywhere_in_groups(300, 1.0)
-    };
     let rng = &mut StdRng::seed_from_u64(1_000_014);
-    let corruption = pgo_sim::corrupt(&kitti, &scattered, rng).expect("corrupt");
+    let corruption = pgo_sim::corrupt(&kitti, &scattered(), rng).expect("corrupt");
     let file = temp_dir("scattered-kitti").join("kitti.g2o");
     corruption.graph.write_g2o(&file).expect("write");
     let read = PoseGraph2::read_g2o(&file).expect("read");
     Some((read, corruption.wrong))
+}
+
+/// The options of the scattered exploration (docs/benchmarks.md): 300
+/// aliases placed anywhere one by one, every count true-like.
+fn scattered() -> CorruptionOptions {
+    CorruptionOptions {
+        group_size: 1,
+        ..anywhere_in_groups(300, 1.0)
+    }
 }
 
 /// The report of `optimize()` on [`aliased_torus`]'s first `n` poses (with

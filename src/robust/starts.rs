@@ -127,7 +127,7 @@ impl<P: Clone> End<P> {
     where
         P: Pose<D>,
     {
-        let summary = summary(graph, weights, job, start);
+        let (summary, _) = summary(graph, weights, job, start);
         Self::keep(graph, weights, job, (summary, out))
     }
 
@@ -195,24 +195,27 @@ impl<P: Clone> End<P> {
 }
 
 /// Where the session's map and `weights` ended from `start`, with its χ²
-/// verdict (the iterations still to be set).
+/// verdict (the iterations still to be set), and the test's α (`None`: no
+/// test).
 fn summary<P: Pose<D>, const D: usize>(
     graph: &Graph<P, D>,
     weights: &[f64],
     job: &Job<'_, P, D>,
     start: Start,
-) -> StartEnd {
-    StartEnd {
+) -> (StartEnd, Option<f64>) {
+    let test = (job.test)(graph, weights);
+    let end = StartEnd {
         start,
         accepted: (job.candidates.iter())
             .filter(|c| weights[c.edge] >= 0.5)
             .count(),
         objective: None,
-        passed: (job.test)(graph, weights).map(|t| t.passed),
+        passed: test.as_ref().map(|t| t.passed),
         chosen: false,
         iterations: 0,
         settled: true,
-    }
+    };
+    (end, test.map(|t| t.alpha))
 }
 
 /// EM: the annealed start, then — when its map fails the χ² test, its
@@ -234,12 +237,11 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     else {
         return Ok(annealed);
     };
-    let mut ended = summary(session.graph, weights, job, Start::Annealed);
+    let (mut ended, alpha) = summary(session.graph, weights, job, Start::Annealed);
     ended.iterations = share;
     // Decisions that settled, with no population called wrong that the
     // file calls consistent and no loop accepted that it calls an outlier
     // (module doc).
-    let alpha = (job.test)(session.graph, weights).map(|t| t.alpha);
     let settled = !annealed.unsettled
         && !(annealed.model.as_ref()).is_some_and(|m| {
             m.wrong_within_kernel()
