@@ -39,7 +39,7 @@ use super::Layers;
 use crate::linear::Parallelism;
 use crate::stats::log_chi2::{Density, LogChi2};
 pub use crate::stats::log_chi2::{ln_chi2_mean, ln_chi2_sigma};
-use crate::stats::mixture::{NormalComponent, log_sum_exp, normalize_log_terms};
+use crate::stats::mixture::{LnProduct, NormalComponent, log_sum_exp, normalize_log_terms};
 use crate::stats::separation::{CLEAN_SEPARATION, ashman_d};
 use crate::stats::squarem;
 use serde::Serialize;
@@ -145,31 +145,6 @@ pub enum Scale {
     /// At [`ln_chi2_mean`]: the file's information is taken as right, as
     /// the χ² test takes it.
     File,
-}
-
-/// `ln Π xᵢ` of factors `xᵢ ≥ 1` (each term's share of a log-sum-exp):
-/// one logarithm per run of factors whose product stays finite instead of
-/// one per factor.
-#[derive(Default)]
-struct LnProduct {
-    logs: f64,
-    product: Option<f64>,
-}
-
-impl LnProduct {
-    fn push(&mut self, x: f64) {
-        let p = self.product.unwrap_or(1.0) * x;
-        if p > 1e250 {
-            self.logs += p.ln();
-            self.product = None;
-        } else {
-            self.product = Some(p);
-        }
-    }
-
-    fn ln(&self) -> f64 {
-        self.logs + self.product.map_or(0.0, f64::ln)
-    }
 }
 
 /// The candidates' count posteriors, each distinct value once: a count

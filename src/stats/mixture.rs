@@ -265,6 +265,47 @@ pub(crate) fn normalize_log_terms(terms: &mut [f64]) -> (f64, f64) {
     (top, sum)
 }
 
+/// `ln Π xᵢ` of factors `xᵢ ≥ 1` (each value's share of a log-sum-exp in
+/// an E-step): one logarithm per run of factors whose product stays finite
+/// instead of one per factor.
+#[derive(Default)]
+pub(crate) struct LnProduct {
+    logs: f64,
+    product: Option<f64>,
+}
+
+impl LnProduct {
+    /// Multiplies in `x ≥ 1`.
+    pub(crate) fn push(&mut self, x: f64) {
+        let p = self.product.unwrap_or(1.0) * x;
+        if p > 1e250 {
+            self.logs += p.ln();
+            self.product = None;
+        } else {
+            self.product = Some(p);
+        }
+    }
+
+    /// Multiplies in `x^times` for `1 ≤ x ≤ most` (`times` a whole number,
+    /// as a value's multiplicity is): in powers small enough to stay finite.
+    pub(crate) fn push_power(&mut self, x: f64, times: f64, most: f64) {
+        // `most^chunk ≤ 1e50`: each power stays far below the product's cap.
+        let chunk = (50.0 * std::f64::consts::LN_10 / most.ln().max(f64::EPSILON)).floor();
+        let chunk = chunk.clamp(1.0, i32::MAX as f64);
+        let mut left = times;
+        while left > 0.0 {
+            let n = left.min(chunk);
+            self.push(x.powi(n as i32));
+            left -= n;
+        }
+    }
+
+    /// `ln` of the product.
+    pub(crate) fn ln(&self) -> f64 {
+        self.logs + self.product.map_or(0.0, f64::ln)
+    }
+}
+
 /// The Bayesian information criterion `k ln n − 2 ln L` of a mixture of
 /// `components` normals (`k = 3K − 1` free parameters: K means, K σ and
 /// K − 1 weights) with log-likelihood `log_likelihood` on `n` values.
@@ -497,7 +538,10 @@ fn weighted_e_step(
             )
         })
         .collect();
-    let mut log_likelihood = 0.0;
+    // `Σ t·top`, and `Π sumᵗ` (each `sum` in [1, K]) with one logarithm
+    // per run of factors instead of one per value.
+    let (mut tops, mut sums) = (0.0, LnProduct::default());
+    let most = mixture.len() as f64;
     for ((&v, &t), r) in y
         .iter()
         .zip(times)
@@ -508,9 +552,10 @@ fn weighted_e_step(
             *x = c - 0.5 * z * z;
         }
         let (top, sum) = normalize_log_terms(r);
-        log_likelihood += t * (top + sum.ln());
+        tops += t * top;
+        sums.push_power(sum, t, most);
     }
-    log_likelihood
+    tops + sums.ln()
 }
 
 /// M-step on `y`, each value once.

@@ -441,3 +441,27 @@ fn two_groups_of_near_ties_get_their_shares() {
     let c = fit.mixture.components();
     assert!((c[0].weight - 0.6).abs() < 1e-6 && (c[1].mean - 3.3).abs() < 0.05);
 }
+
+#[test]
+fn the_weighted_log_likelihood_is_the_sum_of_each_values_whatever_its_multiplicity() {
+    // The E-step multiplies each value's share sums, in powers of its
+    // multiplicity, and takes their logarithm once per run: the same as
+    // the log-likelihood value by value, with multiplicities from 1 to
+    // far beyond where a power would overflow.
+    let m = mixture(&[(0.3, -2.0, 0.5), (0.5, 0.0, 1.0), (0.2, 1.5, 0.3)]);
+    let values: Vec<f64> = (0..40).map(|k| -4.0 + 0.2 * k as f64).collect();
+    let times: Vec<f64> = (0..40).map(|k| [1.0, 7.0, 900.0, 5000.0][k % 4]).collect();
+    let mut r = vec![0.0; values.len() * 3];
+    let ll = weighted_e_step(&values, &times, &m, &mut r);
+    let mut terms = [0.0; 3];
+    let expected: f64 = (values.iter().zip(&times))
+        .map(|(&v, &t)| t * m.log_terms(v, &mut terms))
+        .sum();
+    assert!(
+        (ll - expected).abs() <= 1e-12 * expected.abs(),
+        "{ll} against {expected}"
+    );
+    let mut p = LnProduct::default();
+    p.push_power(2.0, 3000.0, 2.0);
+    assert!((p.ln() - 3000.0 * 2f64.ln()).abs() < 1e-9, "{}", p.ln());
+}
