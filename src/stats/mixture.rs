@@ -286,15 +286,21 @@ impl LnProduct {
         }
     }
 
-    /// Multiplies in `x^times` for `1 ≤ x ≤ most` (`times` a whole number,
-    /// as a value's multiplicity is): in powers small enough to stay finite.
-    pub(crate) fn push_power(&mut self, x: f64, times: f64, most: f64) {
-        // `most^chunk ≤ 1e50`: each power stays far below the product's cap.
-        let chunk = (50.0 * std::f64::consts::LN_10 / most.ln().max(f64::EPSILON)).floor();
-        let chunk = chunk.clamp(1.0, i32::MAX as f64);
+    /// The largest whole power of factors up to `most` that
+    /// [`Self::push_power`] multiplies in at once: `most^power ≤ 10⁵⁰`, far
+    /// below the product's cap.
+    pub(crate) fn largest_power(most: f64) -> f64 {
+        let power = (50.0 * std::f64::consts::LN_10 / most.ln().max(f64::EPSILON)).floor();
+        power.clamp(1.0, i32::MAX as f64)
+    }
+
+    /// Multiplies in `x^times` (`times` a whole number, as a value's
+    /// multiplicity is) for `1 ≤ x ≤ most`, in powers of at most `largest`
+    /// ([`Self::largest_power`] of `most`).
+    pub(crate) fn push_power(&mut self, x: f64, times: f64, largest: f64) {
         let mut left = times;
         while left > 0.0 {
-            let n = left.min(chunk);
+            let n = left.min(largest);
             self.push(x.powi(n as i32));
             left -= n;
         }
@@ -541,7 +547,7 @@ fn weighted_e_step(
     // `Σ t·top`, and `Π sumᵗ` (each `sum` in [1, K]) with one logarithm
     // per run of factors instead of one per value.
     let (mut tops, mut sums) = (0.0, LnProduct::default());
-    let most = mixture.len() as f64;
+    let largest = LnProduct::largest_power(mixture.len() as f64);
     for ((&v, &t), r) in y
         .iter()
         .zip(times)
@@ -553,7 +559,7 @@ fn weighted_e_step(
         }
         let (top, sum) = normalize_log_terms(r);
         tops += t * top;
-        sums.push_power(sum, t, most);
+        sums.push_power(sum, t, largest);
     }
     tops + sums.ln()
 }

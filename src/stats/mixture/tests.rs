@@ -462,6 +462,6 @@ fn the_weighted_log_likelihood_is_the_sum_of_each_values_whatever_its_multiplici
         "{ll} against {expected}"
     );
     let mut p = LnProduct::default();
-    p.push_power(2.0, 3000.0, 2.0);
+    p.push_power(2.0, 3000.0, LnProduct::largest_power(2.0));
     assert!((p.ln() - 3000.0 * 2f64.ln()).abs() < 1e-9, "{}", p.ln());
 }
