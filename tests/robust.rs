@@ -656,6 +656,7 @@ fn the_status_is_the_first_thing_that_questions_the_map() {
     r.robust.outlying.push(pgo::report::Outlying {
         loops: vec![0],
         p_value: 0.01,
+        stated: false,
         map_moves: 0.02,
     });
     assert_eq!(r.status(), MapStatus::Questioned);

@@ -338,8 +338,13 @@ fn outlying_warning(outlying: &Outlying, loops: &[LoopReport]) -> String {
             "them",
         ),
     };
+    let should = if outlying.stated {
+        "the file's information allows"
+    } else {
+        "any true loop of this map should"
+    };
     format!(
-        "{listed} by more than any true loop of this map should (p = {:.1e} over the \
+        "{listed} by more than {should} (p = {:.1e} over the \
          accepted loops), and removing {them} would move a pose by {:.1} % of the map's size. \
          A wrong loop the map has bent to fit looks like this; check them \
          (`robust.outlying` in the JSON report)",

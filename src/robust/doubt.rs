@@ -48,7 +48,12 @@
 //! upper tail below `α / K` with a chance of at most `α` (the χ² test's;
 //! [`LoopModel::beyond_reach`]). A lone alias accepted among thousands of
 //! true loops shows this way, where no cluster has members to test an
-//! offset with. Those of one cluster are named when removing them would
+//! offset with. Aliases the map bent to fit widen that density around
+//! themselves, so an accepted loop is outlying too where the information
+//! as the file states it calls it an outlier at the same level and the
+//! fitted density expects fewer than one true loop as far out
+//! ([`LoopModel::beyond_stated`]); either test alone names true loops of
+//! real maps. Those of one cluster are named when removing them would
 //! move the map, to first order (the deleted residuals' move,
 //! [`Evaluation::removing`]), by more than [`DOUBT_MOVE`] of its size.
 //!
@@ -114,9 +119,14 @@ pub struct Outlying {
     pub loops: Vec<usize>,
     /// The chance that some true loop among the accepted candidates tested
     /// has an innovation as large as the largest of these: their least
-    /// upper-tail probability under the true loops' fitted density, times
-    /// the candidates tested; below the χ² test's α.
+    /// upper-tail probability under the true loops' fitted density or
+    /// under the information as stated, times the candidates tested;
+    /// below the χ² test's α.
     pub p_value: f64,
+    /// Whether that least tail is the information's as stated (`χ²_D` on
+    /// the scale of [`LoopModel::stated_bound`]) rather than the true
+    /// loops' fitted density.
+    pub stated: bool,
     /// The largest move of a pose's position that removing them would make
     /// (to first order), as a share of the map's size.
     pub map_moves: f64,
@@ -261,7 +271,9 @@ pub fn held_back<P: Pose<D>, const D: usize>(
 /// solved with the edges of non-zero `weights`: of the `accepted`
 /// candidates with an innovation (`nu2`), `K` of them, those whose upper
 /// tail under the true loops' density of `model` is below `alpha / K`
-/// (the χ² test's α over the candidates tested), outside the clusters
+/// (the χ² test's α over the candidates tested), or under the information
+/// as stated where that density expects fewer than one as far out
+/// ([`LoopModel::beyond_stated`]), outside the clusters
 /// already named `doubtful`; of each cluster together (each alone with the
 /// clusters layer off), those whose removal would move the map by more
 /// than [`DOUBT_MOVE`] of its size.
@@ -279,13 +291,18 @@ pub fn outlying<P: Pose<D>, const D: usize>(
         .filter_map(|k| nu2[k].filter(|&v| v > 0.0).map(|v| (k, v)))
         .collect();
     let named: Vec<usize> = doubtful.iter().flat_map(|d| d.loops.clone()).collect();
-    let mut p_value = vec![1.0; candidates.len()];
-    for (k, p) in model.beyond_reach(&tested, alpha) {
-        if !named.contains(&k) {
-            p_value[k] = p;
+    // Each candidate's least tail, and whether it is the stated one.
+    let mut p_value = vec![(1.0, false); candidates.len()];
+    let fitted = model.beyond_reach(&tested, alpha).into_iter();
+    let stated = model.beyond_stated(&tested, alpha).into_iter();
+    for (k, p, by_stated) in
+        (fitted.map(|(k, p)| (k, p, false))).chain(stated.map(|(k, p)| (k, p, true)))
+    {
+        if !named.contains(&k) && p < p_value[k].0 {
+            p_value[k] = (p, by_stated);
         }
     }
-    let flagged: Vec<bool> = p_value.iter().map(|&p| p < alpha).collect();
+    let flagged: Vec<bool> = p_value.iter().map(|&(p, _)| p < alpha).collect();
     if size <= 0.0 || !flagged.contains(&true) {
         return Ok(Vec::new());
     }
@@ -298,7 +315,8 @@ pub fn outlying<P: Pose<D>, const D: usize>(
             continue;
         };
         let map_moves = eval.largest_move(&g) / size;
-        let p_value = loops.iter().map(|&k| p_value[k]).fold(1.0, f64::min);
+        let (p_value, stated) = (loops.iter().map(|&k| p_value[k]))
+            .fold((1.0, false), |a, b| if b.0 < a.0 { b } else { a });
         log::debug!(
             "outlying loops {loops:?}: p = {p_value:.2e}, removing them moves the map by {:.2} %",
             100.0 * map_moves
@@ -307,6 +325,7 @@ pub fn outlying<P: Pose<D>, const D: usize>(
             outlying.push(Outlying {
                 loops,
                 p_value,
+                stated,
                 map_moves,
             });
         }

@@ -43,6 +43,7 @@ use crate::stats::mixture::{LnProduct, NormalComponent, log_sum_exp, normalize_l
 use crate::stats::separation::{CLEAN_SEPARATION, ashman_d};
 use crate::stats::squarem;
 use serde::Serialize;
+use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 /// One normal population of `y = ln ν²`: its share (among wrong loops; 1
 /// for the true loops), mean and spread.
@@ -793,11 +794,47 @@ impl LoopModel {
     /// bent the map and widened the true loops' fitted spread around
     /// itself (docs/method.md §5). `None` for `k` = 0.
     pub fn stated_bound(&self, k: usize, alpha: f64) -> Option<f64> {
-        let scale = (self.true_loops.mean - ln_chi2_mean(self.dof))
-            .exp()
-            .max(1.0);
         let bound = crate::stats::chi2_critical(self.dof as u64, alpha / k as f64).ok()?;
-        Some(scale * bound)
+        Some(self.stated_scale() * bound)
+    }
+
+    /// The scale [`Self::stated_bound`] judges on: the true loops' `s²`
+    /// where they scatter more than the information states, else the
+    /// information's own (1).
+    fn stated_scale(&self) -> f64 {
+        (self.true_loops.mean - ln_chi2_mean(self.dof))
+            .exp()
+            .max(1.0)
+    }
+
+    /// The candidates among `tested` (each its index and `ν²`), all taken
+    /// as true loops, that the information as stated calls outliers and
+    /// that lie where the true loops' fitted density expects fewer than
+    /// one of them: the upper tail of `χ²_D` at `ν²` over
+    /// [`Self::stated_scale`] below `alpha` over the number tested (beyond
+    /// [`Self::stated_bound`]), and that number times the fitted tail
+    /// ([`Self::true_upper_tail`]) below 1. Real loops reach beyond the
+    /// information as stated (a map's loops can scatter in scale), so the
+    /// stated tail alone names true loops where others of the map lie as
+    /// far out; the fitted tail alone is widened by the aliases it is to
+    /// find. Each with its p-value, the number tested times its stated
+    /// tail; the largest innovation first.
+    pub fn beyond_stated(&self, tested: &[(usize, f64)], alpha: f64) -> Vec<(usize, f64)> {
+        let n = tested.len() as f64;
+        let Ok(chi2) = ChiSquared::new(self.dof as f64) else {
+            return Vec::new();
+        };
+        let scale = self.stated_scale();
+        let mut by_size: Vec<(usize, f64)> = (tested.iter().copied())
+            .filter(|&(_, nu2)| nu2 > 0.0)
+            .collect();
+        by_size.sort_by(|a, b| b.1.total_cmp(&a.1));
+        (by_size.into_iter())
+            .map(|(k, nu2)| (k, nu2, n * chi2.sf(nu2 / scale)))
+            .take_while(|&(_, _, p)| p < alpha)
+            .filter(|&(_, nu2, _)| n * self.true_upper_tail(nu2.ln()) < 1.0)
+            .map(|(k, _, p)| (k, p))
+            .collect()
     }
 
     /// Whether some of the accepted candidates' innovations `accepted`
@@ -890,7 +927,6 @@ fn span(y: &[f64], floor: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use statrs::distribution::{ChiSquared, ContinuousCDF};
 
     fn ev(p: Option<f64>, nu2: f64) -> Evidence {
         Evidence {
@@ -979,6 +1015,43 @@ mod tests {
         assert_eq!(beyond.len(), 1, "{beyond:?}");
         assert_eq!(beyond[0].0, 440);
         assert!(beyond[0].1 < 1e-12, "{beyond:?}");
+    }
+
+    #[test]
+    fn beyond_stated_names_only_what_the_fit_does_not_expect_either() {
+        let bound = |k: usize| {
+            ChiSquared::new(3.0)
+                .unwrap()
+                .inverse_cdf(1.0 - 0.05 / k as f64)
+        };
+        let true_ones = |e: &[Evidence], n: usize| -> Vec<(usize, f64)> {
+            e[..n].iter().map(|x| x.innovation).enumerate().collect()
+        };
+        // True loops at half the stated scale: none named; one just beyond
+        // the stated bound lies where the fit expects none of them.
+        let (e, _) = population();
+        let m = fitted(&e);
+        let mut tested = true_ones(&e, 400);
+        assert_eq!(m.beyond_stated(&tested, 0.05), vec![], "{m:?}");
+        tested.push((1_000, 1.05 * bound(401)));
+        let named = m.beyond_stated(&tested, 0.05);
+        assert_eq!(named.len(), 1, "{named:?}");
+        assert!(named[0].0 == 1_000 && named[0].1 < 0.05, "{named:?}");
+        // Half the true loops at ten times the scale of the other half: the
+        // widest reach beyond the stated bound, as real loops whose
+        // information states some far better than others do; one more
+        // there, and those of them beyond it, lie where the fit expects
+        // several, and none is named.
+        let mut e = gaussian_loops(200, 0.3, Some(0.999));
+        e.extend(gaussian_loops(200, 3.0, Some(0.999)));
+        e.extend((0..40).map(|k| ev(Some(0.01), (14.0 + (k % 7) as f64 * 0.5).exp())));
+        let m = fitted(&e);
+        let mut tested = true_ones(&e, 400);
+        let beyond = tested.iter().filter(|t| t.1 > bound(401)).count();
+        assert!(beyond >= 3, "{beyond} beyond the stated bound");
+        tested.push((1_000, 1.05 * bound(401)));
+        assert_eq!(m.beyond_stated(&tested, 0.05), vec![], "{m:?}");
+        assert_eq!(m.beyond_stated(&[], 0.05), vec![]);
     }
 
     #[test]
