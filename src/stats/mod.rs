@@ -1,8 +1,8 @@
 //! The statistics the method rests on: the χ² goodness-of-fit test of an
 //! optimised graph ([`chi2`]), mixtures of normal distributions fitted by EM
-//! ([`mixture`]) and accelerated by SQUAREM ([`squarem`]), and how far
-//! apart two weighted normals are and where their densities cross
-//! ([`separation`]).
+//! ([`mixture`]) and accelerated by SQUAREM ([`squarem`]) and Newton steps
+//! near the optimum, and how far apart two weighted normals are and where
+//! their densities cross ([`separation`]).
 //!
 //! The χ² items are re-exported here, so `crate::stats::chi2_critical` and
 //! the like name them directly.

@@ -465,3 +465,71 @@ fn the_weighted_log_likelihood_is_the_sum_of_each_values_whatever_its_multiplici
     p.push_power(2.0, 3000.0, LnProduct::largest_power(2.0));
     assert!((p.ln() - 3000.0 * 2f64.ln()).abs() < 1e-9, "{}", p.ln());
 }
+
+/// Two overlapping components, 600 values: EM's rate is close to 1 there.
+fn overlapping() -> (Vec<f64>, NormalMixture) {
+    let mut rng = StdRng::seed_from_u64(11);
+    let truth = mixture(&[(0.6, 0.0, 1.0), (0.4, 0.9, 0.6)]);
+    let start = mixture(&[(0.5, -0.5, 1.0), (0.5, 1.5, 1.0)]);
+    (sample(&mut rng, &truth, 600), start)
+}
+
+/// The free parameters' gradient is the log-likelihood's: against central
+/// differences of it.
+#[test]
+fn the_gradient_is_the_log_likelihoods() {
+    let (y, _) = overlapping();
+    let (values, times) = tally(&y);
+    let m = mixture(&[(0.3, -0.2, 0.8), (0.7, 0.7, 0.9)]);
+    let mut run = EmRun {
+        values: &values,
+        times: &times,
+        responsibilities: vec![0.0; values.len() * 2],
+        floor: 1e-12,
+        tolerance: 1e-9,
+        iterations: 0,
+    };
+    let g = run.gradient(&m);
+    let x = reduced(&m);
+    for i in 0..x.len() {
+        let at = |d: f64| {
+            let mut z = x.clone();
+            z[i] += d;
+            from_reduced(&z, 0.0).unwrap().log_likelihood(&y)
+        };
+        let numeric = (at(1e-6) - at(-1e-6)) / 2e-6;
+        assert!(
+            (numeric - g[i]).abs() < 1e-5 * (1.0 + g[i].abs()),
+            "{i}: {numeric} {}",
+            g[i]
+        );
+    }
+    // At the variance floor no Newton step is taken.
+    let floored = mixture(&[(0.3, -0.2, 1e-6), (0.7, 0.7, 0.9)]);
+    let ll = run.e_step(&floored);
+    assert!(run.newton_step(&floored, ll).is_none());
+}
+
+/// Where the components overlap, EM with SQUAREM creeps towards its fixed
+/// point and stops when an iteration moves it by less than the tolerance,
+/// still some way off; Newton steps near it land on it. The fit matches
+/// plain EM run until it no longer moves, to a far tighter tolerance.
+#[test]
+fn newton_steps_land_on_the_fixed_point_em_creeps_towards() {
+    let (y, start) = overlapping();
+    let fit = em(&y, start.clone(), &OPTIONS, |_| {}).unwrap();
+    assert!(fit.converged, "{fit:?}");
+    let mut naive = start;
+    let mut r = vec![0.0; y.len() * 2];
+    for _ in 0..100_000 {
+        e_step(&y, &naive, &mut r);
+        let next = m_step(&y, &r, 2, OPTIONS.variance_floor).unwrap();
+        let change = naive.max_abs_change(&next);
+        naive = next;
+        if change < 1e-15 {
+            break;
+        }
+    }
+    let off = fit.mixture.max_abs_change(&naive);
+    assert!(off < 1e-9, "{off:e}: {fit:?} against {naive:?}");
+}
