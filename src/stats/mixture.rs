@@ -394,12 +394,23 @@ pub fn em(
     };
     let (mut mixture, mut converged) = (start, false);
     let limit = options.max_iterations;
-    let mut newton_tries = 0;
+    // Newton steps tried, and the log-likelihood at the start of the last
+    // cycle and whether that cycle gained little.
+    let (mut newton_tries, mut previous, mut creeping) = (0, None, false);
     // Cycles of two EM iterations, each of which may end the fit, and the
-    // iteration from a jump along them.
+    // iteration from a jump along them; near the optimum, a Newton step
+    // first.
     while run.iterations < limit {
+        if creeping && newton_tries < MAX_NEWTON_TRIES {
+            newton_tries += 1;
+            if let Some(next) = run.newton_step(&mixture) {
+                mixture = next;
+            }
+        }
         let (ll0, first, done) = run.step(&mixture)?;
         observe(ll0);
+        creeping = previous.is_some_and(|p| ll0 - p < NEWTON_GAIN * ll0.abs().max(1.0));
+        previous = Some(ll0);
         if done || run.iterations >= limit {
             (mixture, converged) = (first, done);
             break;
@@ -409,19 +420,9 @@ pub fn em(
             (mixture, converged) = (second, done);
             break;
         }
-        let previous = ll0;
         (mixture, converged) = run.extrapolated_step(&[mixture, first, second], ll0)?;
         if converged {
             break;
-        }
-        if newton_tries < MAX_NEWTON_TRIES && run.iterations < limit {
-            let ll = run.e_step(&mixture);
-            if ll - previous < NEWTON_GAIN * ll.abs().max(1.0) {
-                newton_tries += 1;
-                if let Some(next) = run.newton_step(&mixture, ll) {
-                    mixture = next;
-                }
-            }
         }
     }
     let log_likelihood = mixture.log_likelihood(y);
@@ -501,20 +502,22 @@ impl EmRun<'_> {
 /// step or two land on the fixed point, and a step refused (a Hessian not
 /// negative definite, a likelihood that falls) is paid for once per try.
 /// Over the gate's fits of the aliased manhattan replay every 10 poses
-/// (docs/method.md §2), 4 and 8 took 100 E-steps per fit alike.
+/// (docs/method.md §2), 4 and 8 took 100 E-steps per fit alike (tried
+/// at the cycle after the one that gained little: 85 with 4).
 const MAX_NEWTON_TRIES: usize = 4;
 
 /// A SQUAREM cycle that raised the log-likelihood by less than this share
 /// of it is taken to be near the optimum, where a Newton step is tried.
 /// On those fits 10⁻⁶ and 10⁻⁴ took 100 E-steps per fit, 10⁻³ 138 (its
-/// steps tried too far out fail): the quadratic model holds only close in.
+/// steps tried too far out fail; the step tried right after the cycle, at
+/// an E-step more per cycle): the quadratic model holds only close in.
 const NEWTON_GAIN: f64 = 1e-6;
 
 impl EmRun<'_> {
-    /// The log-likelihood's gradient at `mixture` in the reduced
+    /// The log-likelihood at `mixture` and its gradient in the reduced
     /// parameters ([`reduced`]), from an E-step at it.
-    fn gradient(&mut self, mixture: &NormalMixture) -> Vec<f64> {
-        self.e_step(mixture);
+    fn gradient(&mut self, mixture: &NormalMixture) -> (f64, Vec<f64>) {
+        let ll = self.e_step(mixture);
         let comps = &mixture.components;
         let k = comps.len();
         let mut g = vec![0.0; 3 * k - 1];
@@ -529,28 +532,27 @@ impl EmRun<'_> {
                 g[j] += t * (r[j] / comps[j].weight - r[k - 1] / comps[k - 1].weight);
             }
         }
-        g
+        (ll, g)
     }
 
-    /// A Newton step on the log-likelihood from `mixture` (log-likelihood
-    /// `ll`), its Hessian by central differences of the gradient: the next
-    /// mixture when it is valid and no less likely; `None` where a
-    /// component sits at the variance floor or the Hessian is not
-    /// negative definite.
-    fn newton_step(&mut self, mixture: &NormalMixture, ll: f64) -> Option<NormalMixture> {
+    /// A Newton step on the log-likelihood from `mixture`, its Hessian by
+    /// central differences of the gradient: the next mixture when it is
+    /// valid and no less likely; `None` where a component sits at the
+    /// variance floor or the Hessian is not negative definite.
+    fn newton_step(&mut self, mixture: &NormalMixture) -> Option<NormalMixture> {
         if (mixture.components.iter()).any(|c| c.sigma * c.sigma <= self.floor * AT_FLOOR) {
             return None;
         }
         let x = reduced(mixture);
         let n = x.len();
-        let g = self.gradient(mixture);
+        let (ll, g) = self.gradient(mixture);
         let mut h = nalgebra::DMatrix::<f64>::zeros(n, n);
         for i in 0..n {
             let step = 1e-5 * x[i].abs().max(1e-2);
             let mut at = |d: f64| {
                 let mut y = x.clone();
                 y[i] += d;
-                from_reduced(&y, 0.0).map(|m| self.gradient(&m))
+                from_reduced(&y, 0.0).map(|m| self.gradient(&m).1)
             };
             let (up, down) = (at(step)?, at(-step)?);
             for r in 0..n {
