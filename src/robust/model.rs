@@ -744,12 +744,8 @@ impl LoopModel {
     /// p-value, that number times its tail; the largest innovation first.
     pub fn beyond_reach(&self, tested: &[(usize, f64)], alpha: f64) -> Vec<(usize, f64)> {
         let n = tested.len() as f64;
-        let mut by_size: Vec<(usize, f64)> = (tested.iter().copied())
-            .filter(|&(_, nu2)| nu2 > 0.0)
-            .collect();
-        by_size.sort_by(|a, b| b.1.total_cmp(&a.1));
         // From the largest down, while the tails stay below the level.
-        (by_size.into_iter())
+        (largest_first(tested).into_iter())
             .map(|(k, nu2)| (k, n * self.true_upper_tail(nu2.ln())))
             .take_while(|&(_, p)| p < alpha)
             .collect()
@@ -825,11 +821,7 @@ impl LoopModel {
             return Vec::new();
         };
         let scale = self.stated_scale();
-        let mut by_size: Vec<(usize, f64)> = (tested.iter().copied())
-            .filter(|&(_, nu2)| nu2 > 0.0)
-            .collect();
-        by_size.sort_by(|a, b| b.1.total_cmp(&a.1));
-        (by_size.into_iter())
+        (largest_first(tested).into_iter())
             .map(|(k, nu2)| (k, nu2, n * chi2.sf(nu2 / scale)))
             .take_while(|&(_, _, p)| p < alpha)
             .filter(|&(_, nu2, _)| n * self.true_upper_tail(nu2.ln()) < 1.0)
@@ -910,6 +902,16 @@ fn starts(order: &[usize], marked: &[bool]) -> Vec<Vec<bool>> {
         lower[i] = true;
     }
     vec![lower]
+}
+
+/// The candidates `tested` (each its index and `ν²`) with a positive
+/// innovation, the largest first.
+fn largest_first(tested: &[(usize, f64)]) -> Vec<(usize, f64)> {
+    let mut by_size: Vec<(usize, f64)> = (tested.iter().copied())
+        .filter(|&(_, nu2)| nu2 > 0.0)
+        .collect();
+    by_size.sort_by(|a, b| b.1.total_cmp(&a.1));
+    by_size
 }
 
 /// The width over which one wrong loop is spread when no population of
