@@ -37,7 +37,7 @@
 
 use super::Layers;
 use crate::linear::Parallelism;
-use crate::stats::log_chi2::{Density, LogChi2};
+use crate::stats::log_chi2::{Blended, Density, LogChi2};
 pub use crate::stats::log_chi2::{ln_chi2_mean, ln_chi2_sigma};
 use crate::stats::mixture::{LnProduct, NormalComponent, log_sum_exp, normalize_log_terms};
 use crate::stats::separation::{CLEAN_SEPARATION, ashman_d};
@@ -148,6 +148,49 @@ pub enum Scale {
     File,
 }
 
+/// A wrong population's log-density term `c − (y − m)²·h` at `y`, its
+/// constants `(c, h, m)` as [`LoopModel::e_step`] computes them.
+fn wrong_term((c, h, m): (f64, f64, f64), y: f64) -> f64 {
+    c - (y - m) * (y - m) * h
+}
+
+/// [`LoopModel::e_step`] with `N` populations' terms per candidate: the
+/// true loops' from `truth`, the others' from `wrong(y, ln(1 − π), terms)`.
+/// Sums the responsibilities of the first `columns` (the true loops' and
+/// each wrong population's) into `sums`, and those below the true loops' mean
+/// `below` into its `below`; returns the log-likelihood.
+fn e_step_terms<const N: usize>(
+    (evidence, counts, ln_priors): (&[Evidence], &Counts, &[(f64, f64)]),
+    y: &[f64],
+    truth: &Blended,
+    wrong: impl Fn(f64, f64, &mut [f64; N]),
+    (below, columns): (f64, usize),
+    out: &mut Sums,
+) -> f64 {
+    let mut ll = 0.0;
+    let mut sums_product = LnProduct::default();
+    let mut terms = [0.0; N];
+    // A local copy, which the optimiser can keep in registers.
+    let mut local = *out;
+    let sums = &mut local;
+    for ((e, &yi), &c) in evidence.iter().zip(y).zip(&counts.index) {
+        let (ln_in, ln_out) = ln_priors[c as usize];
+        terms[0] = ln_in + truth.ln(yi);
+        wrong(yi, ln_out, &mut terms);
+        // ln p(y) = top + ln(sum), the logarithms taken of products.
+        let (top, sum) = normalize_log_terms(&mut terms);
+        ll += top;
+        sums_product.push(sum);
+        sums.add(e, yi, &terms[..columns]);
+        if yi < below {
+            sums.below.0 += terms[0];
+            sums.below.1 += 1.0 - terms[0];
+        }
+    }
+    *out = local;
+    ll + sums_product.ln()
+}
+
 /// The candidates' count posteriors, each distinct value once: a count
 /// posterior is a function of an integer count, so a few hundred values
 /// serve any number of candidates, and the E-step takes their priors'
@@ -178,6 +221,7 @@ impl Counts {
 /// What an M-step needs of the responsibilities `r`: per population
 /// `(Σ r, Σ r·y, Σ r·y²)` — for the true loops with a pinned mean
 /// `(Σ r, 0, Σ r·(y − μ)²)` — and the sums behind the two rates.
+#[derive(Clone, Copy)]
 struct Sums {
     /// The true loops' mean when it is not learned.
     pinned: Option<f64>,
@@ -211,16 +255,22 @@ impl Sums {
 
     /// Adds one candidate of evidence `e`, `y = ln ν²` and responsibilities
     /// `r` (true loops first).
+    #[inline(always)]
     fn add(&mut self, e: &Evidence, y: f64, r: &[f64]) {
-        for (j, (c, &w)) in self.columns.iter_mut().zip(r).enumerate() {
-            c.0 += w;
-            match self.pinned {
-                Some(mean) if j == 0 => c.2 += w * (y - mean) * (y - mean),
-                _ => {
-                    c.1 += w * y;
-                    c.2 += w * y * y;
-                }
+        let (first, rest) = self.columns.split_at_mut(1);
+        let (c, w) = (&mut first[0], r[0]);
+        c.0 += w;
+        match self.pinned {
+            Some(mean) => c.2 += w * (y - mean) * (y - mean),
+            None => {
+                c.1 += w * y;
+                c.2 += w * y * y;
             }
+        }
+        for (c, &w) in rest.iter_mut().zip(&r[1..]) {
+            c.0 += w;
+            c.1 += w * y;
+            c.2 += w * y * y;
         }
         self.wrong_total += 1.0 - r[0];
         match e.count_posterior {
@@ -598,7 +648,6 @@ impl LoopModel {
         let table = LogChi2::of(self.dof);
         let truth = self.true_loops(&table).blended();
         let wrong_loops: Vec<(f64, f64, f64)> = self.wrong_loops.iter().map(constants).collect();
-        let mut terms = [0.0; MAX_WRONG_POPULATIONS + 1];
         // `ln π` and `ln(1 − π)` of each distinct count posterior.
         let ln_priors: Vec<(f64, f64)> = (counts.distinct.iter())
             .map(|&c| {
@@ -606,32 +655,40 @@ impl LoopModel {
                 (p.ln(), (1.0 - p).ln())
             })
             .collect();
-        let mut ll = 0.0;
-        let mut sums_product = LnProduct::default();
-        for ((e, &yi), &c) in evidence.iter().zip(y).zip(&counts.index) {
-            let (ln_in, ln_out) = ln_priors[c as usize];
-            let term = |(c, h, m): (f64, f64, f64)| c - (yi - m) * (yi - m) * h;
-            terms[0] = ln_in + truth.ln(yi);
-            let n = if wrong_loops.is_empty() {
-                terms[1] = ln_out - self.span.ln();
-                2
-            } else {
-                for (t, &o) in terms[1..].iter_mut().zip(&wrong_loops) {
-                    *t = ln_out + term(o);
-                }
-                1 + wrong_loops.len()
-            };
-            // ln p(y) = top + ln(sum), the logarithms taken of products.
-            let (top, sum) = normalize_log_terms(&mut terms[..n]);
-            ll += top;
-            sums_product.push(sum);
-            sums.add(e, yi, &terms[..=k]);
-            if yi < self.true_loops.mean {
-                sums.below.0 += terms[0];
-                sums.below.1 += 1.0 - terms[0];
+        let priors = (evidence, counts, &ln_priors[..]);
+        let below = self.true_loops.mean;
+        debug_assert_eq!(k, self.wrong_loops.len());
+        // The terms of each candidate in an array of their number, so that
+        // the loops over them unroll.
+        match wrong_loops[..] {
+            [] => {
+                let uniform = -self.span.ln();
+                let wrong = |_: f64, ln_out: f64, t: &mut [f64; 2]| t[1] = ln_out + uniform;
+                e_step_terms(priors, y, &truth, wrong, (below, k + 1), sums)
             }
+            [a] => {
+                let wrong = |yi: f64, ln_out: f64, t: &mut [f64; 2]| {
+                    t[1] = ln_out + wrong_term(a, yi);
+                };
+                e_step_terms(priors, y, &truth, wrong, (below, k + 1), sums)
+            }
+            [a, b] => {
+                let wrong = |yi: f64, ln_out: f64, t: &mut [f64; 3]| {
+                    t[1] = ln_out + wrong_term(a, yi);
+                    t[2] = ln_out + wrong_term(b, yi);
+                };
+                e_step_terms(priors, y, &truth, wrong, (below, k + 1), sums)
+            }
+            [a, b, c] => {
+                let wrong = |yi: f64, ln_out: f64, t: &mut [f64; 4]| {
+                    t[1] = ln_out + wrong_term(a, yi);
+                    t[2] = ln_out + wrong_term(b, yi);
+                    t[3] = ln_out + wrong_term(c, yi);
+                };
+                e_step_terms(priors, y, &truth, wrong, (below, k + 1), sums)
+            }
+            _ => unreachable!("at most {MAX_WRONG_POPULATIONS} wrong populations, {k} asked"),
         }
-        ll + sums_product.ln()
     }
 
     /// `ln` of the wrong loops' density of `y`.
@@ -979,6 +1036,61 @@ mod tests {
             truth.push(false);
         }
         (e, truth)
+    }
+
+    /// The E-step, with 0 to 3 wrong populations, against the mixture's
+    /// density summed candidate by candidate: its log-likelihood and the
+    /// sums of the responsibilities of the true loops.
+    #[test]
+    fn the_e_step_sums_the_mixtures_responsibilities() {
+        let (mut e, _) = population();
+        e.extend([ev(None, 0.3), ev(None, 4e4)]);
+        let model = fitted(&e);
+        let y: Vec<f64> = e.iter().map(|c| c.innovation.ln()).collect();
+        let counts = Counts::new(&e);
+        let table = LogChi2::of(model.dof);
+        let truth = model.true_loops(&table);
+        let wrong = [(0.5, 12.0, 1.0), (0.3, 4.0, 0.4), (0.2, -1.0, 0.7)];
+        for k in 0..=MAX_WRONG_POPULATIONS {
+            let total: f64 = wrong[..k].iter().map(|w| w.0).sum();
+            let mut m = model.clone();
+            m.wrong_loops = (wrong[..k].iter())
+                .map(|&(weight, mean, sigma)| Population {
+                    weight: weight / total,
+                    mean,
+                    sigma,
+                })
+                .collect();
+            let mut sums = Sums::new(None);
+            let ll = m.e_step((&e, &counts), &y, k, &mut sums);
+            let (mut expected, mut r0, mut below) = (0.0, 0.0, 0.0);
+            for (c, &yi) in e.iter().zip(&y) {
+                let p = m.prior(c.count_posterior);
+                let t = p.ln() + truth.ln(yi);
+                let lse = log_sum_exp([t, (1.0 - p).ln() + m.ln_wrong_density(yi)].into_iter());
+                expected += lse;
+                r0 += (t - lse).exp();
+                if yi < m.true_loops.mean {
+                    below += (t - lse).exp();
+                }
+            }
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs().max(1.0);
+            assert!(
+                close(ll, expected),
+                "{k} wrong populations: {ll} against {expected}"
+            );
+            assert!(
+                close(sums.columns[0].0, r0),
+                "{k}: {} against {r0}",
+                sums.columns[0].0
+            );
+            assert!(
+                close(sums.below.0, below),
+                "{k}: {} against {below}",
+                sums.below.0
+            );
+            assert!(close(sums.wrong_total, e.len() as f64 - r0));
+        }
     }
 
     #[test]
