@@ -156,9 +156,10 @@ fn wrong_term((c, h, m): (f64, f64, f64), y: f64) -> f64 {
 
 /// [`LoopModel::e_step`] with `N` populations' terms per candidate: the
 /// true loops' from `truth`, the others' from `wrong(y, ln(1 − π), terms)`.
-/// Sums the responsibilities of the first `columns` (the true loops' and
-/// each wrong population's) into `sums`, and those below the true loops' mean
-/// `below` into its `below`; returns the log-likelihood.
+/// Adds the responsibilities of the first `columns` populations (the true
+/// loops and each wrong population; the uniform term has none) to `out`,
+/// and the true loops' of the candidates below their mean `below` to its
+/// `below`; returns the log-likelihood.
 fn e_step_terms<const N: usize>(
     (evidence, counts, ln_priors): (&[Evidence], &Counts, &[(f64, f64)]),
     y: &[f64],
