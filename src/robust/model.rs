@@ -510,7 +510,7 @@ impl LoopModel {
         // of the model it gives (its log-likelihood, and its sums).
         let e_step = |mut model: Self| {
             let mut sums = Sums::new(pinned);
-            model.ln_likelihood = model.e_step((evidence, counts), y, k, &mut sums);
+            model.ln_likelihood = model.e_step((evidence, counts), y, &mut sums);
             (model, sums)
         };
         let iterate = |sums: &Sums| {
@@ -629,13 +629,13 @@ impl LoopModel {
         }
     }
 
-    /// The responsibilities of the `k` + 1 populations under this model,
-    /// summed into `sums` for the next M-step, and the log-likelihood.
+    /// The responsibilities of the true loops and of each wrong population
+    /// under this model, summed into `sums` for the next M-step, and the
+    /// log-likelihood.
     fn e_step(
         &self,
         (evidence, counts): (&[Evidence], &Counts),
         y: &[f64],
-        k: usize,
         sums: &mut Sums,
     ) -> f64 {
         // Per population: ln(weight) − ln σ − ln √(2π), and 1/(2σ²).
@@ -657,28 +657,27 @@ impl LoopModel {
             })
             .collect();
         let priors = (evidence, counts, &ln_priors[..]);
-        let below = self.true_loops.mean;
-        debug_assert_eq!(k, self.wrong_loops.len());
+        let (below, columns) = (self.true_loops.mean, wrong_loops.len() + 1);
         // The terms of each candidate in an array of their number, so that
         // the loops over them unroll.
         match wrong_loops[..] {
             [] => {
                 let uniform = -self.span.ln();
                 let wrong = |_: f64, ln_out: f64, t: &mut [f64; 2]| t[1] = ln_out + uniform;
-                e_step_terms(priors, y, &truth, wrong, (below, k + 1), sums)
+                e_step_terms(priors, y, &truth, wrong, (below, columns), sums)
             }
             [a] => {
                 let wrong = |yi: f64, ln_out: f64, t: &mut [f64; 2]| {
                     t[1] = ln_out + wrong_term(a, yi);
                 };
-                e_step_terms(priors, y, &truth, wrong, (below, k + 1), sums)
+                e_step_terms(priors, y, &truth, wrong, (below, columns), sums)
             }
             [a, b] => {
                 let wrong = |yi: f64, ln_out: f64, t: &mut [f64; 3]| {
                     t[1] = ln_out + wrong_term(a, yi);
                     t[2] = ln_out + wrong_term(b, yi);
                 };
-                e_step_terms(priors, y, &truth, wrong, (below, k + 1), sums)
+                e_step_terms(priors, y, &truth, wrong, (below, columns), sums)
             }
             [a, b, c] => {
                 let wrong = |yi: f64, ln_out: f64, t: &mut [f64; 4]| {
@@ -686,9 +685,9 @@ impl LoopModel {
                     t[2] = ln_out + wrong_term(b, yi);
                     t[3] = ln_out + wrong_term(c, yi);
                 };
-                e_step_terms(priors, y, &truth, wrong, (below, k + 1), sums)
+                e_step_terms(priors, y, &truth, wrong, (below, columns), sums)
             }
-            _ => unreachable!("at most {MAX_WRONG_POPULATIONS} wrong populations, {k} asked"),
+            _ => unreachable!("at most {MAX_WRONG_POPULATIONS} wrong populations"),
         }
     }
 
@@ -1063,7 +1062,7 @@ mod tests {
                 })
                 .collect();
             let mut sums = Sums::new(None);
-            let ll = m.e_step((&e, &counts), &y, k, &mut sums);
+            let ll = m.e_step((&e, &counts), &y, &mut sums);
             let (mut expected, mut r0, mut below) = (0.0, 0.0, 0.0);
             for (c, &yi) in e.iter().zip(&y) {
                 let p = m.prior(c.count_posterior);
