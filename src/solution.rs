@@ -79,12 +79,13 @@ pub struct LoopDecision {
 
 impl Reason {
     /// Its name as the JSON report spells it (snake case): `consistent`,
-    /// `inconsistent`, `unchecked`, `explains_chi2`, `unsettled`,
-    /// `kernel`, `dropped` or `trusted` (for bindings).
+    /// `inconsistent`, `outlying`, `unchecked`, `explains_chi2`,
+    /// `unsettled`, `kernel`, `dropped` or `trusted` (for bindings).
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Consistent => "consistent",
             Self::Inconsistent => "inconsistent",
+            Self::Outlying => "outlying",
             Self::Unchecked => "unchecked",
             Self::ExplainsChi2 => "explains_chi2",
             Self::Unsettled => "unsettled",

@@ -8,7 +8,7 @@
 use pgo::report::{LoopReport, Report};
 use pgo::{
     AnyPoseGraph, AnySolution, Error, GateMode, Initialization, MapStatus, Options, Pose,
-    PoseGraph, PoseGraph2, PoseGraph3, RobustMethod, Se2,
+    PoseGraph, PoseGraph2, PoseGraph3, Reason, RobustMethod, Se2,
 };
 use pgo_sim::{
     AliasOffsets, AliasPlace, CorruptionOptions, ErrorCoordinates, InlierModel, OutlierPolicy,
@@ -461,7 +461,10 @@ const PLACES_SEED_2: (f64, u64) = (1.0, 1_000_003);
 /// between ~570 loops and all of them (the aliases bend the map until
 /// ~160 true loops look wrong with them) and end with 155 true loops
 /// `unsettled` and the χ² test passed; the kernel start's end keeps every
-/// true loop and no alias, and ranks first.
+/// true loop and no alias, and ranks first. That is without the true
+/// loops' reach (docs/method.md §4); with it the aliases are rejected
+/// before they bend the map, and the annealed start alone keeps every
+/// true loop and no alias.
 #[test]
 fn an_end_whose_decisions_did_not_settle_meets_the_second_start() {
     let Some((r, _)) = kernel_start_chosen(1000, PLACES_SEED_2) else {
@@ -588,15 +591,24 @@ fn scattered() -> CorruptionOptions {
 }
 
 /// The report of `optimize()` on [`aliased_torus`]'s first `n` poses (with
-/// the true loops it accepted), checked to keep every true loop and no
-/// alias, from the second of two starts.
+/// the true loops it accepted) without the true loops' reach (`--expert
+/// no-reach`), checked to keep every true loop and no alias, from the
+/// second of two starts; and checked to keep them from the first start
+/// alone with every layer on.
 fn kernel_start_chosen(n: u64, case: (f64, u64)) -> Option<(Report, usize)> {
     let (young, edge_wrong) = aliased_torus(n, case)?;
     let wrong = candidate_labels(&young, &edge_wrong);
-    let solution = young.optimize(&Options::default()).unwrap();
-    let r = solution.report().clone();
+    let true_loops = wrong.iter().filter(|w| !**w).count();
+    let mut options = Options::default();
+    let whole = young.optimize(&options).unwrap().into_report();
+    assert_eq!(true_loops_kept(&whole, &wrong).0, true_loops);
+    let starts = &whole.robust.starts;
+    assert!(starts.len() == 1 && starts[0].settled, "{starts:?}");
+    assert_eq!(whole.status(), MapStatus::Ok);
+    options.expert.layers.reach = false;
+    let r = young.optimize(&options).unwrap().into_report();
     let (accepted, _) = true_loops_kept(&r, &wrong);
-    assert_eq!(accepted, wrong.iter().filter(|w| !**w).count());
+    assert_eq!(accepted, true_loops);
     let starts = &r.robust.starts;
     assert_eq!(starts.len(), 2, "{starts:?}");
     assert!(starts[1].chosen, "{starts:?}");
@@ -612,7 +624,9 @@ fn kernel_start_chosen(n: u64, case: (f64, u64)) -> Option<(Report, usize)> {
 /// whose map fits best and passes — judged at its own map, thousands of
 /// true loops are `unsettled`. Without the second start that end was
 /// returned (the whole file: 3 of 4,049 true loops, 22.9 % off); the kernel
-/// start's end keeps every true loop and no alias, and ranks first.
+/// start's end keeps every true loop and no alias, and ranks first. That
+/// is without the true loops' reach; with it the annealed start alone
+/// keeps every true loop and no alias.
 #[test]
 fn a_set_kept_from_a_cycle_meets_the_second_start() {
     let Some((r, accepted)) = kernel_start_chosen(4000, (0.5, 1_000_006)) else {
@@ -952,39 +966,55 @@ fn true_loops_kept_out_by_their_counts_alone_are_named_when_they_would_move_the_
     assert_eq!(r.status(), MapStatus::Questioned);
 }
 
-/// An accepted alias whose innovation lies beyond every true loop's is
-/// named when the map would move without it: parking-garage with 300
-/// aliases in groups of 10 placed anywhere, half the groups with
-/// true-like counts, its information as published (seed 3 of the
-/// exploration of docs/method.md §4). One alias (88–694, 130 inliers) is
-/// accepted alone among 4,616 loops, at the largest innovation of them
-/// (`ν²` 0.035 where the true loops' fit centres on 1.4·10⁻⁴); the map
-/// passes its test with it, 1.4 % off. Its upper tail under the true
-/// loops' fitted density is 8·10⁻⁶, below the χ² test's α over the 4,616
-/// tested, and the map would move by 4.6 % of its size without it: the
-/// report names it, and only it, and warns.
+/// parking-garage with 300 aliases placed anywhere in groups of 10, half
+/// the groups' counts true-like (seed 3 of the exploration of
+/// docs/method.md §4), information as published, accepts one alias of a
+/// group alone (88–694) among 4,615 true loops, and passes its test with
+/// it, 1.4 % off. Its upper tail under the true loops' fitted density
+/// lies at the decisions' own reach (docs/method.md §4): `K·p` 0.036 at
+/// the map that holds it, 0.051 at the map without it. Wherever the
+/// decisions end, the alias is not accepted silently: it is out, or the
+/// map is reported unsettled or questioned.
 #[test]
-fn an_accepted_alias_beyond_the_true_loops_reach_is_named_when_it_moves_the_map() {
+fn an_alias_at_the_edge_of_the_true_loops_reach_is_never_accepted_silently() {
     let aliased = anywhere_in_groups(300, 0.5);
     let Some((r, wrong)) = corrupted_and_decided("parking-garage.g2o", &aliased, 1_000_004, None)
     else {
         return;
     };
     assert!(r.chi2_test.as_ref().is_some_and(|t| t.passed));
-    assert!(r.robust.doubtful.is_empty(), "{:?}", r.robust.doubtful);
-    let outlying = &r.robust.outlying;
+    let aliases = (0..wrong.len())
+        .filter(|&k| wrong[k] && r.loops[k].accepted)
+        .count();
+    assert!(aliases <= 1, "{aliases} aliases accepted");
+    if aliases == 1 {
+        assert_ne!(r.status(), MapStatus::Ok);
+    }
+}
+
+/// kitti_00 with 300 aliases placed anywhere one by one, every count
+/// true-like (seed 16 of the scattered exploration in docs/benchmarks.md),
+/// information as published. One alias (347–2452) sits at `ν²` 86 among
+/// 137 true loops that reach 9: between the true loops' wide fit and the
+/// wrong loops' narrow one far out, its posterior is near 1, but no true
+/// loop of the map reaches it. It is rejected as `outlying`, and the map
+/// keeps every true loop and no alias, where it ended 0.18 % off with the
+/// alias and exit status 0.
+#[test]
+fn an_alias_beyond_the_true_loops_reach_is_rejected_whatever_its_posterior() {
+    let Some((r, wrong)) = corrupted_and_decided("kitti_00.g2o", &scattered(), 1_000_017, None)
+    else {
+        return;
+    };
+    assert_eq!(true_loops_kept(&r, &wrong).0, 137);
+    let outlying: Vec<usize> = (0..wrong.len())
+        .filter(|&k| r.loops[k].reason == Reason::Outlying)
+        .collect();
     assert_eq!(outlying.len(), 1, "{outlying:?}");
-    assert_eq!(outlying[0].loops.len(), 1, "{outlying:?}");
-    let alias = outlying[0].loops[0];
-    assert!(wrong[alias] && r.loops[alias].accepted, "{outlying:?}");
-    assert!(outlying[0].p_value < 0.05, "{outlying:?}");
-    assert!(outlying[0].map_moves > 0.02, "{outlying:?}");
-    let warned = r
-        .warnings
-        .iter()
-        .any(|w| w.contains("by more than any true loop"));
-    assert!(warned, "{:?}", r.warnings);
-    assert_eq!(r.status(), MapStatus::Questioned);
+    let alias = &r.loops[outlying[0]];
+    assert!(wrong[outlying[0]] && !alias.accepted, "{alias:?}");
+    assert!(alias.posterior.is_some_and(|p| p > 0.5), "{alias:?}");
+    assert_eq!(r.status(), MapStatus::Ok);
 }
 
 /// An accepted alias that the file's information calls an outlier, where

@@ -191,9 +191,12 @@ fn a_replay_ends_with_the_batch_map_and_decisions() {
         assert_eq!(kinds[0], UpdateSolve::Batch);
         // A young map's updates run the whole job (too few candidates for
         // EM's model, no model or no accepted loop to resume from:
-        // docs/method.md §7b); once EM resumes, at most one does: the
-        // file's true loop at `ν²` 23.5, beyond `χ²₃(1 − 0.05/200)` = 19.3,
-        // is looked at once by both starts, and the updates after resume.
+        // docs/method.md §7b); once EM resumes, at most two do, both for
+        // the file's true loop at `ν²` 23.5, beyond `χ²₃(1 − 0.05/200)` =
+        // 19.3: near the edge of the true loops' reach (§4), a growing map
+        // can reject it (every 7 poses: at 686 poses, which the updates
+        // leave to the whole job), and an update that accepts it again is
+        // looked at by both starts (at 791), and the updates after resume.
         let warm = kinds.iter().position(|k| *k == UpdateSolve::Warm);
         let warm = warm.expect("EM resumes");
         let later = kinds[warm..]
@@ -201,8 +204,11 @@ fn a_replay_ends_with_the_batch_map_and_decisions() {
             .filter(|k| **k == UpdateSolve::Batch)
             .count();
         let later = &reasons[reasons.len() - later..];
+        let about_it = |r: &String| {
+            r.contains("calls an outlier") || r.contains("rejected a loop the last update accepted")
+        };
         assert!(
-            later.len() <= 1 && later.iter().all(|r| r.contains("calls an outlier")),
+            later.len() <= 2 && later.iter().all(about_it),
             "{kinds:?} {later:?}"
         );
     }

@@ -337,6 +337,7 @@ fn every_decision_says_why_and_follows_the_posterior() {
         match l.reason {
             Reason::Consistent => assert!(l.accepted && p >= 0.5),
             Reason::Inconsistent => assert!(!l.accepted && p < 0.5),
+            Reason::Outlying => assert!(!l.accepted && p >= 0.5),
             Reason::Unchecked => assert!(l.innovation.is_none()),
             Reason::ExplainsChi2 => assert!(!l.accepted),
             other => panic!("EM gave {other:?} to {}–{}", l.from, l.to),

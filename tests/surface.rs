@@ -210,6 +210,7 @@ fn reasons_and_update_solves_are_named_as_the_json_spells_them() {
     let reasons = [
         Reason::Consistent,
         Reason::Inconsistent,
+        Reason::Outlying,
         Reason::Unchecked,
         Reason::ExplainsChi2,
         Reason::Unsettled,

@@ -1000,7 +1000,7 @@ enum PgoStatus pgo_result_loop(const struct PgoResult *result,
 
 /**
  * Why the `k`-th loop ended where it did: `"consistent"`,
- * `"inconsistent"`, `"unchecked"`, `"explains_chi2"`, `"unsettled"`,
+ * `"inconsistent"`, `"outlying"`, `"unchecked"`, `"explains_chi2"`, `"unsettled"`,
  * `"kernel"`, `"dropped"` or `"trusted"` (the reason's name in snake case; later
  * versions may add reasons). The string is static: never free it. NULL on failure
  * (`PGO_ERR_INVALID_ARGUMENT` in `pgo_last_error`: NULL `result`, `k` out

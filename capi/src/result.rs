@@ -513,7 +513,7 @@ pub unsafe extern "C" fn pgo_result_loop(
 }
 
 /// Why the `k`-th loop ended where it did: `"consistent"`,
-/// `"inconsistent"`, `"unchecked"`, `"explains_chi2"`, `"unsettled"`,
+/// `"inconsistent"`, `"outlying"`, `"unchecked"`, `"explains_chi2"`, `"unsettled"`,
 /// `"kernel"`, `"dropped"` or `"trusted"` (the reason's name in snake case; later
 /// versions may add reasons). The string is static: never free it. NULL on failure
 /// (`PGO_ERR_INVALID_ARGUMENT` in `pgo_last_error`: NULL `result`, `k` out

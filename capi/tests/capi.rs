@@ -1287,13 +1287,15 @@ fn a_replay_through_c_is_the_librarys_and_ends_with_the_batch_job() {
     use PgoUpdateSolve::*;
     assert_eq!(kinds[0].0, PgoUpdateBatch);
     // A later whole job only while the map is young (too few candidates
-    // for EM's model, no model or accepted loop to resume from) or where
-    // EM's decisions from the last ones swung (the documented fall-backs,
-    // docs/method.md §7b).
+    // for EM's model, no model or accepted loop to resume from), where
+    // EM's decisions from the last ones swung, or where an update accepts
+    // a loop the information calls an outlier (the documented fall-backs,
+    // docs/method.md §7b: here the sample's loop 19–45, at 200 poses).
     let resumed = kinds.iter().position(|(s, _)| *s == PgoUpdateWarm);
     let resumed = resumed.unwrap_or(kinds.len());
+    let fall_back = |why: &String| why.contains("swung") || why.contains("calls an outlier");
     assert!(
-        (kinds[resumed..].iter()).all(|(s, why)| *s != PgoUpdateBatch || why.contains("swung")),
+        (kinds[resumed..].iter()).all(|(s, why)| *s != PgoUpdateBatch || fall_back(why)),
         "{kinds:?}"
     );
     let kinds: Vec<PgoUpdateSolve> = kinds.into_iter().map(|(s, _)| s).collect();

@@ -78,8 +78,8 @@ impl Solution {
     /// (EM's probability that it is a true loop) and `innovation` (its ν²
     /// against the map without its cluster), each None where the method
     /// gives none, and `reason` (why it ended where it did: "consistent",
-    /// "inconsistent", "unchecked", "explains_chi2", "unsettled", "kernel",
-    /// "dropped" or "trusted").
+    /// "inconsistent", "outlying", "unchecked", "explains_chi2", "unsettled",
+    /// "kernel", "dropped" or "trusted").
     #[getter]
     fn loops<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
         let loops = PyList::empty(py);

@@ -46,9 +46,9 @@
 //! the `K` accepted loops are all true, their log innovations are `K`
 //! draws from the true loops' fitted density, and the largest has an
 //! upper tail below `α / K` with a chance of at most `α` (the χ² test's;
-//! [`LoopModel::beyond_reach`]). A lone alias accepted among thousands of
-//! true loops shows this way, where no cluster has members to test an
-//! offset with. Aliases the map bent to fit widen that density around
+//! [`LoopModel::beyond_reach`]). The decisions reject such a loop
+//! themselves ([`super::schedule::verdict`]); this check applies the same
+//! tail to the set they kept, its `K` the loops the set holds. Aliases the map bent to fit widen that density around
 //! themselves, so an accepted loop is outlying too where the information
 //! as the file states it calls it an outlier at the same level and the
 //! fitted density expects fewer than one true loop as far out

@@ -135,6 +135,10 @@ pub struct Layers {
     /// poses and keep the better end ([`starts`]); off: the annealed start
     /// only.
     pub starts: bool,
+    /// Reject a candidate whose innovation lies beyond the true loops'
+    /// reach, whatever its posterior ([`schedule::verdict`], reason
+    /// `outlying`); off: the posterior alone decides.
+    pub reach: bool,
 }
 
 impl Default for Layers {
@@ -150,13 +154,14 @@ impl Default for Layers {
             relaxation: true,
             rescue: true,
             starts: true,
+            reach: true,
         }
     }
 }
 
 impl Layers {
     /// The layer names, as `--expert` takes them (with `no-`).
-    pub const NAMES: [&'static str; 10] = [
+    pub const NAMES: [&'static str; 11] = [
         "annealing",
         "decisions",
         "clusters",
@@ -167,6 +172,7 @@ impl Layers {
         "relaxation",
         "rescue",
         "starts",
+        "reach",
     ];
 
     /// Parses `no-LAYER[,no-LAYER…]` (empty: every layer on).
@@ -184,6 +190,7 @@ impl Layers {
                 "no-relaxation" => &mut layers.relaxation,
                 "no-rescue" => &mut layers.rescue,
                 "no-starts" => &mut layers.starts,
+                "no-reach" => &mut layers.reach,
                 _ => {
                     return Err(format!(
                         "unknown layer '{item}': expected no-LAYER with LAYER one of {}",
@@ -221,6 +228,10 @@ pub enum Reason {
     Unchecked,
     /// Taken out because the map failed the χ² test without it.
     ExplainsChi2,
+    /// Its posterior is ≥ ½, but its innovation lies beyond the reach of
+    /// the map's true loops (the loop model's fitted density puts the
+    /// largest of them there with a chance below the χ² test's α).
+    Outlying,
     /// The decisions did not settle on it: the last evaluation's posterior
     /// and the set the map was solved with disagree (it was accepted on
     /// some maps of a cycle of sets and rejected on others, and the set
@@ -341,6 +352,10 @@ pub struct Job<'a, P: Pose<D>, const D: usize> {
     /// The caller's own poses (a g2o file's vertices), from which EM's
     /// second start runs a plain kernel ([`starts`]); `None`: one start.
     pub given: Option<&'a [P]>,
+    /// The χ² test's level (`--alpha`), which EM's decisions also share
+    /// among the loops they accept to bound the true loops' reach
+    /// ([`schedule::verdict`]).
+    pub alpha: f64,
 }
 
 /// Solves for the map with the candidates weighed by the job's method,
@@ -578,6 +593,7 @@ fn settle<P: ChordalInit<D>, const D: usize>(
         layers,
         relax: chordal,
         swing,
+        alpha: job.alpha,
     };
     let mut passing = search::Passing::default();
     let (mut decided, mut search) = decide_and_explain(
@@ -624,7 +640,7 @@ fn settle<P: ChordalInit<D>, const D: usize>(
         let ending = (&mut decided, &mut search);
         end_passing(session, weights, (job, &how), ending, &passing)?;
     }
-    record(out, decided, search, candidates);
+    record(out, decided, search, (candidates, &how));
     Ok(())
 }
 
@@ -728,7 +744,7 @@ fn record(
     out: &mut Outcome,
     decided: schedule::Decided,
     search: Option<Search>,
-    candidates: &[Candidate],
+    (candidates, how): (&[Candidate], &schedule::Deciding<'_>),
 ) {
     out.decisions = decided.decisions;
     out.relaxations += decided.relaxations;
@@ -745,9 +761,9 @@ fn record(
         Some((i, m)) => (i, m),
         None => last,
     };
+    let judging = (&decided, candidates, removed.as_slice(), how);
+    (out.reasons, out.posteriors) = reasons((innovations, model), judging);
     for k in 0..candidates.len() {
-        let judged = reason(k, (innovations, model), &decided, candidates, &removed);
-        (out.reasons[k], out.posteriors[k]) = judged;
         out.innovations[k] = innovations.nu2.get(k).copied().flatten();
     }
     // Whether the decisions did not settle at the last map they judged
@@ -756,8 +772,7 @@ fn record(
     out.unsettled = match decided.at_own_map {
         None => out.reasons.contains(&Reason::Unsettled),
         Some(_) => {
-            (0..candidates.len())
-                .any(|k| reason(k, last, &decided, candidates, &removed).0 == Reason::Unsettled)
+            reasons(last, judging).0.contains(&Reason::Unsettled)
                 || disputed(&out.reasons, &decided.accepted)
         }
     };
@@ -782,36 +797,56 @@ fn disputed(reasons: &[Reason], accepted: &[bool]) -> bool {
     judged != accepted && schedule::swings_most(accepted, &judged)
 }
 
-/// Candidate `k`'s reason and posterior under the loop `model` with
+/// What [`reasons`] judges against: the decisions, the candidates, the
+/// loops the χ² search took out, and how the decisions judge.
+type Judging<'a> = (
+    &'a schedule::Decided,
+    &'a [Candidate],
+    &'a [usize],
+    &'a schedule::Deciding<'a>,
+);
+
+/// Each candidate's reason and posterior under the loop `model` with
 /// `innovations`, against the set `decided` accepted (`removed`: the loops
-/// the χ² search took out).
-fn reason(
-    k: usize,
+/// the χ² search took out), as the decisions `how` judge
+/// ([`schedule::verdict`]).
+fn reasons(
     (innovations, model): (&Innovations, &Option<LoopModel>),
-    decided: &schedule::Decided,
-    candidates: &[Candidate],
-    removed: &[usize],
-) -> (Reason, Option<f64>) {
-    let e = innovations.evidence(candidates, k);
-    let posterior = model.as_ref().map(|m| match &e {
-        Some(e) => m.posterior(e),
-        None => m.prior(candidates[k].count_posterior),
-    });
-    let consistent = posterior.is_some_and(|p| p >= 0.5);
-    let reason = if removed.contains(&k) {
-        Reason::ExplainsChi2
-    } else if !candidates[k].kept && !decided.rescue {
-        Reason::Dropped
-    } else if e.is_none() {
-        Reason::Unchecked
-    } else if consistent != decided.accepted[k] {
-        Reason::Unsettled
-    } else if consistent {
-        Reason::Consistent
-    } else {
-        Reason::Inconsistent
+    (decided, candidates, removed, how): Judging<'_>,
+) -> (Vec<Reason>, Vec<Option<f64>>) {
+    let n = candidates.len();
+    let (judged, beyond) = match model {
+        Some(m) => schedule::verdict(m, innovations, candidates, (how.layers, how.alpha)),
+        None => (vec![false; n], vec![false; n]),
     };
-    (reason, posterior)
+    (0..n)
+        .map(|k| {
+            let e = innovations.evidence(candidates, k);
+            let posterior = model.as_ref().map(|m| match &e {
+                Some(e) => m.posterior(e),
+                None => m.prior(candidates[k].count_posterior),
+            });
+            // What the model at this map does with it (the posterior alone
+            // without a model).
+            let judged = model.is_some() && judged[k];
+            let reason = if removed.contains(&k) {
+                Reason::ExplainsChi2
+            } else if !candidates[k].kept && !decided.rescue {
+                Reason::Dropped
+            } else if e.is_none() {
+                Reason::Unchecked
+            } else if judged != decided.accepted[k] {
+                Reason::Unsettled
+            } else if judged {
+                Reason::Consistent
+            } else if beyond[k] {
+                Reason::Outlying
+            } else {
+                Reason::Inconsistent
+            };
+            (reason, posterior)
+        })
+        .unzip()
 }
 
 #[cfg(test)]

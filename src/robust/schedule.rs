@@ -403,7 +403,7 @@ impl Decided {
             &innov,
             &self.accepted,
             (D, how.scale),
-            how.layers,
+            (how.layers, how.alpha),
             &parallelism,
         );
         session.modelled(fit.elapsed());
@@ -427,6 +427,9 @@ pub struct Deciding<'a> {
     pub relax: bool,
     /// Whether to stop at the second swing ([`Swing`]).
     pub swing: Swing,
+    /// The χ² test's level, which the true loops' reach shares among the
+    /// loops accepted ([`verdict`]).
+    pub alpha: f64,
 }
 
 /// What [`decide`] shows of each set it solves: the map in the graph, the
@@ -836,42 +839,73 @@ fn relaxed_start<P: ChordalInit<D>, const D: usize>(
 }
 
 /// Fits the loop model to every candidate's evidence and returns it with
-/// the set it accepts (posterior ≥ ½; for a candidate that nothing else
-/// checks, prior ≥ ½).
+/// the set it accepts ([`verdict`]).
 fn judge(
     candidates: &[Candidate],
     innov: &Innovations,
     accepted: &[bool],
     (dimension, scale): (usize, Scale),
-    layers: &Layers,
+    (layers, alpha): (&Layers, f64),
     parallelism: &Parallelism,
 ) -> (LoopModel, Vec<bool>) {
-    let all: Vec<Option<Evidence>> = (0..candidates.len())
-        .map(|k| innov.evidence(candidates, k))
-        .collect();
     // Exact zeros (a loop the map fits perfectly) have no logarithm: they
     // are consistent whatever the model, and say nothing about its spread.
-    let (fitted, start): (Vec<Evidence>, Vec<bool>) = all
-        .iter()
+    let (fitted, start): (Vec<Evidence>, Vec<bool>) = (0..candidates.len())
         .zip(accepted)
-        .filter_map(|(e, &a)| {
-            e.filter(|e| e.innovation > 0.0 && e.innovation.is_finite())
+        .filter_map(|(k, &a)| {
+            (innov.evidence(candidates, k))
+                .filter(|e| e.innovation > 0.0 && e.innovation.is_finite())
                 .map(|e| (e, a))
         })
         .unzip();
     let model = LoopModel::fit(&fitted, &start, (dimension, scale), layers, parallelism);
-    let next = all
-        .iter()
-        .zip(candidates)
-        .map(|(e, c)| {
+    let (next, _) = verdict(&model, innov, candidates, (layers, alpha));
+    (model, next)
+}
+
+/// The set the loop `model` accepts at one evaluation (the innovations
+/// `innov`), and the candidates it leaves out beyond the true loops'
+/// reach. A candidate is accepted when its posterior is ≥ ½ (for one that
+/// nothing else checks, its prior; one the gate dropped only with the
+/// layer `rescue`), unless (with the layer `reach`) its innovation lies
+/// where no true loop of the map reaches: among the `K` so accepted with an innovation, its upper tail
+/// under the true loops' fitted density below `alpha / K`
+/// ([`LoopModel::beyond_reach`]; Bonferroni: were they all true loops, the
+/// largest would lie there with a chance of at most `alpha`). The
+/// posterior weighs the true loops' density against the wrong loops'
+/// where both are far in their tails — an innovation between a wide true
+/// population and a narrow wrong one goes to the wider — and there the
+/// tail says what the ratio cannot: such a loop is no likelier true than
+/// wrong, and one wrong loop bends the map where one true loop less costs
+/// it little (docs/method.md §4).
+pub(super) fn verdict(
+    model: &LoopModel,
+    innov: &Innovations,
+    candidates: &[Candidate],
+    (layers, alpha): (&Layers, f64),
+) -> (Vec<bool>, Vec<bool>) {
+    let mut accepted: Vec<bool> = (0..candidates.len())
+        .map(|k| {
+            let c = &candidates[k];
             (c.kept || layers.rescue)
-                && match e {
-                    Some(e) => model.posterior(e) >= 0.5,
+                && match innov.evidence(candidates, k) {
+                    Some(e) => model.posterior(&e) >= 0.5,
                     None => model.prior(c.count_posterior) >= 0.5,
                 }
         })
         .collect();
-    (model, next)
+    let tested: Vec<(usize, f64)> = (0..candidates.len())
+        .filter(|&k| accepted[k])
+        .filter_map(|k| innov.nu2.get(k).copied().flatten().map(|v| (k, v)))
+        .collect();
+    let mut beyond = vec![false; candidates.len()];
+    if !layers.reach {
+        return (accepted, beyond);
+    }
+    for (k, _) in model.beyond_reach(&tested, alpha) {
+        (accepted[k], beyond[k]) = (false, true);
+    }
+    (accepted, beyond)
 }
 
 /// Whether a candidate of annealing weight `w` is held: the decisions start
