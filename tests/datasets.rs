@@ -966,30 +966,41 @@ fn true_loops_kept_out_by_their_counts_alone_are_named_when_they_would_move_the_
     assert_eq!(r.status(), MapStatus::Questioned);
 }
 
-/// parking-garage with 300 aliases placed anywhere in groups of 10, half
-/// the groups' counts true-like (seed 3 of the exploration of
-/// docs/method.md §4), information as published, accepts one alias of a
-/// group alone (88–694) among 4,615 true loops, and passes its test with
-/// it, 1.4 % off. Its upper tail under the true loops' fitted density
-/// lies at the decisions' own reach (docs/method.md §4): `K·p` 0.036 at
-/// the map that holds it, 0.051 at the map without it. Wherever the
-/// decisions end, the alias is not accepted silently: it is out, or the
-/// map is reported unsettled or questioned.
+/// An accepted alias whose innovation lies beyond every true loop's is
+/// named when the map would move without it: parking-garage with 300
+/// aliases in groups of 10 placed anywhere, half the groups with
+/// true-like counts, its information as published (seed 3 of the
+/// exploration of docs/method.md §4). One alias (88–694, 130 inliers) is
+/// accepted alone among 4,616 loops, at the largest innovation of them
+/// (`ν²` 0.035 where the true loops' fit centres on 1.4·10⁻⁴); the map
+/// passes its test with it, 1.4 % off. Its upper tail under the true
+/// loops' fitted density is 8·10⁻⁶, below the χ² test's α over the 4,616
+/// tested, and the map would move by 4.6 % of its size without it: the
+/// report names it, and only it, and warns. The decisions' own reach
+/// (docs/method.md §4) leaves it alone: its `ν²`, 0.035 on 6 dof, is
+/// below its information's mean.
 #[test]
-fn an_alias_at_the_edge_of_the_true_loops_reach_is_never_accepted_silently() {
+fn an_accepted_alias_beyond_the_true_loops_reach_is_named_when_it_moves_the_map() {
     let aliased = anywhere_in_groups(300, 0.5);
     let Some((r, wrong)) = corrupted_and_decided("parking-garage.g2o", &aliased, 1_000_004, None)
     else {
         return;
     };
     assert!(r.chi2_test.as_ref().is_some_and(|t| t.passed));
-    let aliases = (0..wrong.len())
-        .filter(|&k| wrong[k] && r.loops[k].accepted)
-        .count();
-    assert!(aliases <= 1, "{aliases} aliases accepted");
-    if aliases == 1 {
-        assert_ne!(r.status(), MapStatus::Ok);
-    }
+    assert!(r.robust.doubtful.is_empty(), "{:?}", r.robust.doubtful);
+    let outlying = &r.robust.outlying;
+    assert_eq!(outlying.len(), 1, "{outlying:?}");
+    assert_eq!(outlying[0].loops.len(), 1, "{outlying:?}");
+    let alias = outlying[0].loops[0];
+    assert!(wrong[alias] && r.loops[alias].accepted, "{outlying:?}");
+    assert!(outlying[0].p_value < 0.05, "{outlying:?}");
+    assert!(outlying[0].map_moves > 0.02, "{outlying:?}");
+    let warned = r
+        .warnings
+        .iter()
+        .any(|w| w.contains("by more than any true loop"));
+    assert!(warned, "{:?}", r.warnings);
+    assert_eq!(r.status(), MapStatus::Questioned);
 }
 
 /// kitti_00 with 300 aliases placed anywhere one by one, every count

@@ -543,7 +543,6 @@ fn resolve<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 test,
                 chordal: false,
                 given: None,
-                alpha: config.options.test.alpha,
             };
             let (outcome, all) = robust::resume(session, weights, &job, proposal.as_ref())?;
             full = all;

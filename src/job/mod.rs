@@ -100,7 +100,6 @@ pub(crate) fn run<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                 test,
                 chordal,
                 given: Some(&given),
-                alpha: config.options.test.alpha,
             };
             robust::solve(session, weights, &job)
         };

@@ -47,8 +47,9 @@
 //! draws from the true loops' fitted density, and the largest has an
 //! upper tail below `α / K` with a chance of at most `α` (the χ² test's;
 //! [`LoopModel::beyond_reach`]). The decisions reject such a loop
-//! themselves ([`super::schedule::verdict`]); this check applies the same
-//! tail to the set they kept, its `K` the loops the set holds. Aliases the map bent to fit widen that density around
+//! themselves where its `ν²` exceeds its information's mean
+//! ([`super::schedule::verdict`]); below that — the map's true loops far
+//! tighter than their information — this check names it. Aliases the map bent to fit widen that density around
 //! themselves, so an accepted loop is outlying too where the information
 //! as the file states it calls it an outlier at the same level and the
 //! fitted density expects fewer than one true loop as far out

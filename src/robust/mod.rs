@@ -352,10 +352,6 @@ pub struct Job<'a, P: Pose<D>, const D: usize> {
     /// The caller's own poses (a g2o file's vertices), from which EM's
     /// second start runs a plain kernel ([`starts`]); `None`: one start.
     pub given: Option<&'a [P]>,
-    /// The χ² test's level (`--alpha`), which EM's decisions also share
-    /// among the loops they accept to bound the true loops' reach
-    /// ([`schedule::verdict`]).
-    pub alpha: f64,
 }
 
 /// Solves for the map with the candidates weighed by the job's method,
@@ -593,7 +589,6 @@ fn settle<P: ChordalInit<D>, const D: usize>(
         layers,
         relax: chordal,
         swing,
-        alpha: job.alpha,
     };
     let mut passing = search::Passing::default();
     let (mut decided, mut search) = decide_and_explain(
@@ -816,7 +811,7 @@ fn reasons(
 ) -> (Vec<Reason>, Vec<Option<f64>>) {
     let n = candidates.len();
     let (judged, beyond) = match model {
-        Some(m) => schedule::verdict(m, innovations, candidates, (how.layers, how.alpha)),
+        Some(m) => schedule::verdict(m, innovations, candidates, how.layers),
         None => (vec![false; n], vec![false; n]),
     };
     (0..n)

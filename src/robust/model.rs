@@ -808,6 +808,12 @@ impl LoopModel {
             .collect()
     }
 
+    /// The innovations' dimension `D`: a true loop's `ν²` under the
+    /// information as stated is `χ²_D`, of mean `D`.
+    pub fn dimension(&self) -> usize {
+        self.dof
+    }
+
     /// The wrong loops' density of `y = ln ν²`, `f_wrong(y)` (all their
     /// populations, or uniform over the span without one).
     pub fn wrong_density(&self, y: f64) -> f64 {

@@ -403,7 +403,7 @@ impl Decided {
             &innov,
             &self.accepted,
             (D, how.scale),
-            (how.layers, how.alpha),
+            how.layers,
             &parallelism,
         );
         session.modelled(fit.elapsed());
@@ -427,9 +427,6 @@ pub struct Deciding<'a> {
     pub relax: bool,
     /// Whether to stop at the second swing ([`Swing`]).
     pub swing: Swing,
-    /// The χ² test's level, which the true loops' reach shares among the
-    /// loops accepted ([`verdict`]).
-    pub alpha: f64,
 }
 
 /// What [`decide`] shows of each set it solves: the map in the graph, the
@@ -845,7 +842,7 @@ fn judge(
     innov: &Innovations,
     accepted: &[bool],
     (dimension, scale): (usize, Scale),
-    (layers, alpha): (&Layers, f64),
+    layers: &Layers,
     parallelism: &Parallelism,
 ) -> (LoopModel, Vec<bool>) {
     // Exact zeros (a loop the map fits perfectly) have no logarithm: they
@@ -859,30 +856,41 @@ fn judge(
         })
         .unzip();
     let model = LoopModel::fit(&fitted, &start, (dimension, scale), layers, parallelism);
-    let (next, _) = verdict(&model, innov, candidates, (layers, alpha));
+    let (next, _) = verdict(&model, innov, candidates, layers);
     (model, next)
 }
+
+/// The level at which the decisions bound the true loops' reach
+/// ([`verdict`]): the chance that they reject the largest true loop of a
+/// map whose accepted loops are all true (Bonferroni over them). The χ²
+/// test's default level; a level of its own, so that `--alpha` changes
+/// the verdict and not the decisions.
+pub const REACH_LEVEL: f64 = 0.05;
 
 /// The set the loop `model` accepts at one evaluation (the innovations
 /// `innov`), and the candidates it leaves out beyond the true loops'
 /// reach. A candidate is accepted when its posterior is ≥ ½ (for one that
 /// nothing else checks, its prior; one the gate dropped only with the
 /// layer `rescue`), unless (with the layer `reach`) its innovation lies
-/// where no true loop of the map reaches: among the `K` so accepted with an innovation, its upper tail
-/// under the true loops' fitted density below `alpha / K`
-/// ([`LoopModel::beyond_reach`]; Bonferroni: were they all true loops, the
-/// largest would lie there with a chance of at most `alpha`). The
-/// posterior weighs the true loops' density against the wrong loops'
-/// where both are far in their tails — an innovation between a wide true
-/// population and a narrow wrong one goes to the wider — and there the
-/// tail says what the ratio cannot: such a loop is no likelier true than
-/// wrong, and one wrong loop bends the map where one true loop less costs
-/// it little (docs/method.md §4).
+/// where no true loop of the map reaches: among the `K` so accepted with
+/// an innovation, its upper tail under the true loops' fitted density
+/// below [`REACH_LEVEL`] over `K` ([`LoopModel::beyond_reach`]), and its
+/// `ν²` above `D`, the mean of `χ²_D` under the information as the file
+/// states it. The posterior
+/// weighs the true loops' density against the wrong loops' where both are
+/// far in their tails — an innovation between a wide true population and
+/// a narrow wrong one goes to the wider — and there the tail says what
+/// the ratio cannot: such a loop is no likelier true than wrong, and one
+/// wrong loop bends the map where one true loop less costs it little. A
+/// loop that errs by no more than its information's own expectation is
+/// never rejected by its tail: that would rest only on the map's true
+/// loops being far tighter than their information, as rounding makes
+/// those of a noise-free file (docs/method.md §4).
 pub(super) fn verdict(
     model: &LoopModel,
     innov: &Innovations,
     candidates: &[Candidate],
-    (layers, alpha): (&Layers, f64),
+    layers: &Layers,
 ) -> (Vec<bool>, Vec<bool>) {
     let mut accepted: Vec<bool> = (0..candidates.len())
         .map(|k| {
@@ -902,8 +910,11 @@ pub(super) fn verdict(
     if !layers.reach {
         return (accepted, beyond);
     }
-    for (k, _) in model.beyond_reach(&tested, alpha) {
-        (accepted[k], beyond[k]) = (false, true);
+    let expected = model.dimension() as f64;
+    for (k, _) in model.beyond_reach(&tested, REACH_LEVEL) {
+        if innov.nu2[k].is_some_and(|v| v > expected) {
+            (accepted[k], beyond[k]) = (false, true);
+        }
     }
     (accepted, beyond)
 }

@@ -618,7 +618,6 @@ fn deciding(layers: &Layers, relax: bool, swing: Swing) -> Deciding<'_> {
         layers,
         relax,
         swing,
-        alpha: 0.05,
     }
 }
 
@@ -841,19 +840,77 @@ fn an_innovation_beyond_the_true_loops_reach_is_rejected_whatever_its_posterior(
         })
         .collect();
     let layers = Layers::default();
-    let (accepted, beyond) = verdict(&model, &innov, &candidates, (&layers, 0.05));
+    let (accepted, beyond) = verdict(&model, &innov, &candidates, &layers);
     assert!(!accepted[n - 1] && beyond[n - 1], "{model:?}");
     assert!(accepted[..200].iter().all(|&a| a), "{model:?}");
     assert!(!accepted[200..].iter().any(|&a| a), "{model:?}");
     assert_eq!(beyond.iter().filter(|&&b| b).count(), 1);
-    // At a level so small that even it is within reach, or without the
-    // layer, the posterior decides.
-    let (accepted, _) = verdict(&model, &innov, &candidates, (&layers, 1e-12));
-    assert!(accepted[n - 1]);
+    // Without the layer the posterior decides.
     let off = Layers {
         reach: false,
         ..layers
     };
-    let (accepted, beyond) = verdict(&model, &innov, &candidates, (&off, 0.05));
+    let (accepted, beyond) = verdict(&model, &innov, &candidates, &off);
     assert!(accepted[n - 1] && !beyond.contains(&true));
+}
+
+/// The true loops of a noise-free file err by rounding: far tighter than
+/// their information states (`ν²` about 10⁻⁸ here). One at 10⁻⁶ lies
+/// beyond their fitted reach, but errs by less than its information's
+/// expectation (`D` = 3), and it stays in.
+#[test]
+fn an_innovation_below_its_informations_expectation_is_never_beyond_reach() {
+    use super::super::model::Evidence;
+    use crate::linear::Parallelism;
+    use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
+    let (chi2, normal) = (ChiSquared::new(3.0).unwrap(), Normal::standard());
+    let quantile = |k: usize, n: usize| (k as f64 + 0.5) / n as f64;
+    let mut nu2: Vec<f64> = (0..200)
+        .map(|k| 1e-8 * chi2.inverse_cdf(quantile(k, 200)))
+        .collect();
+    nu2.extend((0..100).map(|k| (11.0 + 0.5 * normal.inverse_cdf(quantile(k, 100))).exp()));
+    nu2.push(1e-6);
+    let n = nu2.len();
+    let evidence: Vec<Evidence> = (nu2.iter())
+        .map(|&v| Evidence {
+            count_posterior: Some(0.5),
+            innovation: v,
+        })
+        .collect();
+    let layers = Layers::default();
+    let model = LoopModel::fit(
+        &evidence,
+        &vec![true; n],
+        (3, Scale::Learned),
+        &layers,
+        &Parallelism::sequential(),
+    );
+    let tested: Vec<(usize, f64)> = nu2[..200]
+        .iter()
+        .copied()
+        .chain([1e-6])
+        .enumerate()
+        .collect();
+    assert!(
+        model
+            .beyond_reach(&tested, REACH_LEVEL)
+            .iter()
+            .any(|&(k, _)| k == 200),
+        "{model:?}"
+    );
+    let innov = Innovations {
+        nu2: nu2.iter().map(|&v| Some(v)).collect(),
+        ..Innovations::default()
+    };
+    let candidates: Vec<Candidate> = (0..n)
+        .map(|edge| Candidate {
+            edge,
+            count_posterior: Some(0.5),
+            kept: true,
+        })
+        .collect();
+    assert!(model.posterior(&evidence[n - 1]) >= 0.5, "{model:?}");
+    let (accepted, beyond) = verdict(&model, &innov, &candidates, &layers);
+    assert!(accepted[n - 1] && !beyond.contains(&true), "{model:?}");
+    assert!(accepted[..200].iter().all(|&a| a), "{model:?}");
 }
