@@ -230,7 +230,9 @@ pub enum Reason {
     ExplainsChi2,
     /// Its posterior is ≥ ½, but its innovation lies beyond the reach of
     /// the map's true loops (the loop model's fitted density puts the
-    /// largest of them there with a chance below the χ² test's α).
+    /// largest of them there with a chance below
+    /// [`schedule::REACH_LEVEL`], and its `ν²` exceeds its information's
+    /// mean).
     Outlying,
     /// The decisions did not settle on it: the last evaluation's posterior
     /// and the set the map was solved with disagree (it was accepted on
@@ -821,18 +823,15 @@ fn reasons(
                 Some(e) => m.posterior(e),
                 None => m.prior(candidates[k].count_posterior),
             });
-            // What the model at this map does with it (the posterior alone
-            // without a model).
-            let judged = model.is_some() && judged[k];
             let reason = if removed.contains(&k) {
                 Reason::ExplainsChi2
             } else if !candidates[k].kept && !decided.rescue {
                 Reason::Dropped
             } else if e.is_none() {
                 Reason::Unchecked
-            } else if judged != decided.accepted[k] {
+            } else if judged[k] != decided.accepted[k] {
                 Reason::Unsettled
-            } else if judged {
+            } else if judged[k] {
                 Reason::Consistent
             } else if beyond[k] {
                 Reason::Outlying

@@ -876,9 +876,8 @@ pub const REACH_LEVEL: f64 = 0.05;
 /// an innovation, its upper tail under the true loops' fitted density
 /// below [`REACH_LEVEL`] over `K` ([`LoopModel::beyond_reach`]), and its
 /// `ν²` above `D`, the mean of `χ²_D` under the information as the file
-/// states it. The posterior
-/// weighs the true loops' density against the wrong loops' where both are
-/// far in their tails — an innovation between a wide true population and
+/// states it. The posterior weighs the true loops' density against the
+/// wrong loops' where both are far in their tails — an innovation between a wide true population and
 /// a narrow wrong one goes to the wider — and there the tail says what
 /// the ratio cannot: such a loop is no likelier true than wrong, and one
 /// wrong loop bends the map where one true loop less costs it little. A
@@ -902,14 +901,14 @@ pub(super) fn verdict(
                 }
         })
         .collect();
-    let tested: Vec<(usize, f64)> = (0..candidates.len())
-        .filter(|&k| accepted[k])
-        .filter_map(|k| innov.nu2.get(k).copied().flatten().map(|v| (k, v)))
-        .collect();
     let mut beyond = vec![false; candidates.len()];
     if !layers.reach {
         return (accepted, beyond);
     }
+    let tested: Vec<(usize, f64)> = (0..candidates.len())
+        .filter(|&k| accepted[k])
+        .filter_map(|k| innov.nu2.get(k).copied().flatten().map(|v| (k, v)))
+        .collect();
     let expected = model.dimension() as f64;
     for (k, _) in model.beyond_reach(&tested, REACH_LEVEL) {
         if innov.nu2[k].is_some_and(|v| v > expected) {

@@ -790,29 +790,31 @@ fn adding_a_loop_moves_the_map_as_solving_with_it_does() {
     );
 }
 
-/// A candidate between a wide population of true loops and a narrow one
-/// of wrong loops far out, its count like every other's: the likelihood
-/// ratio takes it for a true loop, whose density's tail is the heavier
-/// there, but no true loop of the map reaches it (as an alias at `ν²` 86
-/// among true loops up to 10 on kitti_00, docs/method.md §4), and the
-/// decisions leave it out; the true loops' own largest stay in.
-#[test]
-fn an_innovation_beyond_the_true_loops_reach_is_rejected_whatever_its_posterior() {
-    use super::super::model::Evidence;
-    use crate::linear::Parallelism;
+/// The `(k + ½)/n` quantiles of `χ²₃` and of the standard normal.
+fn chi2_and_normal_quantiles() -> (impl Fn(usize, usize) -> f64, impl Fn(usize, usize) -> f64) {
     use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
     let (chi2, normal) = (ChiSquared::new(3.0).unwrap(), Normal::standard());
-    let quantile = |k: usize, n: usize| (k as f64 + 0.5) / n as f64;
-    // 200 true loops: `s²·χ²₃` with `ln s²` scattered by 1.2 around −2.3.
-    let mut nu2: Vec<f64> = (0..200)
-        .map(|k| {
-            let scale = (-2.3 + 1.2 * normal.inverse_cdf(quantile((k * 7) % 200, 200))).exp();
-            scale * chi2.inverse_cdf(quantile(k, 200))
-        })
-        .collect();
-    // 100 wrong loops tight around e¹¹, and the one in between.
-    nu2.extend((0..100).map(|k| (11.0 + 0.5 * normal.inverse_cdf(quantile(k, 100))).exp()));
-    nu2.push(86.0);
+    let p = |k: usize, n: usize| (k as f64 + 0.5) / n as f64;
+    (
+        move |k, n| chi2.inverse_cdf(p(k, n)),
+        move |k, n| normal.inverse_cdf(p(k, n)),
+    )
+}
+
+/// Candidates of 3-D innovations `true_loops`, then 100 wrong loops tight
+/// around `ν²` = e¹¹, then one at `last`, every count alike: the model
+/// fitted to them (from every candidate taken as true), with their
+/// innovations and the candidates, and the last one's posterior.
+fn judged_with_one_in_between(
+    true_loops: Vec<f64>,
+    last: f64,
+) -> (LoopModel, Innovations, Vec<Candidate>, f64) {
+    use super::super::model::Evidence;
+    use crate::linear::Parallelism;
+    let (_, normal) = chi2_and_normal_quantiles();
+    let mut nu2 = true_loops;
+    nu2.extend((0..100).map(|k| (11.0 + 0.5 * normal(k, 100)).exp()));
+    nu2.push(last);
     let n = nu2.len();
     let evidence: Vec<Evidence> = (nu2.iter())
         .map(|&v| Evidence {
@@ -827,7 +829,7 @@ fn an_innovation_beyond_the_true_loops_reach_is_rejected_whatever_its_posterior(
         &Layers::default(),
         &Parallelism::sequential(),
     );
-    assert!(model.posterior(&evidence[n - 1]) >= 0.5, "{model:?}");
+    let posterior = model.posterior(&evidence[n - 1]);
     let innov = Innovations {
         nu2: nu2.iter().map(|&v| Some(v)).collect(),
         ..Innovations::default()
@@ -839,6 +841,25 @@ fn an_innovation_beyond_the_true_loops_reach_is_rejected_whatever_its_posterior(
             kept: true,
         })
         .collect();
+    (model, innov, candidates, posterior)
+}
+
+/// A candidate between a wide population of true loops and a narrow one
+/// of wrong loops far out, its count like every other's: the likelihood
+/// ratio takes it for a true loop, whose density's tail is the heavier
+/// there, but no true loop of the map reaches it (as an alias at `ν²` 86
+/// among true loops up to 10 on kitti_00, docs/method.md §4), and the
+/// decisions leave it out; the true loops' own largest stay in.
+#[test]
+fn an_innovation_beyond_the_true_loops_reach_is_rejected_whatever_its_posterior() {
+    let (chi2, normal) = chi2_and_normal_quantiles();
+    // 200 true loops: `s²·χ²₃` with `ln s²` scattered by 1.2 around −2.3.
+    let true_loops = (0..200)
+        .map(|k| (-2.3 + 1.2 * normal((k * 7) % 200, 200)).exp() * chi2(k, 200))
+        .collect();
+    let (model, innov, candidates, posterior) = judged_with_one_in_between(true_loops, 86.0);
+    let n = candidates.len();
+    assert!(posterior >= 0.5, "{model:?}");
     let layers = Layers::default();
     let (accepted, beyond) = verdict(&model, &innov, &candidates, &layers);
     assert!(!accepted[n - 1] && beyond[n - 1], "{model:?}");
@@ -860,57 +881,18 @@ fn an_innovation_beyond_the_true_loops_reach_is_rejected_whatever_its_posterior(
 /// expectation (`D` = 3), and it stays in.
 #[test]
 fn an_innovation_below_its_informations_expectation_is_never_beyond_reach() {
-    use super::super::model::Evidence;
-    use crate::linear::Parallelism;
-    use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
-    let (chi2, normal) = (ChiSquared::new(3.0).unwrap(), Normal::standard());
-    let quantile = |k: usize, n: usize| (k as f64 + 0.5) / n as f64;
-    let mut nu2: Vec<f64> = (0..200)
-        .map(|k| 1e-8 * chi2.inverse_cdf(quantile(k, 200)))
-        .collect();
-    nu2.extend((0..100).map(|k| (11.0 + 0.5 * normal.inverse_cdf(quantile(k, 100))).exp()));
-    nu2.push(1e-6);
-    let n = nu2.len();
-    let evidence: Vec<Evidence> = (nu2.iter())
-        .map(|&v| Evidence {
-            count_posterior: Some(0.5),
-            innovation: v,
-        })
-        .collect();
-    let layers = Layers::default();
-    let model = LoopModel::fit(
-        &evidence,
-        &vec![true; n],
-        (3, Scale::Learned),
-        &layers,
-        &Parallelism::sequential(),
-    );
-    let tested: Vec<(usize, f64)> = nu2[..200]
-        .iter()
-        .copied()
+    let (chi2, _) = chi2_and_normal_quantiles();
+    let true_loops: Vec<f64> = (0..200).map(|k| 1e-8 * chi2(k, 200)).collect();
+    let tested: Vec<(usize, f64)> = (true_loops.iter().copied())
         .chain([1e-6])
         .enumerate()
         .collect();
-    assert!(
-        model
-            .beyond_reach(&tested, REACH_LEVEL)
-            .iter()
-            .any(|&(k, _)| k == 200),
-        "{model:?}"
-    );
-    let innov = Innovations {
-        nu2: nu2.iter().map(|&v| Some(v)).collect(),
-        ..Innovations::default()
-    };
-    let candidates: Vec<Candidate> = (0..n)
-        .map(|edge| Candidate {
-            edge,
-            count_posterior: Some(0.5),
-            kept: true,
-        })
-        .collect();
-    assert!(model.posterior(&evidence[n - 1]) >= 0.5, "{model:?}");
-    let (accepted, beyond) = verdict(&model, &innov, &candidates, &layers);
+    let (model, innov, candidates, posterior) = judged_with_one_in_between(true_loops, 1e-6);
+    let n = candidates.len();
+    let beyond_fit = model.beyond_reach(&tested, REACH_LEVEL);
+    assert!(beyond_fit.iter().any(|&(k, _)| k == 200), "{model:?}");
+    assert!(posterior >= 0.5, "{model:?}");
+    let (accepted, beyond) = verdict(&model, &innov, &candidates, &Layers::default());
     assert!(accepted[n - 1] && !beyond.contains(&true), "{model:?}");
     assert!(accepted[..200].iter().all(|&a| a), "{model:?}");
 }
