@@ -516,6 +516,19 @@ fn an_update_that_holds_loops_back_runs_the_whole_job() {
     );
 }
 
+/// An update that leaves a candidate's posterior near ½ runs the whole
+/// job. A sphere with aliases in groups of 5, updated every 20 poses: at
+/// 220 poses a true loop at `ν²` 23.1 on 6 dof has posterior 0.52, and
+/// rejected (beyond the true loops' reach of the update's fit) or accepted
+/// (within the batch job's) are both fixed points of EM.
+#[test]
+fn an_update_with_a_posterior_near_half_runs_the_whole_job() {
+    let sim = aliased_sphere(28, 5);
+    let steps = every_poses(&sim, 20, 220);
+    assert!(mismatched(&steps).is_empty(), "{steps:#?}");
+    assert!(whole_jobs(&steps, "near ½").contains(&220), "{steps:#?}");
+}
+
 /// The replays of aliases placed anywhere, wider than CI runs (192
 /// replays: a grid and a sphere, seeds 1–48, groups of 5 and 10, an update
 /// every 20 poses, each compared with the batch job; about a minute in
@@ -523,10 +536,12 @@ fn an_update_that_holds_loops_back_runs_the_whole_job() {
 /// --ignored`. Prints every replay with a whole job or a mismatch, at each
 /// mismatch the true loops the update and the batch job reject and the
 /// wrong ones they accept, and the totals of those over every step. Fails
-/// if more replays mismatch than the 6 known (docs/method.md §7b: at one
-/// or two updates each, EM's warm decisions end at another of its fixed
-/// points than the batch job's annealing), if any step accepts an alias,
-/// or if the true loops rejected over every step grow.
+/// if more than the one known replay mismatches (grid seed 48, groups of
+/// 5, at 160 poses: the update keeps four true loops the gate drops, the
+/// batch job rejects them; before the whole job at a posterior near ½, 6
+/// did, each at another of EM's fixed points than the batch job's
+/// annealing; docs/method.md §7b), if any step accepts an alias, or if the
+/// true loops rejected over every step grow.
 #[test]
 #[ignore]
 fn wider_aliased_replays() {
@@ -573,9 +588,9 @@ fn wider_aliased_replays() {
          over every step, true loops rejected / wrong accepted: updates {ut} / {uw}, batch jobs {bt} / {bw}",
         mismatching.len()
     );
-    assert!(mismatching.len() <= 6, "{mismatching:?}");
+    assert!(mismatching.len() <= 1, "{mismatching:?}");
     assert_eq!((uw, bw), (0, 0), "aliases accepted");
-    assert!(ut <= 299 && bt <= 306, "{totals:?}");
+    assert!(ut <= 302 && bt <= 306, "{totals:?}");
 }
 
 /// A cycle of the batch job's decision sets that a half step settles: on a

@@ -30,7 +30,10 @@
 //!    loops the last whole job's two starts kept are remembered) or that
 //!    holds loops back by their counts runs the whole job too: the batch
 //!    job would seek EM's second start there, or its annealing may accept
-//!    what the warm decisions held back.
+//!    what the warm decisions held back. So does one that leaves a
+//!    candidate's posterior near ½:
+//!    there EM can have two fixed points, and which one a solve ends at
+//!    depends on where it started.
 
 use super::{Error, Settings, candidates, finish};
 use crate::geometry::Pose;
@@ -632,6 +635,29 @@ fn beyond_stated(report: &Report) -> Vec<(VertexId, VertexId)> {
 /// annealing accepts (docs/method.md §7b).
 const HELD_BACK: &str = "the update's map holds loops back by their counts: the whole job";
 
+/// The reason of an update with a candidate on a knife edge
+/// ([`on_knife_edge`]).
+const KNIFE_EDGE: &str = "a candidate's posterior lies near ½: the whole job";
+
+/// Posterior odds of a true loop within this factor (as a natural
+/// logarithm) of even — posteriors from 0.27 to 0.73 — put a candidate on
+/// a knife edge: its own decision moves the true loops' fit, and with it
+/// its posterior, enough that accepted and rejected can both be fixed
+/// points of EM, and which one a solve ends at depends on where it started
+/// (the warm decisions or the batch job's annealing). Over the 192 wider
+/// replays of `tests/update_equals_optimize.rs` the two fixed points of
+/// such a candidate had posteriors 0.08–0.31 nat apart in log-odds (for
+/// example 0.44 and 0.52); one nat is three times the widest.
+const KNIFE_EDGE_LN_ODDS: f64 = 1.0;
+
+/// Whether a candidate of `report` has a posterior on a knife edge
+/// ([`KNIFE_EDGE_LN_ODDS`]).
+fn on_knife_edge(report: &Report) -> bool {
+    (report.loops.iter())
+        .filter_map(|l| l.posterior)
+        .any(|p| (p / (1.0 - p)).ln().abs() < KNIFE_EDGE_LN_ODDS)
+}
+
 /// Why the last decisions, in `warm`, are no start from which the robust
 /// solve `method` of `candidates` candidates reaches the batch job's
 /// decisions and map (`None`: they are). The batch job weighs the
@@ -739,6 +765,8 @@ pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
                     Some(BEYOND_STATED)
                 } else if !r.robust.held_back.is_empty() {
                     Some(HELD_BACK)
+                } else if on_knife_edge(r) {
+                    Some(KNIFE_EDGE)
                 } else {
                     None
                 }
