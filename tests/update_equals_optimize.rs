@@ -545,21 +545,63 @@ fn an_update_with_a_posterior_near_half_runs_the_whole_job() {
 #[test]
 #[ignore]
 fn wider_aliased_replays() {
-    let mut mismatching = Vec::new();
-    // True loops rejected and wrong ones accepted, summed over every step:
-    // by the updates, by the batch jobs.
+    let (mismatching, totals) = aliased_replays(1..=48, 20);
+    let [(ut, uw), (bt, bw)] = totals;
+    assert!(mismatching.len() <= 1, "{mismatching:?}");
+    assert_eq!((uw, bw), (0, 0), "aliases accepted");
+    assert!(ut <= 302 && bt <= 306, "{totals:?}");
+}
+
+/// The same replays on seeds no rule of the update was found on (49–72)
+/// and at another interval (every 13 poses): 96 replays, about a minute
+/// in release. 6 differ from the batch job at 1–4 updates each (8 before
+/// the whole job at a posterior near ½): in three the update keeps true
+/// loops the batch job rejects (1, 3, and 13–14 on a young grid), in two
+/// it rejects a true loop the batch job keeps (grid seed 71, both group
+/// sizes), and in one the rotations are 1.2·10⁻⁶ rad apart
+/// (docs/method.md §7b). Over every step the updates reject 211 true
+/// loops and the batch jobs 264, and both accept 10 aliases. Fails if more
+/// replays differ, or if the true loops rejected or the aliases accepted
+/// grow.
+#[test]
+#[ignore]
+fn unseen_aliased_replays() {
+    let (mismatching, totals) = aliased_replays(49..=72, 13);
+    let [(ut, uw), (bt, bw)] = totals;
+    assert!(mismatching.len() <= 6, "{mismatching:?}");
+    assert!(uw <= 10 && bw <= 10, "aliases accepted: {totals:?}");
+    assert!(ut <= 211 && bt <= 264, "{totals:?}");
+}
+
+/// One replay of [`aliased_replays`]: the world, the seed, the group size.
+type Replay = (World, u64, usize);
+
+/// True loops rejected and wrong ones accepted summed over every step: by
+/// the updates, by the batch jobs.
+type Totals = [(usize, usize); 2];
+
+/// Replays [`aliased_anywhere`] on a sphere and a grid for each of `seeds`
+/// and groups of 5 and 10, an update every `every` poses up to 400, each
+/// compared with the batch job; prints every replay with a whole job
+/// (after 100 poses) or a mismatch. Returns the replays that differ, and
+/// the true loops rejected and wrong ones accepted summed over every step:
+/// by the updates, by the batch jobs.
+fn aliased_replays(seeds: std::ops::RangeInclusive<u64>, every: usize) -> (Vec<Replay>, Totals) {
+    let (mut mismatching, mut replays, mut whole) = (Vec::new(), 0, 0);
     let mut totals = [(0, 0), (0, 0)];
     for world in [World::Sphere3d, World::Grid2d] {
-        for seed in 1..=48u64 {
+        for seed in seeds.clone() {
             for group in [5usize, 10] {
                 let steps = match aliased_anywhere(world, seed, group) {
-                    AnySimulation::Planar(s) => every_poses(&s, 20, 400),
-                    AnySimulation::Spatial(s) => every_poses(&s, 20, 400),
+                    AnySimulation::Planar(s) => every_poses(&s, every, 400),
+                    AnySimulation::Spatial(s) => every_poses(&s, every, 400),
                 };
+                replays += 1;
                 let jobs: Vec<(usize, &String)> = (steps.iter())
                     .filter_map(|s| s.whole_job.as_ref().map(|r| (s.poses, r)))
                     .filter(|(p, _)| *p > 100)
                     .collect();
+                whole += jobs.len();
                 let bad = mismatched(&steps);
                 if !jobs.is_empty() || !bad.is_empty() {
                     eprintln!("{world:?} seed {seed} group {group}: whole jobs {jobs:?}");
@@ -584,13 +626,12 @@ fn wider_aliased_replays() {
     }
     let [(ut, uw), (bt, bw)] = totals;
     eprintln!(
-        "{} of 192 replays differ from the batch job: {mismatching:?}\n\
+        "{} of {replays} replays differ from the batch job: {mismatching:?}\n\
+         whole jobs after 100 poses: {whole}\n\
          over every step, true loops rejected / wrong accepted: updates {ut} / {uw}, batch jobs {bt} / {bw}",
         mismatching.len()
     );
-    assert!(mismatching.len() <= 1, "{mismatching:?}");
-    assert_eq!((uw, bw), (0, 0), "aliases accepted");
-    assert!(ut <= 302 && bt <= 306, "{totals:?}");
+    (mismatching, totals)
 }
 
 /// A cycle of the batch job's decision sets that a half step settles: on a

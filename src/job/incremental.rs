@@ -31,9 +31,8 @@
 //!    holds loops back by their counts runs the whole job too: the batch
 //!    job would seek EM's second start there, or its annealing may accept
 //!    what the warm decisions held back. So does one that leaves a
-//!    candidate's posterior near ½:
-//!    there EM can have two fixed points, and which one a solve ends at
-//!    depends on where it started.
+//!    candidate's posterior near ½: there EM can have two fixed points,
+//!    and which one a solve ends at depends on where it started.
 
 use super::{Error, Settings, candidates, finish};
 use crate::geometry::Pose;
@@ -644,10 +643,13 @@ const KNIFE_EDGE: &str = "a candidate's posterior lies near ½: the whole job";
 /// a knife edge: its own decision moves the true loops' fit, and with it
 /// its posterior, enough that accepted and rejected can both be fixed
 /// points of EM, and which one a solve ends at depends on where it started
-/// (the warm decisions or the batch job's annealing). Over the 192 wider
-/// replays of `tests/update_equals_optimize.rs` the two fixed points of
-/// such a candidate had posteriors 0.08–0.31 nat apart in log-odds (for
-/// example 0.44 and 0.52); one nat is three times the widest.
+/// (the warm decisions or the batch job's annealing). Of the 192 wider
+/// replays of `tests/update_equals_optimize.rs`, five differed from the
+/// batch job at such a candidate: at three its posteriors at the two
+/// fixed points were 0.08–0.31 nat apart in log-odds (0.44 and 0.52 the
+/// widest), at one both were 0.52 (the true loops' reach decided), at one
+/// the update's was 0.56 (its model of nothing). One nat is three times
+/// the widest gap.
 const KNIFE_EDGE_LN_ODDS: f64 = 1.0;
 
 /// Whether a candidate of `report` has a posterior on a knife edge
