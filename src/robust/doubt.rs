@@ -50,8 +50,9 @@
 //! themselves where its `ν²` exceeds its information's mean
 //! ([`super::schedule::verdict`]); below that — the map's true loops far
 //! tighter than their information — this check names it. Aliases the map
-//! bent to fit widen that density around themselves, so an accepted loop is outlying too where the information
-//! as the file states it calls it an outlier at the same level and the
+//! bent to fit widen that density around themselves, so an accepted loop
+//! is outlying too where the information as the file states it calls it
+//! an outlier at the same level and the
 //! fitted density expects fewer than one true loop as far out
 //! ([`LoopModel::beyond_stated`]); either test alone names true loops of
 //! real maps. Those of one cluster are named when removing them would

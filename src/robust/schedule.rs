@@ -877,8 +877,9 @@ pub const REACH_LEVEL: f64 = 0.05;
 /// below [`REACH_LEVEL`] over `K` ([`LoopModel::beyond_reach`]), and its
 /// `ν²` above `D`, the mean of `χ²_D` under the information as the file
 /// states it. The posterior weighs the true loops' density against the
-/// wrong loops' where both are far in their tails — an innovation between a wide true population and
-/// a narrow wrong one goes to the wider — and there the tail says what
+/// wrong loops' where both are far in their tails — an innovation
+/// between a wide true population and a narrow wrong one goes to the
+/// wider — and there the tail says what
 /// the ratio cannot: such a loop is no likelier true than wrong, and one
 /// wrong loop bends the map where one true loop less costs it little. A
 /// loop that errs by no more than its information's own expectation is
