@@ -11,10 +11,14 @@ Each FILE.g2o (or FILE.cal.g2o) needs FILE.labels.csv beside it, as
 its wrong loops accepted, true loops rejected and exit status are kept in
 OUT/NAME.jsonl (a file already there is not run again, so a scan can be
 stopped and resumed). The script prints each file where a build decides
-otherwise than the first, and the totals.
+otherwise than the first, and the totals; then, over the files where both
+builds recorded them, how many maps they wrote are the same bytes (a
+SHA-256 of the map) and, where the number of EM's decisions (solves of an
+accepted set) differs, those numbers and the builds' times.
 """
 
 import argparse
+import hashlib
 import json
 import os
 import subprocess
@@ -38,6 +42,11 @@ def run(binary, path, timeout):
         p = subprocess.run([binary, "optimize", path, "-o", os.path.join(tmp, "out.g2o"), "--json"],
                            capture_output=True, text=True, timeout=timeout)
         seconds = time.perf_counter() - t0
+        try:
+            with open(os.path.join(tmp, "out.g2o"), "rb") as written:
+                digest = hashlib.sha256(written.read()).hexdigest()
+        except OSError:
+            digest = None
     try:
         report = json.loads(p.stdout)
     except json.JSONDecodeError:
@@ -48,7 +57,8 @@ def run(binary, path, timeout):
     if len(loops) != len(wrong):
         return {"exit": p.returncode, "error": "%d loops in the report, %d in the labels" % (len(loops), len(wrong))}
     accepted = [l["accepted"] for l in loops]
-    return {"exit": p.returncode, "seconds": round(seconds, 2),
+    return {"exit": p.returncode, "seconds": round(seconds, 2), "map_sha256": digest,
+            "decisions": report.get("robust", {}).get("decisions"),
             "wrong_accepted": sum(a and w for a, w in zip(accepted, wrong)),
             "true_rejected": sum((not a) and (not w) for a, w in zip(accepted, wrong)),
             "true": sum(not w for w in wrong)}
@@ -102,6 +112,15 @@ def main():
                 name, b["wrong_accepted"], b["true_rejected"], b["exit"]))
         print("%s against %s: %d files, %d decided otherwise; %d runs reject more true loops (%d loops), "
               "wrong loops accepted: %d fewer, %d more" % (name, first, len(files), differ, runs_lost, lost, gained, worse))
+        both = [f for f in files if results[first][f].get("map_sha256") and results[name][f].get("map_sha256")]
+        same = sum(results[first][f]["map_sha256"] == results[name][f]["map_sha256"] for f in both)
+        print("%s against %s: maps the same bytes on %d of %d files" % (name, first, same, len(both)))
+        moved = [f for f in both if results[first][f].get("decisions") != results[name][f].get("decisions")]
+        if moved:
+            total = lambda build, k: sum(results[build][f][k] or 0 for f in moved)
+            print("%s against %s: EM's decisions differ on %d files: %d against %d, in %.1f s against %.1f s" % (
+                name, first, len(moved), total(name, "decisions"), total(first, "decisions"),
+                total(name, "seconds"), total(first, "seconds")))
 
 
 if __name__ == "__main__":

@@ -434,7 +434,7 @@ pub fn solve<P: ChordalInit<D>, const D: usize>(
 fn annealed_start<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
-    job: &Job<'_, P, D>,
+    (job, restarts): (&Job<'_, P, D>, &mut search::Restarts<P>),
 ) -> Result<Outcome, SolveError> {
     let mut out = Outcome::new(job.candidates.len());
     if session.exhausted() {
@@ -460,7 +460,7 @@ fn annealed_start<P: ChordalInit<D>, const D: usize>(
     settle(
         session,
         weights,
-        job,
+        (job, restarts),
         (job.chordal, Swing::Continue),
         &mut out,
     )?;
@@ -500,7 +500,14 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
         if let Some(proposal) = proposal {
             schedule::propose(session, weights, candidates, proposal, job.layers)?;
         }
-        settle(session, weights, job, (false, Swing::GiveUp), &mut out)?;
+        let restarts = &mut search::Restarts::default();
+        settle(
+            session,
+            weights,
+            (job, restarts),
+            (false, Swing::GiveUp),
+            &mut out,
+        )?;
         if out.swung {
             return Ok((out, false));
         }
@@ -581,7 +588,7 @@ fn doubts<P: Pose<D>, const D: usize>(
 fn settle<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
-    job: &Job<'_, P, D>,
+    (job, restarts): (&Job<'_, P, D>, &mut search::Restarts<P>),
     (chordal, swing): (bool, Swing),
     out: &mut Outcome,
 ) -> Result<(), SolveError> {
@@ -622,8 +629,7 @@ fn settle<P: ChordalInit<D>, const D: usize>(
             test,
             |session, weights| {
                 let how = schedule::Deciding { scale, ..how };
-                let mut solved = passing.recording(candidates, test);
-                schedule::decide(session, weights, candidates, &how, &mut solved)
+                restarts.decide(session, weights, (candidates, &how), &mut passing, test)
             },
         )?;
         if restarted {

@@ -276,6 +276,13 @@ impl Decided {
         self.relaxed_starts += other.relaxed_starts;
     }
 
+    /// These decisions with no work counted: the same decisions taken
+    /// again from a record of them ([`super::search::Restarts`]).
+    pub fn without_work(mut self) -> Self {
+        (self.decisions, self.relaxations, self.relaxed_starts) = (0, 0, 0);
+        self
+    }
+
     /// Nothing decided yet: the candidates `edges` of weight ≥ ½ accepted,
     /// and their clusters (each its own with the layer off).
     fn start<P: Pose<D>, const D: usize>(
@@ -817,7 +824,7 @@ pub fn propose<P: Pose<D>, const D: usize>(
 ///   optimum in 4 iterations.
 /// * Where the map before fits better, LM from it ends lower than the
 ///   relaxation: no map fits a problem better than its minimum.
-fn relaxed_start<P: ChordalInit<D>, const D: usize>(
+pub(super) fn relaxed_start<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &[f64],
 ) -> Result<bool, SolveError> {

@@ -48,10 +48,11 @@
 //! `D²`.
 
 use super::innovation::{Evaluation, through_wide_chains};
-use super::schedule::{Decided, left_out, objective};
+use super::schedule::{self, Decided, Deciding, left_out, objective, relaxed_start};
 use super::{Candidate, Layers};
 use crate::geometry::Pose;
 use crate::graph::Graph;
+use crate::solve::init::ChordalInit;
 use crate::solve::{Session, SolveError};
 use crate::stats::{Chi2Test, chi2_critical};
 use serde::Serialize;
@@ -97,12 +98,13 @@ pub type Test<'t, P, const D: usize> = dyn Fn(&Graph<P, D>, &[f64]) -> Option<Ch
 /// The sets the decisions solved whose maps passed the χ² test, from
 /// every start of the decisions: where a failed test that no cluster
 /// explains ends (module doc, [`Passing::best`]).
-#[derive(Default)]
+#[derive(Clone, Default)]
 pub struct Passing {
     sets: Vec<PassingSet>,
 }
 
 /// A set whose map passed, and what ranks it.
+#[derive(Clone)]
 struct PassingSet {
     /// One flag per candidate.
     accepted: Vec<bool>,
@@ -136,10 +138,23 @@ impl Passing {
             dof: t.dof_residual,
             scale: t.d2 / t.dof_residual as f64,
         };
-        match self.sets.iter_mut().find(|s| s.accepted == accepted) {
+        self.keep(set);
+    }
+
+    /// Keeps `set`: of a set solved twice, the better fitting map counts.
+    fn keep(&mut self, set: PassingSet) {
+        match self.sets.iter_mut().find(|s| s.accepted == set.accepted) {
             Some(s) if set.fit < s.fit => *s = set,
             Some(_) => {}
             None => self.sets.push(set),
+        }
+    }
+
+    /// Keeps every set of `other`, in its order, as [`Passing::record`]
+    /// would have.
+    pub fn merge(&mut self, other: &Passing) {
+        for set in &other.sets {
+            self.keep(set.clone());
         }
     }
 
@@ -519,6 +534,95 @@ pub fn restart<P: Pose<D>, const D: usize>(
     session.graph.poses = saved.0;
     weights.copy_from_slice(&saved.1);
     Ok(false)
+}
+
+/// The restarts' decisions ([`restart`]) of one job, kept so that EM's
+/// second start, when its test fails unexplained as well, does not make
+/// them again. A restart decides from no candidate accepted, on the
+/// trusted edges' chordal relaxation where that fits them better than the
+/// map of the start it follows ([`super::schedule::relaxed_start`]): it
+/// then begins at the same poses whichever start it follows, and its
+/// decisions, map and passing sets are the same bits. A record is taken
+/// only for a restart that begins exactly where the recorded one began —
+/// the same scale, poses and weights — and that the budget did not cut
+/// short (docs/method.md §7).
+pub struct Restarts<P> {
+    done: Vec<Restarted<P>>,
+}
+
+impl<P> Default for Restarts<P> {
+    fn default() -> Self {
+        Self { done: Vec::new() }
+    }
+}
+
+/// One restart's beginning and end.
+struct Restarted<P> {
+    scale: super::Scale,
+    /// The poses and weights it began from.
+    from: (Vec<P>, Vec<f64>),
+    /// The map and weights it ended at, its decisions, and the passing
+    /// sets it solved.
+    to: (Vec<P>, Vec<f64>),
+    decided: Decided,
+    passing: Passing,
+}
+
+impl<P> Restarts<P> {
+    /// [`super::schedule::decide`] of `candidates` as `how` says, from the
+    /// map in the session's graph and `weights` (the restart's: no
+    /// candidate accepted), each passing set it solves recorded in
+    /// `passing` — or, where a restart of this job began at the same
+    /// scale, poses and weights, its record: its end, its passing sets and
+    /// its decisions, with no work counted. A start on the chordal
+    /// relaxation (`how.relax`) first takes the relaxation where it fits
+    /// the trusted edges better than the map before.
+    pub fn decide<const D: usize>(
+        &mut self,
+        session: &mut Session<'_, P, D>,
+        weights: &mut [f64],
+        (candidates, how): (&[Candidate], &Deciding<'_>),
+        passing: &mut Passing,
+        test: &Test<'_, P, D>,
+    ) -> Result<Decided, SolveError>
+    where
+        P: ChordalInit<D>,
+    {
+        let relaxed = how.relax && how.layers.relaxation;
+        if relaxed {
+            relaxed_start(session, weights)?;
+        }
+        let from = (session.graph.poses.as_slice(), &*weights);
+        let known = (self.done.iter())
+            .filter(|_| relaxed)
+            .find(|r| r.scale == how.scale && (r.from.0.as_slice(), r.from.1.as_slice()) == from);
+        if let Some(r) = known {
+            session.graph.poses.clone_from(&r.to.0);
+            weights.copy_from_slice(&r.to.1);
+            passing.merge(&r.passing);
+            return Ok(r.decided.clone().without_work());
+        }
+        let from = (session.graph.poses.clone(), weights.to_vec());
+        let mut solved = Passing::default();
+        let decided = schedule::decide(
+            session,
+            weights,
+            candidates,
+            how,
+            &mut solved.recording(candidates, test),
+        )?;
+        passing.merge(&solved);
+        if relaxed && !decided.cut_short && !session.exhausted() {
+            self.done.push(Restarted {
+                scale: how.scale,
+                from,
+                to: (session.graph.poses.clone(), weights.to_vec()),
+                decided: decided.clone(),
+                passing: solved,
+            });
+        }
+        Ok(decided)
+    }
 }
 
 #[cfg(test)]

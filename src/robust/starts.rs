@@ -64,6 +64,7 @@
 //! Ties keep the annealed start's end.
 
 use super::schedule::{misfit_scale, objective};
+use super::search::Restarts;
 use super::{Candidate, Job, Outcome, RobustMethod, Swing, annealed_start, kernels, settle};
 use crate::geometry::Pose;
 use crate::graph::Graph;
@@ -229,7 +230,8 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     job: &Job<'_, P, D>,
 ) -> Result<Outcome, SolveError> {
     let before = session.iterations();
-    let annealed = annealed_start(session, weights, job)?;
+    let mut restarts = Restarts::default();
+    let annealed = annealed_start(session, weights, (job, &mut restarts))?;
     let share = session.iterations() - before;
     let Some(given) = job
         .given
@@ -260,7 +262,7 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     let mut first = End::keep(session.graph, weights, job, (ended, annealed));
     session.graph.poses.copy_from_slice(given);
     let before = session.iterations();
-    let kernel = kernel_start(session, weights, job, share)?;
+    let kernel = kernel_start(session, weights, (job, &mut restarts), share)?;
     let used = session.iterations() - before;
     let Some(kernel) = kernel else {
         return unsettled(session, weights, first, used);
@@ -338,7 +340,7 @@ fn unsettled<P: Pose<D>, const D: usize>(
 fn kernel_start<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
-    job: &Job<'_, P, D>,
+    (job, restarts): (&Job<'_, P, D>, &mut Restarts<P>),
     cap: usize,
 ) -> Result<Option<Outcome>, SolveError> {
     let mut out = Outcome::new(job.candidates.len());
@@ -371,7 +373,7 @@ fn kernel_start<P: ChordalInit<D>, const D: usize>(
     settle(
         session,
         weights,
-        job,
+        (job, restarts),
         (job.chordal, Swing::Continue),
         &mut out,
     )?;

@@ -599,6 +599,57 @@ fn a_restart_that_still_fails_is_undone_but_its_work_is_counted() {
 }
 
 #[test]
+fn a_restart_that_begins_where_a_recorded_one_began_takes_its_record() {
+    use super::super::search::{Passing, Restarts};
+    // The restart from two starts' maps: the converged map and the same
+    // twisted. Both begin at the trusted edges' relaxation, so the record
+    // of the first is the second's end to the bit, with no solve.
+    on_search_case(false, |mut s, w, candidates, layers, _| {
+        let how = deciding(layers, true, Swing::Continue);
+        let twisted = {
+            let mut g = s.graph.clone();
+            twist(&mut g);
+            g.poses
+        };
+        let restart = |s: &mut Session<'_, Se2, 3>,
+                       w: &mut [f64],
+                       restarts: &mut Restarts<Se2>,
+                       how: &Deciding<'_>| {
+            for c in candidates {
+                w[c.edge] = 0.0;
+            }
+            let mut passing = Passing::default();
+            let decided =
+                (restarts.decide(s, w, (candidates, how), &mut passing, &chi2_test)).unwrap();
+            let best = passing.best(1.0).map(|(set, j, _)| (set.to_vec(), j));
+            (decided, best, s.graph.poses.clone(), w.to_vec())
+        };
+        let mut recorded = Restarts::default();
+        let first = restart(&mut s, w, &mut recorded, &how);
+        assert!(first.0.decisions > 0 && first.1.is_some(), "{:?}", first.1);
+        // Decided afresh from the twisted map.
+        s.graph.poses.clone_from(&twisted);
+        let fresh = restart(&mut s, w, &mut Restarts::default(), &how);
+        // From the record.
+        s.graph.poses.clone_from(&twisted);
+        let solved = s.iterations();
+        let again = restart(&mut s, w, &mut recorded, &how);
+        assert_eq!(s.iterations(), solved);
+        assert_eq!(again.0.decisions, 0);
+        for (a, b) in [(&again, &fresh), (&again, &first)] {
+            assert_eq!(a.0.accepted, b.0.accepted);
+            assert_eq!((&a.1, &a.2, &a.3), (&b.1, &b.2, &b.3));
+        }
+        // Not on the relaxation, the restart begins at the twisted map
+        // and decides afresh.
+        s.graph.poses.clone_from(&twisted);
+        let how = deciding(layers, false, Swing::Continue);
+        let own = restart(&mut s, w, &mut recorded, &how);
+        assert!(s.iterations() > solved && own.0.decisions > 0);
+    });
+}
+
+#[test]
 fn a_cycle_keeps_the_set_whose_map_fits_best() {
     // Two candidates (edges 1 and 2); the map was solved with the first
     // set, the second fits better: it is put in the weights.
