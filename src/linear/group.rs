@@ -45,9 +45,11 @@ impl<const D: usize> BlockSystem<D> {
     /// less: the recurrence from the selected inverse `z` while its blocks
     /// off the factor's pattern cost less than the sparse solve would
     /// ([`BlockSystem::propagate_group_selected`]), else the solve. The
-    /// recurrence gives up at the solve's cost, so a group never costs
-    /// more than twice the cheaper way. Reads the system only: threads
-    /// may share it, each with its own `scratch`.
+    /// recurrence is first counted without its arithmetic
+    /// ([`Self::recurrence_fits`]) and run only if it fits the budget, so a
+    /// group costs the cheaper way plus the count, which is at most the
+    /// solve's cost too. Reads the system only: threads may share it, each
+    /// with its own `scratch`.
     ///
     /// # Panics
     /// If no factorisation succeeded before, or a block index is out of
@@ -62,6 +64,11 @@ impl<const D: usize> BlockSystem<D> {
             return DMatrix::zeros(D * edges.len(), D * edges.len());
         };
         let budget = solve_cost / recurrence_product_cost(D);
+        // Counted first: a recurrence that runs out of budget would cost
+        // the solve's time for nothing.
+        if !self.recurrence_fits(edges, budget) {
+            return self.solve_group(edges, scratch);
+        }
         (self.propagate_group_selected(z, edges, budget))
             .unwrap_or_else(|| self.solve_group(edges, scratch))
     }
@@ -202,6 +209,31 @@ impl<const D: usize> BlockSystem<D> {
             }
         }
         Some(gram)
+    }
+
+    /// Whether [`Self::propagate_group_selected`] of `edges` finishes within
+    /// `budget` products: its recurrence run without the arithmetic
+    /// ([`OffPattern::counting`]), asking for the same blocks in the same
+    /// order.
+    fn recurrence_fits(&self, edges: &[EdgeJacobian<D>], budget: usize) -> bool {
+        let mut count = OffPattern::counting(&self.symbolic, budget);
+        let positions = |e: &EdgeJacobian<D>| {
+            (e.iter())
+                .filter_map(|(b, _)| Some(self.position[(*b)?]))
+                .collect::<Vec<_>>()
+        };
+        for (e, ea) in edges.iter().enumerate() {
+            for fa in &edges[..=e] {
+                for p in positions(ea) {
+                    for q in positions(fa) {
+                        if count.block(p, q).is_none() {
+                            return false;
+                        }
+                    }
+                }
+            }
+        }
+        true
     }
 
     /// An upper bound (in the positive semi-definite order) of one edge's
@@ -434,5 +466,33 @@ mod tests {
             sys.propagate_group_selected(&z, &[far], usize::MAX)
                 .is_some()
         );
+    }
+
+    #[test]
+    fn the_count_runs_out_of_budget_where_the_recurrence_does() {
+        let n = 40;
+        let (sys, _) = ring(n);
+        let z = sys.selected_inverse();
+        let one = nalgebra::Matrix2::identity();
+        let edge = |i: usize, j: usize| [(Some(i), -one), (Some(j), one)];
+        let (mut fits, mut not) = (0, 0);
+        for start in 0..n {
+            for size in [1, 3, 8] {
+                let edges: Vec<_> = (0..size)
+                    .map(|k| edge((start + 5 * k) % n, (start + 11 * k + 1) % n))
+                    .collect();
+                // Every budget from none to past what the group needs.
+                let needs = (0..)
+                    .find(|&b| sys.propagate_group_selected(&z, &edges, b).is_some())
+                    .unwrap();
+                for budget in [0, needs / 2, needs.saturating_sub(1), needs, needs + 1] {
+                    let counted = sys.recurrence_fits(&edges, budget);
+                    let real = sys.propagate_group_selected(&z, &edges, budget).is_some();
+                    assert_eq!(counted, real, "{start} {size} {budget} of {needs}");
+                    (fits, not) = (fits + usize::from(real), not + usize::from(!real));
+                }
+            }
+        }
+        assert!(fits > 0 && not > 0, "{fits} {not}");
     }
 }
