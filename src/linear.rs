@@ -332,6 +332,18 @@ impl<const D: usize> BlockSystem<D> {
         (self.symbolic.supernodes(), self.symbolic.flops())
     }
 
+    /// The floating-point operations of forming again only the factor's
+    /// panels that a change of `H` in the rows and columns of `blocks`
+    /// (variable blocks) reaches: those on the blocks' paths to the root of
+    /// the elimination tree. Every other panel would keep its values; this
+    /// is the work an incremental factorisation (iSAM2's Bayes tree) does
+    /// for such a change.
+    #[cfg(any(test, feature = "internals"))]
+    pub fn refactor_flops(&self, blocks: &[usize]) -> f64 {
+        self.symbolic
+            .affected_flops(blocks.iter().map(|&b| self.position[b]))
+    }
+
     /// Sets `H` and `b` to zero before assembly.
     pub fn clear(&mut self) {
         self.factor_current = false;
@@ -932,6 +944,24 @@ mod tests {
 
     use std::ops::AddAssign;
 
+    #[test]
+    fn a_change_at_every_block_refactors_all_and_the_root_is_on_every_path() {
+        for seed in 0..4 {
+            let (sys, _, _) = random_system(seed);
+            let all = sys.factor_stats().1;
+            let blocks: Vec<usize> = (0..sys.num_blocks()).collect();
+            assert!((sys.refactor_flops(&blocks) - all).abs() <= 1e-12 * all);
+            assert_eq!(sys.refactor_flops(&[]), 0.0);
+            // A chain joins every block: one tree, whose root holds the
+            // block eliminated last, and every change redoes the root.
+            let last = sys.positions().iter().position(|&p| p == blocks.len() - 1);
+            let root = sys.refactor_flops(&[last.unwrap()]);
+            assert!(root > 0.0 && root < all);
+            for b in blocks {
+                assert!(sys.refactor_flops(&[b]) >= root, "seed {seed}, block {b}");
+            }
+        }
+    }
     #[test]
     fn solves_like_a_dense_cholesky() {
         for seed in 0..5 {

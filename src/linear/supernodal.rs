@@ -108,7 +108,9 @@ pub(super) struct Symbolic<const D: usize> {
     child_ptr: Vec<usize>,
     children: Vec<u32>,
     roots: Vec<u32>,
-    /// Floating-point operations of each subtree (for the schedule).
+    /// Floating-point operations of each supernode (its updates and its
+    /// diagonal factorisation) and of each subtree (for the schedule).
+    node_flops: Vec<f64>,
     subtree_flops: Vec<f64>,
     /// Floating-point operations of one factorisation.
     flops: f64,
@@ -486,6 +488,7 @@ impl<const D: usize> Symbolic<D> {
             parent: Vec::new(),
             children: Vec::new(),
             roots: Vec::new(),
+            node_flops: Vec::new(),
             subtree_flops: Vec::new(),
             flops: 0.0,
             max_update: 0,
@@ -622,14 +625,14 @@ impl<const D: usize> Symbolic<D> {
             }
         }
         self.flops = node_flops.iter().sum();
-        let mut subtree_flops = node_flops;
+        let mut subtree_flops = node_flops.clone();
         for s in 0..ns {
             if self.parent[s] != u32::MAX {
                 subtree_flops[self.parent[s] as usize] += subtree_flops[s];
             }
         }
-        (self.subtree_flops, self.max_update, self.max_below) =
-            (subtree_flops, max_update, max_below);
+        (self.node_flops, self.subtree_flops) = (node_flops, subtree_flops);
+        (self.max_update, self.max_below) = (max_update, max_below);
     }
 
     fn panel(&self, s: usize) -> Panel {
@@ -677,6 +680,39 @@ impl<const D: usize> Symbolic<D> {
     /// Floating-point operations of one numeric factorisation.
     pub(super) fn flops(&self) -> f64 {
         self.flops
+    }
+
+    /// The supernodes whose panels change when `H` changes only in the
+    /// rows and columns of the block columns at `positions`: those holding
+    /// one of them, and their ancestors in the elimination tree. Every
+    /// other panel comes out of a factorisation the same bits, since a
+    /// panel is formed from its own columns of `H` and its descendants'
+    /// panels alone.
+    #[cfg(any(test, feature = "internals"))]
+    pub(super) fn affected(&self, positions: impl IntoIterator<Item = usize>) -> Vec<bool> {
+        let mut mark = vec![false; self.supernodes()];
+        for p in positions {
+            let mut s = self.supernode_of[p] as usize;
+            while !mark[s] {
+                mark[s] = true;
+                match self.parent[s] {
+                    u32::MAX => break,
+                    q => s = q as usize,
+                }
+            }
+        }
+        mark
+    }
+
+    /// The floating-point operations of forming only the
+    /// [`Self::affected`] supernodes' panels.
+    #[cfg(any(test, feature = "internals"))]
+    pub(super) fn affected_flops(&self, positions: impl IntoIterator<Item = usize>) -> f64 {
+        let mark = self.affected(positions);
+        (0..self.supernodes())
+            .filter(|&s| mark[s])
+            .map(|s| self.node_flops[s])
+            .sum()
     }
 
     /// Supernode of block column `b` and where, in that supernode's panel,
@@ -1619,6 +1655,49 @@ mod tests {
             }
         }
         assert!(refused > 0);
+    }
+
+    #[test]
+    fn a_change_at_some_columns_reaches_only_their_paths_to_the_root() {
+        for seed in 0..12 {
+            let n = 30 + seed as usize;
+            let (later, a) = random_problem(200 + seed, n);
+            let sym = Symbolic::<2>::new(&Adjacency::from_lists(&later)).unwrap();
+            let before = factor_dense(&sym, &later, &a, 1, None);
+            // Every column affected: the whole factorisation's work.
+            let all = sym.affected_flops(0..n);
+            assert!(
+                (all - sym.flops()).abs() <= 1e-12 * sym.flops(),
+                "seed {seed}"
+            );
+            // A change of the diagonal block of one column and of one block
+            // that column shares with a later one.
+            let c = (seed as usize * 7) % n;
+            let mut b = a.clone();
+            b[(2 * c, 2 * c)] += 0.5;
+            let changed: Vec<usize> = match later[c].first() {
+                Some(&q) => {
+                    for (x, y) in [(2 * q, 2 * c), (2 * c, 2 * q)] {
+                        b[(x, y)] += 0.01;
+                    }
+                    vec![c, q]
+                }
+                None => vec![c],
+            };
+            let after = factor_dense(&sym, &later, &b, 1, None);
+            let mark = sym.affected(changed.iter().copied());
+            for t in 0..sym.supernodes() {
+                // The factor's entries: on and below the diagonal (the
+                // diagonal block's upper triangle is scratch).
+                let ld = sym.panel(t).ld::<2>();
+                let same = (sym.val_ptr[t]..sym.val_ptr[t + 1])
+                    .filter(|&i| (i - sym.val_ptr[t]) % ld >= (i - sym.val_ptr[t]) / ld)
+                    .all(|i| before[i] == after[i]);
+                assert_eq!(same, !mark[t], "seed {seed}, supernode {t}");
+            }
+            let part = sym.affected_flops(changed.iter().copied());
+            assert!(part > 0.0 && part <= all, "seed {seed}");
+        }
     }
 
     #[test]
