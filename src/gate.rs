@@ -136,6 +136,16 @@ impl VarianceFloor {
     }
 }
 
+/// How much lower the two-component mixture's BIC must be than one
+/// normal's for the counts to show two populations. A difference of BICs
+/// approximates twice the logarithm of the Bayes factor between the two
+/// models (Schwarz 1978), and evidence below 2 is "not worth more than a
+/// bare mention" (Kass & Raftery 1995, "Bayes factors", JASA 90:773–795).
+/// A few dozen counts of one population (a young map whose candidates all
+/// verified alike) are split by chance that narrowly, and a gate drawn
+/// between the halves would drop the true loops of the lower one.
+pub const MIN_BIC_GAIN: f64 = 2.0;
+
 /// Settings of the fit and of the degeneracy checks.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct MixtureOptions {
@@ -147,6 +157,9 @@ pub struct MixtureOptions {
     pub variance_floor: VarianceFloor,
     /// Fewer non-zero counts than this are degenerate (default 8).
     pub min_counts: usize,
+    /// Two components whose BIC is not lower than one normal's by more
+    /// than this are degenerate (default [`MIN_BIC_GAIN`]).
+    pub min_bic_gain: f64,
     /// Ashman's D below this is degenerate (default [`CLEAN_SEPARATION`],
     /// the usual bound for a clean separation of two normals).
     pub min_ashman_d: f64,
@@ -165,6 +178,7 @@ impl Default for MixtureOptions {
             max_iterations: 1000,
             variance_floor: VarianceFloor::Quantization,
             min_counts: 8,
+            min_bic_gain: MIN_BIC_GAIN,
             min_ashman_d: CLEAN_SEPARATION,
             min_loop_weight: 0.02,
             min_loop_size: 3.0,
@@ -373,12 +387,15 @@ pub enum Degeneracy {
         /// How many starts were tried.
         starts: usize,
     },
-    /// BIC prefers one component to two.
+    /// BIC does not prefer two components to one by more than
+    /// [`MixtureOptions::min_bic_gain`].
     OneComponent {
         /// BIC of one component.
         bic_one: f64,
         /// BIC of two components.
         bic_two: f64,
+        /// The gain asked of two components.
+        min_gain: f64,
     },
     /// The two components overlap too much.
     Overlapping {
@@ -434,9 +451,13 @@ impl fmt::Display for Degeneracy {
                 f,
                 "EM found no two-component fit: all {starts} starts collapsed onto a few tied counts or lost a component"
             ),
-            Degeneracy::OneComponent { bic_one, bic_two } => write!(
+            Degeneracy::OneComponent {
+                bic_one,
+                bic_two,
+                min_gain,
+            } => write!(
                 f,
-                "the counts show one component: BIC 1-comp {bic_one:.1} <= 2-comp {bic_two:.1}"
+                "the counts show one component: BIC 1-comp {bic_one:.1} is not above 2-comp {bic_two:.1} by more than {min_gain}"
             ),
             Degeneracy::Overlapping {
                 ashman_d,
@@ -668,10 +689,11 @@ fn check_separation(
     mixture: &LogNormalMixture,
     options: &MixtureOptions,
 ) -> Option<Degeneracy> {
-    if s.bic_one <= s.bic_two {
+    if s.bic_one - s.bic_two <= options.min_bic_gain {
         Some(Degeneracy::OneComponent {
             bic_one: s.bic_one,
             bic_two: s.bic_two,
+            min_gain: options.min_bic_gain,
         })
     } else if s.ashman_d < options.min_ashman_d {
         Some(Degeneracy::Overlapping {

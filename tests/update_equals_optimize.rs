@@ -500,9 +500,12 @@ fn an_update_whose_decisions_swing_runs_the_whole_job() {
 /// An update whose map holds loops back by their counts runs the whole
 /// job: EM from the last decisions can hold back there true loops that
 /// the annealing accepts. A sphere with aliases placed anywhere in groups
-/// of 5, updated every 20 poses: at 260 poses the update held back nine
-/// true loops in six clusters that the batch job accepts (poses 8.5 % of
-/// the map's size apart).
+/// of 5, updated every 20 poses: at 160 poses the update holds loops back
+/// (its gate's two components lower BIC by 3.6) and runs the whole job.
+/// At 260 poses it once held back nine true loops in six clusters that
+/// the batch job accepted (poses 8.5 % of the map's size apart), behind a
+/// gate that split one population by chance (BIC 0.14): the gate now sees
+/// one component there, and the update holds nothing back.
 #[test]
 fn an_update_that_holds_loops_back_runs_the_whole_job() {
     let AnySimulation::Spatial(sim) = aliased_anywhere(World::Sphere3d, 30, 5) else {
@@ -510,10 +513,7 @@ fn an_update_that_holds_loops_back_runs_the_whole_job() {
     };
     let steps = every_poses(&sim, 20, 260);
     assert!(mismatched(&steps).is_empty(), "{steps:#?}");
-    assert!(
-        whole_jobs(&steps, "holds loops back").contains(&260),
-        "{steps:#?}"
-    );
+    assert_eq!(whole_jobs(&steps, "holds loops back"), [160], "{steps:#?}");
 }
 
 /// An update that leaves a candidate's posterior near ½ runs the whole
@@ -541,7 +541,9 @@ fn an_update_with_a_posterior_near_half_runs_the_whole_job() {
 /// batch job rejects them; before the whole job at a posterior near ½, 6
 /// did, each at another of EM's fixed points than the batch job's
 /// annealing; docs/method.md §7b), if any step accepts an alias, or if the
-/// true loops rejected over every step grow.
+/// true loops rejected over every step grow (263 by the updates and 267 by
+/// the batch jobs; 302 and 306 while the gate drew a crossing through
+/// counts whose two components lowered BIC by less than 2).
 #[test]
 #[ignore]
 fn wider_aliased_replays() {
@@ -549,7 +551,7 @@ fn wider_aliased_replays() {
     let [(ut, uw), (bt, bw)] = totals;
     assert!(mismatching.len() <= 1, "{mismatching:?}");
     assert_eq!((uw, bw), (0, 0), "aliases accepted");
-    assert!(ut <= 302 && bt <= 306, "{totals:?}");
+    assert!(ut <= 263 && bt <= 267, "{totals:?}");
 }
 
 /// The same replays on seeds no rule of the update was found on (49–72)
@@ -559,8 +561,9 @@ fn wider_aliased_replays() {
 /// loops the batch job rejects (1, 3, and 13–14 on a young grid), in two
 /// it rejects a true loop the batch job keeps (grid seed 71, both group
 /// sizes), and in one the rotations are 1.2·10⁻⁶ rad apart
-/// (docs/method.md §7b). Over every step the updates reject 211 true
-/// loops and the batch jobs 264, and both accept 10 aliases. Fails if more
+/// (docs/method.md §7b). Over every step the updates reject 171 true
+/// loops and the batch jobs 198 (211 and 264 with a gate on chance splits
+/// of the counts), and both accept 10 aliases. Fails if more
 /// replays differ, or if the true loops rejected or the aliases accepted
 /// grow.
 #[test]
@@ -570,7 +573,7 @@ fn unseen_aliased_replays() {
     let [(ut, uw), (bt, bw)] = totals;
     assert!(mismatching.len() <= 6, "{mismatching:?}");
     assert!(uw <= 10 && bw <= 10, "aliases accepted: {totals:?}");
-    assert!(ut <= 211 && bt <= 264, "{totals:?}");
+    assert!(ut <= 171 && bt <= 198, "{totals:?}");
 }
 
 /// One replay of [`aliased_replays`]: the world, the seed, the group size.
