@@ -60,10 +60,7 @@ fn replay<P: Pose<D>, const D: usize>(full: &Graph<P, D>, every: usize) -> (usiz
     let (mut next_edge, mut steps, mut fresh) = (0, 0, 0);
     let (mut redone, mut whole) = (0.0, 0.0);
     let mut last_positions: Vec<usize> = Vec::new();
-    let mut ends = (1..=n / every).map(|k| k * every).collect::<Vec<_>>();
-    if n % every != 0 {
-        ends.push(n);
-    }
+    let ends = (every..n).step_by(every).chain(std::iter::once(n));
     // The graph at the last step that solved.
     let (mut old_vertices, mut old_edges) = (0, 0);
     for end in ends {

@@ -962,6 +962,7 @@ mod tests {
             }
         }
     }
+
     #[test]
     fn solves_like_a_dense_cholesky() {
         for seed in 0..5 {

@@ -217,15 +217,13 @@ impl<const D: usize> BlockSystem<D> {
     /// order.
     fn recurrence_fits(&self, edges: &[EdgeJacobian<D>], budget: usize) -> bool {
         let mut count = OffPattern::counting(&self.symbolic, budget);
-        let positions = |e: &EdgeJacobian<D>| {
-            (e.iter())
-                .filter_map(|(b, _)| Some(self.position[(*b)?]))
-                .collect::<Vec<_>>()
-        };
+        let positions = |e: &EdgeJacobian<D>| [e[0].0, e[1].0].map(|b| b.map(|b| self.position[b]));
         for (e, ea) in edges.iter().enumerate() {
+            let ps = positions(ea);
             for fa in &edges[..=e] {
-                for p in positions(ea) {
-                    for q in positions(fa) {
+                let qs = positions(fa);
+                for p in ps.into_iter().flatten() {
+                    for q in qs.into_iter().flatten() {
                         if count.block(p, q).is_none() {
                             return false;
                         }
@@ -331,6 +329,21 @@ mod tests {
         }
     }
 
+    /// Groups of 1, 3 and 8 unit edges between blocks of a ring of `n`,
+    /// spread over it from each start: `(start, size, edges)`.
+    fn ring_groups(n: usize) -> Vec<(usize, usize, Vec<EdgeJacobian<2>>)> {
+        let one = nalgebra::Matrix2::identity();
+        let edge = |i: usize, j: usize| [(Some(i), -one), (Some(j), one)];
+        let group = |start: usize, size: usize| {
+            (0..size)
+                .map(|k| edge((start + 5 * k) % n, (start + 11 * k + 1) % n))
+                .collect()
+        };
+        (0..n)
+            .flat_map(|start| [1, 3, 8].map(|size| (start, size, group(start, size))))
+            .collect()
+    }
+
     /// A ring of `n` 2-D blocks with chords every few blocks and a prior on
     /// block 0, pseudo-random symmetric positive definite blocks.
     fn ring(n: usize) -> (BlockSystem<2>, nalgebra::DMatrix<f64>) {
@@ -384,41 +397,34 @@ mod tests {
         let n = 40;
         let (sys, hinv) = ring(n);
         let z = sys.selected_inverse();
-        let one = nalgebra::Matrix2::identity();
-        let edge = |i: usize, j: usize| [(Some(i), -one), (Some(j), one)];
         // One scratch for every group: what one group leaves in it does not
         // leak into the next.
         let mut scratch = GroupScratch::default();
         let (mut by_recurrence, mut by_solve) = (0, 0);
-        for start in 0..n {
-            for size in [1, 3, 8] {
-                let edges: Vec<_> = (0..size)
-                    .map(|k| edge((start + 5 * k) % n, (start + 11 * k + 1) % n))
-                    .collect();
-                let gram = sys.propagate_group_cheaper(&z, &edges, &mut scratch);
-                // The solve alone, without the selected inverse, agrees.
-                let solved = sys.propagate_group_solved(&edges, &mut scratch);
-                assert!((&solved - &gram).abs().max() < 1e-9);
-                assert!(sys.group_solve_cost(&edges, &mut scratch) > 0);
-                for (e, ea) in edges.iter().enumerate() {
-                    for (f, fa) in edges.iter().enumerate() {
-                        let mut want = nalgebra::Matrix2::zeros();
-                        for (p, a) in ea {
-                            for (q, b) in fa {
-                                let h = hinv.fixed_view::<2, 2>(2 * p.unwrap(), 2 * q.unwrap());
-                                want += a * h * b.transpose();
-                            }
+        for (start, size, edges) in ring_groups(n) {
+            let gram = sys.propagate_group_cheaper(&z, &edges, &mut scratch);
+            // The solve alone, without the selected inverse, agrees.
+            let solved = sys.propagate_group_solved(&edges, &mut scratch);
+            assert!((&solved - &gram).abs().max() < 1e-9);
+            assert!(sys.group_solve_cost(&edges, &mut scratch) > 0);
+            for (e, ea) in edges.iter().enumerate() {
+                for (f, fa) in edges.iter().enumerate() {
+                    let mut want = nalgebra::Matrix2::zeros();
+                    for (p, a) in ea {
+                        for (q, b) in fa {
+                            let h = hinv.fixed_view::<2, 2>(2 * p.unwrap(), 2 * q.unwrap());
+                            want += a * h * b.transpose();
                         }
-                        let got = gram.fixed_view::<2, 2>(2 * e, 2 * f);
-                        assert!((got - want).abs().max() < 1e-9, "{start} {size} {e} {f}");
                     }
+                    let got = gram.fixed_view::<2, 2>(2 * e, 2 * f);
+                    assert!((got - want).abs().max() < 1e-9, "{start} {size} {e} {f}");
                 }
-                let budget =
-                    sys.reach_group(&edges, &mut scratch).unwrap() / recurrence_product_cost(2);
-                match sys.propagate_group_selected(&z, &edges, budget) {
-                    Some(_) => by_recurrence += 1,
-                    None => by_solve += 1,
-                }
+            }
+            let budget =
+                sys.reach_group(&edges, &mut scratch).unwrap() / recurrence_product_cost(2);
+            match sys.propagate_group_selected(&z, &edges, budget) {
+                Some(_) => by_recurrence += 1,
+                None => by_solve += 1,
             }
         }
         // Both ways were taken.
@@ -473,24 +479,17 @@ mod tests {
         let n = 40;
         let (sys, _) = ring(n);
         let z = sys.selected_inverse();
-        let one = nalgebra::Matrix2::identity();
-        let edge = |i: usize, j: usize| [(Some(i), -one), (Some(j), one)];
         let (mut fits, mut not) = (0, 0);
-        for start in 0..n {
-            for size in [1, 3, 8] {
-                let edges: Vec<_> = (0..size)
-                    .map(|k| edge((start + 5 * k) % n, (start + 11 * k + 1) % n))
-                    .collect();
-                // Every budget from none to past what the group needs.
-                let needs = (0..)
-                    .find(|&b| sys.propagate_group_selected(&z, &edges, b).is_some())
-                    .unwrap();
-                for budget in [0, needs / 2, needs.saturating_sub(1), needs, needs + 1] {
-                    let counted = sys.recurrence_fits(&edges, budget);
-                    let real = sys.propagate_group_selected(&z, &edges, budget).is_some();
-                    assert_eq!(counted, real, "{start} {size} {budget} of {needs}");
-                    (fits, not) = (fits + usize::from(real), not + usize::from(!real));
-                }
+        for (start, size, edges) in ring_groups(n) {
+            // Every budget from none to past what the group needs.
+            let needs = (0..)
+                .find(|&b| sys.propagate_group_selected(&z, &edges, b).is_some())
+                .unwrap();
+            for budget in [0, needs / 2, needs.saturating_sub(1), needs, needs + 1] {
+                let counted = sys.recurrence_fits(&edges, budget);
+                let real = sys.propagate_group_selected(&z, &edges, budget).is_some();
+                assert_eq!(counted, real, "{start} {size} {budget} of {needs}");
+                (fits, not) = (fits + usize::from(real), not + usize::from(!real));
             }
         }
         assert!(fits > 0 && not > 0, "{fits} {not}");

@@ -592,17 +592,16 @@ impl<P> Restarts<P> {
         if relaxed {
             relaxed_start(session, weights)?;
         }
-        let from = (session.graph.poses.as_slice(), &*weights);
-        let known = (self.done.iter())
-            .filter(|_| relaxed)
-            .find(|r| r.scale == how.scale && (r.from.0.as_slice(), r.from.1.as_slice()) == from);
+        // Only a restart on the relaxation begins where another began.
+        let from = relaxed.then(|| (session.graph.poses.clone(), weights.to_vec()));
+        let known = (from.as_ref())
+            .and_then(|from| (self.done.iter()).find(|r| r.scale == how.scale && r.from == *from));
         if let Some(r) = known {
             session.graph.poses.clone_from(&r.to.0);
             weights.copy_from_slice(&r.to.1);
             passing.merge(&r.passing);
             return Ok(r.decided.clone().without_work());
         }
-        let from = (session.graph.poses.clone(), weights.to_vec());
         let mut solved = Passing::default();
         let decided = schedule::decide(
             session,
@@ -612,7 +611,7 @@ impl<P> Restarts<P> {
             &mut solved.recording(candidates, test),
         )?;
         passing.merge(&solved);
-        if relaxed && !decided.cut_short && !session.exhausted() {
+        if let Some(from) = from.filter(|_| !decided.cut_short && !session.exhausted()) {
             self.done.push(Restarted {
                 scale: how.scale,
                 from,

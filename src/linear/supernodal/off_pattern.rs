@@ -160,14 +160,13 @@ impl<'a, const D: usize> OffPattern<'a, D> {
 
     /// Block `(r, c)` of `Z` if it is on the pattern or computed.
     fn known_block(&self, r: usize, c: usize) -> Option<SMatrix<f64, D, D>> {
-        if self.dry && self.symbolic.local_row(r.max(c), r.min(c)).is_ok() {
-            return Some(SMatrix::zeros());
-        }
-        if let Some(block) = (!self.dry)
-            .then(|| self.symbolic.inverse_block(self.z, r, c))
-            .flatten()
-        {
-            return Some(block);
+        let on_pattern = if self.dry {
+            (self.symbolic.local_row(r.max(c), r.min(c)).is_ok()).then(SMatrix::zeros)
+        } else {
+            self.symbolic.inverse_block(self.z, r, c)
+        };
+        if on_pattern.is_some() {
+            return on_pattern;
         }
         if r > c {
             self.memo.get(&(r as u32, c as u32)).copied()
