@@ -12,7 +12,9 @@
 //! convergence; its time counts in the total. `--set NAME=VALUE` sets any
 //! other option by its name (`Options::set`), e.g. `--set threads=1`.
 //! `--gap-every M` compares every M-th update's map with a batch solve of
-//! the graph at that point (untimed): how far its χ² is above the optimum.
+//! the graph at that point (untimed): how far its χ² is above the batch
+//! job's, and its positions (as a share of the map's size) and rotations
+//! from the batch job's, each update's with `-v`.
 //!
 //! Prints one line per update (poses, how it was solved, milliseconds) and
 //! the earlier decisions it changed (and, for a whole job, why) with `-v`,
@@ -142,6 +144,12 @@ struct Tally {
     kinds: HashMap<&'static str, usize>,
     changed: usize,
     gaps: Vec<f64>,
+    /// At the same updates: how far the positions are from the batch
+    /// job's, as a share of the map's size.
+    apart: Vec<f64>,
+    /// At the same updates: the largest angle from the batch job's
+    /// rotations, in radians.
+    turned: Vec<f64>,
 }
 
 /// `options` without the bound on an update's iterations.
@@ -186,6 +194,17 @@ fn update(
     if args.gap_every > 0 && tally.times.len() % args.gap_every == 0 {
         let batch = graph.optimize(&unbounded(&args.options))?;
         tally.gaps.push(solution.chi2() / batch.chi2() - 1.0);
+        let (apart, size, turned) = poses_apart(&solution, &batch);
+        tally.apart.push(apart / size);
+        tally.turned.push(turned);
+        if args.verbose {
+            writeln!(
+                out,
+                "          gap: χ² {:.1e} above, positions {:.1e} of the size, rotations {turned:.1e} rad",
+                solution.chi2() / batch.chi2() - 1.0,
+                apart / size
+            )?;
+        }
     }
     if args.verbose {
         let r = solution.report();
@@ -292,6 +311,24 @@ fn summary(
             gaps[gaps.len() - 1],
             gaps.len(),
         )?;
+        let apart = &mut tally.apart;
+        apart.sort_by(f64::total_cmp);
+        writeln!(
+            out,
+            "positions apart from the batch job's at the same updates, as a share of the map's size: median {:.1e}, max {:.1e}; {} above 10⁻⁶",
+            apart[apart.len() / 2],
+            apart[apart.len() - 1],
+            apart.iter().filter(|&&a| a > 1e-6).count(),
+        )?;
+        let turned = &mut tally.turned;
+        turned.sort_by(f64::total_cmp);
+        writeln!(
+            out,
+            "rotations apart from the batch job's at the same updates, in radians: median {:.1e}, max {:.1e}; {} above 10⁻⁶",
+            turned[turned.len() / 2],
+            turned[turned.len() - 1],
+            turned.iter().filter(|&&a| a > 1e-6).count(),
+        )?;
     }
     let accepted = |s: &AnySolution| -> Vec<usize> {
         (s.loops().iter().filter(|d| d.accepted))
@@ -306,6 +343,12 @@ fn summary(
         batch.chi2(),
         (last.chi2() / batch.chi2() - 1.0).abs(),
         if same { "identical" } else { "DIFFER" }
+    )?;
+    let (apart, size, turned) = poses_apart(last, batch);
+    writeln!(
+        out,
+        "positions up to {apart:.2e} apart, {:.2e} of the map's size {size:.1} (the diagonal of its bounding box); rotations up to {turned:.2e} rad",
+        apart / size
     )?;
     if args.verbose {
         for (u, b) in last.loops().iter().zip(batch.loops()) {
@@ -329,4 +372,36 @@ fn summary(
         }
     }
     Ok(())
+}
+
+/// The largest distance between a position of `a` and the same pose's of
+/// `b`, the diagonal of `b`'s positions' bounding box, and the largest
+/// angle between a rotation of `a` and the same pose's of `b`.
+fn poses_apart(a: &AnySolution, b: &AnySolution) -> (f64, f64, f64) {
+    let (width, dims) = (b.pose_width(), if b.pose_width() == 3 { 2 } else { 3 });
+    let (pa, pb) = (a.poses_flat(), b.poses_flat());
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    let (mut apart, mut turned) = (0.0f64, 0.0f64);
+    for (x, y) in pa.chunks_exact(width).zip(pb.chunks_exact(width)) {
+        let mut d2 = 0.0;
+        for i in 0..dims {
+            (lo[i], hi[i]) = (lo[i].min(y[i]), hi[i].max(y[i]));
+            d2 += (x[i] - y[i]).powi(2);
+        }
+        apart = apart.max(d2.sqrt());
+        let angle = if dims == 2 {
+            let d = x[2] - y[2];
+            d.sin().atan2(d.cos()).abs()
+        } else {
+            // The angle between unit quaternions q and r: 2·acos|q·r|.
+            let dot: f64 = (3..7).map(|i| x[i] * y[i]).sum();
+            2.0 * dot.abs().min(1.0).acos()
+        };
+        turned = turned.max(angle);
+    }
+    let size = (0..dims)
+        .map(|i| (hi[i] - lo[i]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    (apart, size, turned)
 }
