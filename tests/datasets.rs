@@ -529,6 +529,46 @@ fn an_accepted_loop_the_information_calls_an_outlier_meets_the_second_start() {
     assert!(accepted(true) + 2 <= starts[0].accepted - 128, "{starts:?}");
 }
 
+/// manhattanOlson3500 replayed pose by pose, as a front end feeds it:
+/// from 540 poses on, every update's map is the batch job's to within
+/// 10⁻⁶ of the map's size in position and 10⁻⁶ rad in rotation. With any
+/// chord step allowed to end a solve (one that lowered the χ² by less
+/// than 10⁻⁹ of itself, however far it moved the poses) the update at 547
+/// poses left positions 1.07·10⁻⁶ of the map's size and rotations
+/// 1.65·10⁻⁶ rad from the batch job's (docs/method.md §7b).
+#[test]
+fn every_update_of_a_replay_ends_at_the_batch_map() {
+    let Some(full) = read_planar("manhattanOlson3500-g2o.g2o") else {
+        return;
+    };
+    let (options, mut g) = (Options::default(), PoseGraph2::new());
+    for (k, edges) in edges_due(&full).iter().enumerate().take(600) {
+        add_pose_and_edges(&mut g, &full, k, edges);
+        let u = g.update(&options).unwrap();
+        if k + 1 < 540 {
+            continue;
+        }
+        let b = g.optimize(&options).unwrap();
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        let (mut apart, mut turned) = (0.0f64, 0.0f64);
+        for ((_, pu), (_, pb)) in u.poses().zip(b.poses()) {
+            for (i, v) in [pb.x, pb.y].into_iter().enumerate() {
+                (lo[i], hi[i]) = (lo[i].min(v), hi[i].max(v));
+            }
+            apart = apart.max((pu.x - pb.x).hypot(pu.y - pb.y));
+            let d = pu.theta - pb.theta;
+            turned = turned.max(d.sin().atan2(d.cos()).abs());
+        }
+        let size = (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
+        assert!(
+            apart <= 1e-6 * size && turned <= 1e-6,
+            "at {} poses: positions {apart:.2e} apart ({:.2e} of the size), rotations {turned:.2e} rad",
+            k + 1,
+            apart / size
+        );
+    }
+}
+
 /// The same map replayed by a front end: an update every 500 poses (and
 /// after the last) gives the batch job's decisions at each, and at the end
 /// all 43 true loops and no alias. (Up to 4,500 poses each update runs the

@@ -95,6 +95,15 @@ pub struct SolveSettings {
     /// ([`chord`](self::chord)). Off by default; an incremental update's
     /// solves, which start next to the optimum, use it.
     pub reuse_factor: bool,
+    /// With chord steps: a chord step ends the solve (by the relative
+    /// tolerance or the model's) only if it moved no pose by more than
+    /// this — `(translation, rotation)`, in the map's units and radians;
+    /// else the iterations go on. A chord step contracts the error by as
+    /// much as `H` moved, and least along the weakest directions of the
+    /// map, where the objective is flattest: there a step that lowers it
+    /// by 10⁻¹⁰ of itself can leave the poses about as far from the
+    /// optimum again as it moved them. `None`: any chord step may end it.
+    pub chord_end_step: Option<(f64, f64)>,
     /// Stop when this much time has passed; the best estimate so far is kept.
     pub time_limit: Option<Duration>,
     /// LM damping `λ` (relative to the diagonal of `H`) after the first
@@ -119,6 +128,7 @@ impl Default for SolveSettings {
             model_tolerance: None,
             crawl_tolerance: None,
             reuse_factor: false,
+            chord_end_step: None,
             time_limit: None,
             initial_lambda: 1e-6,
             threads: 0,
@@ -636,7 +646,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             summary.history.push(record);
             observer.iteration(&record);
             if let Some(reason) = self.stop_after_step(previous, objective, step.lambda) {
-                break reason;
+                if !step.reused_factor || self.chord_may_end() {
+                    break reason;
+                }
+                // Converged by the objective, not by the poses: chord
+                // steps crawl along the weakest directions, and a
+                // Gauss–Newton step takes out what they leave.
+                chord.ready = false;
             }
             self.linearize(graph, weights);
             progress.lap(|t| &mut t.linearize_s);
@@ -685,6 +701,20 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 StopReason::Stalled
             }
         })
+    }
+
+    /// Whether the last step (a chord step, in `self.step`) moved every
+    /// pose by at most [`SolveSettings::chord_end_step`], if set.
+    fn chord_may_end(&self) -> bool {
+        let Some((translation, rotation)) = self.options.chord_end_step else {
+            return true;
+        };
+        let largest = |part: std::ops::Range<usize>| {
+            (self.step.chunks_exact(D))
+                .flat_map(|block| &block[part.clone()])
+                .fold(0.0f64, |m, v| m.max(v.abs()))
+        };
+        largest(0..D / 2) <= translation && largest(D / 2..D) <= rotation
     }
 
     /// Fails unless `weights` (if any) and the pattern have one entry per
