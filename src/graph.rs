@@ -188,6 +188,19 @@ impl<P: Pose<D>, const D: usize> Graph<P, D> {
         self.ids.len()
     }
 
+    /// The map's size: the diagonal of the bounding box of its positions
+    /// (0 for none).
+    pub fn extent(&self) -> f64 {
+        let mut bounds: Option<(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)> = None;
+        for p in self.poses.iter().map(Pose::position) {
+            bounds = Some(match bounds {
+                None => (p, p),
+                Some((lo, hi)) => (lo.inf(&p), hi.sup(&p)),
+            });
+        }
+        bounds.map_or(0.0, |(lo, hi)| (hi - lo).norm())
+    }
+
     /// The index of the vertex with this id.
     pub fn index_of(&self, id: VertexId) -> Option<usize> {
         self.index.get(&id).copied()
@@ -476,6 +489,19 @@ mod tests {
                 .unwrap();
         }
         g
+    }
+
+    #[test]
+    fn the_extent_is_the_bounding_box_diagonal() {
+        let mut g = Graph2::new();
+        assert_eq!(g.extent(), 0.0);
+        for (k, (x, y)) in [(0.0, 0.0), (3.0, -1.0), (1.0, 3.0)]
+            .into_iter()
+            .enumerate()
+        {
+            g.add_vertex(k as u64, Se2::new(x, y, 0.5)).unwrap();
+        }
+        assert!((g.extent() - 5.0).abs() < 1e-12);
     }
 
     #[test]

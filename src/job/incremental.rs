@@ -69,34 +69,6 @@ use std::time::Instant;
 /// finishes it.
 pub const UPDATE_TOLERANCE: f64 = 1e-9;
 
-/// The largest move of a position, as a share of the map's size (the
-/// diagonal of its positions' bounding box), of a chord step that ends an
-/// update's solve ([`SolveSettings::chord_end_step`]; with
-/// [`CHORD_END_TURN`] for the rotations). An update promises positions
-/// within 10⁻⁶ of that size and rotations within 10⁻⁶ rad of the batch
-/// job's, which ends on a Gauss–Newton step within about 10⁻⁸ of the
-/// optimum. A chord step contracts the error least along the map's
-/// weakest directions, where the objective is flattest: replaying
-/// manhattanOlson3500 every pose (`examples/replay FILE 1 --gap-every 1`,
-/// every update compared with a batch job) with any chord step allowed to
-/// end a solve, 150 of 3,500 updates left positions more than 10⁻⁶ of the
-/// size from the batch job's (up to 2.6·10⁻⁵) and 244 rotations more than
-/// 10⁻⁶ rad (up to 1.3·10⁻⁴); every pose 10 poses, 50 and 80 of 350. Over
-/// the 1,362 updates that ended on a chord step the positions were left
-/// up to 2.7 times the step's largest move from the batch job's (median
-/// 1.1): a fifth of the promise keeps them within it.
-pub const CHORD_END_SHARE: f64 = 2e-7;
-
-/// The largest turn of a rotation, in radians, of a chord step that ends
-/// an update's solve (see [`CHORD_END_SHARE`]). Over the same 1,362
-/// updates the rotations were left at most 0.08 times the step's largest
-/// turn from the batch job's (median 0.01), so 5·10⁻⁶ rad keeps them
-/// within 4·10⁻⁷ rad. With both bounds no update of that replay, every
-/// pose or every 10, ends more than 1.1·10⁻⁷ of the size or 2.5·10⁻⁷ rad
-/// from the batch job's, at 15–18 % more time than with none (a
-/// Gauss–Newton step after the chord steps that move more).
-pub const CHORD_END_TURN: f64 = 5e-6;
-
 /// A capped update's ([`crate::Options`]' `update_iterations`) relative
 /// tolerance and model tolerance
 /// ([`crate::solve::SolveSettings::model_tolerance`]): it stops after a step
@@ -463,12 +435,12 @@ fn update_solver<P: Pose<D>, const D: usize>(
 ) -> (SolveSettings, bool) {
     let cap = update_iterations(config, method);
     let max_iterations = cap.unwrap_or(config.solver.max_iterations);
-    let chord_end_step = Some((CHORD_END_SHARE * map_size(graph), CHORD_END_TURN));
+    let end_step = Some(finish::end_step(graph));
     if closing {
         let solver = SolveSettings {
             max_iterations,
             reuse_factor: true,
-            chord_end_step,
+            end_step,
             ..config.solver.clone()
         };
         return (solver, true);
@@ -480,24 +452,11 @@ fn update_solver<P: Pose<D>, const D: usize>(
         },
         model_tolerance: cap.map(|_| CAPPED_TOLERANCE),
         reuse_factor: true,
-        chord_end_step: cap.is_none().then_some(chord_end_step).flatten(),
+        end_step: end_step.filter(|_| cap.is_none()),
         max_iterations,
         ..config.solver.clone()
     };
     (solver, cap.is_none())
-}
-
-/// The diagonal of the bounding box of `graph`'s positions (at least 1:
-/// a map of one place has no size to be a share of).
-fn map_size<P: Pose<D>, const D: usize>(graph: &Graph<P, D>) -> f64 {
-    let (mut lo, mut hi) = (
-        nalgebra::Vector3::repeat(f64::INFINITY),
-        nalgebra::Vector3::repeat(f64::NEG_INFINITY),
-    );
-    for p in &graph.poses {
-        (lo, hi) = (lo.inf(&p.position()), hi.sup(&p.position()));
-    }
-    (hi - lo).norm().max(1.0)
 }
 
 /// The report's start of an update: the χ² of the placed map — the old

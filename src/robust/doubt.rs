@@ -188,7 +188,7 @@ pub fn doubtful<P: Pose<D>, const D: usize>(
     known: Option<&[Offset]>,
 ) -> Result<Vec<Doubt>, SolveError> {
     let graph = &*session.graph;
-    let size = map_size(graph.poses.iter().map(|p| p.position()));
+    let size = graph.extent();
     if !layers.clusters || size <= 0.0 {
         return Ok(Vec::new());
     }
@@ -249,7 +249,7 @@ pub fn held_back<P: Pose<D>, const D: usize>(
     layers: &Layers,
 ) -> Result<Vec<HeldBack>, SolveError> {
     let graph = &*session.graph;
-    let size = map_size(graph.poses.iter().map(|p| p.position()));
+    let size = graph.extent();
     if size <= 0.0 || !held.contains(&true) {
         return Ok(Vec::new());
     }
@@ -287,7 +287,7 @@ pub fn outlying<P: Pose<D>, const D: usize>(
     (layers, alpha, doubtful): (&Layers, f64, &[Doubt]),
 ) -> Result<Vec<Outlying>, SolveError> {
     let graph = &*session.graph;
-    let size = map_size(graph.poses.iter().map(|p| p.position()));
+    let size = graph.extent();
     let tested: Vec<(usize, f64)> = (0..candidates.len())
         .filter(|&k| accepted[k])
         .filter_map(|k| nu2[k].filter(|&v| v > 0.0).map(|v| (k, v)))
@@ -374,18 +374,6 @@ fn offset_test(joint: f64, common: f64, (dim, members): (usize, usize)) -> (f64,
     (f, p)
 }
 
-/// The diagonal of the bounding box of `positions` (0 for none).
-fn map_size(positions: impl Iterator<Item = nalgebra::Vector3<f64>>) -> f64 {
-    let mut bounds: Option<(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)> = None;
-    for p in positions {
-        bounds = Some(match bounds {
-            None => (p, p),
-            Some((lo, hi)) => (lo.inf(&p), hi.sup(&p)),
-        });
-    }
-    bounds.map_or(0.0, |(lo, hi)| (hi - lo).norm())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -407,13 +395,5 @@ mod tests {
         assert!(p < 1e-7, "{p}");
         assert_eq!(offset_test(5.0, 5.0, (3, 2)), (f64::INFINITY, 0.0));
         assert_eq!(offset_test(0.0, 0.0, (3, 2)), (0.0, 1.0));
-    }
-
-    #[test]
-    fn the_map_size_is_its_bounding_box_diagonal() {
-        let points = [[0.0, 0.0, 0.0], [3.0, -1.0, 0.0], [1.0, 3.0, 0.0]];
-        let size = map_size(points.iter().map(|p| nalgebra::Vector3::from(*p)));
-        assert!((size - 5.0).abs() < 1e-12);
-        assert_eq!(map_size(std::iter::empty()), 0.0);
     }
 }

@@ -19,6 +19,7 @@ mod lm;
 mod normal;
 mod pattern;
 mod progress;
+mod remaining;
 mod session;
 #[cfg(test)]
 mod tests;
@@ -29,6 +30,7 @@ use crate::linear::{BlockSystem, LinearError, Parallelism};
 use chord::Chord;
 use lm::Damping;
 use normal::EdgeTerms;
+use remaining::Remaining;
 // The batches of a linearisation, also for the covariances' (`crate::covariance`).
 pub(crate) use normal::{EDGES_PER_TASK, LINEARIZE_CHUNK};
 pub use pattern::Ordering;
@@ -95,15 +97,15 @@ pub struct SolveSettings {
     /// ([`chord`](self::chord)). Off by default; an incremental update's
     /// solves, which start next to the optimum, use it.
     pub reuse_factor: bool,
-    /// With chord steps: a chord step ends the solve (by the relative
-    /// tolerance or the model's) only if it moved no pose by more than
-    /// this — `(translation, rotation)`, in the map's units and radians;
-    /// else the iterations go on. A chord step contracts the error by as
-    /// much as `H` moved, and least along the weakest directions of the
-    /// map, where the objective is flattest: there a step that lowers it
-    /// by 10⁻¹⁰ of itself can leave the poses about as far from the
-    /// optimum again as it moved them. `None`: any chord step may end it.
-    pub chord_end_step: Option<(f64, f64)>,
+    /// A chord step ends a run (by the relative or the model's tolerance)
+    /// only if it moved no pose by more than this — `(translation,
+    /// rotation)`, in the map's units and radians; else a Gauss–Newton
+    /// step follows. A chord step contracts the error least along the
+    /// map's weakest directions, where the objective is flattest: one that
+    /// lowers it by 10⁻¹⁰ of itself can leave the poses about as far from
+    /// the optimum again as it moved them ([`remaining`](self::remaining)).
+    /// `None`: any chord step may end it.
+    pub end_step: Option<(f64, f64)>,
     /// Stop when this much time has passed; the best estimate so far is kept.
     pub time_limit: Option<Duration>,
     /// LM damping `λ` (relative to the diagonal of `H`) after the first
@@ -128,7 +130,7 @@ impl Default for SolveSettings {
             model_tolerance: None,
             crawl_tolerance: None,
             reuse_factor: false,
-            chord_end_step: None,
+            end_step: None,
             time_limit: None,
             initial_lambda: 1e-6,
             threads: 0,
@@ -388,6 +390,8 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     trial: Vec<P>,
     best: Vec<P>,
     step: Vec<f64>,
+    /// How far the last run's last step left the poses from the optimum.
+    remaining: Remaining,
     terms: Vec<EdgeTerms<D>>,
     /// Each edge's plain χ² at the last poses evaluated.
     edge_chi2: Vec<f64>,
@@ -497,6 +501,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             step: vec![0.0; vertex_of.len() * D],
             vertex_of,
             trial: graph.poses.clone(),
+            remaining: Remaining::default(),
             best: graph.poses.clone(),
             options,
             terms: Vec::new(),
@@ -606,6 +611,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         // Every run starts undamped (see `Damping`).
         let mut damping = Damping::undamped();
         let mut chord = Chord::default();
+        self.remaining = Remaining::default();
         let stop = loop {
             if let Some(reason) = self.stop_before_step(objective, &progress, observer) {
                 break reason;
@@ -645,8 +651,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             let record = step.record(summary.iterations, progress.watch.elapsed());
             summary.history.push(record);
             observer.iteration(&record);
+            self.remaining.after::<D>(&self.step, step.reused_factor);
             if let Some(reason) = self.stop_after_step(previous, objective, step.lambda) {
-                if !step.reused_factor || self.chord_may_end() {
+                if !step.reused_factor || self.remaining.within(self.options.end_step) {
                     break reason;
                 }
                 // Converged by the objective, not by the poses: chord
@@ -703,18 +710,11 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         })
     }
 
-    /// Whether the last step (a chord step, in `self.step`) moved every
-    /// pose by at most [`SolveSettings::chord_end_step`], if set.
-    fn chord_may_end(&self) -> bool {
-        let Some((translation, rotation)) = self.options.chord_end_step else {
-            return true;
-        };
-        let largest = |part: std::ops::Range<usize>| {
-            (self.step.chunks_exact(D))
-                .flat_map(|block| &block[part.clone()])
-                .fold(0.0f64, |m, v| m.max(v.abs()))
-        };
-        largest(0..D / 2) <= translation && largest(D / 2..D) <= rotation
+    /// Whether the last run left the poses within `bound` of the optimum,
+    /// `(translation, rotation)`, as its last step estimates it
+    /// ([`remaining`](self::remaining)).
+    pub fn converged_within(&self, bound: (f64, f64)) -> bool {
+        self.remaining.within(Some(bound))
     }
 
     /// Fails unless `weights` (if any) and the pattern have one entry per

@@ -182,7 +182,18 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
     /// information as published) still lowered its objective by 2.5 % per
     /// iteration at its 100th, and the job ended unconverged with exit
     /// status 4 naming a `--max-iters` it was not given.
-    pub fn finish_converging(&mut self, weights: &[f64]) -> Result<(), SolveError> {
+    ///
+    /// With `polish`, a last run that converged by the objective where its
+    /// last step leaves the poses further than that (`(translation,
+    /// rotation)`) from the optimum ([`Optimizer::converged_within`]) is
+    /// carried on once more, its chord steps bound by it too
+    /// ([`SolveSettings::end_step`]): the map returned is converged in its
+    /// poses, not only in its objective.
+    pub fn finish_converging(
+        &mut self,
+        weights: &[f64],
+        polish: Option<(f64, f64)>,
+    ) -> Result<(), SolveError> {
         for _ in 0..FINAL_RUNS {
             let at_limit =
                 (self.summary.as_ref()).is_some_and(|s| s.stop_reason == StopReason::MaxIterations);
@@ -190,6 +201,16 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
                 break;
             }
             self.converge(weights)?;
+        }
+        let Some(end_step) = polish else {
+            return Ok(());
+        };
+        let converged = (self.summary.as_ref()).is_some_and(|s| s.stop_reason.converged());
+        if converged && !self.exhausted() && !self.optimizer.converged_within(end_step) {
+            let own = self.options.end_step.replace(end_step);
+            let ran = self.converge(weights);
+            self.options.end_step = own;
+            ran?;
         }
         Ok(())
     }
