@@ -117,8 +117,9 @@ fn compare<P: GraphPose<D>, const D: usize>(u: &Solution<P>, b: &Solution<P>) ->
     for ((iu, pu), (ib, pb)) in u.poses().zip(b.poses()) {
         assert_eq!(iu, ib);
         dp = dp.max((pu.position() - pb.position()).norm());
-        let rel = pu.inverse().compose(pb).log();
-        dr = dr.max(rel.rows(D / 2, D - D / 2).norm());
+        // The tangent's rotation: θ of SE(2)'s (x, y, θ), φ of SE(3)'s (ρ, φ).
+        let (rel, translation) = (pu.inverse().compose(pb).log(), D.div_ceil(2));
+        dr = dr.max(rel.rows(translation, D - translation).norm());
     }
     if dp > TOLERANCE * size || dr > TOLERANCE {
         out.push(format!(
@@ -556,12 +557,13 @@ fn wider_aliased_replays() {
 
 /// The same replays on seeds no rule of the update was found on (49–72)
 /// and at another interval (every 13 poses): 96 replays, about a minute
-/// in release. 6 differ from the batch job at 1–4 updates each (8 before
+/// in release. 5 differ from the batch job at 1–4 updates each (8 before
 /// the whole job at a posterior near ½): in three the update keeps true
-/// loops the batch job rejects (1, 3, and 13–14 on a young grid), in two
-/// it rejects a true loop the batch job keeps (grid seed 71, both group
-/// sizes), and in one the rotations are 1.2·10⁻⁶ rad apart
-/// (docs/method.md §7b). Over every step the updates reject 171 true
+/// loops the batch job rejects (1, 3, and 13–14 on a young grid), and in
+/// two it rejects a true loop the batch job keeps (grid seed 71, both
+/// group sizes; docs/method.md §7b). A sixth, grid seed 56, differed by
+/// 1.2·10⁻⁶ in a check of the rotations that read SE(2)'s `y` with `θ`:
+/// its rotations agree. Over every step the updates reject 171 true
 /// loops and the batch jobs 198 (211 and 264 with a gate on chance splits
 /// of the counts), and both accept 10 aliases. Fails if more
 /// replays differ, or if the true loops rejected or the aliases accepted
@@ -571,7 +573,7 @@ fn wider_aliased_replays() {
 fn unseen_aliased_replays() {
     let (mismatching, totals) = aliased_replays(49..=72, 13);
     let [(ut, uw), (bt, bw)] = totals;
-    assert!(mismatching.len() <= 6, "{mismatching:?}");
+    assert!(mismatching.len() <= 5, "{mismatching:?}");
     assert!(uw <= 10 && bw <= 10, "aliases accepted: {totals:?}");
     assert!(ut <= 171 && bt <= 198, "{totals:?}");
 }

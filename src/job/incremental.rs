@@ -61,7 +61,8 @@ use std::time::Instant;
 /// 10⁻⁶ positions within 1.4·10⁻⁷ of the size but rotations 3·10⁻⁶ rad
 /// apart; 10⁻⁸ every pose within 10⁻⁶ on CI's replays, but on the wider
 /// ones with aliases placed anywhere (`wider_aliased_replays`) rotations
-/// 1.0–1.2·10⁻⁶ rad apart on 6 of 96; 10⁻⁹ none, at 11 %
+/// 1.0–1.2·10⁻⁶ rad apart on 6 of 96 (a check that then read SE(2)'s `y`
+/// with `θ`); 10⁻⁹ none, at 11 %
 /// more factorisations than 10⁻⁸ (manhattanOlson3500 every 10 poses,
 /// `examples/replay`: 1125 against 1013). A capped update
 /// ([`update_solver`]) keeps the looser [`CAPPED_TOLERANCE`]: it promises
