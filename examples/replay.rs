@@ -193,15 +193,15 @@ fn update(
     tally.changed += changes.len();
     if args.gap_every > 0 && tally.times.len() % args.gap_every == 0 {
         let batch = graph.optimize(&unbounded(&args.options))?;
-        tally.gaps.push(solution.chi2() / batch.chi2() - 1.0);
+        let gap = solution.chi2() / batch.chi2() - 1.0;
         let (apart, size, turned) = poses_apart(&solution, &batch);
+        tally.gaps.push(gap);
         tally.apart.push(apart / size);
         tally.turned.push(turned);
         if args.verbose {
             writeln!(
                 out,
-                "          gap: χ² {:.1e} above, positions {:.1e} of the size, rotations {turned:.1e} rad",
-                solution.chi2() / batch.chi2() - 1.0,
+                "          gap: χ² {gap:.1e} above, positions {:.1e} of the size, rotations {turned:.1e} rad",
                 apart / size
             )?;
         }
@@ -311,23 +311,15 @@ fn summary(
             gaps[gaps.len() - 1],
             gaps.len(),
         )?;
-        let apart = &mut tally.apart;
-        apart.sort_by(f64::total_cmp);
-        writeln!(
+        spread(
             out,
-            "positions apart from the batch job's at the same updates, as a share of the map's size: median {:.1e}, max {:.1e}; {} above 10⁻⁶",
-            apart[apart.len() / 2],
-            apart[apart.len() - 1],
-            apart.iter().filter(|&&a| a > 1e-6).count(),
+            "positions apart from the batch job's at the same updates, as a share of the map's size",
+            &mut tally.apart,
         )?;
-        let turned = &mut tally.turned;
-        turned.sort_by(f64::total_cmp);
-        writeln!(
+        spread(
             out,
-            "rotations apart from the batch job's at the same updates, in radians: median {:.1e}, max {:.1e}; {} above 10⁻⁶",
-            turned[turned.len() / 2],
-            turned[turned.len() - 1],
-            turned.iter().filter(|&&a| a > 1e-6).count(),
+            "rotations apart from the batch job's at the same updates, in radians",
+            &mut tally.turned,
         )?;
     }
     let accepted = |s: &AnySolution| -> Vec<usize> {
@@ -372,6 +364,19 @@ fn summary(
         }
     }
     Ok(())
+}
+
+/// One summary line of `values` (sorted here): median, largest, and how
+/// many are above the update's promise of 10⁻⁶.
+fn spread(out: &mut impl Write, what: &str, values: &mut [f64]) -> std::io::Result<()> {
+    values.sort_by(f64::total_cmp);
+    writeln!(
+        out,
+        "{what}: median {:.1e}, max {:.1e}; {} above 10⁻⁶",
+        values[values.len() / 2],
+        values[values.len() - 1],
+        values.iter().filter(|&&v| v > 1e-6).count(),
+    )
 }
 
 /// The largest distance between a position of `a` and the same pose's of

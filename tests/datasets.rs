@@ -18,7 +18,8 @@ use std::path::Path;
 
 mod common;
 use common::{
-    add_pose_and_edges, candidate_labels, datasets, edges_due, prefix, rebuilt, temp_dir, write,
+    add_pose_and_edges, candidate_labels, datasets, edges_due, poses_apart, prefix, rebuilt,
+    temp_dir, write,
 };
 
 /// Dataset `name` read as a graph of either dimension (`None` without the
@@ -579,19 +580,7 @@ fn updates_end_at_the_batch_map<P: pgo::GraphPose<D>, const D: usize>(
             continue;
         }
         let b = g.optimize(&options).unwrap();
-        let (mut lo, mut hi) = (
-            pgo::nalgebra::Vector3::repeat(f64::INFINITY),
-            pgo::nalgebra::Vector3::repeat(f64::NEG_INFINITY),
-        );
-        let (mut apart, mut turned) = (0.0f64, 0.0f64);
-        for ((_, pu), (_, pb)) in u.poses().zip(b.poses()) {
-            (lo, hi) = (lo.inf(&pb.position()), hi.sup(&pb.position()));
-            apart = apart.max((pu.position() - pb.position()).norm());
-            // The tangent's rotation: θ of SE(2)'s (x, y, θ), φ of SE(3)'s (ρ, φ).
-            let (rel, translation) = (pu.inverse().compose(pb).log(), D.div_ceil(2));
-            turned = turned.max(rel.rows(translation, D - translation).norm());
-        }
-        let size = (hi - lo).norm();
+        let (apart, size, turned) = poses_apart(&u, &b);
         assert!(
             apart <= 1e-6 * size && turned <= 1e-6,
             "at {} poses: positions {apart:.2e} apart ({:.2e} of the size), rotations {turned:.2e} rad",

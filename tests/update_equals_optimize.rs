@@ -19,7 +19,7 @@
 use pgo::{Cancel, GraphPose, Options, PoseGraph, Solution};
 
 mod common;
-use common::{add_pose_and_edges, edges_due};
+use common::{add_pose_and_edges, edges_due, poses_apart};
 use pgo_sim::{
     AnySimulation, InlierModel, OutlierPolicy, Simulation, SimulationOptions, World, simulate,
 };
@@ -104,23 +104,8 @@ fn compare<P: GraphPose<D>, const D: usize>(u: &Solution<P>, b: &Solution<P>) ->
             "χ² {cu:.9e} vs batch {cb:.9e} (relative {rel:.2e})"
         ));
     }
-    let (mut lo, mut hi) = (
-        pgo::nalgebra::Vector3::repeat(f64::INFINITY),
-        pgo::nalgebra::Vector3::repeat(f64::NEG_INFINITY),
-    );
-    for (_, p) in b.poses() {
-        lo = lo.inf(&p.position());
-        hi = hi.sup(&p.position());
-    }
-    let size = (hi - lo).norm().max(1.0);
-    let (mut dp, mut dr) = (0.0f64, 0.0f64);
-    for ((iu, pu), (ib, pb)) in u.poses().zip(b.poses()) {
-        assert_eq!(iu, ib);
-        dp = dp.max((pu.position() - pb.position()).norm());
-        // The tangent's rotation: θ of SE(2)'s (x, y, θ), φ of SE(3)'s (ρ, φ).
-        let (rel, translation) = (pu.inverse().compose(pb).log(), D.div_ceil(2));
-        dr = dr.max(rel.rows(translation, D - translation).norm());
-    }
+    let (dp, size, dr) = poses_apart(u, b);
+    let size = size.max(1.0);
     if dp > TOLERANCE * size || dr > TOLERANCE {
         out.push(format!(
             "poses {dp:.2e} apart ({:.2e} of the map's size {size:.1}), rotations {dr:.2e}",

@@ -194,3 +194,29 @@ pub fn add_pose_and_edges<P: pgo::GraphPose<D>, const D: usize>(
     }
     candidates
 }
+
+/// How far solution `u`'s poses are from `b`'s: the largest distance
+/// between the same pose's positions, the diagonal of `b`'s positions'
+/// bounding box (the map's size), and the largest angle between the same
+/// pose's rotations (θ of SE(2)'s tangent `(x, y, θ)`, φ of SE(3)'s
+/// `(ρ, φ)`). Panics if the two do not list the same poses.
+#[allow(dead_code)]
+pub fn poses_apart<P: pgo::GraphPose<D>, const D: usize>(
+    u: &pgo::Solution<P>,
+    b: &pgo::Solution<P>,
+) -> (f64, f64, f64) {
+    let (mut lo, mut hi) = (
+        pgo::nalgebra::Vector3::repeat(f64::INFINITY),
+        pgo::nalgebra::Vector3::repeat(f64::NEG_INFINITY),
+    );
+    let (mut apart, mut turned) = (0.0f64, 0.0f64);
+    let translation = D.div_ceil(2);
+    for ((iu, pu), (ib, pb)) in u.poses().zip(b.poses()) {
+        assert_eq!(iu, ib);
+        (lo, hi) = (lo.inf(&pb.position()), hi.sup(&pb.position()));
+        apart = apart.max((pu.position() - pb.position()).norm());
+        let rel = pu.inverse().compose(pb).log();
+        turned = turned.max(rel.rows(translation, D - translation).norm());
+    }
+    (apart, (hi - lo).norm(), turned)
+}
