@@ -517,23 +517,28 @@ def places_section(folder):
            "An end whose decisions did not settle now meets EM's second start, and pgo keeps every "
            "true loop and no alias on both files (docs/method.md §4, §5). Every case "
            "runs pgo and GTSAM's LM + Cauchy and GNC-TLS, each alone and behind pgo's gate, each "
-           "within 300 s of CPU time (sphere2500 seed 6: 600 s; with the information as published "
-           "pgo took 252 s there, its decisions' failed test resolved as docs/method.md §7 "
-           "says). Goal per case: pgo's map error (ATE, %% of the extent) at most "
+           "within 300 s of CPU time (sphere2500 seed 6: 600 s). Goal per case: pgo's map error (ATE, %% of the extent) at most "
            "the best peer's + %g, its precision at least the best peer's; and precision ≥ 0.99, "
            "recall ≥ 0.97, map error ≤ %g %%." % (PEER_MAP_SLACK, SWEEP_MAP_GOAL), "",
            "Made by:", "", "```sh"] + PLACES_CMDS + ["```", "",
            "The commands make these cases and more; the table shows the cases in the folder. "
            "pgo was last measured again alone, with the peers' results taken from the run before "
            "(`.venv/bin/python scripts/remeasure_pgo.py --earlier OLD --keep-earlier-on-error "
-           "bench/results/aliasing_places/*.json`, one at a time): a peer's result on a file "
+           "bench/results/aliasing_places/*.json`, beside a second such run on the other sweeps' "
+           "files, on a 2-core machine): a peer's result on a file "
            "depends on nothing pgo does, and "
            "`bench_robust.py --peers-from` checks that the cases are the same. pgo's times are "
-           "of that run, the peers' of theirs. The slowest case, torus3D seed 2 with the "
-           "information calibrated, took 266 s (1,686 factorisations) of its 300 s of CPU.", ""]
+           "of that run, the peers' of theirs."]
     runs = places_runs(folder)
     if not runs:
-        return out + ["**Not run yet.**", ""]
+        return out + ["", "**Not run yet.**", ""]
+    timed = [(r["tools"]["pgo"]["time"], seed, name, scale, r["tools"]["pgo"].get("factorizations"))
+             for _, seed, _, name, scale, r in runs if "time" in r["tools"].get("pgo", {})]
+    if timed:
+        t, seed, name, scale, fact = max(timed)
+        out[-1] += (" The slowest case, %s seed %d with the information %s, took %.0f s "
+                    "(%s factorisations)." % (name, seed, scale, t, "–" if fact is None else "{:,}".format(fact)))
+    out.append("")
     out += ["| place | seed | group | dataset | information | pgo P / R | pgo ATE % | pgo s | χ² | "
             "best peer | its P / R | its ATE % | pgo behind it |",
             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]

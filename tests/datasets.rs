@@ -490,7 +490,7 @@ fn an_end_whose_decisions_did_not_settle_meets_the_second_start() {
 /// and ranks first.
 #[test]
 fn a_wrong_population_the_file_calls_consistent_meets_the_second_start() {
-    let Some((kitti, edge_wrong)) = scattered_kitti_02() else {
+    let Some((kitti, edge_wrong)) = scattered_kitti_02(1_000_014) else {
         return;
     };
     let wrong = candidate_labels(&kitti, &edge_wrong);
@@ -501,6 +501,33 @@ fn a_wrong_population_the_file_calls_consistent_meets_the_second_start() {
         starts.len() == 2 && starts[0].passed == Some(true) && starts[1].chosen,
         "{starts:?}"
     );
+}
+
+/// The truncated start seeks the objective that ranks the ends, so it
+/// reaches ends the others do not: kitti_02 with 300 aliases placed
+/// anywhere one by one, every count true-like (seed 14 of the scattered
+/// exploration in docs/benchmarks.md), information as published. The
+/// annealed end leaves out two true loops and its decisions did not
+/// settle; the Cauchy kernel's end is the same 41 loops. GNC's truncation
+/// at `J`'s price holds every true loop and no alias, EM's decisions keep
+/// them, and that end ranks first: nothing is left to question.
+#[test]
+fn the_truncated_start_keeps_what_the_others_leave_out() {
+    let Some((kitti, edge_wrong)) = scattered_kitti_02(1_000_015) else {
+        return;
+    };
+    let wrong = candidate_labels(&kitti, &edge_wrong);
+    let r = kitti.optimize(&Options::default()).unwrap().into_report();
+    assert_eq!(true_loops_kept(&r, &wrong), (43, 43));
+    let starts = &r.robust.starts;
+    assert!(
+        starts.len() == 3
+            && starts[0].accepted == 41
+            && starts[1].accepted == 41
+            && starts[2].chosen,
+        "{starts:?}"
+    );
+    assert_eq!(r.status(), MapStatus::Ok);
 }
 
 /// An accepted loop that the file's information calls an outlier meets
@@ -518,7 +545,7 @@ fn an_accepted_loop_the_information_calls_an_outlier_meets_the_second_start() {
     };
     let starts = &r.robust.starts;
     assert!(
-        starts.len() == 2 && starts[0].passed == Some(true) && starts[1].chosen,
+        starts.len() == 3 && starts[0].passed == Some(true) && starts[1].chosen,
         "{starts:?}"
     );
     let accepted = |alias: bool| {
@@ -597,7 +624,7 @@ fn updates_end_at_the_batch_map<P: pgo::GraphPose<D>, const D: usize>(
 /// resume from; the last resumes from the 4,500-pose job's decisions.)
 #[test]
 fn updates_of_a_map_with_such_a_population_are_the_batch_job() {
-    let Some((full, edge_wrong)) = scattered_kitti_02() else {
+    let Some((full, edge_wrong)) = scattered_kitti_02(1_000_014) else {
         return;
     };
     let decided =
@@ -629,12 +656,12 @@ fn updates_of_a_map_with_such_a_population_are_the_batch_job() {
 /// of the scattered exploration in docs/benchmarks.md; information as
 /// published), written and read back; with whether each of its edges is a
 /// wrong candidate (`None` without the datasets).
-fn scattered_kitti_02() -> Option<(PoseGraph2, Vec<bool>)> {
+fn scattered_kitti_02(seed: u64) -> Option<(PoseGraph2, Vec<bool>)> {
     let Ok(AnyPoseGraph::Planar(mut kitti)) = read("kitti_02.g2o")? else {
         panic!("kitti_02 is a 2D file");
     };
     kitti.compose_missing_poses();
-    let rng = &mut StdRng::seed_from_u64(1_000_014);
+    let rng = &mut StdRng::seed_from_u64(seed);
     let corruption = pgo_sim::corrupt(&kitti, &scattered(), rng).expect("corrupt");
     let file = temp_dir("scattered-kitti").join("kitti.g2o");
     corruption.graph.write_g2o(&file).expect("write");
@@ -664,13 +691,14 @@ fn kernel_start_chosen(n: u64, case: (f64, u64)) -> Option<(Report, usize)> {
     let whole = young.optimize(&options).unwrap().into_report();
     assert_eq!(true_loops_kept(&whole, &wrong).0, true_loops);
     let starts = &whole.robust.starts;
-    assert!(starts.len() == 1 && starts[0].settled, "{starts:?}");
+    assert!(starts.len() == 1, "{starts:?}");
     assert_eq!(whole.status(), MapStatus::Ok);
     options.expert.layers.reach = false;
     let r = young.optimize(&options).unwrap().into_report();
     let (accepted, _) = true_loops_kept(&r, &wrong);
     assert_eq!(accepted, true_loops);
     let starts = &r.robust.starts;
+    // The kernel start's end stands: the truncated start is not sought.
     assert_eq!(starts.len(), 2, "{starts:?}");
     assert!(starts[1].chosen, "{starts:?}");
     Some((r, accepted))

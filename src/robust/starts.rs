@@ -13,7 +13,18 @@
 //! by iteratively reweighted LM from the caller's own poses (a g2o file's
 //! vertices), as GTSAM's LM with a Cauchy loss does, until the set it
 //! leaves at weight ≥ ½ is the same two rounds in a row
-//! ([`kernels::Until::HeldSetRepeats`]); EM decides from that set.
+//! ([`kernels::Until::HeldSetRepeats`]); EM decides from that set. And a
+//! third, which seeks the objective that ranks the ends (below) directly:
+//! its truncated least squares — graduated non-convexity's TLS kernel
+//! ([`kernels`], GTSAM's μ schedule) with the truncation at `J`'s price
+//! per candidate left out, `s²·c²` with `s²` the annealed end's misfit
+//! scale where that is below the file's, else 1 — from the caller's poses
+//! until its weights are 0 or 1; EM decides from the set it holds. Neither
+//! kernel start finds every end the other does: the Cauchy kernel weighs
+//! every candidate down from the first map on, GNC begins convex with
+//! every weight near 1 and hardens. The starts run in that order until an
+//! end stands (below): the truncated start is sought only where the
+//! kernel start's end leaves the same questions.
 //!
 //! The second start is sought only when the annealed end's map fails the
 //! χ² test (or there is no test), or its decisions did not settle (some
@@ -61,7 +72,8 @@
 //!    an end they cannot improve one candidate at a time is a local minimum
 //!    of `J`, and `J` ranks the local minima the starts found.
 //!
-//! Ties keep the annealed start's end.
+//! Ties keep the earlier start's end; two ends of one accepted set are one
+//! end.
 
 use super::schedule::{misfit_scale, objective};
 use super::search::Restarts;
@@ -73,13 +85,16 @@ use crate::solve::{Session, SolveError};
 use serde::Serialize;
 
 /// Which start an end came from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Start {
     /// The annealing on the job's initial guess.
     Annealed,
     /// A plain Cauchy kernel from the caller's own poses.
     Kernel,
+    /// Graduated non-convexity's truncated least squares at `J`'s price
+    /// per candidate left out, from the caller's own poses.
+    Truncated,
 }
 
 /// Where one start ended, as the report shows it.
@@ -100,8 +115,9 @@ pub struct StartEnd {
     /// the annealed start).
     pub iterations: usize,
     /// Whether it reached an end: the kernel start's set of weight ≥ ½
-    /// stood within the annealed start's iterations (else it has no end
-    /// to compare, and the annealed end stands).
+    /// stood within the annealed start's iterations, the truncated start's
+    /// weights settled within the job's budget (else it has no end to
+    /// compare).
     pub settled: bool,
 }
 
@@ -163,27 +179,34 @@ impl<P: Clone> End<P> {
     }
 
     /// Puts this end's map and weights back in the session's graph and
-    /// `weights`. The annealed end was solved before the other start ran:
-    /// one more run from it (an iteration or two) makes the report's last
-    /// run its own.
+    /// `weights`. An end solved before another start ran (`solved_before`)
+    /// gets one more run from its map (an iteration or two), which makes
+    /// the report's last run its own.
     fn restore<const D: usize>(
         &self,
         session: &mut Session<'_, P, D>,
         weights: &mut [f64],
+        solved_before: bool,
     ) -> Result<(), SolveError>
     where
         P: Pose<D>,
     {
         session.graph.poses.copy_from_slice(&self.poses);
         weights.copy_from_slice(&self.weights);
-        if self.summary.start == Start::Annealed && !session.exhausted() {
+        if solved_before && !session.exhausted() {
             session.converge(weights)?;
         }
         Ok(())
     }
 
-    /// Whether this end is to be kept over `other` (module doc).
+    /// Whether this end is to be kept over `other` (module doc). Two ends
+    /// of one accepted set are one end, their maps apart by the solver's
+    /// tolerance: neither is better.
     fn better_than(&self, other: &Self) -> bool {
+        let accepted = |w: &[f64]| w.iter().map(|&w| w >= 0.5).collect::<Vec<_>>();
+        if accepted(&self.weights) == accepted(&other.weights) {
+            return false;
+        }
         match (self.summary.passed, other.summary.passed) {
             (Some(true), Some(false)) => true,
             (Some(false), Some(true)) => false,
@@ -222,8 +245,8 @@ fn summary<P: Pose<D>, const D: usize>(
 /// EM: the annealed start, then — when its map fails the χ² test, its
 /// decisions did not settle or its model disagrees with the information as
 /// stated (module doc), the caller gave poses and budget is left —
-/// the kernel start from the caller's poses, and the better end (module
-/// doc) left in the session's graph and `weights`.
+/// the kernel start and the truncated start from the caller's poses, and
+/// the best end (module doc) left in the session's graph and `weights`.
 pub fn em<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -241,17 +264,7 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
     };
     let (mut ended, alpha) = summary(session.graph, weights, job, Start::Annealed);
     ended.iterations = share;
-    // Decisions that settled, with no population called wrong that the
-    // file calls consistent and no loop accepted that it calls an outlier
-    // (module doc).
-    let settled = !annealed.unsettled
-        && !(annealed.model.as_ref()).is_some_and(|m| {
-            m.wrong_within_kernel()
-                || alpha.is_some_and(|a| {
-                    m.accepts_beyond_stated(&accepted_innovations(job, weights, &annealed), a)
-                })
-        });
-    if ended.passed == Some(true) && settled {
+    if ended.passed == Some(true) && settled(job, weights, &annealed, alpha) {
         // A map that passes the χ² test, at decisions that settled, is not
         // second-guessed (module doc).
         ended.chosen = true;
@@ -259,42 +272,114 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
         out.starts = vec![ended];
         return Ok(out);
     }
-    let mut first = End::keep(session.graph, weights, job, (ended, annealed));
-    session.graph.poses.copy_from_slice(given);
-    let before = session.iterations();
-    let kernel = kernel_start(session, weights, (job, &mut restarts), share)?;
-    let used = session.iterations() - before;
-    let Some(kernel) = kernel else {
-        return unsettled(session, weights, first, used);
-    };
-    let mut second = End::take(session.graph, weights, job, (Start::Kernel, kernel));
-    second.summary.iterations = used;
+    let first = End::keep(session.graph, weights, job, (ended, annealed));
+    let truncated = (RobustMethod::Gnc, truncation_width(first.scale, job.c));
+    let mut ends = vec![first];
+    let mut unsettled = Vec::new();
+    // The kernel start gets the annealed start's share of iterations; the
+    // truncated start runs GNC's schedule, whose rounds bound it.
+    for (start, kernel, cap) in [
+        (Start::Kernel, peers_cauchy::<D>(), share),
+        (Start::Truncated, truncated, usize::MAX),
+    ] {
+        if session.exhausted() {
+            break;
+        }
+        session.graph.poses.copy_from_slice(given);
+        let before = session.iterations();
+        let out = kernel_start(session, weights, (job, &mut restarts), (cap, kernel))?;
+        let used = session.iterations() - before;
+        match out {
+            Some(out) => {
+                let mut end = End::take(session.graph, weights, job, (start, out));
+                end.summary.iterations = used;
+                // An end that passes at decisions that settled is not
+                // second-guessed by the next start either.
+                let stands =
+                    end.summary.passed == Some(true) && settled(job, weights, &end.out, alpha);
+                ends.push(end);
+                if stands {
+                    break;
+                }
+            }
+            None => unsettled.push(StartEnd {
+                start,
+                accepted: 0,
+                objective: None,
+                passed: None,
+                chosen: false,
+                iterations: used,
+                settled: false,
+            }),
+        }
+    }
+    keep_best(session, weights, job, ends, unsettled)
+}
+
+/// The best of `ends` (the annealed end first; an end cut short by the
+/// budget competes with none) back in the session's graph and `weights`,
+/// with the work of all and every start's summary, `unsettled` those of
+/// the starts that left no end.
+fn keep_best<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    job: &Job<'_, P, D>,
+    mut ends: Vec<End<P>>,
+    unsettled: Vec<StartEnd>,
+) -> Result<Outcome, SolveError> {
     // `misfit_scale` is finite and positive where it is `Some`.
-    let s2 = [first.scale, second.scale]
-        .into_iter()
-        .flatten()
+    let s2 = (ends.iter().filter_map(|e| e.scale))
         .reduce(f64::min)
         .unwrap_or(1.0);
-    first.rank(s2, job.c);
-    second.rank(s2, job.c);
-    let cut_short = second.out.cut_short;
-    let (mut kept, other) = if !cut_short && second.better_than(&first) {
-        (second, first)
-    } else {
-        (first, second)
-    };
-    kept.restore(session, weights)?;
+    for end in &mut ends {
+        end.rank(s2, job.c);
+    }
+    let mut best = 0;
+    for k in 1..ends.len() {
+        if !ends[k].out.cut_short && ends[k].better_than(&ends[best]) {
+            best = k;
+        }
+    }
+    // The start run last: the last end's, unless a later one left none.
+    let last = (unsettled.iter().map(|u| u.start))
+        .chain(ends.iter().map(|e| e.summary.start))
+        .max();
+    let mut kept = ends.remove(best);
+    kept.restore(session, weights, last != Some(kept.summary.start))?;
     kept.summary.chosen = true;
     let mut out = kept.out;
-    out.rounds += other.out.rounds;
-    out.relaxations += other.out.relaxations;
-    out.decisions += other.out.decisions;
-    out.relaxed_starts += other.out.relaxed_starts;
-    out.cut_short |= cut_short;
-    let mut ends = vec![kept.summary, other.summary];
-    ends.sort_by_key(|e| e.start != Start::Annealed);
-    out.starts = ends;
+    let mut starts = vec![kept.summary];
+    for other in ends {
+        out.rounds += other.out.rounds;
+        out.relaxations += other.out.relaxations;
+        out.decisions += other.out.decisions;
+        out.relaxed_starts += other.out.relaxed_starts;
+        out.cut_short |= other.out.cut_short;
+        starts.push(other.summary);
+    }
+    starts.extend(unsettled);
+    starts.sort_by_key(|e| e.start);
+    out.starts = starts;
     Ok(out)
+}
+
+/// Whether the decisions that ended at `out` (the candidates `weights`
+/// accepts) settled, with no population called wrong that the file calls
+/// consistent and no loop accepted that it calls an outlier at the χ²
+/// test's `alpha` (module doc).
+fn settled<P: Pose<D>, const D: usize>(
+    job: &Job<'_, P, D>,
+    weights: &[f64],
+    out: &Outcome,
+    alpha: Option<f64>,
+) -> bool {
+    !out.unsettled
+        && !(out.model.as_ref()).is_some_and(|m| {
+            m.wrong_within_kernel()
+                || alpha.is_some_and(|a| {
+                    m.accepts_beyond_stated(&accepted_innovations(job, weights, out), a)
+                })
+        })
 }
 
 /// The squared innovations of the candidates `weights` accepts, as `out`
@@ -310,38 +395,32 @@ fn accepted_innovations<P: Pose<D>, const D: usize>(
         .collect()
 }
 
-/// The annealed end `first` back in the session's graph and `weights`,
-/// when the kernel start did not settle within `used` iterations.
-fn unsettled<P: Pose<D>, const D: usize>(
-    session: &mut Session<'_, P, D>,
-    weights: &mut [f64],
-    mut first: End<P>,
-    used: usize,
-) -> Result<Outcome, SolveError> {
-    first.restore(session, weights)?;
-    first.summary.chosen = true;
-    let kernel = StartEnd {
-        start: Start::Kernel,
-        accepted: 0,
-        objective: None,
-        passed: None,
-        chosen: false,
-        iterations: used,
-        settled: false,
-    };
-    let mut out = first.out;
-    out.starts = vec![first.summary, kernel];
-    Ok(out)
+/// The Cauchy kernel at the peers' width, `√χ²_D(0.95)`.
+fn peers_cauchy<const D: usize>() -> (RobustMethod, f64) {
+    let method = RobustMethod::Cauchy;
+    (method, super::default_c(method, D))
 }
 
-/// The kernel start from the map in the session's graph: the Cauchy
-/// kernel at the peers' width over the kept candidates, then EM's
-/// decisions from those it leaves at weight ≥ ½.
+/// The width of the truncated start's truncation: a candidate whose
+/// `eᵀΩe` exceeds `s²·c²` costs `J` more in the map than out of it
+/// (module doc), `c` EM's kernel width and `s²` the misfit scale of the
+/// annealed end's map where that shows the file's information looser than
+/// its noise, else the file's own (1). Wrong loops a map holds only raise
+/// its misfit (hundreds of times the file's scale on a young grid with
+/// aliases in groups), and a truncation that wide holds them all.
+fn truncation_width(scale: Option<f64>, c: f64) -> f64 {
+    scale.unwrap_or(1.0).min(1.0).sqrt() * c
+}
+
+/// A start from the map in the session's graph: `kernel` (a method and
+/// its width) over the kept candidates within `cap` LM iterations, then
+/// EM's decisions from the candidates it holds. `None` where the kernel
+/// did not settle within `cap`.
 fn kernel_start<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
     (job, restarts): (&Job<'_, P, D>, &mut Restarts<P>),
-    cap: usize,
+    (cap, kernel): (usize, (RobustMethod, f64)),
 ) -> Result<Option<Outcome>, SolveError> {
     let mut out = Outcome::new(job.candidates.len());
     let kept: Vec<usize> = (job.candidates.iter())
@@ -351,16 +430,14 @@ fn kernel_start<P: ChordalInit<D>, const D: usize>(
     for c in job.candidates {
         weights[c.edge] = if c.kept { 1.0 } else { 0.0 };
     }
-    let width = super::default_c(RobustMethod::Cauchy, D);
-    let (reweighted, capped) = session.capped(cap, |s| {
-        kernels::reweight(
-            s,
-            weights,
-            &kept,
-            (RobustMethod::Cauchy, width),
-            kernels::Until::HeldSetRepeats,
-        )
-    });
+    // GNC's weights are fractions until its truncation hardens: only its
+    // settled weights say which candidates it holds.
+    let until = match kernel.0 {
+        RobustMethod::Gnc => kernels::Until::Settled,
+        _ => kernels::Until::HeldSetRepeats,
+    };
+    let (reweighted, capped) =
+        session.capped(cap, |s| kernels::reweight(s, weights, &kept, kernel, until));
     (out.rounds, out.cut_short) = reweighted?;
     if out.cut_short && capped && !session.exhausted() {
         // Its share of iterations spent before the weights settled (not
