@@ -545,7 +545,7 @@ fn an_accepted_loop_the_information_calls_an_outlier_meets_the_second_start() {
     };
     let starts = &r.robust.starts;
     assert!(
-        starts.len() == 3 && starts[0].passed == Some(true) && starts[1].chosen,
+        starts.len() == 2 && starts[0].passed == Some(true) && starts[1].chosen,
         "{starts:?}"
     );
     let accepted = |alias: bool| {

@@ -22,9 +22,12 @@
 //! until its weights are 0 or 1; EM decides from the set it holds. Neither
 //! kernel start finds every end the other does: the Cauchy kernel weighs
 //! every candidate down from the first map on, GNC begins convex with
-//! every weight near 1 and hardens. The starts run in that order until an
-//! end stands (below): the truncated start is sought only where the
-//! kernel start's end leaves the same questions.
+//! every weight near 1 and hardens. The truncated start is sought only
+//! where the annealed end fails the χ² test or its decisions did not
+//! settle, and the kernel start's end, if it has one, leaves the same
+//! question: where the second start was sought for the model's
+//! disagreements with the stated information alone (below), GNC's
+//! schedule of 20–40 solves would be spent for nothing.
 //!
 //! The second start is sought only when the annealed end's map fails the
 //! χ² test (or there is no test), or its decisions did not settle (some
@@ -272,6 +275,9 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
         out.starts = vec![ended];
         return Ok(out);
     }
+    // Whether the ends so far leave the decisions open: a failed test or
+    // decisions that did not settle (the truncated start's question).
+    let mut open = ended.passed != Some(true) || annealed.unsettled;
     let first = End::keep(session.graph, weights, job, (ended, annealed));
     let truncated = (RobustMethod::Gnc, truncation_width(first.scale, job.c));
     let mut ends = vec![first];
@@ -282,7 +288,7 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
         (Start::Kernel, peers_cauchy::<D>(), share),
         (Start::Truncated, truncated, usize::MAX),
     ] {
-        if session.exhausted() {
+        if session.exhausted() || start == Start::Truncated && !open {
             break;
         }
         session.graph.poses.copy_from_slice(given);
@@ -293,14 +299,8 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
             Some(out) => {
                 let mut end = End::take(session.graph, weights, job, (start, out));
                 end.summary.iterations = used;
-                // An end that passes at decisions that settled is not
-                // second-guessed by the next start either.
-                let stands =
-                    end.summary.passed == Some(true) && settled(job, weights, &end.out, alpha);
+                open &= end.summary.passed != Some(true) || end.out.unsettled;
                 ends.push(end);
-                if stands {
-                    break;
-                }
             }
             None => unsettled.push(StartEnd {
                 start,
