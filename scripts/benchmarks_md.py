@@ -525,7 +525,8 @@ def places_section(folder):
            "pgo was last measured again alone, with the peers' results taken from the run before "
            "(`.venv/bin/python scripts/remeasure_pgo.py --earlier OLD --keep-earlier-on-error "
            "bench/results/aliasing_places/*.json`, beside a second such run on the other sweeps' "
-           "files, on a 2-core machine): a peer's result on a file "
+           "files and at times a test run, on a 2-core machine, so that pgo's times here are "
+           "up to about twice those of a machine to itself): a peer's result on a file "
            "depends on nothing pgo does, and "
            "`bench_robust.py --peers-from` checks that the cases are the same. pgo's times are "
            "of that run, the peers' of theirs."]
