@@ -118,9 +118,9 @@ pub struct StartEnd {
     /// the annealed start).
     pub iterations: usize,
     /// Whether it reached an end: the kernel start's set of weight ≥ ½
-    /// stood within the annealed start's iterations, the truncated start's
-    /// weights settled within the job's budget (else it has no end to
-    /// compare).
+    /// stood within the annealed start's iterations (else it has no end to
+    /// compare). The truncated start always reaches one: GNC's rounds
+    /// bound it, and an end the budget cut short competes with none.
     pub settled: bool,
 }
 
@@ -202,6 +202,12 @@ impl<P: Clone> End<P> {
         Ok(())
     }
 
+    /// Whether its map fails the χ² test (or has none) or its decisions
+    /// did not settle.
+    fn leaves_open(&self) -> bool {
+        self.summary.passed != Some(true) || self.out.unsettled
+    }
+
     /// Whether this end is to be kept over `other` (module doc). Two ends
     /// of one accepted set are one end, their maps apart by the solver's
     /// tolerance: neither is better.
@@ -275,10 +281,10 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
         out.starts = vec![ended];
         return Ok(out);
     }
-    // Whether the ends so far leave the decisions open: a failed test or
-    // decisions that did not settle (the truncated start's question).
-    let mut open = ended.passed != Some(true) || annealed.unsettled;
     let first = End::keep(session.graph, weights, job, (ended, annealed));
+    // Whether the ends so far leave the decisions open (the truncated
+    // start's question).
+    let mut open = first.leaves_open();
     let truncated = (RobustMethod::Gnc, truncation_width(first.scale, job.c));
     let mut ends = vec![first];
     let mut unsettled = Vec::new();
@@ -299,7 +305,7 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
             Some(out) => {
                 let mut end = End::take(session.graph, weights, job, (start, out));
                 end.summary.iterations = used;
-                open &= end.summary.passed != Some(true) || end.out.unsettled;
+                open &= end.leaves_open();
                 ends.push(end);
             }
             None => unsettled.push(StartEnd {
