@@ -542,14 +542,15 @@ fn wider_aliased_replays() {
 
 /// The same replays on seeds no rule of the update was found on (49–72)
 /// and at another interval (every 13 poses): 96 replays, about a minute
-/// in release. 5 differ from the batch job at 1–4 updates each (8 before
-/// the whole job at a posterior near ½): in three the update keeps true
-/// loops the batch job rejects (1, 3, and 13–14 on a young grid), and in
-/// two it rejects a true loop the batch job keeps (grid seed 71, both
-/// group sizes; docs/method.md §7b). A sixth, grid seed 56, differed by
+/// in release. 4 differ from the batch job at 1–4 updates each (8 before
+/// the whole job at a posterior near ½, 5 before the χ² search gave back
+/// what the map without the aliases accepts): in two the update keeps
+/// true loops the batch job rejects (3, and 13–14 on a young grid), and
+/// in two it rejects a true loop the batch job keeps (grid seed 71, both
+/// group sizes; docs/method.md §7b). A fifth, grid seed 56, differed by
 /// 1.2·10⁻⁶ in a check of the rotations that read SE(2)'s `y` with `θ`:
 /// its rotations agree. Over every step the updates reject 171 true
-/// loops and the batch jobs 198 (211 and 264 with a gate on chance splits
+/// loops and the batch jobs 196 (211 and 264 with a gate on chance splits
 /// of the counts), and both accept 10 aliases. Fails if more
 /// replays differ, or if the true loops rejected or the aliases accepted
 /// grow.
@@ -558,9 +559,9 @@ fn wider_aliased_replays() {
 fn unseen_aliased_replays() {
     let (mismatching, totals) = aliased_replays(49..=72, 13);
     let [(ut, uw), (bt, bw)] = totals;
-    assert!(mismatching.len() <= 5, "{mismatching:?}");
+    assert!(mismatching.len() <= 4, "{mismatching:?}");
     assert!(uw <= 10 && bw <= 10, "aliases accepted: {totals:?}");
-    assert!(ut <= 171 && bt <= 198, "{totals:?}");
+    assert!(ut <= 171 && bt <= 196, "{totals:?}");
 }
 
 /// One replay of [`aliased_replays`]: the world, the seed, the group size.
@@ -643,4 +644,34 @@ fn a_cycle_of_decisions_is_settled_by_half_steps() {
     let b = g.optimize(&Options::default()).unwrap();
     // (true loops rejected, aliases accepted)
     assert_eq!(errors(&b, &wrong), (0, 0));
+}
+
+/// A true loop the χ² search took out while aliases bent the map comes
+/// back once they are out. A sphere's first 338 poses (aliases placed
+/// anywhere in groups of 5, seed 55): the search takes out true loop 46
+/// first (its drop 999 on 6 dimensions), then an alias and two groups of
+/// aliases; at the map without them the model accepts loop 46 by its own
+/// innovation and count (posterior 0.9986), and the batch job now keeps
+/// it, as the update replaying the same poses every 13 did.
+#[test]
+fn a_true_loop_the_search_took_out_before_the_aliases_comes_back() {
+    let sim = aliased_sphere(55, 5);
+    let mut g = PoseGraph::<pgo::Se3, 6>::new();
+    let mut wrong = Vec::new();
+    for (k, due) in edges_due(&sim.noisy).iter().enumerate().take(338) {
+        let candidates = add_pose_and_edges(&mut g, &sim.noisy, k, due);
+        wrong.extend(candidates.iter().map(|&i| sim.wrong[i]));
+    }
+    let b = g.optimize(&Options::default()).unwrap();
+    assert!(!wrong[46] && b.loops()[46].accepted, "{:?}", b.loops()[46]);
+    assert_eq!(errors(&b, &wrong), (0, 0));
+    let search = b.report().robust.search.as_ref().unwrap();
+    let removed: Vec<usize> = (search.removed.iter())
+        .flat_map(|r| r.loops.iter().copied())
+        .collect();
+    assert!(
+        removed.len() >= 10 && removed.iter().all(|&k| wrong[k]),
+        "{removed:?}"
+    );
+    assert!(b.report().chi2_test.as_ref().unwrap().passed);
 }

@@ -476,7 +476,12 @@ fn explains(t: &Chi2Test, drop: f64, (loops, dimension): (usize, usize), tested:
 /// Whether a drop of `D²` by `drop` without `loops` accepted loops of
 /// dimension `dimension` is an outlier as one of `tested` clusters: above
 /// the critical value of χ²(loops·dimension) at `t.alpha / tested`.
-fn stands_out(t: &Chi2Test, drop: f64, (loops, dimension): (usize, usize), tested: usize) -> bool {
+pub(super) fn stands_out(
+    t: &Chi2Test,
+    drop: f64,
+    (loops, dimension): (usize, usize),
+    tested: usize,
+) -> bool {
     let alpha = t.alpha / tested.max(1) as f64;
     chi2_critical((loops * dimension) as u64, alpha).is_ok_and(|c| drop > c)
 }
