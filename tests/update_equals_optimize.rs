@@ -542,15 +542,16 @@ fn wider_aliased_replays() {
 
 /// The same replays on seeds no rule of the update was found on (49–72)
 /// and at another interval (every 13 poses): 96 replays, about a minute
-/// in release. 4 differ from the batch job at 1–4 updates each (8 before
+/// in release. 3 differ from the batch job at 1–4 updates each (8 before
 /// the whole job at a posterior near ½, 5 before the χ² search gave back
-/// what the map without the aliases accepts): in two the update keeps
-/// true loops the batch job rejects (3, and 13–14 on a young grid), and
-/// in two it rejects a true loop the batch job keeps (grid seed 71, both
-/// group sizes; docs/method.md §7b). A fifth, grid seed 56, differed by
+/// what the map without the aliases accepts and a cycle was halved
+/// again): in one the update keeps true loops the batch job rejects
+/// (13–14 on a young grid), and in two it rejects a true loop the batch
+/// job keeps (grid seed 71, both group sizes; docs/method.md §7b). A
+/// fourth, grid seed 56, differed by
 /// 1.2·10⁻⁶ in a check of the rotations that read SE(2)'s `y` with `θ`:
 /// its rotations agree. Over every step the updates reject 171 true
-/// loops and the batch jobs 196 (211 and 264 with a gate on chance splits
+/// loops and the batch jobs 193 (211 and 264 with a gate on chance splits
 /// of the counts), and both accept 10 aliases. Fails if more
 /// replays differ, or if the true loops rejected or the aliases accepted
 /// grow.
@@ -559,9 +560,9 @@ fn wider_aliased_replays() {
 fn unseen_aliased_replays() {
     let (mismatching, totals) = aliased_replays(49..=72, 13);
     let [(ut, uw), (bt, bw)] = totals;
-    assert!(mismatching.len() <= 4, "{mismatching:?}");
+    assert!(mismatching.len() <= 3, "{mismatching:?}");
     assert!(uw <= 10 && bw <= 10, "aliases accepted: {totals:?}");
-    assert!(ut <= 171 && bt <= 196, "{totals:?}");
+    assert!(ut <= 171 && bt <= 193, "{totals:?}");
 }
 
 /// One replay of [`aliased_replays`]: the world, the seed, the group size.
@@ -674,4 +675,28 @@ fn a_true_loop_the_search_took_out_before_the_aliases_comes_back() {
         "{removed:?}"
     );
     assert!(b.report().chi2_test.as_ref().unwrap().passed);
+}
+
+/// A cycle that one half step does not settle is halved again. A
+/// sphere's first 325 poses (aliases placed anywhere in groups of 5, seed
+/// 60): at a map of 43 loops the model accepts 8 candidates of one place,
+/// 3 true loops and 5 aliases, whose map rejects all 8; the half step adds
+/// the 4 of least `ν²`, an alias among them, and their map rejects the 4.
+/// Halved again (the alias and a true loop out), the map of the other two
+/// accepts the third, and the set settles without the aliases: the batch job
+/// keeps every true loop and no alias, as the update replaying the same
+/// poses every 13 did (it kept 3 true loops fewer, the set of a cycle).
+#[test]
+fn a_cycle_one_half_step_leaves_is_halved_again() {
+    let sim = aliased_sphere(60, 5);
+    let mut g = PoseGraph::<pgo::Se3, 6>::new();
+    let mut wrong = Vec::new();
+    for (k, due) in edges_due(&sim.noisy).iter().enumerate().take(325) {
+        let candidates = add_pose_and_edges(&mut g, &sim.noisy, k, due);
+        wrong.extend(candidates.iter().map(|&i| sim.wrong[i]));
+    }
+    let b = g.optimize(&Options::default()).unwrap();
+    assert_eq!(errors(&b, &wrong), (0, 0));
+    assert!(b.report().chi2_test.as_ref().unwrap().passed);
+    assert_eq!(b.status(), pgo::MapStatus::Ok, "{:?}", b.report().warnings);
 }
