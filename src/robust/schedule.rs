@@ -461,7 +461,8 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
     // Whether the map in the graph met the job's own tolerance, and whether
     // the set repeats on a map that did not (it is then solved again).
     let (mut converged, mut again) = (false, false);
-    // The best set of a cycle a half step left ([`half_step`]), with its fit.
+    // The best set of the cycles half steps left ([`half_step`]), with its
+    // fit.
     let mut before_half: Option<(Vec<bool>, f64)> = None;
     // How many candidates the cycle last halved moved ([`half_step_out`]).
     let mut halved = usize::MAX;
