@@ -626,6 +626,19 @@ fn aliased_replays(seeds: std::ops::RangeInclusive<u64>, every: usize) -> (Vec<R
     (mismatching, totals)
 }
 
+/// The first `poses` poses of [`aliased_sphere`] `seed` (groups of 5)
+/// added as a front end adds them, and whether each candidate is wrong.
+fn sphere_prefix(seed: u64, poses: usize) -> (PoseGraph<pgo::Se3, 6>, Vec<bool>) {
+    let sim = aliased_sphere(seed, 5);
+    let mut g = PoseGraph::<pgo::Se3, 6>::new();
+    let mut wrong = Vec::new();
+    for (k, due) in edges_due(&sim.noisy).iter().enumerate().take(poses) {
+        let candidates = add_pose_and_edges(&mut g, &sim.noisy, k, due);
+        wrong.extend(candidates.iter().map(|&i| sim.wrong[i]));
+    }
+    (g, wrong)
+}
+
 /// A cycle of the batch job's decision sets that a half step settles: on a
 /// simulated sphere's first 380 poses (40 aliases placed anywhere in
 /// groups of 5, every count true-like) the decisions swung between the set
@@ -635,13 +648,7 @@ fn aliased_replays(seeds: std::ops::RangeInclusive<u64>, every: usize) -> (Vec<R
 /// go in first and the map with them rejects the aliases.
 #[test]
 fn a_cycle_of_decisions_is_settled_by_half_steps() {
-    let sim = aliased_sphere(8, 5);
-    let mut g = PoseGraph::<pgo::Se3, 6>::new();
-    let mut wrong = Vec::new();
-    for (k, due) in edges_due(&sim.noisy).iter().enumerate().take(380) {
-        let candidates = add_pose_and_edges(&mut g, &sim.noisy, k, due);
-        wrong.extend(candidates.iter().map(|&i| sim.wrong[i]));
-    }
+    let (g, wrong) = sphere_prefix(8, 380);
     let b = g.optimize(&Options::default()).unwrap();
     // (true loops rejected, aliases accepted)
     assert_eq!(errors(&b, &wrong), (0, 0));
@@ -656,13 +663,7 @@ fn a_cycle_of_decisions_is_settled_by_half_steps() {
 /// it, as the update replaying the same poses every 13 did.
 #[test]
 fn a_true_loop_the_search_took_out_before_the_aliases_comes_back() {
-    let sim = aliased_sphere(55, 5);
-    let mut g = PoseGraph::<pgo::Se3, 6>::new();
-    let mut wrong = Vec::new();
-    for (k, due) in edges_due(&sim.noisy).iter().enumerate().take(338) {
-        let candidates = add_pose_and_edges(&mut g, &sim.noisy, k, due);
-        wrong.extend(candidates.iter().map(|&i| sim.wrong[i]));
-    }
+    let (g, wrong) = sphere_prefix(55, 338);
     let b = g.optimize(&Options::default()).unwrap();
     assert!(!wrong[46] && b.loops()[46].accepted, "{:?}", b.loops()[46]);
     assert_eq!(errors(&b, &wrong), (0, 0));
@@ -688,13 +689,7 @@ fn a_true_loop_the_search_took_out_before_the_aliases_comes_back() {
 /// poses every 13 did (it kept 3 true loops fewer, the set of a cycle).
 #[test]
 fn a_cycle_one_half_step_leaves_is_halved_again() {
-    let sim = aliased_sphere(60, 5);
-    let mut g = PoseGraph::<pgo::Se3, 6>::new();
-    let mut wrong = Vec::new();
-    for (k, due) in edges_due(&sim.noisy).iter().enumerate().take(325) {
-        let candidates = add_pose_and_edges(&mut g, &sim.noisy, k, due);
-        wrong.extend(candidates.iter().map(|&i| sim.wrong[i]));
-    }
+    let (g, wrong) = sphere_prefix(60, 325);
     let b = g.optimize(&Options::default()).unwrap();
     assert_eq!(errors(&b, &wrong), (0, 0));
     assert!(b.report().chi2_test.as_ref().unwrap().passed);

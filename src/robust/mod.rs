@@ -780,14 +780,14 @@ fn take_back<P: ChordalInit<D>, const D: usize>(
         return Ok(());
     }
     let saved = (session.graph.poses.clone(), weights.to_vec());
-    let mut freed = judged.to_vec();
+    let mut judging = judged.to_vec();
     for &k in &back {
-        freed[k].count_posterior = candidates[k].count_posterior;
+        judging[k].count_posterior = candidates[k].count_posterior;
     }
-    let mut again = schedule::decide(session, weights, &freed, how, solved)?;
+    let mut again = schedule::decide(session, weights, &judging, how, solved)?;
     let explained = match again.swung {
         true => None,
-        false => search::explain(session, weights, &freed, &mut again, how.layers, test)?,
+        false => search::explain(session, weights, &judging, &mut again, how.layers, test)?,
     };
     let stands = explained.is_some_and(|s| s.removed.is_empty())
         && search::verdict(session, weights, test) == Some(true);
@@ -813,10 +813,13 @@ fn freed<P: Pose<D>, const D: usize>(
     (candidates, how, test): (&[Candidate], &schedule::Deciding<'_>, &Test<'_, P, D>),
     (decided, search): (&schedule::Decided, &Search),
 ) -> Vec<usize> {
+    if search.removed.is_empty() || decided.cut_short || session.exhausted() {
+        return Vec::new();
+    }
     let (Some(model), Some(t)) = (&decided.model, test(session.graph, weights)) else {
         return Vec::new();
     };
-    if search.removed.is_empty() || !t.passed || decided.cut_short || session.exhausted() {
+    if !t.passed {
         return Vec::new();
     }
     let (accepts, beyond) = schedule::verdict(model, &decided.innovations, candidates, how.layers);

@@ -585,11 +585,14 @@ fn half_step_out(
     out: &Decided,
     (before_half, halved): (&mut Option<(Vec<bool>, f64)>, &mut usize),
 ) -> Option<Vec<bool>> {
-    let last = &cycle.last()?.0;
+    if cycle.len() < 2 {
+        return None;
+    }
+    let last = &cycle[cycle.len() - 1].0;
     let moves = (last.iter().zip(&out.accepted))
         .filter(|(a, b)| a != b)
         .count();
-    if cycle.len() < 2 || moves >= *halved {
+    if moves >= *halved {
         return None;
     }
     let half = half_step(last, &out.accepted, &out.innovations)?;
