@@ -375,7 +375,7 @@ fn outlying_warning(outlying: &Outlying, loops: &[LoopReport]) -> String {
         ),
     };
     let should = if outlying.stated {
-        "the file's information allows"
+        "the file's information allows on the scale of the map's true loops"
     } else {
         "any true loop of this map should"
     };

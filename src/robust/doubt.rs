@@ -51,9 +51,9 @@
 //! ([`super::schedule::verdict`]); below that — the map's true loops far
 //! tighter than their information — this check names it. Aliases the map
 //! bent to fit widen that density around themselves, so an accepted loop
-//! is outlying too where the information as the file states it calls it
-//! an outlier at the same level and the
-//! fitted density expects fewer than one true loop as far out
+//! is outlying too where the information — its `χ²_D` shape, on the
+//! scale the true loops show — calls it an outlier at the same level and
+//! the fitted density expects fewer than one true loop as far out
 //! ([`LoopModel::beyond_stated`]); either test alone names true loops of
 //! real maps. Those of one cluster are named when removing them would
 //! move the map, to first order (the deleted residuals' move,
@@ -121,13 +121,13 @@ pub struct Outlying {
     pub loops: Vec<usize>,
     /// The chance that some true loop among the accepted candidates tested
     /// has an innovation as large as the largest of these: their least
-    /// upper-tail probability under the true loops' fitted density or
-    /// under the information as stated, times the candidates tested;
-    /// below the χ² test's α.
+    /// upper-tail probability under the true loops' fitted density, or
+    /// where that names none of them under the information (`stated`),
+    /// times the candidates tested; below the χ² test's α.
     pub p_value: f64,
-    /// Whether that least tail is the information's as stated (`χ²_D` on
-    /// the scale of [`LoopModel::stated_bound`]) rather than the true
-    /// loops' fitted density.
+    /// Whether only the information's tail names them (`χ²_D` on the true
+    /// loops' own scale, [`LoopModel::beyond_stated`]), not the true loops'
+    /// fitted density.
     pub stated: bool,
     /// The largest move of a pose's position that removing them would make
     /// (to first order), as a share of the map's size.
@@ -274,8 +274,8 @@ pub fn held_back<P: Pose<D>, const D: usize>(
 /// candidates with an innovation (`nu2`), `K` of them, those whose upper
 /// tail under the true loops' density of `model` is below `alpha / K`
 /// (the χ² test's α over the candidates tested), or under the information
-/// as stated where that density expects fewer than one as far out
-/// ([`LoopModel::beyond_stated`]), outside the clusters
+/// on the true loops' own scale where that density expects fewer than one
+/// as far out ([`LoopModel::beyond_stated`]), outside the clusters
 /// already named `doubtful`; of each cluster together (each alone with the
 /// clusters layer off), those whose removal would move the map by more
 /// than [`DOUBT_MOVE`] of its size.
@@ -293,16 +293,19 @@ pub fn outlying<P: Pose<D>, const D: usize>(
         .filter_map(|k| nu2[k].filter(|&v| v > 0.0).map(|v| (k, v)))
         .collect();
     let named: Vec<usize> = doubtful.iter().flat_map(|d| d.loops.clone()).collect();
-    // Each candidate's least tail, and whether it is the stated one.
+    // Each candidate's tail: the fitted one where that names it, else the
+    // information's, and whether it is the information's.
     let mut p_value = vec![(1.0, false); candidates.len()];
-    let fitted = model.beyond_reach(&tested, alpha).into_iter();
-    let stated = model.beyond_stated(&tested, alpha).into_iter();
-    for (k, p, by_stated) in
-        (fitted.map(|(k, p)| (k, p, false))).chain(stated.map(|(k, p)| (k, p, true)))
-    {
-        if !named.contains(&k) && p < p_value[k].0 {
-            p_value[k] = (p, by_stated);
+    for (k, p) in model.beyond_reach(&tested, alpha) {
+        p_value[k] = (p, false);
+    }
+    for (k, p) in model.beyond_stated(&tested, alpha) {
+        if p_value[k].0 >= alpha {
+            p_value[k] = (p, true);
         }
+    }
+    for &k in &named {
+        p_value[k] = (1.0, false);
     }
     let flagged: Vec<bool> = p_value.iter().map(|&(p, _)| p < alpha).collect();
     if size <= 0.0 || !flagged.contains(&true) {
