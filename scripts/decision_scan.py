@@ -8,13 +8,15 @@ Usage:
 Each FILE.g2o (or FILE.cal.g2o) needs FILE.labels.csv beside it, as
 `pgo corrupt --labels` writes it (and scripts/bench_robust.py keeps under its
 --work folder). Every build runs `pgo optimize FILE --json` with its defaults;
-its wrong loops accepted, true loops rejected and exit status are kept in
+its wrong loops accepted, true loops rejected, exit status and the true and
+wrong loops the report names doubtful, held back or outlying are kept in
 OUT/NAME.jsonl (a file already there is not run again, so a scan can be
 stopped and resumed). The script prints each file where a build decides
 otherwise than the first, and the totals; then, over the files where both
 builds recorded them, how many maps they wrote are the same bytes (a
 SHA-256 of the map) and, where the number of EM's decisions (solves of an
-accepted set) differs, those numbers and the builds' times.
+accepted set) differs, those numbers and the builds' times; and each
+build's totals of the loops named doubtful, held back and outlying.
 """
 
 import argparse
@@ -27,6 +29,10 @@ import tempfile
 import time
 
 from bench_robust import read_labels
+
+
+# The report's lists of loops the evidence questions in a passing map.
+NAMING_CHECKS = ("doubtful", "held_back", "outlying")
 
 
 def labels_of(path):
@@ -57,11 +63,18 @@ def run(binary, path, timeout):
     if len(loops) != len(wrong):
         return {"exit": p.returncode, "error": "%d loops in the report, %d in the labels" % (len(loops), len(wrong))}
     accepted = [l["accepted"] for l in loops]
+    robust = report.get("robust") or {}
+    # The loops each check of the evidence names (docs/method.md §7), true
+    # and wrong by the labels.
+    named = {}
+    for check in NAMING_CHECKS:
+        ks = [k for entry in robust.get(check) or [] for k in entry["loops"]]
+        named[check] = [sum(not wrong[k] for k in ks), sum(wrong[k] for k in ks)]
     return {"exit": p.returncode, "seconds": round(seconds, 2), "map_sha256": digest,
-            "decisions": report.get("robust", {}).get("decisions"),
+            "decisions": robust.get("decisions"),
             "wrong_accepted": sum(a and w for a, w in zip(accepted, wrong)),
             "true_rejected": sum((not a) and (not w) for a, w in zip(accepted, wrong)),
-            "true": sum(not w for w in wrong)}
+            "true": sum(not w for w in wrong), "named": named}
 
 
 def main():
@@ -115,6 +128,13 @@ def main():
         both = [f for f in files if results[first][f].get("map_sha256") and results[name][f].get("map_sha256")]
         same = sum(results[first][f]["map_sha256"] == results[name][f]["map_sha256"] for f in both)
         print("%s against %s: maps the same bytes on %d of %d files" % (name, first, same, len(both)))
+        for build in (first, name):
+            rows = [results[build][f].get("named") for f in files]
+            if any(r is None for r in rows):
+                continue
+            print("%s: loops named (true / wrong) %s" % (build, ", ".join(
+                "%s %d / %d" % (check, sum(r[check][0] for r in rows), sum(r[check][1] for r in rows))
+                for check in NAMING_CHECKS)))
         moved = [f for f in both if results[first][f].get("decisions") != results[name][f].get("decisions")]
         if moved:
             total = lambda build, k: sum(results[build][f][k] or 0 for f in moved)
