@@ -8,8 +8,9 @@ Usage:
 Each FILE.g2o (or FILE.cal.g2o) needs FILE.labels.csv beside it, as
 `pgo corrupt --labels` writes it (and scripts/bench_robust.py keeps under its
 --work folder). Every build runs `pgo optimize FILE --json` with its defaults;
-its wrong loops accepted, true loops rejected, exit status and the true and
-wrong loops the report names doubtful, held back or outlying are kept in
+its wrong loops accepted, true loops rejected, exit status, EM's starts (the
+one kept marked `*`) and the true and wrong loops the report names
+doubtful, held back or outlying are kept in
 OUT/NAME.jsonl (a file already there is not run again, so a scan can be
 stopped and resumed). The script prints each file where a build decides
 otherwise than the first, and the totals; then, over the files where both
@@ -74,7 +75,8 @@ def run(binary, path, timeout):
             "decisions": robust.get("decisions"),
             "wrong_accepted": sum(a and w for a, w in zip(accepted, wrong)),
             "true_rejected": sum((not a) and (not w) for a, w in zip(accepted, wrong)),
-            "true": sum(not w for w in wrong), "named": named}
+            "true": sum(not w for w in wrong), "named": named,
+            "starts": ["%s%s" % (e["start"], "*" if e["chosen"] else "") for e in robust.get("starts") or []]}
 
 
 def main():
