@@ -209,8 +209,8 @@ impl Default for TestOptions {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct ExpertOptions {
-    /// EM: switch layers off, `no-LAYER,…` with LAYER one of annealing,
-    /// decisions, clusters, aliasing, populations, search.
+    /// EM: switch layers off, `no-LAYER,…` with LAYER one of
+    /// [`Layers::NAMES`].
     #[cfg_attr(
         feature = "clap",
         arg(id = "expert", long = "expert", value_name = "no-LAYER,…", hide = true, default_value = "", value_parser = Layers::parse)

@@ -16,7 +16,8 @@ pub use crate::gate::{
     Degeneracy, DegeneratePolicy, EmStart, GateMode, LogNormalMixture, Separation, TwoNormals,
 };
 pub use crate::robust::{
-    DOUBT_MOVE, Doubt, HeldBack, Layers, LoopModel, Outlying, Reason, RobustMethod, Search, Suspect,
+    DOUBT_MOVE, Doubt, HeldBack, Layers, LoopModel, Outlying, Reason, RobustMethod, Search, Start,
+    StartEnd, Suspect,
 };
 pub use crate::solve::init::Initialization;
 pub use crate::solve::{StopReason, Timing};
@@ -308,7 +309,7 @@ pub struct RobustReport {
     /// EM: where each of its starts ended and which was kept (empty with
     /// one start).
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub starts: Vec<crate::robust::StartEnd>,
+    pub starts: Vec<StartEnd>,
     /// EM: whether its decisions did not settle at the last map they
     /// judged, which EM's second start and an update's whole job follow.
     /// A set kept from a cycle is reported as judged at its own map, where

@@ -5,7 +5,7 @@
 //! reason and passes when the datasets are absent (and fails when `CI` is
 //! `true`).
 
-use pgo::report::{LoopReport, Report};
+use pgo::report::{LoopReport, Report, Start, StartEnd};
 use pgo::{
     AnyPoseGraph, AnySolution, Error, GateMode, Initialization, MapStatus, Options, Pose,
     PoseGraph, PoseGraph2, PoseGraph3, Reason, RobustMethod, Se2,
@@ -531,10 +531,15 @@ fn the_truncated_start_keeps_what_the_others_leave_out() {
 /// 5 aliases with the 128 true loops, the largest at `ν²` 35.6 on 3 dof
 /// (beyond `χ²₃(1 − α/K)` = 18.3, `K` = 133; the true loops reach 5.2),
 /// and passed its test 7.25 % off. The kernel start's end leaves the two
-/// largest out, keeps every true loop, and ranks first (0.82 % off).
+/// largest out, keeps every true loop, and ranks first (0.82 % off;
+/// without the recheck, `--expert no-recheck`, which then leaves out two
+/// more).
 #[test]
 fn an_accepted_loop_the_information_calls_an_outlier_meets_the_second_start() {
-    let Some((r, wrong)) = corrupted_and_decided("CSAIL.g2o", &scattered(), 1_000_016, None) else {
+    let by = without_recheck();
+    let Some((r, wrong)) =
+        corrupted_and_decided_by("CSAIL.g2o", &scattered(), 1_000_016, None, &by)
+    else {
         return;
     };
     let starts = &r.robust.starts;
@@ -827,13 +832,24 @@ fn corrupted_and_decided(
     seed: u64,
     calibrated: Option<f64>,
 ) -> Option<(Report, Vec<bool>)> {
+    corrupted_and_decided_by(name, options, seed, calibrated, &Options::default())
+}
+
+/// [`corrupted_and_decided`] with the job's options `by`.
+fn corrupted_and_decided_by(
+    name: &str,
+    options: &CorruptionOptions,
+    seed: u64,
+    calibrated: Option<f64>,
+    by: &Options,
+) -> Option<(Report, Vec<bool>)> {
     let src = datasets()?.join(name);
     let work = temp_dir(&format!("corrupted-{name}-{}-{seed}", options.outliers));
     let job = (options, seed, calibrated);
     Some(
         match AnyPoseGraph::read_g2o(&src).unwrap_or_else(|e| panic!("{name}: {e}")) {
-            AnyPoseGraph::Planar(g) => corrupt_and_decide(g, job, &work),
-            AnyPoseGraph::Spatial(g) => corrupt_and_decide(g, job, &work),
+            AnyPoseGraph::Planar(g) => corrupt_and_decide(g, job, by, &work),
+            AnyPoseGraph::Spatial(g) => corrupt_and_decide(g, job, by, &work),
         },
     )
 }
@@ -843,6 +859,7 @@ fn corrupted_and_decided(
 fn corrupt_and_decide<P: ErrorCoordinates<D>, const D: usize>(
     mut graph: PoseGraph<P, D>,
     (options, seed, calibrated): (&CorruptionOptions, u64, Option<f64>),
+    by: &Options,
     work: &Path,
 ) -> (Report, Vec<bool>) {
     // The clean optimum, of the graph as the file gives it.
@@ -874,7 +891,7 @@ fn corrupt_and_decide<P: ErrorCoordinates<D>, const D: usize>(
     };
     let graph = PoseGraph::<P, D>::read_g2o(&input).expect("read");
     let wrong = candidate_labels(&graph, &corruption.wrong);
-    let solution = graph.optimize(&Options::default()).expect("optimise");
+    let solution = graph.optimize(by).expect("optimise");
     (solution.into_report(), wrong)
 }
 
@@ -1069,13 +1086,16 @@ fn true_loops_kept_out_by_their_counts_alone_are_named_when_they_would_move_the_
 /// passes its test with it, 1.4 % off. Its upper tail under the true
 /// loops' fitted density is 8·10⁻⁶, below the χ² test's α over the 4,616
 /// tested, and the map would move by 4.6 % of its size without it: the
-/// report names it, and only it, and warns. The decisions' own reach
-/// (docs/method.md §4) leaves it alone: its `ν²`, 0.035 on 6 dof, is
-/// below its information's mean.
+/// report names it, and only it, and warns (without the recheck,
+/// `--expert no-recheck`, which then leaves it out). The decisions' own
+/// reach (docs/method.md §4) leaves it alone: its `ν²`, 0.035 on 6 dof,
+/// is below its information's mean.
 #[test]
 fn an_accepted_alias_beyond_the_true_loops_reach_is_named_when_it_moves_the_map() {
     let aliased = anywhere_in_groups(300, 0.5);
-    let Some((r, wrong)) = corrupted_and_decided("parking-garage.g2o", &aliased, 1_000_004, None)
+    let by = without_recheck();
+    let Some((r, wrong)) =
+        corrupted_and_decided_by("parking-garage.g2o", &aliased, 1_000_004, None, &by)
     else {
         return;
     };
@@ -1130,10 +1150,15 @@ fn an_alias_beyond_the_true_loops_reach_is_rejected_whatever_its_posterior() {
 /// the true loops reach 5.2 and the information as stated bounds 130
 /// accepted loops at 18.2; the true loops' fitted spread, widened by the
 /// aliases, still expects only 0.1 of them that far out. The map passed
-/// its test 0.66 % off and exited 0; it is questioned now.
+/// its test 0.66 % off and exited 0. Without the recheck (`--expert
+/// no-recheck`) it is questioned; with it, the end without them is kept
+/// ([`loops_the_outlying_check_names_are_left_out_where_the_end_without_them_ranks_first`]).
 #[test]
 fn an_alias_beyond_the_stated_information_is_named_when_it_moves_the_map() {
-    let Some((r, wrong)) = corrupted_and_decided("CSAIL.g2o", &scattered(), 1_000_014, None) else {
+    let by = without_recheck();
+    let Some((r, wrong)) =
+        corrupted_and_decided_by("CSAIL.g2o", &scattered(), 1_000_014, None, &by)
+    else {
         return;
     };
     assert!(r.chi2_test.as_ref().is_some_and(|t| t.passed));
@@ -1162,11 +1187,14 @@ fn an_alias_beyond_the_stated_information_is_named_when_it_moves_the_map() {
 /// 13.8 and 16.8 and seed 17 one at 11.0, within the stated bound for
 /// about 130 accepted loops (18.2) but far beyond the true loops' largest
 /// (5.2); the maps passed their tests 0.91 % and 0.76 % off and exited 0.
-/// Each alias moves the map by 1.7–2.5 %: named, questioned.
+/// Each alias moves the map by 1.7–2.5 %: named, questioned (without the
+/// recheck, `--expert no-recheck`, which leaves them out).
 #[test]
 fn aliases_within_the_stated_information_but_beyond_the_loops_own_scale_are_named() {
+    let by = without_recheck();
     for seed in [1_000_017, 1_000_018] {
-        let Some((r, wrong)) = corrupted_and_decided("CSAIL.g2o", &scattered(), seed, None) else {
+        let Some((r, wrong)) = corrupted_and_decided_by("CSAIL.g2o", &scattered(), seed, None, &by)
+        else {
             return;
         };
         assert!(
@@ -1189,6 +1217,90 @@ fn aliases_within_the_stated_information_but_beyond_the_loops_own_scale_are_name
             (r.warnings.iter()).any(|w| w.contains("on the scale of the map's true loops"));
         assert!(warned, "seed {seed}: {:?}", r.warnings);
         assert_eq!(r.status(), MapStatus::Questioned, "seed {seed}");
+    }
+}
+
+/// The job's default options with the layer `recheck` off: the outlying
+/// check names what it finds and the map stands.
+fn without_recheck() -> Options {
+    let mut by = Options::default();
+    by.expert.layers.recheck = false;
+    by
+}
+
+/// The loops the outlying check names are left out where the end without
+/// them ranks first. Named without the recheck (`--expert no-recheck`,
+/// the tests above): CSAIL with 300 aliases placed anywhere one by one,
+/// every count true-like, information as published (seeds 13, 16 and 17 of
+/// the scattered exploration in docs/benchmarks.md; two, two and one
+/// aliases named, the maps 0.66–0.91 % off), and parking-garage's single
+/// alias (seed 3 of the exploration of docs/method.md §4, 1.4 % off).
+/// EM's decisions from the map without them, holding them out, end where
+/// the aliases that fitted the bent map no longer fit: the end's
+/// objective `J` is below every other end's (the named aliases' `ν²` lie
+/// far above the price of leaving a loop out on the map's own scale), it
+/// is kept, every named loop is rejected as `outlying`, and nothing
+/// questions the map. Seed 13 and parking-garage end with every true loop
+/// and no alias; seeds 16 and 17 keep two and one aliases at `ν²` where
+/// true loops lie too, and seed 16 leaves one true loop out.
+#[test]
+fn loops_the_outlying_check_names_are_left_out_where_the_end_without_them_ranks_first() {
+    let (scattered, grouped) = (scattered(), anywhere_in_groups(300, 0.5));
+    for (name, aliased, seed, exact) in [
+        ("CSAIL.g2o", &scattered, 1_000_014, true),
+        ("CSAIL.g2o", &scattered, 1_000_017, false),
+        ("CSAIL.g2o", &scattered, 1_000_018, false),
+        ("parking-garage.g2o", &grouped, 1_000_004, true),
+    ] {
+        let case = format!("{name} seed {seed}");
+        let Some((named, _)) =
+            corrupted_and_decided_by(name, aliased, seed, None, &without_recheck())
+        else {
+            return;
+        };
+        let named: Vec<usize> = named
+            .robust
+            .outlying
+            .iter()
+            .flat_map(|o| o.loops.clone())
+            .collect();
+        let (r, wrong) = corrupted_and_decided(name, aliased, seed, None).expect("read");
+        assert!(!named.is_empty(), "{case}");
+        for &k in &named {
+            assert!(wrong[k], "{case}: {:?}", r.loops[k]);
+            assert_eq!(
+                r.loops[k].reason,
+                Reason::Outlying,
+                "{case}: {:?}",
+                r.loops[k]
+            );
+        }
+        let starts = &r.robust.starts;
+        let chosen: Vec<&StartEnd> = starts.iter().filter(|s| s.chosen).collect();
+        assert_eq!(chosen.len(), 1, "{case}: {starts:?}");
+        assert_eq!(
+            chosen[0].start,
+            Start::WithoutOutlying,
+            "{case}: {starts:?}"
+        );
+        // The starts that reached an end, each ranked.
+        let others = (starts.iter())
+            .filter(|s| s.start != Start::WithoutOutlying)
+            .filter_map(|s| s.objective)
+            .fold(f64::INFINITY, f64::min);
+        let kept = chosen[0].objective.expect("ranked");
+        assert!(kept < others, "{case}: {starts:?}");
+        if exact {
+            true_loops_kept(&r, &wrong);
+            let rejected = (r.loops.iter().zip(&wrong)).filter(|(l, w)| !l.accepted && !**w);
+            assert_eq!(rejected.count(), 0, "{case}");
+        }
+        assert!(
+            r.robust.outlying.is_empty(),
+            "{case}: {:?}",
+            r.robust.outlying
+        );
+        assert_eq!(r.status(), MapStatus::Ok, "{case}");
     }
 }
 

@@ -30,7 +30,7 @@ pub use doubt::{DOUBT_MOVE, Doubt, HeldBack, Outlying};
 pub use model::{LoopModel, Scale};
 pub use schedule::{Proposal, Swing};
 pub use search::{MAX_REMOVALS, Search, Suspect, Test};
-pub use starts::StartEnd;
+pub use starts::{Start, StartEnd};
 
 use crate::geometry::Pose;
 use crate::solve::init::ChordalInit;
@@ -139,6 +139,10 @@ pub struct Layers {
     /// reach, whatever its posterior ([`schedule::verdict`], reason
     /// `outlying`); off: the posterior alone decides.
     pub reach: bool,
+    /// Try the end kept without the loops its outlying check names, and
+    /// keep the better end ([`starts::recheck`]); off: they are only
+    /// named.
+    pub recheck: bool,
 }
 
 impl Default for Layers {
@@ -155,13 +159,14 @@ impl Default for Layers {
             rescue: true,
             starts: true,
             reach: true,
+            recheck: true,
         }
     }
 }
 
 impl Layers {
     /// The layer names, as `--expert` takes them (with `no-`).
-    pub const NAMES: [&'static str; 11] = [
+    pub const NAMES: [&'static str; 12] = [
         "annealing",
         "decisions",
         "clusters",
@@ -173,6 +178,7 @@ impl Layers {
         "rescue",
         "starts",
         "reach",
+        "recheck",
     ];
 
     /// Parses `no-LAYER[,no-LAYER…]` (empty: every layer on).
@@ -191,6 +197,7 @@ impl Layers {
                 "no-rescue" => &mut layers.rescue,
                 "no-starts" => &mut layers.starts,
                 "no-reach" => &mut layers.reach,
+                "no-recheck" => &mut layers.recheck,
                 _ => {
                     return Err(format!(
                         "unknown layer '{item}': expected no-LAYER with LAYER one of {}",
@@ -382,6 +389,7 @@ pub fn solve<P: ChordalInit<D>, const D: usize>(
         RobustMethod::Em if n >= MIN_CANDIDATES => {
             out = starts::em(session, weights, job)?;
             doubts(session, weights, job, &mut out);
+            out = starts::recheck(session, weights, job, out)?;
         }
         RobustMethod::None => {
             session.converge(weights)?;
@@ -512,6 +520,7 @@ pub fn resume<P: ChordalInit<D>, const D: usize>(
             return Ok((out, false));
         }
         doubts(session, weights, job, &mut out);
+        out = starts::recheck(session, weights, job, out)?;
     }
     for (k, cand) in candidates.iter().enumerate() {
         out.weights[k] = weights[cand.edge];

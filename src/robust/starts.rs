@@ -77,10 +77,22 @@
 //!
 //! Ties keep the earlier start's end; two ends of one accepted set are one
 //! end.
+//!
+//! The end kept meets one more end where its outlying check
+//! ([`super::doubt`]) names accepted loops — beyond the true loops' own
+//! scale, and moving the map — in a map that passes with settled
+//! decisions, the end every start above stands on: EM's decisions again
+//! from the map solved without them, holding them out as the χ² search
+//! holds out what it takes ([`recheck`]). An alias the map bent to fit
+//! leaves a map that falls back without it, and the two ends are ranked
+//! by `J` as the starts' are; the update does the same at its end
+//! ([`super::resume`]).
 
 use super::schedule::{misfit_scale, objective};
 use super::search::Restarts;
-use super::{Candidate, Job, Outcome, RobustMethod, Swing, annealed_start, kernels, settle};
+use super::{
+    Candidate, Job, Outcome, Reason, RobustMethod, Swing, annealed_start, kernels, settle,
+};
 use crate::geometry::Pose;
 use crate::graph::Graph;
 use crate::solve::init::ChordalInit;
@@ -98,6 +110,9 @@ pub enum Start {
     /// Graduated non-convexity's truncated least squares at `J`'s price
     /// per candidate left out, from the caller's own poses.
     Truncated,
+    /// EM's decisions from the end kept, with the loops it named
+    /// `outlying` ([`super::doubt`]) taken out.
+    WithoutOutlying,
 }
 
 /// Where one start ended, as the report shows it.
@@ -212,8 +227,7 @@ impl<P: Clone> End<P> {
     /// of one accepted set are one end, their maps apart by the solver's
     /// tolerance: neither is better.
     fn better_than(&self, other: &Self) -> bool {
-        let accepted = |w: &[f64]| w.iter().map(|&w| w >= 0.5).collect::<Vec<_>>();
-        if accepted(&self.weights) == accepted(&other.weights) {
+        if held(&self.weights) == held(&other.weights) {
             return false;
         }
         match (self.summary.passed, other.summary.passed) {
@@ -356,17 +370,125 @@ fn keep_best<P: Pose<D>, const D: usize>(
     let mut out = kept.out;
     let mut starts = vec![kept.summary];
     for other in ends {
-        out.rounds += other.out.rounds;
-        out.relaxations += other.out.relaxations;
-        out.decisions += other.out.decisions;
-        out.relaxed_starts += other.out.relaxed_starts;
-        out.cut_short |= other.out.cut_short;
+        add_work(&mut out, &other.out);
         starts.push(other.summary);
     }
     starts.extend(unsettled);
     starts.sort_by_key(|e| e.start);
     out.starts = starts;
     Ok(out)
+}
+
+/// The end kept (`kept`, in the session's graph and `weights`) tried
+/// without the loops its outlying check named: EM's decisions again from
+/// the map solved without them ([`without`]), whose end competes with the
+/// kept one as the starts' ends do (module doc), again while the end that
+/// wins names some. A loop the check names lies beyond the true loops' own
+/// scale and moves the map, as an alias does that bent the map into
+/// another basin (docs/method.md §7); without it the map can fall back,
+/// and the aliases that fitted the bent map no longer fit. Leaving out a
+/// true loop within the true loops' reach lowers the fit by less than
+/// `J`'s price for it, and the end with it stays. Returns the outcome of
+/// the end kept, its doubts found.
+pub fn recheck<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    job: &Job<'_, P, D>,
+    mut kept: Outcome,
+) -> Result<Outcome, SolveError> {
+    let mut tried: Vec<Vec<bool>> = Vec::new();
+    while job.layers.recheck && !kept.outlying.is_empty() && !session.exhausted() {
+        let named: Vec<usize> = kept.outlying.iter().flat_map(|o| o.loops.clone()).collect();
+        let mut starts = std::mem::take(&mut kept.starts);
+        let start = (starts.iter().find(|s| s.chosen)).map_or(Start::Annealed, |s| s.start);
+        let (summary, _) = summary(session.graph, weights, job, start);
+        let mut before = End::keep(session.graph, weights, job, (summary, kept));
+        tried.push(held(&before.weights));
+        let mut after = without(session, weights, job, &named)?;
+        let s2 = (before.scale.into_iter().chain(after.scale))
+            .reduce(f64::min)
+            .unwrap_or(1.0);
+        before.rank(s2, job.c);
+        after.rank(s2, job.c);
+        // The end kept is listed, at the objective it was compared by.
+        match starts.iter_mut().find(|s| s.chosen) {
+            Some(s) => s.objective = before.summary.objective,
+            None => starts.push(StartEnd {
+                chosen: true,
+                ..before.summary.clone()
+            }),
+        }
+        let accepted = held(&after.weights);
+        let wins = !after.out.cut_short && !tried.contains(&accepted) && after.better_than(&before);
+        tried.push(accepted);
+        let (win, lose) = if wins {
+            starts.iter_mut().for_each(|s| s.chosen = false);
+            after.summary.chosen = true;
+            starts.push(after.summary.clone());
+            (after, before)
+        } else {
+            before.restore(session, weights, true)?;
+            starts.push(after.summary.clone());
+            (before, after)
+        };
+        kept = win.out;
+        add_work(&mut kept, &lose.out);
+        kept.starts = starts;
+        if !wins {
+            break;
+        }
+        super::doubts(session, weights, job, &mut kept);
+    }
+    Ok(kept)
+}
+
+/// The end of EM's decisions from the map in the session's graph solved
+/// without the candidates `named`, which they hold out as the χ² search
+/// holds out what it takes (a prior of 0); those that end rejected are
+/// `outlying`.
+fn without<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    job: &Job<'_, P, D>,
+    named: &[usize],
+) -> Result<End<P>, SolveError> {
+    let iterations = session.iterations();
+    let mut judged = job.candidates.to_vec();
+    for &k in named {
+        weights[job.candidates[k].edge] = 0.0;
+        judged[k].count_posterior = Some(0.0);
+    }
+    session.converge(weights)?;
+    let holding = Job {
+        candidates: &judged,
+        ..*job
+    };
+    let mut out = Outcome::new(job.candidates.len());
+    let restarts = &mut Restarts::default();
+    let how = (job.chordal, Swing::Continue);
+    settle(session, weights, (&holding, restarts), how, &mut out)?;
+    for &k in named {
+        if weights[job.candidates[k].edge] < 0.5 {
+            out.reasons[k] = Reason::Outlying;
+        }
+    }
+    let mut end = End::take(session.graph, weights, job, (Start::WithoutOutlying, out));
+    end.summary.iterations = session.iterations() - iterations;
+    Ok(end)
+}
+
+/// Which edges the `weights` hold (weight ≥ ½).
+fn held(weights: &[f64]) -> Vec<bool> {
+    weights.iter().map(|&w| w >= 0.5).collect()
+}
+
+/// Adds the work of an end not kept (`other`) to the outcome kept.
+fn add_work(out: &mut Outcome, other: &Outcome) {
+    out.rounds += other.rounds;
+    out.relaxations += other.relaxations;
+    out.decisions += other.decisions;
+    out.relaxed_starts += other.relaxed_starts;
+    out.cut_short |= other.cut_short;
 }
 
 /// Whether the decisions that ended at `out` (the candidates `weights`

@@ -43,8 +43,10 @@ fn decisions_that_did_not_settle_exit_4() {
     let mit = dir.join("MIT.g2o");
     let aliased = mit_aliased(&dir, &work, 1_000_024, 10);
     let out = work.join("out.g2o");
-    let (code, said, err) =
-        optimize_saying(&aliased, &out, "pgo: the loop decisions did not settle");
+    let (code, said, err) = optimize_saying(
+        (&aliased, &out, &[]),
+        "pgo: the loop decisions did not settle",
+    );
     assert_eq!(code, Some(4), "{err}");
     assert_eq!(said.len(), 1, "{err}");
     assert!(out.exists());
@@ -107,49 +109,64 @@ fn aliased_anywhere(
 /// sweep: true loops held back by their counts), each 2–3 % off;
 /// parking-garage with 300 aliases in groups of 10 (seed 3 of the
 /// exploration of docs/method.md §4: one alias accepted beyond the true
-/// loops' reach), 1.4 % off.
+/// loops' reach), 1.4 % off without the recheck (`--expert no-recheck`);
+/// with it, the map without that alias is kept and exits 0.
 #[test]
 fn questioned_decisions_exit_5() {
     let Some(dir) = datasets() else { return };
     let work = crate::common::temp_dir("questioned");
-    for (case, seed, says) in [
+    for (case, seed, says, extra) in [
         (
             ("MIT", 30, 20),
             1_000_009,
             "10 accepted loops in doubtful clusters:",
+            &[][..],
         ),
         (
             ("MIT", 30, 20),
             1_000_014,
             "rejected loops held back by their counts:",
+            &[],
         ),
         (
             ("parking-garage", 300, 10),
             1_000_004,
             "1 accepted loop beyond the true loops' reach:",
+            &["--expert", "no-recheck"],
         ),
     ] {
         let aliased = aliased_anywhere(&dir, &work, case, seed);
         let out = work.join("out.g2o");
         let questioned = "pgo: the map passed its χ² test, but the evidence questions";
-        let (code, said, err) = optimize_saying(&aliased, &out, questioned);
+        let (code, said, err) = optimize_saying((&aliased, &out, extra), questioned);
         assert_eq!(code, Some(5), "{seed}: {err}");
         assert_eq!(said.len(), 1, "{seed}: {err}");
         assert!(said[0].contains(says), "{seed}: {}", said[0]);
         assert!(said[0].ends_with("exit status 5)"), "{}", said[0]);
         assert!(out.exists());
+        if !extra.is_empty() {
+            // With the recheck: the map without the named alias, nothing
+            // questioned.
+            let (code, said, err) = optimize_saying((&aliased, &out, &[]), questioned);
+            assert_eq!((code, said.len()), (Some(0), 0), "{seed}: {err}");
+        }
     }
 }
 
-/// `pgo optimize INPUT -o OUT`: its exit status, the lines of its stderr
-/// that start with `prefix`, and all of its stderr.
-fn optimize_saying(input: &Path, out: &Path, prefix: &str) -> (Option<i32>, Vec<String>, String) {
-    let o = pgo(&[
+/// `pgo optimize INPUT -o OUT [EXTRA…]`: its exit status, the lines of its
+/// stderr that start with `prefix`, and all of its stderr.
+fn optimize_saying(
+    (input, out, extra): (&Path, &Path, &[&str]),
+    prefix: &str,
+) -> (Option<i32>, Vec<String>, String) {
+    let mut args = vec![
         "optimize",
         input.to_str().unwrap(),
         "-o",
         out.to_str().unwrap(),
-    ]);
+    ];
+    args.extend_from_slice(extra);
+    let o = pgo(&args);
     let err = stderr(&o);
     let said = (err.lines())
         .filter(|l| l.starts_with(prefix))
