@@ -9,10 +9,10 @@ run with a flag, the flagged true loops and aliases, then the totals: the
 check pgo's outlying test would make with that tail instead of the fitted
 log-normal's.
 
-usage: .venv/bin/python scripts/tail_shape_scan.py [WORK_DIR] [--run]
+usage: .venv/bin/python scripts/tail_shape_scan.py [WORK_DIR] [--run] [--seeds S ...]
        --run first makes the scan's runs in WORK_DIR (default
        bench-out/tail_scan): intel, manhattan, CSAIL, MIT, kitti_00 and
-       parking-garage, seeds 21 and 22, aliases at revisited places in
+       parking-garage, seeds 21 and 22 (or those after --seeds), aliases at revisited places in
        groups of 5 (30 % true-like counts), placed anywhere in groups of
        10 (50 %) and scattered one by one (100 %), both information scales.
 """
@@ -37,9 +37,9 @@ SETTINGS = [
 DATASETS = ["intel", "manhattan", "CSAIL", "MIT", "kitti_00", "parking-garage"]
 
 
-def make_runs(work):
+def make_runs(work, seeds):
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    for seed in (21, 22):
+    for seed in seeds:
         for name in DATASETS:
             for setting in SETTINGS:
                 subprocess.run(
@@ -71,11 +71,18 @@ def flagged(report, wrong):
 
 
 def main():
-    args = [a for a in sys.argv[1:] if a != "--run"]
+    argv = sys.argv[1:]
+    seeds = [21, 22]
+    if "--seeds" in argv:
+        at = argv.index("--seeds")
+        given = [a for a in argv[at + 1:] if a.isdigit()]
+        seeds = [int(a) for a in given]
+        argv = argv[:at] + argv[at + 1 + len(given):]
+    args = [a for a in argv if a != "--run"]
     work = os.path.abspath(args[0] if args else "bench-out/tail_scan")
     if "--run" in sys.argv:
         os.makedirs(work, exist_ok=True)
-        make_runs(work)
+        make_runs(work, seeds)
     runs = runs_true = runs_wrong = n_true = n_wrong = 0
     for path in sorted(glob.glob(os.path.join(work, "*.report.json"))):
         stem = path[:-len(".report.json")]
