@@ -141,7 +141,7 @@ pub struct Layers {
     pub reach: bool,
     /// Try the end kept without the loops its outlying check names, and
     /// keep the better end ([`starts::recheck`]); off: they are only
-    /// named.
+    /// named (`outlying`, exit status 5).
     pub recheck: bool,
 }
 
@@ -239,7 +239,8 @@ pub enum Reason {
     /// the map's true loops (the loop model's fitted density puts the
     /// largest of them there with a chance below
     /// [`schedule::REACH_LEVEL`], and its `ν²` exceeds its information's
-    /// mean).
+    /// mean); or the outlying check named it in an end it was accepted in,
+    /// and the end without it was kept ([`starts::recheck`]).
     Outlying,
     /// The decisions did not settle on it: the last evaluation's posterior
     /// and the set the map was solved with disagree (it was accepted on
