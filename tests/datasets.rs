@@ -628,7 +628,7 @@ fn updates_of_a_map_with_such_a_population_are_the_batch_job() {
     };
     let (updates, wrong) = updates_are_the_batch_job(&full, &edge_wrong, 500);
     let last = updates.last().expect("updates");
-    assert_eq!(accepted_by_kind(last, &wrong), (43, 0));
+    assert_eq!(true_loops_kept(last.report(), &wrong).0, 43);
 }
 
 /// CSAIL with 300 aliases placed anywhere one by one, every count
@@ -649,7 +649,7 @@ fn an_update_leaves_out_what_its_outlying_check_names_as_the_batch_job_does() {
     };
     let (updates, wrong) = updates_are_the_batch_job(&full, &edge_wrong, 100);
     let last = updates.last().expect("updates");
-    assert_eq!(accepted_by_kind(last, &wrong), (128, 0));
+    assert_eq!(true_loops_kept(last.report(), &wrong).0, 128);
     let rechecked_warm = |u: &pgo::Solution<Se2>| {
         let warm = u
             .incremental()
@@ -689,16 +689,6 @@ fn updates_are_the_batch_job(
         updates.push(u);
     }
     (updates, wrong)
-}
-
-/// The true loops and the wrong ones among the candidates `solution` accepts.
-fn accepted_by_kind(solution: &pgo::Solution<Se2>, wrong: &[bool]) -> (usize, usize) {
-    let count = |wrong_ones: bool| {
-        (solution.loops().iter().zip(wrong))
-            .filter(|&(l, &w)| l.accepted && w == wrong_ones)
-            .count()
-    };
-    (count(false), count(true))
 }
 
 /// A planar dataset with 300 aliases placed anywhere one by one, every
