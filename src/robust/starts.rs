@@ -29,6 +29,18 @@
 //! disagreements with the stated information alone (below), GNC's
 //! schedule of 20–40 solves would be spent for nothing.
 //!
+//! Where the best of those ends still fails the χ² test or its decisions
+//! did not settle, EM decides once more from that end's map, with every
+//! candidate judged against the map without its cluster only — without
+//! the agreement layer ([`super::innovation`]), by which the members of a
+//! cluster that agree with each other speak against one that does not —
+//! and then with every layer from where that ends, within the annealed
+//! start's share of iterations. A group of aliases at a revisited place
+//! that outnumbers the true loop beside it agrees with itself, and where
+//! the map leans its way the true loop is the member that disagrees;
+//! judged against the map without the cluster, the true loop fits and the
+//! group does not ([`without_agreement`]).
+//!
 //! The second start is sought only when the annealed end's map fails the
 //! χ² test (or there is no test), or its decisions did not settle (some
 //! candidate is [`super::Reason::Unsettled`]: the model at the map kept
@@ -110,6 +122,10 @@ pub enum Start {
     /// Graduated non-convexity's truncated least squares at `J`'s price
     /// per candidate left out, from the caller's own poses.
     Truncated,
+    /// EM's decisions without the agreement layer, then with every layer,
+    /// from the map of the best end so far where that leaves the decisions
+    /// open.
+    WithoutAgreement,
     /// EM's decisions from the end kept, with the loops it named
     /// `outlying` ([`super::doubt`]) taken out.
     WithoutOutlying,
@@ -133,10 +149,25 @@ pub struct StartEnd {
     /// the annealed start).
     pub iterations: usize,
     /// Whether it reached an end: the kernel start's set of weight ≥ ½
-    /// stood within the annealed start's iterations (else it has no end to
-    /// compare). The truncated start always reaches one: GNC's rounds
+    /// stood, and the start without the agreement layer settled, within
+    /// the annealed start's iterations (else it has no end to compare). The truncated start always reaches one: GNC's rounds
     /// bound it, and an end the budget cut short competes with none.
     pub settled: bool,
+}
+
+impl StartEnd {
+    /// A start that reached no end.
+    fn unsettled(start: Start) -> Self {
+        Self {
+            start,
+            accepted: 0,
+            objective: None,
+            passed: None,
+            chosen: false,
+            iterations: 0,
+            settled: false,
+        }
+    }
 }
 
 /// Where a start ended: its map, weights and outcome, and how it ranks.
@@ -268,8 +299,9 @@ fn summary<P: Pose<D>, const D: usize>(
 /// EM: the annealed start, then — when its map fails the χ² test, its
 /// decisions did not settle or its model disagrees with the information as
 /// stated (module doc), the caller gave poses and budget is left —
-/// the kernel start and the truncated start from the caller's poses, and
-/// the best end (module doc) left in the session's graph and `weights`.
+/// the kernel start and the truncated start from the caller's poses and
+/// the start without the agreement layer from the best end's map, and the
+/// best end (module doc) left in the session's graph and `weights`.
 pub fn em<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -323,16 +355,13 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
                 ends.push(end);
             }
             None => unsettled.push(StartEnd {
-                start,
-                accepted: 0,
-                objective: None,
-                passed: None,
-                chosen: false,
                 iterations: used,
-                settled: false,
+                ..StartEnd::unsettled(start)
             }),
         }
     }
+    let apart = without_agreement(session, weights, (job, share), &mut ends)?;
+    unsettled.extend(apart);
     keep_best(session, weights, job, ends, unsettled)
 }
 
@@ -347,19 +376,7 @@ fn keep_best<P: Pose<D>, const D: usize>(
     mut ends: Vec<End<P>>,
     unsettled: Vec<StartEnd>,
 ) -> Result<Outcome, SolveError> {
-    // `misfit_scale` is finite and positive where it is `Some`.
-    let s2 = (ends.iter().filter_map(|e| e.scale))
-        .reduce(f64::min)
-        .unwrap_or(1.0);
-    for end in &mut ends {
-        end.rank(s2, job.c);
-    }
-    let mut best = 0;
-    for k in 1..ends.len() {
-        if !ends[k].out.cut_short && ends[k].better_than(&ends[best]) {
-            best = k;
-        }
-    }
+    let best = best_of(&mut ends, job.c);
     // The start run last: the last end's, unless a later one left none.
     let last = (unsettled.iter().map(|u| u.start))
         .chain(ends.iter().map(|e| e.summary.start))
@@ -377,6 +394,26 @@ fn keep_best<P: Pose<D>, const D: usize>(
     starts.sort_by_key(|e| e.start);
     out.starts = starts;
     Ok(out)
+}
+
+/// The index of the best of `ends` (module doc), each ranked on their
+/// least misfit scale with kernel width `c`: the first end unless a later
+/// one not cut short by the budget is better.
+fn best_of<P: Clone>(ends: &mut [End<P>], c: f64) -> usize {
+    // `misfit_scale` is finite and positive where it is `Some`.
+    let s2 = (ends.iter().filter_map(|e| e.scale))
+        .reduce(f64::min)
+        .unwrap_or(1.0);
+    for end in ends.iter_mut() {
+        end.rank(s2, c);
+    }
+    let mut best = 0;
+    for k in 1..ends.len() {
+        if !ends[k].out.cut_short && ends[k].better_than(&ends[best]) {
+            best = k;
+        }
+    }
+    best
 }
 
 /// The end kept (`kept`, in the session's graph and `weights`) tried
@@ -475,6 +512,72 @@ fn without<P: ChordalInit<D>, const D: usize>(
     let mut end = End::take(session.graph, weights, job, (Start::WithoutOutlying, out));
     end.summary.iterations = session.iterations() - iterations;
     Ok(end)
+}
+
+/// The start without the agreement layer, where the best of `ends` leaves
+/// the decisions open (its map fails the χ² test, or its decisions did not
+/// settle): EM's decisions from that end's map with every candidate judged
+/// against the map without its cluster only, then with every layer from
+/// where they end, within `share` iterations (the annealed start's). A
+/// cluster's members that agree with each other speak against one that
+/// does not ([`super::innovation`]); where a group of aliases outnumbers
+/// the true loop beside it in the map an end leans to, that is the true
+/// loop, and the decisions settle without it (module doc). Its end joins
+/// `ends`; returns the start's summary where the share ran out first.
+fn without_agreement<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    (job, share): (&Job<'_, P, D>, usize),
+    ends: &mut Vec<End<P>>,
+) -> Result<Option<StartEnd>, SolveError> {
+    let best = best_of(ends, job.c);
+    if !job.layers.agreement || session.exhausted() || !ends[best].leaves_open() {
+        return Ok(None);
+    }
+    ends[best].restore(session, weights, false)?;
+    let layers = super::Layers {
+        agreement: false,
+        ..*job.layers
+    };
+    let apart = Job {
+        layers: &layers,
+        ..*job
+    };
+    let how = (job.chordal, Swing::Continue);
+    let before = session.iterations();
+    let (out, capped) = session.capped(share, |session| {
+        let mut first = Outcome::new(job.candidates.len());
+        settle(
+            session,
+            weights,
+            (&apart, &mut Restarts::default()),
+            how,
+            &mut first,
+        )?;
+        let mut out = Outcome::new(job.candidates.len());
+        if !first.cut_short {
+            settle(
+                session,
+                weights,
+                (job, &mut Restarts::default()),
+                how,
+                &mut out,
+            )?;
+        }
+        add_work(&mut out, &first);
+        Ok::<_, SolveError>(out)
+    });
+    let (out, used) = (out?, session.iterations() - before);
+    if out.cut_short && capped && !session.exhausted() {
+        return Ok(Some(StartEnd {
+            iterations: used,
+            ..StartEnd::unsettled(Start::WithoutAgreement)
+        }));
+    }
+    let mut end = End::take(session.graph, weights, job, (Start::WithoutAgreement, out));
+    end.summary.iterations = used;
+    ends.push(end);
+    Ok(None)
 }
 
 /// Which edges the `weights` hold (weight ≥ ½).
