@@ -27,7 +27,11 @@
 //! settle, and the kernel start's end, if it has one, leaves the same
 //! question: where the second start was sought for the model's
 //! disagreements with the stated information alone (below), GNC's
-//! schedule of 20–40 solves would be spent for nothing.
+//! schedule of 20–40 solves would be spent for nothing — unless that
+//! disagreement is a population called wrong that the stated information
+//! calls consistent (true loops the annealed end may have left out) and
+//! the kernel start reached no end (its weights did not stand within its
+//! share of iterations): then nothing answered it.
 //!
 //! Where the best of those ends still fails the χ² test or its decisions
 //! did not settle, EM decides once more from that end's map, with every
@@ -354,10 +358,17 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
                 open &= end.leaves_open();
                 ends.push(end);
             }
-            None => unsettled.push(StartEnd {
-                iterations: used,
-                ..StartEnd::unsettled(start)
-            }),
+            None => {
+                // A kernel start that reached no end answered nothing: where
+                // the annealed end's model calls wrong a population the
+                // stated information calls consistent (true loops it may
+                // have left out: a map fits what it keeps), that stays open.
+                open |= (ends[0].out.model.as_ref()).is_some_and(|m| m.wrong_within_kernel());
+                unsettled.push(StartEnd {
+                    iterations: used,
+                    ..StartEnd::unsettled(start)
+                });
+            }
         }
     }
     let apart = without_agreement(session, weights, (job, share), &mut ends)?;
