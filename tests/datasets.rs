@@ -1346,6 +1346,17 @@ fn loops_the_outlying_check_names_are_left_out_where_the_end_without_them_ranks_
     }
 }
 
+/// The options of the fresh MIT runs (`scripts/tail_shape_scan.py`): 30
+/// aliases in groups of 5 at revisited places, 30 % of them with counts
+/// drawn like a true loop's.
+fn revisited_in_fives() -> CorruptionOptions {
+    CorruptionOptions {
+        group_size: 5,
+        true_like_share: 0.3,
+        ..corruption(30, OutlierPolicy::Aliased)
+    }
+}
+
 /// A group of aliases at a revisited place that outnumbers the true loop
 /// beside it: MIT (20 true loops) with 30 aliases in groups of 5 at
 /// revisited places, 30 % of them with true-like counts, information as
@@ -1359,11 +1370,7 @@ fn loops_the_outlying_check_names_are_left_out_where_the_end_without_them_ranks_
 /// ranks first by `J`.
 #[test]
 fn a_group_that_outnumbers_the_true_loop_beside_it_meets_the_start_without_agreement() {
-    let revisited = CorruptionOptions {
-        group_size: 5,
-        true_like_share: 0.3,
-        ..corruption(30, OutlierPolicy::Aliased)
-    };
+    let revisited = revisited_in_fives();
     let Some((r, wrong)) = corrupted_and_decided("MIT.g2o", &revisited, 1_000_026, None) else {
         return;
     };
@@ -1398,11 +1405,7 @@ fn a_question_the_kernel_start_leaves_unanswered_stays_open() {
         return;
     };
     mit.compose_missing_poses();
-    let revisited = CorruptionOptions {
-        group_size: 5,
-        true_like_share: 0.3,
-        ..corruption(30, OutlierPolicy::Aliased)
-    };
+    let revisited = revisited_in_fives();
     let rng = &mut StdRng::seed_from_u64(1_000_026);
     let corrupted = pgo_sim::corrupt(&mit, &revisited, rng).expect("corrupt");
     let file = temp_dir("young-revisited-mit").join("m.g2o");
