@@ -623,12 +623,7 @@ fn updates_end_at_the_batch_map<P: pgo::GraphPose<D>, const D: usize>(
 /// resume from; the last resumes from the 4,500-pose job's decisions.)
 #[test]
 fn updates_of_a_map_with_such_a_population_are_the_batch_job() {
-    let Some((full, edge_wrong)) = scattered_planar("kitti_02.g2o", 1_000_014) else {
-        return;
-    };
-    let (updates, wrong) = updates_are_the_batch_job(&full, &edge_wrong, 500);
-    let last = updates.last().expect("updates");
-    assert_eq!(true_loops_kept(last.report(), &wrong).0, 43);
+    updates_are_the_batch_job(("kitti_02.g2o", 1_000_014), 500, 43);
 }
 
 /// CSAIL with 300 aliases placed anywhere one by one, every count
@@ -644,12 +639,9 @@ fn updates_of_a_map_with_such_a_population_are_the_batch_job() {
 /// the information calls an outlier.
 #[test]
 fn an_update_leaves_out_what_its_outlying_check_names_as_the_batch_job_does() {
-    let Some((full, edge_wrong)) = scattered_planar("CSAIL.g2o", 1_000_014) else {
+    let Some(updates) = updates_are_the_batch_job(("CSAIL.g2o", 1_000_014), 100, 128) else {
         return;
     };
-    let (updates, wrong) = updates_are_the_batch_job(&full, &edge_wrong, 100);
-    let last = updates.last().expect("updates");
-    assert_eq!(true_loops_kept(last.report(), &wrong).0, 128);
     let rechecked_warm = |u: &pgo::Solution<Se2>| {
         let warm = u
             .incremental()
@@ -662,22 +654,24 @@ fn an_update_leaves_out_what_its_outlying_check_names_as_the_batch_job_does() {
     assert!(updates[5..].iter().all(rechecked_warm));
 }
 
-/// Replays `full` (whether each of its edges is a wrong candidate:
-/// `edge_wrong`) as a front end feeds it, checking that an update every
-/// `every` poses and after the last gives `optimize()`'s decisions on the
-/// same graph; returns the updates and whether each candidate is wrong.
+/// Replays dataset `name` with scattered aliases ([`scattered_planar`] of
+/// `seed`) as a front end feeds it, checking that an update every `every`
+/// poses and after the last gives `optimize()`'s decisions on the same
+/// graph, and that the last keeps `true_loops` true loops and no alias;
+/// returns the updates (`None` without the datasets).
 fn updates_are_the_batch_job(
-    full: &PoseGraph2,
-    edge_wrong: &[bool],
+    (name, seed): (&str, u64),
     every: usize,
-) -> (Vec<pgo::Solution<Se2>>, Vec<bool>) {
+    true_loops: usize,
+) -> Option<Vec<pgo::Solution<Se2>>> {
+    let (full, edge_wrong) = scattered_planar(name, seed)?;
     let decided =
         |s: &pgo::Solution<Se2>| -> Vec<bool> { s.loops().iter().map(|l| l.accepted).collect() };
     let (options, mut g, mut wrong) = (Options::default(), PoseGraph2::new(), Vec::new());
     let mut updates = Vec::new();
-    let due = edges_due(full);
+    let due = edges_due(&full);
     for (k, edges) in due.iter().enumerate() {
-        let added = add_pose_and_edges(&mut g, full, k, edges);
+        let added = add_pose_and_edges(&mut g, &full, k, edges);
         wrong.extend(added.iter().map(|&i| edge_wrong[i]));
         if (k + 1) % every != 0 && k + 1 != due.len() {
             continue;
@@ -688,22 +682,35 @@ fn updates_are_the_batch_job(
         assert_eq!(decided(&u), decided(&b), "at {} poses ({reason:?})", k + 1);
         updates.push(u);
     }
-    (updates, wrong)
+    let last = updates.last().expect("updates");
+    assert_eq!(true_loops_kept(last.report(), &wrong).0, true_loops);
+    Some(updates)
 }
 
 /// A planar dataset with 300 aliases placed anywhere one by one, every
 /// count true-like, planted as `pgo corrupt --seed SEED` plants them (seed
 /// `SEED − 1` of the scattered exploration in docs/benchmarks.md;
-/// information as published), written and read back; with whether each of
-/// its edges is a wrong candidate (`None` without the datasets).
+/// information as published) ([`corrupted_planar`]).
 fn scattered_planar(name: &str, seed: u64) -> Option<(PoseGraph2, Vec<bool>)> {
+    corrupted_planar(name, &scattered(), seed)
+}
+
+/// Planar dataset `name` with wrong candidates planted as `pgo corrupt
+/// --seed SEED` plants them (`options`), written and read back; with
+/// whether each of its edges is a wrong candidate (`None` without the
+/// datasets).
+fn corrupted_planar(
+    name: &str,
+    options: &CorruptionOptions,
+    seed: u64,
+) -> Option<(PoseGraph2, Vec<bool>)> {
     let Ok(AnyPoseGraph::Planar(mut graph)) = read(name)? else {
         panic!("{name} is a 2D file");
     };
     graph.compose_missing_poses();
     let rng = &mut StdRng::seed_from_u64(seed);
-    let corruption = pgo_sim::corrupt(&graph, &scattered(), rng).expect("corrupt");
-    let file = temp_dir(&format!("scattered-{name}")).join("m.g2o");
+    let corruption = pgo_sim::corrupt(&graph, options, rng).expect("corrupt");
+    let file = temp_dir(&format!("corrupted-planar-{name}-{seed}")).join("m.g2o");
     corruption.graph.write_g2o(&file).expect("write");
     let read = PoseGraph2::read_g2o(&file).expect("read");
     Some((read, corruption.wrong))
@@ -1346,6 +1353,12 @@ fn loops_the_outlying_check_names_are_left_out_where_the_end_without_them_ranks_
     }
 }
 
+/// Where `start` ended in the report `r` (it ran).
+fn start_of(r: &Report, start: Start) -> &StartEnd {
+    let starts = &r.robust.starts;
+    (starts.iter().find(|s| s.start == start)).unwrap_or_else(|| panic!("{start:?}: {starts:?}"))
+}
+
 /// The options of the fresh MIT runs (`scripts/tail_shape_scan.py`): 30
 /// aliases in groups of 5 at revisited places, 30 % of them with counts
 /// drawn like a true loop's.
@@ -1375,8 +1388,10 @@ fn a_group_that_outnumbers_the_true_loop_beside_it_meets_the_start_without_agree
         return;
     };
     let starts = &r.robust.starts;
-    let of = |start| starts.iter().find(|s| s.start == start).expect("ran");
-    let (annealed, apart) = (of(Start::Annealed), of(Start::WithoutAgreement));
+    let (annealed, apart) = (
+        start_of(&r, Start::Annealed),
+        start_of(&r, Start::WithoutAgreement),
+    );
     assert!(annealed.accepted < 20, "{starts:?}");
     assert!(apart.chosen, "{starts:?}");
     let kept = apart.objective.expect("ranked");
@@ -1401,25 +1416,19 @@ fn a_group_that_outnumbers_the_true_loop_beside_it_meets_the_start_without_agree
 /// its end keeps all 16 and no alias, at the lowest `J`.
 #[test]
 fn a_question_the_kernel_start_leaves_unanswered_stays_open() {
-    let Some(Ok(AnyPoseGraph::Planar(mut mit))) = read("MIT.g2o") else {
+    let Some((mit, edge_wrong)) = corrupted_planar("MIT.g2o", &revisited_in_fives(), 1_000_026)
+    else {
         return;
     };
-    mit.compose_missing_poses();
-    let revisited = revisited_in_fives();
-    let rng = &mut StdRng::seed_from_u64(1_000_026);
-    let corrupted = pgo_sim::corrupt(&mit, &revisited, rng).expect("corrupt");
-    let file = temp_dir("young-revisited-mit").join("m.g2o");
-    corrupted.graph.write_g2o(&file).expect("write");
-    let (young, kept) = prefix(&PoseGraph2::read_g2o(&file).expect("read"), 580);
-    let edge_wrong: Vec<bool> = kept.iter().map(|&k| corrupted.wrong[k]).collect();
+    let (young, kept) = prefix(&mit, 580);
+    let edge_wrong: Vec<bool> = kept.iter().map(|&k| edge_wrong[k]).collect();
     let wrong = candidate_labels(&young, &edge_wrong);
     let r = young.optimize(&Options::default()).unwrap().into_report();
     let starts = &r.robust.starts;
-    let of = |start| starts.iter().find(|s| s.start == start).expect("ran");
-    assert_eq!(of(Start::Annealed).accepted, 10, "{starts:?}");
-    assert!(!of(Start::Kernel).settled, "{starts:?}");
-    of(Start::Truncated);
-    assert!(of(Start::WithoutAgreement).chosen, "{starts:?}");
+    assert_eq!(start_of(&r, Start::Annealed).accepted, 10, "{starts:?}");
+    assert!(!start_of(&r, Start::Kernel).settled, "{starts:?}");
+    start_of(&r, Start::Truncated);
+    assert!(start_of(&r, Start::WithoutAgreement).chosen, "{starts:?}");
     assert_eq!(true_loops_kept(&r, &wrong), (16, 16));
     assert_eq!(r.status(), MapStatus::Ok);
 }

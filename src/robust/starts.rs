@@ -154,8 +154,9 @@ pub struct StartEnd {
     pub iterations: usize,
     /// Whether it reached an end: the kernel start's set of weight ≥ ½
     /// stood, and the start without the agreement layer settled, within
-    /// the annealed start's iterations (else it has no end to compare). The truncated start always reaches one: GNC's rounds
-    /// bound it, and an end the budget cut short competes with none.
+    /// the annealed start's iterations (else it has no end to compare).
+    /// The truncated start always reaches one: GNC's rounds bound it, and
+    /// an end the budget cut short competes with none.
     pub settled: bool,
 }
 
@@ -351,23 +352,18 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
         let before = session.iterations();
         let out = kernel_start(session, weights, (job, &mut restarts), (cap, kernel))?;
         let used = session.iterations() - before;
-        match out {
-            Some(out) => {
-                let mut end = End::take(session.graph, weights, job, (start, out));
-                end.summary.iterations = used;
+        match reached(session.graph, weights, job, (start, out, used)) {
+            Ok(end) => {
                 open &= end.leaves_open();
                 ends.push(end);
             }
-            None => {
+            Err(none) => {
                 // A kernel start that reached no end answered nothing: where
                 // the annealed end's model calls wrong a population the
                 // stated information calls consistent (true loops it may
                 // have left out: a map fits what it keeps), that stays open.
                 open |= (ends[0].out.model.as_ref()).is_some_and(|m| m.wrong_within_kernel());
-                unsettled.push(StartEnd {
-                    iterations: used,
-                    ..StartEnd::unsettled(start)
-                });
+                unsettled.push(none);
             }
         }
     }
@@ -579,16 +575,39 @@ fn without_agreement<P: ChordalInit<D>, const D: usize>(
         Ok::<_, SolveError>(out)
     });
     let (out, used) = (out?, session.iterations() - before);
-    if out.cut_short && capped && !session.exhausted() {
-        return Ok(Some(StartEnd {
-            iterations: used,
-            ..StartEnd::unsettled(Start::WithoutAgreement)
-        }));
+    let out = (!out.cut_short || !capped || session.exhausted()).then_some(out);
+    match reached(
+        session.graph,
+        weights,
+        job,
+        (Start::WithoutAgreement, out, used),
+    ) {
+        Ok(end) => {
+            ends.push(end);
+            Ok(None)
+        }
+        Err(none) => Ok(Some(none)),
     }
-    let mut end = End::take(session.graph, weights, job, (Start::WithoutAgreement, out));
+}
+
+/// Where `start` ended after `used` iterations, in `graph` and `weights`
+/// (`out`; `None` where it reached no end): an end to rank, or the summary
+/// of a start that reached none.
+fn reached<P: Pose<D>, const D: usize>(
+    graph: &Graph<P, D>,
+    weights: &[f64],
+    job: &Job<'_, P, D>,
+    (start, out, used): (Start, Option<Outcome>, usize),
+) -> Result<End<P>, StartEnd> {
+    let Some(out) = out else {
+        return Err(StartEnd {
+            iterations: used,
+            ..StartEnd::unsettled(start)
+        });
+    };
+    let mut end = End::take(graph, weights, job, (start, out));
     end.summary.iterations = used;
-    ends.push(end);
-    Ok(None)
+    Ok(end)
 }
 
 /// Which edges the `weights` hold (weight ≥ ½).
