@@ -14,7 +14,8 @@
 //! `--gap-every M` compares every M-th update's map with a batch solve of
 //! the graph at that point (untimed): how far its χ² is above the batch
 //! job's, and its positions (as a share of the map's size) and rotations
-//! from the batch job's, each update's with `-v`.
+//! from the batch job's, each update's with `-v`, with the loops only one
+//! of the two accepts.
 //!
 //! Prints one line per update (poses, how it was solved, milliseconds) and
 //! the earlier decisions it changed (and, for a whole job, why) with `-v`,
@@ -204,6 +205,13 @@ fn update(
                 "          gap: χ² {gap:.1e} above, positions {:.1e} of the size, rotations {turned:.1e} rad",
                 apart / size
             )?;
+            let (only_update, only_batch) = accepted_apart(&solution, &batch);
+            if !only_update.is_empty() || !only_batch.is_empty() {
+                writeln!(
+                    out,
+                    "          accepted by the update only: {only_update:?}; by the batch job only: {only_batch:?}"
+                )?;
+            }
         }
     }
     if args.verbose {
@@ -377,6 +385,18 @@ fn spread(out: &mut impl Write, what: &str, values: &mut [f64]) -> std::io::Resu
         values[values.len() - 1],
         values.iter().filter(|&&v| v > 1e-6).count(),
     )
+}
+
+/// The loops (from, to) `a` accepts and `b` does not, and the reverse.
+fn accepted_apart(a: &AnySolution, b: &AnySolution) -> (Vec<(u64, u64)>, Vec<(u64, u64)>) {
+    let accepted = |s: &AnySolution| -> Vec<(u64, u64)> {
+        let loops = s.report().loops.iter().filter(|l| l.accepted);
+        loops.map(|l| (l.from, l.to)).collect()
+    };
+    let (a, b) = (accepted(a), accepted(b));
+    let only =
+        |x: &[(u64, u64)], y: &[(u64, u64)]| x.iter().filter(|l| !y.contains(l)).copied().collect();
+    (only(&a, &b), only(&b, &a))
 }
 
 /// The largest distance between a position of `a` and the same pose's of
