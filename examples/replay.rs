@@ -387,9 +387,12 @@ fn spread(out: &mut impl Write, what: &str, values: &mut [f64]) -> std::io::Resu
     )
 }
 
-/// The loops (from, to) `a` accepts and `b` does not, and the reverse.
-fn accepted_apart(a: &AnySolution, b: &AnySolution) -> (Vec<(u64, u64)>, Vec<(u64, u64)>) {
-    let accepted = |s: &AnySolution| -> Vec<(u64, u64)> {
+/// A loop by its ends (from, to).
+type Ends = (u64, u64);
+
+/// The loops `a` accepts and `b` does not, and the reverse.
+fn accepted_apart(a: &AnySolution, b: &AnySolution) -> (Vec<Ends>, Vec<Ends>) {
+    let accepted = |s: &AnySolution| -> Vec<Ends> {
         let loops = s.report().loops.iter().filter(|l| l.accepted);
         loops.map(|l| (l.from, l.to)).collect()
     };
