@@ -832,15 +832,20 @@ impl LoopModel {
         y <= self.kernel_edge() && self.ln_likelihood_ratio(y) > 0.0
     }
 
-    /// Whether a population of wrong loops lies within EM's kernel on the
-    /// true loops' scale or the information's as stated
-    /// ([`Self::kernel_edge`]): candidates the model calls wrong that the
+    /// Whether a log innovation `y = ln ν²` lies within EM's kernel on the
+    /// true loops' scale or the information's as stated, whichever is
+    /// wider ([`Self::kernel_edge`]): a loop the file calls consistent.
+    pub fn within_kernel(&self, y: f64) -> bool {
+        y <= self.kernel_edge()
+    }
+
+    /// Whether a population of wrong loops lies within EM's kernel
+    /// ([`Self::within_kernel`]): candidates the model calls wrong that the
     /// file calls consistent — as a run of true loops the decisions left
     /// out can look (a place whose loops fit the map only with another
     /// place's; docs/method.md §5).
     pub fn wrong_within_kernel(&self) -> bool {
-        let edge = self.kernel_edge();
-        self.wrong_loops.iter().any(|p| p.mean <= edge)
+        self.wrong_loops.iter().any(|p| self.within_kernel(p.mean))
     }
 
     /// The largest `ν²` of `k` accepted true loops that the information as

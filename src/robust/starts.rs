@@ -33,6 +33,17 @@
 //! the kernel start reached no end (its weights did not stand within its
 //! share of iterations): then nothing answered it.
 //!
+//! Where the best of those ends has a model that calls wrong a population
+//! the information as stated calls consistent, and no other start reached
+//! its accepted set, the loops it left out at innovations within EM's
+//! kernel are put back: the map is solved from that end's with them, and
+//! EM decides from there ([`readmitted`]). A young map that a group of
+//! aliases bent can keep true loops out at innovations the file's noise
+//! allows; the kernel starts, from the caller's poses, need not reach the
+//! set that holds them, and where that end passes with decisions that
+//! settled, nothing else asks again. Two starts that share nothing and
+//! reach one set answer the question; the start is not sought then.
+//!
 //! Where the best of those ends still fails the χ² test or its decisions
 //! did not settle, EM decides once more from that end's map, with every
 //! candidate judged against the map without its cluster only — without
@@ -126,6 +137,10 @@ pub enum Start {
     /// Graduated non-convexity's truncated least squares at `J`'s price
     /// per candidate left out, from the caller's own poses.
     Truncated,
+    /// EM's decisions from the map of the best end so far solved with the
+    /// candidates it rejects that the information as stated calls
+    /// consistent, where its model calls such a population wrong.
+    Readmitted,
     /// EM's decisions without the agreement layer, then with every layer,
     /// from the map of the best end so far where that leaves the decisions
     /// open.
@@ -304,9 +319,10 @@ fn summary<P: Pose<D>, const D: usize>(
 /// EM: the annealed start, then — when its map fails the χ² test, its
 /// decisions did not settle or its model disagrees with the information as
 /// stated (module doc), the caller gave poses and budget is left —
-/// the kernel start and the truncated start from the caller's poses and
-/// the start without the agreement layer from the best end's map, and the
-/// best end (module doc) left in the session's graph and `weights`.
+/// the kernel start and the truncated start from the caller's poses, and
+/// the start with the loops left out readmitted and the one without the
+/// agreement layer from the best end's map; the best end (module doc) left
+/// in the session's graph and `weights`.
 pub fn em<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -367,6 +383,7 @@ pub fn em<P: ChordalInit<D>, const D: usize>(
             }
         }
     }
+    readmitted(session, weights, job, &mut ends)?;
     let apart = without_agreement(session, weights, (job, share), &mut ends)?;
     unsettled.extend(apart);
     keep_best(session, weights, job, ends, unsettled)
@@ -550,27 +567,14 @@ fn without_agreement<P: ChordalInit<D>, const D: usize>(
         layers: &layers,
         ..*job
     };
-    let how = (job.chordal, Swing::Continue);
     let before = session.iterations();
     let (out, capped) = session.capped(share, |session| {
-        let mut first = Outcome::new(job.candidates.len());
-        settle(
-            session,
-            weights,
-            (&apart, &mut Restarts::default()),
-            how,
-            &mut first,
-        )?;
-        let mut out = Outcome::new(job.candidates.len());
-        if !first.cut_short {
-            settle(
-                session,
-                weights,
-                (job, &mut Restarts::default()),
-                how,
-                &mut out,
-            )?;
-        }
+        let first = decided_from_map(session, weights, &apart, job.chordal)?;
+        let mut out = if first.cut_short {
+            Outcome::new(job.candidates.len())
+        } else {
+            decided_from_map(session, weights, job, job.chordal)?
+        };
         add_work(&mut out, &first);
         Ok::<_, SolveError>(out)
     });
@@ -588,6 +592,74 @@ fn without_agreement<P: ChordalInit<D>, const D: usize>(
         }
         Err(none) => Ok(Some(none)),
     }
+}
+
+/// The start with the loops the best of `ends` left out readmitted, where
+/// its model calls wrong a population that the information as stated
+/// calls consistent and no other end holds its set: every candidate the
+/// gate kept that the end rejects at an innovation within EM's kernel
+/// ([`super::model::LoopModel::within_kernel`]) is put back, the map is
+/// solved from that end's, and EM decides from there (module doc). Its
+/// end joins `ends`. EM decides from the map itself, without chordal
+/// relaxations of the sets it tries: a relaxation rebuilds a map from its
+/// set alone, and the one the readmitted loops made would be lost.
+fn readmitted<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    job: &Job<'_, P, D>,
+    ends: &mut Vec<End<P>>,
+) -> Result<(), SolveError> {
+    let best = best_of(ends, job.c);
+    let end = &ends[best];
+    let Some(model) = (end.out.model.as_ref()).filter(|m| m.wrong_within_kernel()) else {
+        return Ok(());
+    };
+    // Another start that reached the same set answered the question.
+    let set = held(&end.weights);
+    let confirmed = (ends.iter().enumerate()).any(|(k, e)| k != best && held(&e.weights) == set);
+    if confirmed {
+        return Ok(());
+    }
+    let within = |v: &Option<f64>| v.is_some_and(|v| v > 0.0 && model.within_kernel(v.ln()));
+    let left_out: Vec<usize> = (job.candidates.iter().zip(&end.out.innovations))
+        .filter(|(c, v)| c.kept && end.weights[c.edge] < 0.5 && within(v))
+        .map(|(c, _)| c.edge)
+        .collect();
+    if left_out.is_empty() || session.exhausted() {
+        return Ok(());
+    }
+    end.restore(session, weights, false)?;
+    for &edge in &left_out {
+        weights[edge] = 1.0;
+    }
+    let before = session.iterations();
+    session.converge(weights)?;
+    let out = decided_from_map(session, weights, job, false)?;
+    let mut end = End::take(session.graph, weights, job, (Start::Readmitted, out));
+    end.summary.iterations = session.iterations() - before;
+    ends.push(end);
+    Ok(())
+}
+
+/// EM's decisions with every layer from the map in the session's graph
+/// and `weights`, each set they try solved from its chordal relaxation
+/// where `relax` (else from the map before it).
+fn decided_from_map<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    job: &Job<'_, P, D>,
+    relax: bool,
+) -> Result<Outcome, SolveError> {
+    let mut out = Outcome::new(job.candidates.len());
+    let how = (relax, Swing::Continue);
+    settle(
+        session,
+        weights,
+        (job, &mut Restarts::default()),
+        how,
+        &mut out,
+    )?;
+    Ok(out)
 }
 
 /// Where `start` ended after `used` iterations, in `graph` and `weights`
