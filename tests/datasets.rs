@@ -1447,11 +1447,10 @@ fn a_question_the_kernel_start_leaves_unanswered_stays_open() {
 /// annealed end passes and settles with 10 of the 16 true loops, its model
 /// calling a population wrong within EM's kernel; the Cauchy start reaches
 /// no end and the truncated one passes at 9, so nothing is left open for
-/// the start without the agreement layer. From the best
-/// end's map solved with the rejected candidates within the kernel (true
-/// loops 9–4 and 241–235), EM's decisions keep all 16 and no alias, at the
-/// lowest `J`. Before, the annealed end stood (exit 0, six true loops
-/// out).
+/// the start without the agreement layer. From the best end's map solved
+/// with the rejected candidates within the kernel (six true loops and
+/// eight aliases), EM's decisions keep all 16 and no alias, at the lowest
+/// `J`. Before, the annealed end stood (exit 0, six true loops out).
 #[test]
 fn loops_called_wrong_within_the_kernel_are_tried_in() {
     let Some((r, wrong)) = young_revisited_mit(620) else {
