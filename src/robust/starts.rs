@@ -641,9 +641,9 @@ fn readmitted<P: ChordalInit<D>, const D: usize>(
     Ok(())
 }
 
-/// EM's decisions with every layer from the map in the session's graph
-/// and `weights`, each set they try solved from its chordal relaxation
-/// where `relax` (else from the map before it).
+/// EM's decisions with the layers of `job` from the map in the session's
+/// graph and `weights`, each set they try solved from its chordal
+/// relaxation where `relax` (else from the map before it).
 fn decided_from_map<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
