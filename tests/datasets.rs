@@ -760,7 +760,8 @@ fn scattered() -> CorruptionOptions {
 /// the true loops it accepted) without the true loops' reach (`--expert
 /// no-reach`), checked to keep every true loop and no alias, from the
 /// second of two starts; and checked to keep them from the first start
-/// alone with every layer on.
+/// with every layer on (the only start sought; the end without the map's
+/// keystone, where one is tried, ranks below it).
 fn kernel_start_chosen(n: u64, case: (f64, u64)) -> Option<(Report, usize)> {
     let (young, edge_wrong) = aliased_torus(n, case)?;
     let wrong = candidate_labels(&young, &edge_wrong);
@@ -769,16 +770,25 @@ fn kernel_start_chosen(n: u64, case: (f64, u64)) -> Option<(Report, usize)> {
     let whole = young.optimize(&options).unwrap().into_report();
     assert_eq!(true_loops_kept(&whole, &wrong).0, true_loops);
     let starts = &whole.robust.starts;
-    assert!(starts.len() == 1, "{starts:?}");
+    assert!(
+        starts[0].start == Start::Annealed && starts[0].chosen,
+        "{starts:?}"
+    );
+    let tried = |s: &StartEnd| s.start == Start::WithoutKeystone && !s.chosen;
+    assert!(starts[1..].iter().all(tried), "{starts:?}");
     assert_eq!(whole.status(), MapStatus::Ok);
     options.expert.layers.reach = false;
     let r = young.optimize(&options).unwrap().into_report();
     let (accepted, _) = true_loops_kept(&r, &wrong);
     assert_eq!(accepted, true_loops);
     let starts = &r.robust.starts;
-    // The kernel start's end stands: the truncated start is not sought.
-    assert_eq!(starts.len(), 2, "{starts:?}");
-    assert!(starts[1].chosen, "{starts:?}");
+    // The kernel start's end stands: the truncated start is not sought
+    // (the end without the keystone, tried, ranks below it).
+    assert!(
+        starts[1].start == Start::Kernel && starts[1].chosen,
+        "{starts:?}"
+    );
+    assert!(starts[2..].iter().all(tried), "{starts:?}");
     Some((r, accepted))
 }
 
@@ -1415,30 +1425,83 @@ fn a_group_that_outnumbers_the_true_loop_beside_it_meets_the_start_without_agree
     assert_eq!(r.status(), MapStatus::Ok);
 }
 
+/// A group of aliases the map rests on is tried out: MIT with 30 aliases
+/// in groups of 5 at revisited places, information as published, fresh
+/// seed 30. Three members of a group (273–537, 274–538, 275–539: the
+/// true loop 537–273 read the other way round) bend the map into a
+/// basin where they fit (`ν²` 8.2–11.2) and three true loops of that
+/// corridor do not (`ν²` 539–17,145); the annealed end passes its χ² test
+/// and settles, 25.9 % off, and no start was sought. Removing the group
+/// would move the map by 55 % of its size: it is the map's keystone. EM's
+/// decisions from the map without it keep all 20 true loops and no alias,
+/// at a lower `J`, and that end is kept. Without the layer
+/// (`--expert no-keystone`) the annealed end stands.
+#[test]
+fn a_keystone_group_of_aliases_is_tried_out() {
+    let revisited = revisited_in_fives();
+    let Some((r, wrong)) = corrupted_and_decided("MIT.g2o", &revisited, 1_000_031, None) else {
+        return;
+    };
+    let starts = &r.robust.starts;
+    assert_eq!(start_of(&r, Start::Annealed).accepted, 20, "{starts:?}");
+    chosen_at_the_lowest_objective(&r, Start::WithoutKeystone);
+    assert_eq!(true_loops_kept(&r, &wrong), (20, 20));
+    assert_eq!(r.status(), MapStatus::Ok);
+    let mut by = Options::default();
+    by.expert.layers.keystone = false;
+    let (r, wrong) = corrupted_and_decided_by("MIT.g2o", &revisited, 1_000_031, None, &by).unwrap();
+    let aliases_in = (r.loops.iter().zip(&wrong)).filter(|(l, w)| **w && l.accepted);
+    assert_eq!(aliases_in.count(), 3);
+}
+
 /// The map above replayed by a front end, an update every 10 poses: the
 /// young map's updates keep true loops the batch jobs of the same graph
-/// leave out (docs/method.md §7b), at 14 of the 81 updates (21 before the
-/// start with the loops left out put back, 32 before the start without
-/// the agreement layer); the last update is the batch job's, with every
-/// true loop and no alias. Fails if more updates differ. About a minute
-/// in a debug build: run with `--ignored`.
+/// leave out (docs/method.md §7b), at 10 of the 81 updates (14 before the
+/// end without the keystone, 21 before the start with the loops left out
+/// put back, 32 before the start without the agreement layer); the last
+/// update is the batch job's, with every true loop and no alias. Fails if
+/// more updates differ. About a minute in a debug build: run with
+/// `--ignored`.
 #[test]
 #[ignore]
 fn a_young_map_with_a_group_beside_its_loops_is_the_batch_job_at_the_end() {
-    let Some((mit, edge_wrong)) = corrupted_planar("MIT.g2o", &revisited_in_fives(), 1_000_026)
-    else {
+    let Some(differ) = mit_replayed_every_10(1_000_026) else {
         return;
     };
+    eprintln!("updates that differ from the batch job: {differ:?}");
+    assert!(differ.len() <= 10, "{differ:?}");
+}
+
+/// MIT with aliases in groups of 5 at revisited places, corrupted with
+/// `seed`, replayed every 10 poses: the numbers of poses at the updates
+/// whose decisions differ from the batch job's, checked to end at the
+/// batch job's with every true loop and no alias. `None` where the
+/// dataset is absent.
+fn mit_replayed_every_10(seed: u64) -> Option<Vec<usize>> {
+    let (mit, edge_wrong) = corrupted_planar("MIT.g2o", &revisited_in_fives(), seed)?;
     let (steps, wrong) = replayed(&mit, &edge_wrong, 10);
     let differ: Vec<usize> = (steps.iter())
         .filter(|(_, u, b)| decided(u) != decided(b))
         .map(|(poses, _, _)| *poses)
         .collect();
-    eprintln!("updates that differ from the batch job: {differ:?}");
-    assert!(differ.len() <= 14, "{differ:?}");
     let (_, last, batch) = steps.last().expect("updates");
     assert_eq!(decided(last), decided(batch));
     assert_eq!(true_loops_kept(last.report(), &wrong), (20, 20));
+    Some(differ)
+}
+
+/// The keystone's map (MIT seed 30 above) replayed every 10 poses: every
+/// update is the batch job's, the last with every true loop and no alias
+/// (docs/method.md §7b). Before the end without the keystone, 23 of the 81
+/// differed, the last among them: the batch job held three aliases, 25.9 %
+/// off. Run with `--ignored`.
+#[test]
+#[ignore]
+fn the_keystone_s_map_replayed_is_the_batch_job_at_every_update() {
+    let Some(differ) = mit_replayed_every_10(1_000_031) else {
+        return;
+    };
+    assert!(differ.is_empty(), "{differ:?}");
 }
 
 /// Checks that the end of `start` is the one kept, at an objective `J`

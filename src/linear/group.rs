@@ -234,6 +234,19 @@ impl<const D: usize> BlockSystem<D> {
         true
     }
 
+    /// The largest trace of any variable block's `(H⁻¹)ᵢᵢ` in the selected
+    /// inverse `z`: at least the largest variance of the map's marginals in
+    /// any direction of one block.
+    pub fn largest_marginal(&self, z: &SelectedInverse) -> f64 {
+        (0..self.n_blocks)
+            .filter_map(|b| {
+                let p = self.position[b];
+                let h = self.symbolic.inverse_block(&z.values, p, p)?;
+                Some(h.trace())
+            })
+            .fold(0.0, f64::max)
+    }
+
     /// An upper bound (in the positive semi-definite order) of one edge's
     /// `A·H⁻¹·Aᵀ` from the diagonal blocks of the selected inverse `z`:
     /// `2·(Aᵢ·(H⁻¹)ᵢᵢ·Aᵢᵀ + Aⱼ·(H⁻¹)ⱼⱼ·Aⱼᵀ)`, since

@@ -155,7 +155,7 @@ fn bad_values_name_the_option_and_change_nothing() {
         (
             "expert",
             "no-such-layer",
-            "--expert unknown layer 'no-such-layer': expected no-LAYER with LAYER one of annealing, decisions, clusters, agreement, aliasing, populations, search, relaxation, rescue, starts, reach, recheck",
+            "--expert unknown layer 'no-such-layer': expected no-LAYER with LAYER one of annealing, decisions, clusters, agreement, aliasing, populations, search, relaxation, rescue, starts, reach, recheck, keystone",
         ),
         ("solver", "cg", "--solver must be one of lm, gn, got 'cg'"),
         (

@@ -59,6 +59,15 @@
 //! move the map, to first order (the deleted residuals' move,
 //! [`Evaluation::removing`]), by more than [`DOUBT_MOVE`] of its size.
 //!
+//! Last, the map's *keystone*: the accepted cluster whose removal would
+//! move it most, to first order, where that is more than
+//! [`KEYSTONE_MOVE`] of its size. On a map with few loops every true
+//! cluster holds a stretch of it, and so does a group of aliases that
+//! bent it: a settled, passing end can rest on an alias that keeps the
+//! true loops of the place it hides out (their innovations at the bent
+//! map beyond EM's kernel). [`super::starts::recheck`] tries the end
+//! without it.
+//!
 //! Only a passing map whose decisions settled is examined (docs/method.md
 //! §7).
 
@@ -82,6 +91,24 @@ use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 /// groups' by 1.41 % to 9.79 %. At 0.5 %, the benchmarks' goal for a
 /// map's error, that true run would warn on every sphere2500 map.
 pub const DOUBT_MOVE: f64 = 0.01;
+
+/// A keystone's removal moves some pose by more than this share of the
+/// map's size (module doc). Measured over 572 labelled runs
+/// (docs/method.md §7, "A keystone"): the largest move a single accepted
+/// cluster's removal makes is at most 2.2 % on every map but MIT, and
+/// 12.7 % to 57 % on MIT (20 true loops in 808 poses), whose true
+/// clusters hold it up one by one; a tenth of the map lies in that gap.
+/// Below it, a wrong cluster is answered by EM's decisions and the
+/// checks above at [`DOUBT_MOVE`].
+pub const KEYSTONE_MOVE: f64 = 0.1;
+
+/// The most clusters whose moves are solved for in the search for a
+/// keystone: those whose moves are largest in the map's own metric
+/// (`gᵀ·H⁻¹·g`, [`Evaluation::removing`]), solved in one pass over the
+/// factor. Every cluster of a map with as few loops as MIT's (13–14
+/// accepted clusters) is solved for; on a map with thousands the pass
+/// costs about what 32 more solves of the map do.
+pub const KEYSTONE_CANDIDATES: usize = 32;
 
 /// An accepted cluster whose errors share one offset and that moves the
 /// map (module doc).
@@ -316,7 +343,7 @@ pub fn outlying<P: Pose<D>, const D: usize>(
     let mut eval = Evaluation::for_clusters(session.optimizer, graph, weights, (&edges, &groups))?;
     let mut outlying = Vec::new();
     for loops in groups {
-        let Some(g) = eval.removing(&edges, &loops) else {
+        let Some((g, _)) = eval.removing(&edges, &loops) else {
             continue;
         };
         let map_moves = eval.largest_move(&g) / size;
@@ -336,6 +363,117 @@ pub fn outlying<P: Pose<D>, const D: usize>(
         }
     }
     Ok(outlying)
+}
+
+/// The accepted members of each cluster with the squared size of the move
+/// the map would make without them, in its own metric (`gᵀ·H⁻¹·g`,
+/// [`Evaluation::removing`]), and the largest trace of a pose's block of
+/// `H⁻¹` ([`Evaluation::largest_marginal`]): what bounds each move
+/// ([`keystone`]).
+#[derive(Clone, Debug)]
+pub struct Moves {
+    clusters: Vec<(Vec<usize>, f64)>,
+    spread: f64,
+}
+
+/// The [`Moves`] of the clusters with members in the map, from an
+/// evaluation `innov` of `clusters` that held the selected inverse; `None`
+/// unless it judged the set `accepted`.
+pub fn moves(innov: &Innovations, clusters: &[Vec<usize>], accepted: &[bool]) -> Option<Moves> {
+    if innov.accepted != accepted || innov.moves.len() != clusters.len() {
+        return None;
+    }
+    let spread = innov.spread?;
+    let sized = (clusters.iter().zip(&innov.moves))
+        .filter_map(|(members, &q)| {
+            let loops: Vec<usize> = members.iter().copied().filter(|&k| accepted[k]).collect();
+            Some((loops, q?))
+        })
+        .collect();
+    Some(Moves {
+        clusters: sized,
+        spread,
+    })
+}
+
+/// The keystone (module doc) of the map in the session's graph, solved
+/// with the edges of non-zero `weights`: of the clusters of `accepted`
+/// candidates (each alone with the clusters layer off), the one whose
+/// removal would move the map most, to first order (the deleted
+/// residuals' move, [`Evaluation::removing`]), where that is more than
+/// [`KEYSTONE_MOVE`] of the map's size. Only the clusters whose move's
+/// bound reaches that are solved for ([`Evaluation::largest_marginal`]),
+/// the [`KEYSTONE_CANDIDATES`] of the largest moves in the map's metric:
+/// from `known`, the decisions' evaluation of this map, where given —
+/// then a map no cluster can move that far is not factorised again.
+pub fn keystone<P: Pose<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &[f64],
+    (candidates, accepted): (&[Candidate], &[bool]),
+    layers: &Layers,
+    known: Option<&Moves>,
+) -> Result<Option<Vec<usize>>, SolveError> {
+    let graph = &*session.graph;
+    let size = graph.extent();
+    if size <= 0.0 || !accepted.contains(&true) {
+        return Ok(None);
+    }
+    let reach = KEYSTONE_MOVE * size;
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    let within = |(q, spread): (f64, f64)| (q * spread).sqrt() > reach;
+    let mut bounded: Vec<(f64, Vec<usize>)> = match known {
+        Some(known) => (known.clusters.iter())
+            .filter(|(_, q)| within((*q, known.spread)))
+            .map(|(loops, q)| (*q, loops.clone()))
+            .collect(),
+        None => Vec::new(),
+    };
+    log::debug!(
+        "keystone: {} clusters may move the map by over {:.0} % ({})",
+        bounded.len(),
+        100.0 * KEYSTONE_MOVE,
+        if known.is_some() {
+            "known"
+        } else {
+            "not known"
+        }
+    );
+    if known.is_some() && bounded.is_empty() {
+        return Ok(None);
+    }
+    let groups = match known {
+        Some(_) => {
+            bounded.sort_by(|a, b| b.0.total_cmp(&a.0));
+            bounded.truncate(KEYSTONE_CANDIDATES);
+            bounded.iter().map(|(_, loops)| loops.clone()).collect()
+        }
+        None => of_clusters(graph, &edges, accepted, layers.clusters),
+    };
+    let mut eval = Evaluation::for_clusters(session.optimizer, graph, weights, (&edges, &groups))?;
+    if known.is_none() {
+        let spread = eval.largest_marginal().unwrap_or(f64::INFINITY);
+        bounded = (groups.into_iter())
+            .filter_map(|loops| Some((eval.removing(&edges, &loops)?.1, loops)))
+            .filter(|(q, _)| within((*q, spread)))
+            .collect();
+        bounded.sort_by(|a, b| b.0.total_cmp(&a.0));
+        bounded.truncate(KEYSTONE_CANDIDATES);
+    }
+    let (groups, gradients): (Vec<Vec<usize>>, Vec<Vec<f64>>) = (bounded.into_iter())
+        .filter_map(|(_, loops)| Some((eval.removing(&edges, &loops)?.0, loops)))
+        .map(|(g, loops)| (loops, g))
+        .unzip();
+    let moves = eval.largest_moves(&gradients);
+    let best = (groups.into_iter().zip(moves))
+        .filter(|(_, m)| *m > reach)
+        .max_by(|a, b| a.1.total_cmp(&b.1));
+    if let Some((loops, m)) = &best {
+        log::debug!(
+            "keystone {loops:?}: removing it moves the map by {:.1} %",
+            100.0 * m / size
+        );
+    }
+    Ok(best.map(|(loops, _)| loops))
 }
 
 /// The candidates `marked` grouped by their clusters among the candidates

@@ -63,6 +63,12 @@ use std::sync::Mutex;
 /// manhattan and intel, whose factorisations are smaller); 8 lies between.
 pub const SELECTED_INVERSE_COST: f64 = 8.0;
 
+/// Gradients solved in one pass over the factor by
+/// [`Evaluation::largest_moves`]: each pass reads the factor once and
+/// holds two copies of the map's variables per gradient (10⁶ poses in 3D:
+/// 96 MB each), so four keep that within a fifth of such a factor's size.
+pub const MOVES_AT_ONCE: usize = 4;
+
 /// What the innovations of one evaluation found.
 #[derive(Clone, Debug, Default)]
 pub struct Innovations {
@@ -80,6 +86,15 @@ pub struct Innovations {
     /// members in the map explains (`None` with fewer than two of them, or
     /// no joint statistic).
     pub common: Vec<Option<f64>>,
+    /// Each cluster's `gᵀ·H⁻¹·g` ([`Evaluation::removing`]) over its
+    /// members in the map: the squared size, in the map's own metric, of
+    /// the move the map would make without them (`None` with none of them
+    /// or `S` singular).
+    pub moves: Vec<Option<f64>>,
+    /// The largest trace of a pose's block of `H⁻¹`
+    /// ([`Evaluation::largest_marginal`]), where the evaluation held the
+    /// selected inverse.
+    pub spread: Option<f64>,
     /// The candidates the map was solved with, as the evaluation judged
     /// them.
     pub accepted: Vec<bool>,
@@ -200,6 +215,8 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             exact: vec![true; edges.len()],
             joint: Vec::with_capacity(clusters.len()),
             common: Vec::with_capacity(clusters.len()),
+            moves: Vec::with_capacity(clusters.len()),
+            spread: self.largest_marginal(),
             accepted: accepted.to_vec(),
         };
         // In the map first, then the others.
@@ -213,13 +230,14 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             })
             .collect();
         let judged = self.judge_all(edges, &groups, exact);
-        for ((members, _), (nu2, (joint, common), exact)) in groups.iter().zip(judged) {
+        for ((members, _), (nu2, (joint, common, moves), exact)) in groups.iter().zip(judged) {
             for (&k, v) in members.iter().zip(nu2) {
                 out.nu2[k] = v;
                 out.exact[k] = exact;
             }
             out.joint.push(joint);
             out.common.push(common);
+            out.moves.push(moves);
         }
         out
     }
@@ -249,12 +267,13 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         })
     }
 
-    /// `J_Aᵀ·S⁻¹·e_A` by variable block for candidates `members` (indices
-    /// of `edges`) in the map, `S = Σ_A − J_A·H⁻¹·J_Aᵀ`: `H⁻¹` of it is how
-    /// the map would move, to first order, without them (module doc).
-    /// `None` where a covariance is singular or nothing else checks them
-    /// (`S` singular).
-    pub fn removing(&self, edges: &[usize], members: &[usize]) -> Option<Vec<f64>> {
+    /// `g = J_Aᵀ·S⁻¹·e_A` by variable block for candidates `members`
+    /// (indices of `edges`) in the map, `S = Σ_A − J_A·H⁻¹·J_Aᵀ`: `H⁻¹` of
+    /// it is how the map would move, to first order, without them (module
+    /// doc); and that move's squared size in the map's own metric,
+    /// `gᵀ·H⁻¹·g = vᵀ·(J_A·H⁻¹·J_Aᵀ)·v` with `v = S⁻¹·e_A`. `None` where a
+    /// covariance is singular or nothing else checks them (`S` singular).
+    pub fn removing(&self, edges: &[usize], members: &[usize]) -> Option<(Vec<f64>, f64)> {
         let lin = self.linearise(edges, members);
         let gram = self.gram(&lin.jacobians, &mut GroupScratch::default());
         let sigma = (lin.covariances.iter().copied()).collect::<Option<Vec<_>>>()?;
@@ -262,7 +281,21 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         // S⁻¹·e_A = L⁻ᵀ·L⁻¹·e_A.
         let (mut s_inv_e, _) = whiten(l.as_ref(), &lin.errors);
         solve_upper_triangular_in_place(l.transpose(), s_inv_e.as_mut(), Par::Seq);
-        Some(self.gradient(&lin.jacobians, s_inv_e.as_ref()))
+        let v = DVector::from_fn(s_inv_e.nrows(), |r, _| s_inv_e[(r, 0)]);
+        let size = v.dot(&(&gram * &v));
+        Some((self.gradient(&lin.jacobians, s_inv_e.as_ref()), size))
+    }
+
+    /// The largest trace of a pose's block of `H⁻¹` — at least the largest
+    /// variance of the map's marginals in any direction of one pose —
+    /// where the evaluation holds the selected inverse. A move
+    /// `δ = H⁻¹·g` shifts no pose's position by more than
+    /// `√(gᵀ·H⁻¹·g · this)` (Cauchy–Schwarz in the metric of `H`: a
+    /// position's shift is as long as the translation part of the pose's
+    /// block of `δ`, [`Pose::retract`]).
+    pub fn largest_marginal(&self) -> Option<f64> {
+        let inverse = self.inverse.as_ref()?;
+        Some(self.optimizer.system().largest_marginal(inverse))
     }
 
     /// `J_Rᵀ·C⁻¹·e_R` by variable block for candidates `members` (indices
@@ -307,17 +340,39 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
     /// [`Self::adding`] for the move candidates outside the map would
     /// make), each pose retracted by its block of `δ`.
     pub fn largest_move(&mut self, g: &[f64]) -> f64 {
-        let mut delta = g.to_vec();
+        self.largest_moves(&[g.to_vec()])[0]
+    }
+
+    /// [`Self::largest_move`] of each of the gradients `gs`, solved
+    /// [`MOVES_AT_ONCE`] to a pass over the factor.
+    pub fn largest_moves(&mut self, gs: &[Vec<f64>]) -> Vec<f64> {
+        (gs.chunks(MOVES_AT_ONCE))
+            .flat_map(|chunk| self.moves_at_once(chunk))
+            .collect()
+    }
+
+    /// [`Self::largest_moves`] of `gs` in one pass over the factor.
+    fn moves_at_once(&mut self, gs: &[Vec<f64>]) -> Vec<f64> {
+        if gs.is_empty() {
+            return Vec::new();
+        }
+        let mut delta: Vec<f64> = gs.concat();
         // The system's solve gives −H⁻¹·g from its factorisation of H.
-        self.optimizer.solve_factored(&mut delta);
+        self.optimizer.solve_factored(&mut delta, gs.len());
         let graph = self.graph;
-        (graph.poses.iter().zip(&self.block))
-            .filter_map(|(pose, b)| {
-                let b = (*b)?;
-                let step = SVector::<f64, D>::from_fn(|a, _| -delta[b * D + a]);
-                Some((pose.retract(&step).position() - pose.position()).norm())
+        let n = self.step.len();
+        (0..gs.len())
+            .map(|c| {
+                let delta = &delta[c * n..(c + 1) * n];
+                (graph.poses.iter().zip(&self.block))
+                    .filter_map(|(pose, b)| {
+                        let b = (*b)?;
+                        let step = SVector::<f64, D>::from_fn(|a, _| -delta[b * D + a]);
+                        Some((pose.retract(&step).position() - pose.position()).norm())
+                    })
+                    .fold(0.0, f64::max)
             })
-            .fold(0.0, f64::max)
+            .collect()
     }
 
     /// Whether it took the selected inverse ([`Evaluation::for_clusters`]).
@@ -431,15 +486,15 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
                     let nu2 = lin.covariances[0]
                         .and_then(|c| (c + bound).cholesky())
                         .map(|c| lin.errors[0].dot(&c.solve(&lin.errors[0])));
-                    return (vec![nu2], (Some(0.0), None), false);
+                    return (vec![nu2], (Some(0.0), None, None), false);
                 };
                 gram
             }
             _ => self.gram(&lin.jacobians, scratch),
         };
-        let (nu2, joint, common) =
+        let (nu2, joint, common, moves) =
             judge_cluster(&lin.errors, &lin.covariances, &gram, (a, self.within));
-        (nu2, (joint, common), true)
+        (nu2, (joint, common, moves), true)
     }
 }
 
@@ -552,7 +607,11 @@ impl CommonOffset {
 
 /// A cluster's members' `ν²`, its joint statistic and common offset's
 /// share of it, and whether the `ν²` are exact ([`Innovations`]).
-type Judged = (Vec<Option<f64>>, (Option<f64>, Option<f64>), bool);
+type Judged = (
+    Vec<Option<f64>>,
+    (Option<f64>, Option<f64>, Option<f64>),
+    bool,
+);
 
 /// Candidates linearised at the map: what their innovations are made of.
 struct Linearised<const D: usize> {
@@ -605,15 +664,15 @@ fn judge_cluster<const D: usize>(
     covariances: &[Option<SMatrix<f64, D, D>>],
     gram: &DMatrix<f64>,
     (a, within): (usize, bool),
-) -> (Vec<Option<f64>>, Option<f64>, Option<f64>) {
+) -> (Vec<Option<f64>>, Option<f64>, Option<f64>, Option<f64>) {
     let m = errors.len();
     let Some(sigma) = covariances.iter().copied().collect::<Option<Vec<_>>>() else {
-        return (vec![None; m], None, None);
+        return (vec![None; m], None, None, None);
     };
     let (na, nr) = (D * a, D * (m - a));
     // S = Σ_A − M_AA = L·Lᵀ; y = L⁻¹·e_A, so e_Aᵀ·S⁻¹·e_A = |y|².
     let Some(l) = cholesky_of_s(&sigma[..a], gram, na) else {
-        return (vec![None; m], None, None);
+        return (vec![None; m], None, None, None);
     };
     let (y, joint) = whiten(l.as_ref(), &errors[..a]);
     let common = (a >= 2)
@@ -623,6 +682,8 @@ fn judge_cluster<const D: usize>(
     let mut s_inv_e = y.clone();
     solve_upper_triangular_in_place(l.transpose(), s_inv_e.as_mut(), Par::Seq);
     let s_inv_e = DVector::from_fn(na, |r, _| s_inv_e[(r, 0)]);
+    // gᵀ·H⁻¹·g = vᵀ·M_AA·v with v = S⁻¹·e_A (Evaluation::removing).
+    let moves = (a > 0).then(|| s_inv_e.dot(&(gram.view((0, 0), (na, na)) * &s_inv_e)));
     // The diagonal blocks of S⁻¹ = WᵀW with W = L⁻¹, for the members of A;
     // X = L⁻¹·M_AR, for those of R: M_RA·S⁻¹·M_AR = XᵀX.
     let mut w = faer::Mat::<f64>::identity(na, na);
@@ -663,7 +724,8 @@ fn judge_cluster<const D: usize>(
         nu2
     };
     let joint = Some(joint).filter(|j| j.is_finite());
-    (nu2, joint, common.filter(|_| joint.is_some()))
+    let moves = moves.filter(|q| q.is_finite() && joint.is_some());
+    (nu2, joint, common.filter(|_| joint.is_some()), moves)
 }
 
 /// Each member's `ν²` made the larger of `apart` (against the map without
@@ -810,7 +872,7 @@ mod tests {
         let hinv = 1.0 / 3.0;
         let gram = DMatrix::from_element(3, 3, hinv);
         // Cluster {z1, z2} in the map, z3 out.
-        let (nu2, joint, _) = judge_cluster(&errors, &cov, &gram, (2, true));
+        let (nu2, joint, _, _) = judge_cluster(&errors, &cov, &gram, (2, true));
         // Without z1 and z2 the map is the prior alone: x = 0 with variance
         // 1, so each innovation is z²/(1 + 1). z1 and z2 agree with it
         // better than z3 does, so z3 is also judged against the map with
@@ -836,7 +898,8 @@ mod tests {
         let x = (z_true + z_wrong) / h;
         let errors = [Vector1::new(x - z_true), Vector1::new(x - z_wrong)];
         let gram = DMatrix::from_element(2, 2, 1.0 / h);
-        let (nu2, _, _) = judge_cluster(&errors, &[Some(Matrix1::new(1.0)); 2], &gram, (2, true));
+        let (nu2, _, _, _) =
+            judge_cluster(&errors, &[Some(Matrix1::new(1.0)); 2], &gram, (2, true));
         let with_true = 1.0 / (1.0 / prior + 1.0);
         let want = [0.0, z_wrong.powi(2) / (1.0 + with_true)];
         for (v, want) in nu2.iter().zip(want) {
@@ -849,7 +912,7 @@ mod tests {
     fn a_cluster_nothing_else_checks_has_no_innovation() {
         // One loop is the only tie: H⁻¹ gives it M = Σ, S = 0.
         let errors = [Vector1::new(0.3)];
-        let (nu2, joint, _) = judge_cluster(
+        let (nu2, joint, _, _) = judge_cluster(
             &errors,
             &[Some(Matrix1::new(2.0))],
             &DMatrix::from_element(1, 1, 2.0),

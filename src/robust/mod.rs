@@ -143,6 +143,12 @@ pub struct Layers {
     /// keep the better end ([`starts::recheck`]); off: they are only
     /// named (`outlying`, exit status 5).
     pub recheck: bool,
+    /// Try the end kept without its keystone — the accepted cluster whose
+    /// removal would move the map most, by more than
+    /// [`doubt::KEYSTONE_MOVE`] of its size — and keep the end without it
+    /// where that is better and accepts as many candidates
+    /// ([`starts::recheck`]); off: not sought.
+    pub keystone: bool,
 }
 
 impl Default for Layers {
@@ -160,13 +166,14 @@ impl Default for Layers {
             starts: true,
             reach: true,
             recheck: true,
+            keystone: true,
         }
     }
 }
 
 impl Layers {
     /// The layer names, as `--expert` takes them (with `no-`).
-    pub const NAMES: [&'static str; 12] = [
+    pub const NAMES: [&'static str; 13] = [
         "annealing",
         "decisions",
         "clusters",
@@ -179,6 +186,7 @@ impl Layers {
         "starts",
         "reach",
         "recheck",
+        "keystone",
     ];
 
     /// Parses `no-LAYER[,no-LAYER…]` (empty: every layer on).
@@ -198,6 +206,7 @@ impl Layers {
                 "no-starts" => &mut layers.starts,
                 "no-reach" => &mut layers.reach,
                 "no-recheck" => &mut layers.recheck,
+                "no-keystone" => &mut layers.keystone,
                 _ => {
                     return Err(format!(
                         "unknown layer '{item}': expected no-LAYER with LAYER one of {}",
@@ -309,6 +318,13 @@ pub struct Outcome {
     /// EM: the accepted candidates of a passing map whose innovations lie
     /// beyond the true loops' and that move it ([`doubt`]).
     pub outlying: Vec<Outlying>,
+    /// EM: the keystone of a passing map with no outlying candidates
+    /// ([`doubt::keystone`]), for [`starts::recheck`] to try without.
+    keystone: Option<Vec<usize>>,
+    /// EM: the sizes of the clusters' moves at the map kept, from the
+    /// decisions' evaluation of it, with the set it judged
+    /// ([`doubt::Moves`]).
+    moves: Option<(Vec<bool>, doubt::Moves)>,
     /// EM: the common offsets of the clusters at the map kept, from the
     /// decisions' evaluation of it, with the set it judged.
     offsets: Option<(Vec<bool>, Vec<doubt::Offset>)>,
@@ -337,6 +353,8 @@ impl Outcome {
             doubtful: Vec::new(),
             held_back: Vec::new(),
             outlying: Vec::new(),
+            keystone: None,
+            moves: None,
             offsets: None,
         }
     }
@@ -547,6 +565,7 @@ fn doubts<P: Pose<D>, const D: usize>(
     job: &Job<'_, P, D>,
     out: &mut Outcome,
 ) {
+    out.keystone = None;
     let test = (job.test)(session.graph, weights);
     let settled = !out.unsettled && !out.reasons.contains(&Reason::Unsettled);
     let finished = !out.cut_short && !session.exhausted();
@@ -589,6 +608,16 @@ fn doubts<P: Pose<D>, const D: usize>(
             advise("outlying candidates", e);
             Vec::new()
         });
+    if out.outlying.is_empty() && job.layers.keystone {
+        let known = (out.moves.as_ref())
+            .filter(|(set, _)| *set == accepted)
+            .map(|(_, moves)| moves);
+        out.keystone =
+            doubt::keystone(session, weights, ends, job.layers, known).unwrap_or_else(|e| {
+                advise("keystone", e);
+                None
+            });
+    }
 }
 
 /// EM from an accepted set: decisions by innovation until the set repeats
@@ -889,6 +918,8 @@ fn record(
     };
     out.offsets = doubt::offsets(innovations, &decided.clusters, &decided.accepted)
         .map(|offsets| (decided.accepted.clone(), offsets));
+    out.moves = doubt::moves(innovations, &decided.clusters, &decided.accepted)
+        .map(|moves| (decided.accepted.clone(), moves));
     out.model = model.clone();
     out.search = search;
 }

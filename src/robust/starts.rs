@@ -113,7 +113,16 @@
 //! holds out what it takes ([`recheck`]). An alias the map bent to fit
 //! leaves a map that falls back without it, and the two ends are ranked
 //! by `J` as the starts' are; the update does the same at its end
-//! ([`super::resume`]).
+//! ([`super::resume`]). Where the check names nothing, the end meets the
+//! end without its keystone ([`super::doubt::keystone`]) instead: the
+//! accepted cluster the map rests on most, which a group of aliases that
+//! bent a map with few loops can be. That end replaces the kept one only
+//! where it ranks first, accepts as many candidates, and nothing
+//! questions it (it passes, settled, and names no doubtful cluster, loop
+//! held back or outlying loop): taken out as a whole, a cluster of true
+//! loops at a tension lowers the fit by more than their price, and a
+//! group of aliases that agree with each other fits as a place seen
+//! twice would.
 
 use super::schedule::{misfit_scale, objective};
 use super::search::Restarts;
@@ -148,6 +157,9 @@ pub enum Start {
     /// EM's decisions from the end kept, with the loops it named
     /// `outlying` ([`super::doubt`]) taken out.
     WithoutOutlying,
+    /// EM's decisions from the end kept, with its keystone
+    /// ([`super::doubt::keystone`]) taken out.
+    WithoutKeystone,
 }
 
 /// Where one start ended, as the report shows it.
@@ -173,9 +185,21 @@ pub struct StartEnd {
     /// The truncated start always reaches one: GNC's rounds bound it, and
     /// an end the budget cut short competes with none.
     pub settled: bool,
+    /// Its fit at a price of 0 and of 1 per candidate left out, to rank
+    /// it again on another scale ([`End::rank`]).
+    #[serde(skip)]
+    fit: Option<(f64, f64)>,
 }
 
 impl StartEnd {
+    /// Its objective `J` at the scale `s2` with kernel width `c` (module
+    /// doc), where it has an end.
+    fn rank(&mut self, s2: f64, c: f64) {
+        if let Some((fit, with_one)) = self.fit {
+            self.objective = Some(fit + s2 * c * c * (with_one - fit));
+        }
+    }
+
     /// A start that reached no end.
     fn unsettled(start: Start) -> Self {
         Self {
@@ -186,6 +210,7 @@ impl StartEnd {
             chosen: false,
             iterations: 0,
             settled: false,
+            fit: None,
         }
     }
 }
@@ -196,8 +221,6 @@ struct End<P> {
     weights: Vec<f64>,
     out: Outcome,
     summary: StartEnd,
-    /// Its [`objective`] at a price of 0 and of 1 per candidate left out.
-    fit: (f64, f64),
     /// Its map's misfit scale ([`misfit_scale`]).
     scale: Option<f64>,
 }
@@ -227,15 +250,18 @@ impl<P: Clone> End<P> {
     where
         P: Pose<D>,
     {
+        let fit = (
+            objective(graph, weights, job.candidates, 0.0),
+            objective(graph, weights, job.candidates, 1.0),
+        );
         Self {
             poses: graph.poses.clone(),
             weights: weights.to_vec(),
             out,
-            summary,
-            fit: (
-                objective(graph, weights, job.candidates, 0.0),
-                objective(graph, weights, job.candidates, 1.0),
-            ),
+            summary: StartEnd {
+                fit: Some(fit),
+                ..summary
+            },
             scale: misfit_scale(graph, weights),
         }
     }
@@ -243,8 +269,7 @@ impl<P: Clone> End<P> {
     /// Its objective `J` at the scale `s2` with kernel width `c` (module
     /// doc).
     fn rank(&mut self, s2: f64, c: f64) {
-        let (fit, with_one) = self.fit;
-        self.summary.objective = Some(fit + s2 * c * c * (with_one - fit));
+        self.summary.rank(s2, c);
     }
 
     /// Puts this end's map and weights back in the session's graph and
@@ -312,6 +337,7 @@ fn summary<P: Pose<D>, const D: usize>(
         chosen: false,
         iterations: 0,
         settled: true,
+        fit: None,
     };
     (end, test.map(|t| t.alpha))
 }
@@ -449,8 +475,11 @@ fn best_of<P: Clone>(ends: &mut [End<P>], c: f64) -> usize {
 /// another basin (docs/method.md §7); without it the map can fall back,
 /// and the aliases that fitted the bent map no longer fit. Leaving out a
 /// true loop within the true loops' reach lowers the fit by less than
-/// `J`'s price for it, and the end with it stays. Returns the outcome of
-/// the end kept, its doubts found.
+/// `J`'s price for it, and the end with it stays. Where the check names
+/// none, the same without the end's keystone, once per end kept, whose
+/// end must also accept as many candidates and be questioned by nothing
+/// to win (module doc). Returns the outcome of the end kept, its doubts
+/// found.
 pub fn recheck<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -458,20 +487,28 @@ pub fn recheck<P: ChordalInit<D>, const D: usize>(
     mut kept: Outcome,
 ) -> Result<Outcome, SolveError> {
     let mut tried: Vec<Vec<bool>> = Vec::new();
-    while job.layers.recheck && !kept.outlying.is_empty() && !session.exhausted() {
-        let named: Vec<usize> = kept.outlying.iter().flat_map(|o| o.loops.clone()).collect();
+    while let Some((which, named)) = to_recheck(job, &kept) {
+        if session.exhausted() {
+            break;
+        }
         let mut starts = std::mem::take(&mut kept.starts);
         let start = (starts.iter().find(|s| s.chosen)).map_or(Start::Annealed, |s| s.start);
         let (summary, _) = summary(session.graph, weights, job, start);
         let mut before = End::keep(session.graph, weights, job, (summary, kept));
         tried.push(held(&before.weights));
-        let mut after = without(session, weights, job, &named)?;
+        let mut after = without(session, weights, job, (which, &named))?;
+        if which == Start::WithoutKeystone {
+            // Its own checks, at its map (still in the session).
+            super::doubts(session, weights, job, &mut after.out);
+        }
         let s2 = (before.scale.into_iter().chain(after.scale))
             .reduce(f64::min)
             .unwrap_or(1.0);
         before.rank(s2, job.c);
         after.rank(s2, job.c);
-        // The end kept is listed, at the objective it was compared by.
+        // Every end listed is ranked on the scale the two are compared
+        // by, the end kept at the objective it was compared by.
+        starts.iter_mut().for_each(|s| s.rank(s2, job.c));
         match starts.iter_mut().find(|s| s.chosen) {
             Some(s) => s.objective = before.summary.objective,
             None => starts.push(StartEnd {
@@ -480,7 +517,15 @@ pub fn recheck<P: ChordalInit<D>, const D: usize>(
             }),
         }
         let accepted = held(&after.weights);
-        let wins = !after.out.cut_short && !tried.contains(&accepted) && after.better_than(&before);
+        // The end without a keystone answers whether it kept other loops
+        // out: it must put back as many as it takes out, and nothing may
+        // question it (module doc).
+        let answers = which != Start::WithoutKeystone
+            || after.summary.accepted >= before.summary.accepted && unquestioned(&after);
+        let wins = !after.out.cut_short
+            && !tried.contains(&accepted)
+            && answers
+            && after.better_than(&before);
         tried.push(accepted);
         let (win, lose) = if wins {
             starts.iter_mut().for_each(|s| s.chosen = false);
@@ -503,15 +548,43 @@ pub fn recheck<P: ChordalInit<D>, const D: usize>(
     Ok(kept)
 }
 
+/// Whether an end passes its χ² test with decisions that settled, and its
+/// checks name no doubtful cluster, no loop held back and no outlying one
+/// ([`super::doubt`]): a map nothing questions.
+fn unquestioned<P>(end: &End<P>) -> bool {
+    let out = &end.out;
+    end.summary.passed == Some(true)
+        && !out.unsettled
+        && !out.reasons.contains(&Reason::Unsettled)
+        && out.doubtful.is_empty()
+        && out.held_back.is_empty()
+        && out.outlying.is_empty()
+}
+
+/// What the end kept is tried without, if anything: the loops its
+/// outlying check named, else its keystone (module doc), each where its
+/// layer is on.
+fn to_recheck<P: Pose<D>, const D: usize>(
+    job: &Job<'_, P, D>,
+    kept: &Outcome,
+) -> Option<(Start, Vec<usize>)> {
+    if job.layers.recheck && !kept.outlying.is_empty() {
+        let named = kept.outlying.iter().flat_map(|o| o.loops.clone()).collect();
+        return Some((Start::WithoutOutlying, named));
+    }
+    let keystone = kept.keystone.clone().filter(|_| job.layers.keystone)?;
+    Some((Start::WithoutKeystone, keystone))
+}
+
 /// The end of EM's decisions from the map in the session's graph solved
 /// without the candidates `named`, which they hold out as the χ² search
-/// holds out what it takes (a prior of 0); those that end rejected are
-/// `outlying`.
+/// holds out what it takes (a prior of 0), as the start `which`; those
+/// named by the outlying check that end rejected are `outlying`.
 fn without<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
     job: &Job<'_, P, D>,
-    named: &[usize],
+    (which, named): (Start, &[usize]),
 ) -> Result<End<P>, SolveError> {
     let iterations = session.iterations();
     let mut judged = job.candidates.to_vec();
@@ -528,12 +601,12 @@ fn without<P: ChordalInit<D>, const D: usize>(
     let restarts = &mut Restarts::default();
     let how = (job.chordal, Swing::Continue);
     settle(session, weights, (&holding, restarts), how, &mut out)?;
-    for &k in named {
+    for &k in named.iter().filter(|_| which == Start::WithoutOutlying) {
         if weights[job.candidates[k].edge] < 0.5 {
             out.reasons[k] = Reason::Outlying;
         }
     }
-    let mut end = End::take(session.graph, weights, job, (Start::WithoutOutlying, out));
+    let mut end = End::take(session.graph, weights, job, (which, out));
     end.summary.iterations = session.iterations() - iterations;
     Ok(end)
 }

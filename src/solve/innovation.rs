@@ -50,10 +50,11 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         Ok(block)
     }
 
-    /// `−H⁻¹·g` for `g` by variable block (replaced in place), `H` the
-    /// normal matrix of the last [`Self::factor_at`].
-    pub(crate) fn solve_factored(&mut self, g: &mut [f64]) {
-        self.system.solve_many(g, 1);
+    /// `−H⁻¹·g` for `k` gradients `g`, one after the other and each by
+    /// variable block (replaced in place), `H` the normal matrix of the
+    /// last [`Self::factor_at`]: one pass over the factor for all.
+    pub(crate) fn solve_factored(&mut self, g: &mut [f64], k: usize) {
+        self.system.solve_many(g, k);
     }
 
     /// The Gauss–Newton step `δ = −H⁻¹·b` left at the poses of the last
