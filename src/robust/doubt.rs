@@ -420,51 +420,34 @@ pub fn keystone<P: Pose<D>, const D: usize>(
     }
     let reach = KEYSTONE_MOVE * size;
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
-    let within = |(q, spread): (f64, f64)| (q * spread).sqrt() > reach;
-    let mut bounded: Vec<(f64, Vec<usize>)> = match known {
-        Some(known) => (known.clusters.iter())
-            .filter(|(_, q)| within((*q, known.spread)))
-            .map(|(loops, q)| (*q, loops.clone()))
-            .collect(),
-        None => Vec::new(),
-    };
-    log::debug!(
-        "keystone: {} clusters may move the map by over {:.0} % ({})",
-        bounded.len(),
-        100.0 * KEYSTONE_MOVE,
-        if known.is_some() {
-            "known"
-        } else {
-            "not known"
+    // The clusters to solve for, and the evaluation that solves them.
+    let (tried, mut eval) = match known {
+        Some(known) => {
+            let tried = largest_first(known.clusters.clone(), known.spread, reach);
+            if tried.is_empty() {
+                return Ok(None);
+            }
+            let eval =
+                Evaluation::for_clusters(session.optimizer, graph, weights, (&edges, &tried))?;
+            (tried, eval)
         }
-    );
-    if known.is_some() && bounded.is_empty() {
-        return Ok(None);
-    }
-    let groups = match known {
-        Some(_) => {
-            bounded.sort_by(|a, b| b.0.total_cmp(&a.0));
-            bounded.truncate(KEYSTONE_CANDIDATES);
-            bounded.iter().map(|(_, loops)| loops.clone()).collect()
+        None => {
+            let groups = of_clusters(graph, &edges, accepted, layers.clusters);
+            let eval =
+                Evaluation::for_clusters(session.optimizer, graph, weights, (&edges, &groups))?;
+            let sized = (groups.into_iter())
+                .filter_map(|loops| Some((eval.removing(&edges, &loops)?.1, loops)))
+                .map(|(q, loops)| (loops, q))
+                .collect();
+            let spread = eval.largest_marginal().unwrap_or(f64::INFINITY);
+            (largest_first(sized, spread, reach), eval)
         }
-        None => of_clusters(graph, &edges, accepted, layers.clusters),
     };
-    let mut eval = Evaluation::for_clusters(session.optimizer, graph, weights, (&edges, &groups))?;
-    if known.is_none() {
-        let spread = eval.largest_marginal().unwrap_or(f64::INFINITY);
-        bounded = (groups.into_iter())
-            .filter_map(|loops| Some((eval.removing(&edges, &loops)?.1, loops)))
-            .filter(|(q, _)| within((*q, spread)))
-            .collect();
-        bounded.sort_by(|a, b| b.0.total_cmp(&a.0));
-        bounded.truncate(KEYSTONE_CANDIDATES);
-    }
-    let (groups, gradients): (Vec<Vec<usize>>, Vec<Vec<f64>>) = (bounded.into_iter())
-        .filter_map(|(_, loops)| Some((eval.removing(&edges, &loops)?.0, loops)))
-        .map(|(g, loops)| (loops, g))
+    let (tried, gradients): (Vec<Vec<usize>>, Vec<Vec<f64>>) = (tried.into_iter())
+        .filter_map(|loops| Some((loops.clone(), eval.removing(&edges, &loops)?.0)))
         .unzip();
     let moves = eval.largest_moves(&gradients);
-    let best = (groups.into_iter().zip(moves))
+    let best = (tried.into_iter().zip(moves))
         .filter(|(_, m)| *m > reach)
         .max_by(|a, b| a.1.total_cmp(&b.1));
     if let Some((loops, m)) = &best {
@@ -474,6 +457,16 @@ pub fn keystone<P: Pose<D>, const D: usize>(
         );
     }
     Ok(best.map(|(loops, _)| loops))
+}
+
+/// Of clusters with the squared sizes `q` of their moves in the map's
+/// metric, those whose bound `√(q·spread)` exceeds `reach`, the
+/// [`KEYSTONE_CANDIDATES`] of the largest `q` first.
+fn largest_first(mut sized: Vec<(Vec<usize>, f64)>, spread: f64, reach: f64) -> Vec<Vec<usize>> {
+    sized.retain(|(_, q)| (q * spread).sqrt() > reach);
+    sized.sort_by(|a, b| b.1.total_cmp(&a.1));
+    sized.truncate(KEYSTONE_CANDIDATES);
+    sized.into_iter().map(|(loops, _)| loops).collect()
 }
 
 /// The candidates `marked` grouped by their clusters among the candidates

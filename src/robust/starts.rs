@@ -487,10 +487,7 @@ pub fn recheck<P: ChordalInit<D>, const D: usize>(
     mut kept: Outcome,
 ) -> Result<Outcome, SolveError> {
     let mut tried: Vec<Vec<bool>> = Vec::new();
-    while let Some((which, named)) = to_recheck(job, &kept) {
-        if session.exhausted() {
-            break;
-        }
+    while let Some((which, named)) = to_recheck(job, &kept).filter(|_| !session.exhausted()) {
         let mut starts = std::mem::take(&mut kept.starts);
         let start = (starts.iter().find(|s| s.chosen)).map_or(Start::Annealed, |s| s.start);
         let (summary, _) = summary(session.graph, weights, job, start);
@@ -551,10 +548,9 @@ pub fn recheck<P: ChordalInit<D>, const D: usize>(
 /// Whether an end passes its χ² test with decisions that settled, and its
 /// checks name no doubtful cluster, no loop held back and no outlying one
 /// ([`super::doubt`]): a map nothing questions.
-fn unquestioned<P>(end: &End<P>) -> bool {
+fn unquestioned<P: Clone>(end: &End<P>) -> bool {
     let out = &end.out;
-    end.summary.passed == Some(true)
-        && !out.unsettled
+    !end.leaves_open()
         && !out.reasons.contains(&Reason::Unsettled)
         && out.doubtful.is_empty()
         && out.held_back.is_empty()
