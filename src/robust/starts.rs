@@ -122,7 +122,12 @@
 //! held back or outlying loop): taken out as a whole, a cluster of true
 //! loops at a tension lowers the fit by more than their price, and a
 //! group of aliases that agree with each other fits as a place seen
-//! twice would.
+//! twice would. EM's decisions from the map without the keystone start
+//! where the keystone bent it, and the true loops it pushed out need not
+//! come back from there; so the annealed start runs again too, on the
+//! chordal relaxation without the keystone ([`annealed_without`]), and
+//! the better of the two ends that meets those conditions is the one
+//! that competes.
 
 use super::schedule::{misfit_scale, objective};
 use super::search::Restarts;
@@ -160,6 +165,9 @@ pub enum Start {
     /// EM's decisions from the end kept, with its keystone
     /// ([`super::doubt::keystone`]) taken out.
     WithoutKeystone,
+    /// The annealed start again from the caller's poses, with the end
+    /// kept's keystone taken out.
+    AnnealedWithoutKeystone,
 }
 
 /// Where one start ended, as the report shows it.
@@ -476,10 +484,11 @@ fn best_of<P: Clone>(ends: &mut [End<P>], c: f64) -> usize {
 /// and the aliases that fitted the bent map no longer fit. Leaving out a
 /// true loop within the true loops' reach lowers the fit by less than
 /// `J`'s price for it, and the end with it stays. Where the check names
-/// none, the same without the end's keystone, once per end kept, whose
-/// end must also accept as many candidates and be questioned by nothing
-/// to win (module doc). Returns the outcome of the end kept, its doubts
-/// found.
+/// none, the same without the end's keystone, once per end kept, and the
+/// annealed start again without it ([`trials_without`]); the better of
+/// those two ends that also accepts as many candidates and is questioned
+/// by nothing wins where it ranks first (module doc). Returns the outcome
+/// of the end kept, its doubts found.
 pub fn recheck<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -493,56 +502,89 @@ pub fn recheck<P: ChordalInit<D>, const D: usize>(
         let (summary, _) = summary(session.graph, weights, job, start);
         let mut before = End::keep(session.graph, weights, job, (summary, kept));
         tried.push(held(&before.weights));
-        let mut after = without(session, weights, job, (which, &named))?;
-        if which == Start::WithoutKeystone {
-            // Its own checks, at its map (still in the session).
-            super::doubts(session, weights, job, &mut after.out);
-        }
-        let s2 = (before.scale.into_iter().chain(after.scale))
+        let mut trials = trials_without(session, weights, job, (which, &named))?;
+        let s2 = (before.scale.into_iter())
+            .chain(trials.iter().filter_map(|t| t.scale))
             .reduce(f64::min)
             .unwrap_or(1.0);
         before.rank(s2, job.c);
-        after.rank(s2, job.c);
-        // Every end listed is ranked on the scale the two are compared
+        trials.iter_mut().for_each(|t| t.rank(s2, job.c));
+        // Every end listed is ranked on the scale the ends are compared
         // by, the end kept at the objective it was compared by.
         starts.iter_mut().for_each(|s| s.rank(s2, job.c));
         match starts.iter_mut().find(|s| s.chosen) {
-            Some(s) => s.objective = before.summary.objective,
+            Some(s) => {
+                s.objective = before.summary.objective;
+                s.fit = before.summary.fit;
+            }
             None => starts.push(StartEnd {
                 chosen: true,
                 ..before.summary.clone()
             }),
         }
-        let accepted = held(&after.weights);
         // The end without a keystone answers whether it kept other loops
         // out: it must put back as many as it takes out, and nothing may
         // question it (module doc).
-        let answers = which != Start::WithoutKeystone
-            || after.summary.accepted >= before.summary.accepted && unquestioned(&after);
-        let wins = !after.out.cut_short
-            && !tried.contains(&accepted)
-            && answers
-            && after.better_than(&before);
-        tried.push(accepted);
-        let (win, lose) = if wins {
-            starts.iter_mut().for_each(|s| s.chosen = false);
-            after.summary.chosen = true;
-            starts.push(after.summary.clone());
-            (after, before)
-        } else {
-            before.restore(session, weights, true)?;
-            starts.push(after.summary.clone());
-            (before, after)
+        let answers = |t: &End<P>| {
+            !t.out.cut_short
+                && !tried.contains(&held(&t.weights))
+                && (which != Start::WithoutKeystone
+                    || t.summary.accepted >= before.summary.accepted && unquestioned(t))
         };
-        kept = win.out;
-        add_work(&mut kept, &lose.out);
-        kept.starts = starts;
-        if !wins {
+        let win = (0..trials.len())
+            .filter(|&k| answers(&trials[k]) && trials[k].better_than(&before))
+            .reduce(|a, b| {
+                if trials[b].better_than(&trials[a]) {
+                    b
+                } else {
+                    a
+                }
+            });
+        tried.extend(trials.iter().map(|t| held(&t.weights)));
+        let listed = starts.len();
+        starts.extend(trials.iter().map(|t| t.summary.clone()));
+        let ran_last = trials.len() - 1;
+        let Some(w) = win else {
+            before.restore(session, weights, true)?;
+            kept = before.out;
+            trials.iter().for_each(|t| add_work(&mut kept, &t.out));
+            kept.starts = starts;
             break;
-        }
+        };
+        starts.iter_mut().for_each(|s| s.chosen = false);
+        starts[listed + w].chosen = true;
+        let after = trials.remove(w);
+        after.restore(session, weights, w != ran_last)?;
+        kept = after.out;
+        add_work(&mut kept, &before.out);
+        trials.iter().for_each(|t| add_work(&mut kept, &t.out));
+        kept.starts = starts;
         super::doubts(session, weights, job, &mut kept);
     }
     Ok(kept)
+}
+
+/// The ends that meet the end kept in [`recheck`]: EM's decisions from its
+/// map without the candidates `named` ([`without`]); where they are its
+/// keystone, also the annealed start again without them
+/// ([`annealed_without`]), each with its own checks at its map.
+fn trials_without<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    job: &Job<'_, P, D>,
+    (which, named): (Start, &[usize]),
+) -> Result<Vec<End<P>>, SolveError> {
+    let mut trials = vec![without(session, weights, job, (which, named))?];
+    if which != Start::WithoutKeystone {
+        return Ok(trials);
+    }
+    super::doubts(session, weights, job, &mut trials[0].out);
+    if !session.exhausted() {
+        let mut fresh = annealed_without(session, weights, job, named)?;
+        super::doubts(session, weights, job, &mut fresh.out);
+        trials.push(fresh);
+    }
+    Ok(trials)
 }
 
 /// Whether an end passes its χ² test with decisions that settled, and its
@@ -603,6 +645,41 @@ fn without<P: ChordalInit<D>, const D: usize>(
         }
     }
     let mut end = End::take(session.graph, weights, job, (which, out));
+    end.summary.iterations = session.iterations() - iterations;
+    Ok(end)
+}
+
+/// EM's annealed start again, on the chordal relaxation, with the
+/// candidates `named` held out as [`without`] holds them out. The
+/// relaxation reads no pose, so an update's end meets the same trial as
+/// the batch job's.
+fn annealed_without<P: ChordalInit<D>, const D: usize>(
+    session: &mut Session<'_, P, D>,
+    weights: &mut [f64],
+    job: &Job<'_, P, D>,
+    named: &[usize],
+) -> Result<End<P>, SolveError> {
+    let iterations = session.iterations();
+    let mut judged = job.candidates.to_vec();
+    for c in job.candidates {
+        weights[c.edge] = if c.kept { 1.0 } else { 0.0 };
+    }
+    for &k in named {
+        weights[job.candidates[k].edge] = 0.0;
+        judged[k].count_posterior = Some(0.0);
+    }
+    let holding = Job {
+        candidates: &judged,
+        chordal: true,
+        ..*job
+    };
+    let out = annealed_start(session, weights, (&holding, &mut Restarts::default()))?;
+    let mut end = End::take(
+        session.graph,
+        weights,
+        job,
+        (Start::AnnealedWithoutKeystone, out),
+    );
     end.summary.iterations = session.iterations() - iterations;
     Ok(end)
 }
