@@ -522,35 +522,36 @@ fn an_update_with_a_posterior_near_half_runs_the_whole_job() {
 /// --ignored`. Prints every replay with a whole job or a mismatch, at each
 /// mismatch the true loops the update and the batch job reject and the
 /// wrong ones they accept, and the totals of those over every step. Fails
-/// if more than the one known replay mismatches (grid seed 48, groups of
-/// 5, at 160 poses: the update keeps four true loops the gate drops, the
-/// batch job rejects them; before the whole job at a posterior near ½, 6
-/// did, each at another of EM's fixed points than the batch job's
-/// annealing; docs/method.md §7b), if any step accepts an alias, or if the
-/// true loops rejected over every step grow (263 by the updates and 267 by
-/// the batch jobs; 302 and 306 while the gate drew a crossing through
-/// counts whose two components lowered BIC by less than 2).
+/// if any replay mismatches (the last, grid seed 48 with groups of 5,
+/// kept four true loops its gate came to drop until such an update ran
+/// the whole job: [`an_update_whose_gate_drops_an_accepted_loop_runs_the_whole_job`];
+/// before the whole job at a posterior near ½, 6 did, each at another of
+/// EM's fixed points than the batch job's annealing; docs/method.md §7b),
+/// if any step accepts an alias, or if the true loops rejected over every
+/// step grow (267 by the updates and by the batch jobs; 302 and 306 while
+/// the gate drew a crossing through counts whose two components lowered
+/// BIC by less than 2).
 #[test]
 #[ignore]
 fn wider_aliased_replays() {
     let (mismatching, totals) = aliased_replays(1..=48, 20);
     let [(ut, uw), (bt, bw)] = totals;
-    assert!(mismatching.len() <= 1, "{mismatching:?}");
+    assert!(mismatching.is_empty(), "{mismatching:?}");
     assert_eq!((uw, bw), (0, 0), "aliases accepted");
-    assert!(ut <= 263 && bt <= 267, "{totals:?}");
+    assert!(ut <= 267 && bt <= 267, "{totals:?}");
 }
 
 /// The same replays on seeds no rule of the update was found on (49–72)
 /// and at another interval (every 13 poses): 96 replays, about a minute
-/// in release. 3 differ from the batch job at 1–4 updates each (8 before
-/// the whole job at a posterior near ½, 5 before the χ² search gave back
-/// what the map without the aliases accepts and a cycle was halved
-/// again): in one the update keeps true loops the batch job rejects
-/// (13–14 on a young grid), and in two it rejects a true loop the batch
-/// job keeps (grid seed 71, both group sizes; docs/method.md §7b). A
-/// fourth, grid seed 56, differed by
+/// in release. 2 differ from the batch job at 2–3 updates each (3 before
+/// an update whose gate drops an accepted loop ran the whole job, 8
+/// before the whole job at a posterior near ½, 5 before the χ² search
+/// gave back what the map without the aliases accepts and a cycle was
+/// halved again): the update rejects a true loop the batch job keeps (grid
+/// seed 71, both group sizes; docs/method.md §7b). Another, grid seed
+/// 56, differed by
 /// 1.2·10⁻⁶ in a check of the rotations that read SE(2)'s `y` with `θ`:
-/// its rotations agree. Over every step the updates reject 171 true
+/// its rotations agree. Over every step the updates reject 199 true
 /// loops and the batch jobs 193 (211 and 264 with a gate on chance splits
 /// of the counts), and both accept 10 aliases. Fails if more
 /// replays differ, or if the true loops rejected or the aliases accepted
@@ -560,9 +561,9 @@ fn wider_aliased_replays() {
 fn unseen_aliased_replays() {
     let (mismatching, totals) = aliased_replays(49..=72, 13);
     let [(ut, uw), (bt, bw)] = totals;
-    assert!(mismatching.len() <= 3, "{mismatching:?}");
+    assert!(mismatching.len() <= 2, "{mismatching:?}");
     assert!(uw <= 10 && bw <= 10, "aliases accepted: {totals:?}");
-    assert!(ut <= 171 && bt <= 193, "{totals:?}");
+    assert!(ut <= 199 && bt <= 193, "{totals:?}");
 }
 
 /// One replay of [`aliased_replays`]: the world, the seed, the group size.
@@ -694,4 +695,22 @@ fn a_cycle_one_half_step_leaves_is_halved_again() {
     assert_eq!(errors(&b, &wrong), (0, 0));
     assert!(b.report().chi2_test.as_ref().unwrap().passed);
     assert_eq!(b.status(), pgo::MapStatus::Ok, "{:?}", b.report().warnings);
+}
+
+/// An update whose gate drops a loop the last update accepted runs the
+/// whole job. A grid's first 160 poses (40 aliases placed anywhere in
+/// groups of 5, seed 48), updated every 20: until 140 poses the counts
+/// show one component and the gate keeps every candidate; at 160 it finds
+/// two and drops four true loops the updates had accepted (counts 39–77,
+/// below `T_GV` 99.7). The batch job decides them from their counts' low
+/// priors and rejects them; EM's decisions from the last ones kept them
+/// at a posterior near 1, and that update was not the batch job's.
+#[test]
+fn an_update_whose_gate_drops_an_accepted_loop_runs_the_whole_job() {
+    let AnySimulation::Planar(sim) = aliased_anywhere(World::Grid2d, 48, 5) else {
+        panic!("a grid is planar");
+    };
+    let steps = every_poses(&sim, 20, 160);
+    assert!(mismatched(&steps).is_empty(), "{steps:#?}");
+    assert_eq!(whole_jobs(&steps, "the gate drops"), [160], "{steps:#?}");
 }
