@@ -342,7 +342,7 @@ pub trait G2oPose<const D: usize>: Pose<D> {
     fn write_numbers(&self, out: &mut String) {
         push_numbers(out, &self.numbers());
     }
-    /// Wraps the graph into [`AnyPoseGraph`].
+    /// Wraps the graph into [`AnyGraph`].
     fn wrap(graph: Graph<Self, D>) -> AnyGraph;
 }
 
