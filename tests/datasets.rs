@@ -1486,6 +1486,33 @@ fn a_keystone_alias_is_tried_out_from_the_start() {
     assert_eq!(r.status(), MapStatus::Ok);
 }
 
+/// An end its checks question is not annealed again without its
+/// keystone: MIT with 30 aliases in groups of 5 at revisited places,
+/// information calibrated, fresh seed 40. The annealed end holds 5
+/// aliases, which the doubtful check names (exit 5); EM's decisions from
+/// the map without its keystone end above its `J`. The annealed start
+/// again without it ended with 10 aliases at a lower `J`, questioned by
+/// nothing (exit 0).
+#[test]
+fn a_questioned_end_is_not_annealed_again_without_its_keystone() {
+    let revisited = revisited_in_fives();
+    let Some((r, wrong)) = corrupted_and_decided("MIT.g2o", &revisited, 1_000_041, Some(1.0))
+    else {
+        return;
+    };
+    let starts = &r.robust.starts;
+    let annealed_again = |s: &&StartEnd| s.start == Start::AnnealedWithoutKeystone;
+    assert_eq!(
+        starts.iter().filter(annealed_again).count(),
+        0,
+        "{starts:?}"
+    );
+    assert!(!r.robust.doubtful.is_empty());
+    assert_eq!(r.status(), MapStatus::Questioned);
+    let aliases_in = (r.loops.iter().zip(&wrong)).filter(|(l, w)| **w && l.accepted);
+    assert_eq!(aliases_in.count(), 5);
+}
+
 /// The map above replayed by a front end, an update every 10 poses: the
 /// young map's updates keep true loops the batch jobs of the same graph
 /// leave out (docs/method.md §7b), at 10 of the 81 updates (14 before the
