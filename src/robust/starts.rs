@@ -165,7 +165,7 @@ pub enum Start {
     /// EM's decisions from the end kept, with its keystone
     /// ([`super::doubt::keystone`]) taken out.
     WithoutKeystone,
-    /// The annealed start again from the caller's poses, with the end
+    /// The annealed start again, on the chordal relaxation, with the end
     /// kept's keystone taken out.
     AnnealedWithoutKeystone,
 }
@@ -632,11 +632,7 @@ fn without<P: ChordalInit<D>, const D: usize>(
     (which, named): (Start, &[usize]),
 ) -> Result<End<P>, SolveError> {
     let iterations = session.iterations();
-    let mut judged = job.candidates.to_vec();
-    for &k in named {
-        weights[job.candidates[k].edge] = 0.0;
-        judged[k].count_posterior = Some(0.0);
-    }
+    let judged = held_out(job.candidates, weights, named);
     session.converge(weights)?;
     let holding = Job {
         candidates: &judged,
@@ -656,6 +652,17 @@ fn without<P: ChordalInit<D>, const D: usize>(
     Ok(end)
 }
 
+/// `candidates` with those `named` held out, as the χ² search holds out
+/// what it takes: each at weight 0 in `weights` and a prior of 0.
+fn held_out(candidates: &[Candidate], weights: &mut [f64], named: &[usize]) -> Vec<Candidate> {
+    let mut judged = candidates.to_vec();
+    for &k in named {
+        weights[candidates[k].edge] = 0.0;
+        judged[k].count_posterior = Some(0.0);
+    }
+    judged
+}
+
 /// EM's annealed start again, on the chordal relaxation, with the
 /// candidates `named` held out as [`without`] holds them out. The
 /// relaxation reads no pose, so an update's end meets the same trial as
@@ -667,14 +674,11 @@ fn annealed_without<P: ChordalInit<D>, const D: usize>(
     named: &[usize],
 ) -> Result<End<P>, SolveError> {
     let iterations = session.iterations();
-    let mut judged = job.candidates.to_vec();
+    // The annealed start's first weights: every candidate the gate kept.
     for c in job.candidates {
         weights[c.edge] = if c.kept { 1.0 } else { 0.0 };
     }
-    for &k in named {
-        weights[job.candidates[k].edge] = 0.0;
-        judged[k].count_posterior = Some(0.0);
-    }
+    let judged = held_out(job.candidates, weights, named);
     let holding = Job {
         candidates: &judged,
         chordal: true,
