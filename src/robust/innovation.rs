@@ -49,7 +49,7 @@ use faer::linalg::triangular_solve::{
     solve_lower_triangular_in_place, solve_upper_triangular_in_place,
 };
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 /// The time of the selected inverse in multiply–adds of the sparse group
 /// solves, per multiply–add of a numeric factorisation. Takahashi's
@@ -124,7 +124,7 @@ pub struct Evaluation<'a, P: Pose<D>, const D: usize> {
     step: Vec<f64>,
     /// The selected inverse, unless every cluster is solved for
     /// ([`Evaluation::for_clusters`]).
-    inverse: Option<SelectedInverse>,
+    inverse: Option<Arc<SelectedInverse>>,
     /// Scratch of the sparse solves, one per thread at work.
     scratch: Mutex<Vec<GroupScratch>>,
     /// Whether a cluster's members are also judged against the map with
@@ -142,7 +142,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         weights: &[f64],
     ) -> Result<Self, SolveError> {
         let mut eval = Self::factored(optimizer, graph, weights)?;
-        eval.inverse = Some(eval.optimizer.system().selected_inverse());
+        eval.inverse = Some(eval.optimizer.selected_inverse());
         Ok(eval)
     }
 
@@ -193,7 +193,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         // A factorisation's multiply–adds: half its floating-point operations.
         let inverse_cost = SELECTED_INVERSE_COST * system.factor_stats().1 / 2.0;
         if solves as f64 >= inverse_cost {
-            eval.inverse = Some(system.selected_inverse());
+            eval.inverse = Some(eval.optimizer.selected_inverse());
         }
         Ok(eval)
     }

@@ -9,16 +9,18 @@ use super::{Optimizer, SolveError};
 use crate::geometry::Pose;
 use crate::graph::Graph;
 use crate::linear::LinearError;
-#[cfg(test)]
 use crate::linear::SelectedInverse;
 #[cfg(test)]
 use nalgebra::SMatrix;
+use std::sync::Arc;
 
 impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// Factorises the undamped normal matrix of the edges of non-zero
     /// `weights` at the graph's poses (for the innovations and covariances
     /// read from the system then); returns each vertex's block (`None` for
-    /// a vertex held fixed).
+    /// a vertex held fixed). Where the system still holds the factorisation
+    /// of the same poses, weights and gauge (nothing has linearised or
+    /// factorised since), it is kept, not made again: the same bits.
     pub(crate) fn factor_at(
         &mut self,
         graph: &Graph<P, D>,
@@ -31,23 +33,55 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             });
         }
         self.match_threads()?;
-        self.update_pattern(graph, Some(weights))?;
-        self.factorized = true;
-        self.linearize(graph, Some(weights));
-        match self.system.factorize(0.0) {
-            Ok(()) => {}
-            Err(LinearError::NotPositiveDefinite { block }) => {
-                return Err(SolveError::NotPositiveDefinite {
-                    vertex: graph.id(self.vertex_of[block]),
-                });
+        let at = FactoredAt {
+            poses: graph.poses.clone(),
+            weights: weights.to_vec(),
+            gauge: graph.gauge(),
+        };
+        if self.factored_at.as_ref() != Some(&at) {
+            self.update_pattern(graph, Some(weights))?;
+            self.factorized = true;
+            self.linearize(graph, Some(weights));
+            match self.system.factorize(0.0) {
+                Ok(()) => {}
+                Err(LinearError::NotPositiveDefinite { block }) => {
+                    return Err(SolveError::NotPositiveDefinite {
+                        vertex: graph.id(self.vertex_of[block]),
+                    });
+                }
+                Err(e) => return Err(e.into()),
             }
-            Err(e) => return Err(e.into()),
+            self.factored_at = Some(at);
         }
         let mut block = vec![None; graph.num_vertices()];
         for (b, &v) in self.vertex_of.iter().enumerate() {
             block[v] = Some(b);
         }
         Ok(block)
+    }
+
+    /// The selected inverse of the last [`Self::factor_at`]'s factorisation,
+    /// taken once for every evaluation of the same map.
+    pub(crate) fn selected_inverse(&mut self) -> Arc<SelectedInverse> {
+        if let Some(inverse) = self
+            .selected
+            .as_ref()
+            .filter(|_| self.factored_at.is_some())
+        {
+            return Arc::clone(inverse);
+        }
+        let inverse = Arc::new(self.system.selected_inverse());
+        if self.factored_at.is_some() {
+            self.selected = Some(Arc::clone(&inverse));
+        }
+        inverse
+    }
+
+    /// Forgets the undamped factorisation [`Self::factor_at`] left (the
+    /// system is about to change).
+    pub(super) fn forget_factored(&mut self) {
+        self.factored_at = None;
+        self.selected = None;
     }
 
     /// `−H⁻¹·g` for `k` gradients `g`, one after the other and each by
@@ -68,6 +102,15 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         self.system.solve(&mut step);
         step
     }
+}
+
+/// What an undamped factorisation was made at ([`Optimizer::factor_at`]):
+/// another call with the same finds it in the system as it is.
+#[derive(PartialEq)]
+pub(super) struct FactoredAt<P> {
+    poses: Vec<P>,
+    weights: Vec<f64>,
+    gauge: Vec<usize>,
 }
 
 #[cfg(test)]

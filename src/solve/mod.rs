@@ -26,8 +26,9 @@ mod tests;
 
 use crate::geometry::Pose;
 use crate::graph::{Graph, VertexId};
-use crate::linear::{BlockSystem, LinearError, Parallelism};
+use crate::linear::{BlockSystem, LinearError, Parallelism, SelectedInverse};
 use chord::Chord;
+use innovation::FactoredAt;
 use lm::Damping;
 use normal::EdgeTerms;
 use remaining::Remaining;
@@ -37,6 +38,7 @@ pub use pattern::Ordering;
 pub use progress::{Cancel, Cancellable, Observer};
 use serde::Serialize;
 pub(crate) use session::{Budget, PhaseTimes, Session};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// The nonlinear least-squares method.
@@ -384,6 +386,13 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     /// Whether the optimiser has factorised since it was made (see
     /// [`Self::update_pattern`]).
     factorized: bool,
+    /// The poses, weights and gauge of the undamped factorisation
+    /// ([`Self::factor_at`]) the system holds, while nothing has changed
+    /// it since: the checks after the decisions factorise the map the
+    /// decisions' last evaluation factorised.
+    factored_at: Option<FactoredAt<P>>,
+    /// The selected inverse of that factorisation, once taken.
+    selected: Option<Arc<SelectedInverse>>,
     /// Values of the largest factor among the patterns built so far.
     max_nnz_factor: usize,
     options: SolveSettings,
@@ -495,6 +504,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let mut optimizer = Self {
             max_nnz_factor: 0,
             factorized: false,
+            factored_at: None,
+            selected: None,
             system: BlockSystem::new(0, &[], parallelism.clone())?,
             ordering,
             in_pattern,
@@ -520,6 +531,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// Hands over what a later optimiser of this graph grown can reuse
     /// ([`Optimizer::reuse_spare`]).
     pub fn take_spare(&mut self) -> Spare<P, D> {
+        self.forget_factored();
         Spare {
             factor: self.system.take_factor_allocation(),
             measurements: std::mem::take(&mut self.measurements),
@@ -531,6 +543,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// had the same first edges ([`Optimizer::take_spare`]), before the
     /// first linearisation or evaluation.
     pub fn reuse_spare(&mut self, spare: Spare<P, D>) {
+        self.forget_factored();
         self.system.reuse_factor_allocation(spare.factor);
         self.measurements = spare.measurements;
         self.prepared = spare.prepared;
@@ -566,6 +579,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// The linear system, e.g. to factorise and solve it in a benchmark.
     #[cfg(any(test, feature = "internals"))]
     pub fn system_mut(&mut self) -> &mut BlockSystem<D> {
+        self.forget_factored();
         &mut self.system
     }
 

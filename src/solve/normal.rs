@@ -77,6 +77,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
 
     /// [`Self::linearize`] where the parallel work belongs.
     fn assemble(&mut self, graph: &Graph<P, D>, weights: Option<&[f64]>) -> f64 {
+        self.forget_factored();
         self.system.clear();
         let parallel = self.parallelism.is_parallel();
         if prepare(&graph.poses, &mut self.prepared, parallel) {
@@ -170,6 +171,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         progress: &mut Progress,
     ) -> Result<Solved, SolveError> {
         progress.summary.factorizations += 1;
+        self.forget_factored();
         let factorized = self.system.factorize(lambda);
         self.factorized = true;
         progress.lap(|t| &mut t.factorize_s);

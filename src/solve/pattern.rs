@@ -194,6 +194,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         self.step.resize(self.vertex_of.len() * D, 0.0);
         // The old factor goes before the new pattern is built, so that the
         // two never take memory at the same time.
+        self.forget_factored();
         self.system.release_factor();
         self.system = self.pattern(graph, &variable)?;
         self.max_nnz_factor = self.max_nnz_factor.max(self.system.nnz_factor());

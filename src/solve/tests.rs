@@ -6,6 +6,7 @@ use crate::geometry::{Se2, Se3};
 use nalgebra::{Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use std::f64::consts::{FRAC_PI_2, PI};
+use std::sync::Arc;
 
 /// A square loop of 4 poses with one loop closure whose measurements are
 /// consistent: the optimum has zero error.
@@ -123,6 +124,37 @@ fn innovation_is_the_chi2_a_left_out_edge_adds_to_the_optimum() {
     assert_eq!(nu2[0], g2.edge_chi2(&g2.edges[4]));
     // Weights must match the edges.
     assert!(opt.innovation_chi2(&g2, &w[..2], &[4]).is_err());
+}
+
+#[test]
+fn an_evaluation_of_the_same_map_reuses_its_factorisation_and_nothing_else() {
+    // The same map and weights: the factorisation and its selected inverse
+    // are the last evaluation's (the same bits, one allocation).
+    let mut g = square(0.3, 7);
+    let w = [1.0, 1.0, 1.0, 0.0];
+    let mut opt = Optimizer::new(&g, Some(&w), SolveSettings::default()).unwrap();
+    let start = g.poses.clone();
+    let first = opt.innovation_chi2(&g, &w, &[3]).unwrap();
+    let inverse = opt.selected_inverse();
+    assert_eq!(opt.innovation_chi2(&g, &w, &[3]).unwrap(), first);
+    assert!(Arc::ptr_eq(&inverse, &opt.selected_inverse()));
+    // A run factorises elsewhere (damped, at other poses): back at the
+    // first poses the evaluation factorises again and finds what a fresh
+    // optimiser does.
+    opt.run(&mut g, Some(&w), &mut |_: &IterationRecord| {})
+        .unwrap();
+    assert_ne!(g.poses, start);
+    g.poses = start;
+    let again = opt.innovation_chi2(&g, &w, &[3]).unwrap();
+    let mut fresh = Optimizer::new(&g, Some(&w), SolveSettings::default()).unwrap();
+    assert_eq!(again, fresh.innovation_chi2(&g, &w, &[3]).unwrap());
+    assert!(!Arc::ptr_eq(&inverse, &opt.selected_inverse()));
+    // Other weights are another map.
+    let all = [1.0; 4];
+    let with = opt.innovation_chi2(&g, &all, &[3]).unwrap();
+    let mut fresh = Optimizer::new(&g, Some(&all), SolveSettings::default()).unwrap();
+    assert_eq!(with, fresh.innovation_chi2(&g, &all, &[3]).unwrap());
+    assert_ne!(with, again);
 }
 
 #[test]
