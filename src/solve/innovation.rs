@@ -33,12 +33,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             });
         }
         self.match_threads()?;
-        let at = FactoredAt {
-            poses: graph.poses.clone(),
-            weights: weights.to_vec(),
-            gauge: graph.gauge(),
-        };
-        if self.factored_at.as_ref() != Some(&at) {
+        let gauge = graph.gauge();
+        let held = (self.factored_at.as_ref()).is_some_and(|f| f.is_at(graph, weights, &gauge));
+        if !held {
             self.update_pattern(graph, Some(weights))?;
             self.factorized = true;
             self.linearize(graph, Some(weights));
@@ -51,7 +48,12 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 }
                 Err(e) => return Err(e.into()),
             }
-            self.factored_at = Some(at);
+            self.factored_at = Some(FactoredAt {
+                poses: graph.poses.clone(),
+                weights: weights.to_vec(),
+                gauge,
+                inverse: None,
+            });
         }
         let mut block = vec![None; graph.num_vertices()];
         for (b, &v) in self.vertex_of.iter().enumerate() {
@@ -63,16 +65,12 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// The selected inverse of the last [`Self::factor_at`]'s factorisation,
     /// taken once for every evaluation of the same map.
     pub(crate) fn selected_inverse(&mut self) -> Arc<SelectedInverse> {
-        if let Some(inverse) = self
-            .selected
-            .as_ref()
-            .filter(|_| self.factored_at.is_some())
-        {
-            return Arc::clone(inverse);
+        if let Some(inverse) = self.factored_at.as_ref().and_then(|f| f.inverse.clone()) {
+            return inverse;
         }
         let inverse = Arc::new(self.system.selected_inverse());
-        if self.factored_at.is_some() {
-            self.selected = Some(Arc::clone(&inverse));
+        if let Some(f) = self.factored_at.as_mut() {
+            f.inverse = Some(Arc::clone(&inverse));
         }
         inverse
     }
@@ -81,7 +79,6 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// system is about to change).
     pub(super) fn forget_factored(&mut self) {
         self.factored_at = None;
-        self.selected = None;
     }
 
     /// `−H⁻¹·g` for `k` gradients `g`, one after the other and each by
@@ -104,13 +101,24 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 }
 
-/// What an undamped factorisation was made at ([`Optimizer::factor_at`]):
-/// another call with the same finds it in the system as it is.
-#[derive(PartialEq)]
+/// What an undamped factorisation was made at ([`Optimizer::factor_at`]),
+/// and its selected inverse once taken: another call at the same finds
+/// both in the system as it is.
 pub(super) struct FactoredAt<P> {
     poses: Vec<P>,
     weights: Vec<f64>,
     gauge: Vec<usize>,
+    inverse: Option<Arc<SelectedInverse>>,
+}
+
+impl<P: PartialEq> FactoredAt<P> {
+    /// Whether it was made at `graph`'s poses with `weights` and `gauge`.
+    fn is_at<const D: usize>(&self, graph: &Graph<P, D>, weights: &[f64], gauge: &[usize]) -> bool
+    where
+        P: Pose<D>,
+    {
+        self.poses == graph.poses && self.weights == weights && self.gauge == gauge
+    }
 }
 
 #[cfg(test)]

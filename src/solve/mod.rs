@@ -26,7 +26,7 @@ mod tests;
 
 use crate::geometry::Pose;
 use crate::graph::{Graph, VertexId};
-use crate::linear::{BlockSystem, LinearError, Parallelism, SelectedInverse};
+use crate::linear::{BlockSystem, LinearError, Parallelism};
 use chord::Chord;
 use innovation::FactoredAt;
 use lm::Damping;
@@ -38,7 +38,6 @@ pub use pattern::Ordering;
 pub use progress::{Cancel, Cancellable, Observer};
 use serde::Serialize;
 pub(crate) use session::{Budget, PhaseTimes, Session};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// The nonlinear least-squares method.
@@ -387,12 +386,11 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     /// [`Self::update_pattern`]).
     factorized: bool,
     /// The poses, weights and gauge of the undamped factorisation
-    /// ([`Self::factor_at`]) the system holds, while nothing has changed
-    /// it since: the checks after the decisions factorise the map the
-    /// decisions' last evaluation factorised.
+    /// ([`Self::factor_at`]) the system holds, with its selected inverse
+    /// once taken, while nothing has changed the system since: the checks
+    /// after the decisions factorise the map the decisions' last
+    /// evaluation factorised.
     factored_at: Option<FactoredAt<P>>,
-    /// The selected inverse of that factorisation, once taken.
-    selected: Option<Arc<SelectedInverse>>,
     /// Values of the largest factor among the patterns built so far.
     max_nnz_factor: usize,
     options: SolveSettings,
@@ -505,7 +503,6 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             max_nnz_factor: 0,
             factorized: false,
             factored_at: None,
-            selected: None,
             system: BlockSystem::new(0, &[], parallelism.clone())?,
             ordering,
             in_pattern,
