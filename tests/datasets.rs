@@ -1385,6 +1385,56 @@ fn loops_the_outlying_check_names_are_left_out_where_the_end_without_them_ranks_
     }
 }
 
+/// A loop the outlying check flags whose removal moves the map by more
+/// than it may be off (0.5 %) but too little to name it (1 %) is tried
+/// without, and left out where the end without it ranks first: seed 15 of
+/// the scattered exploration in docs/benchmarks.md (300 aliases placed
+/// anywhere one by one, every count true-like) on CSAIL with its
+/// information as published — one alias at `ν²` 14 (the true loops reach
+/// 5.2) whose removal moves the map by 0.67 %, 0.23 % off with it — and
+/// on intel, both scales. Each ends with every true loop and no alias,
+/// and names nothing: the map exits 0. (Without the recheck, CSAIL also
+/// keeps two aliases the check names.)
+#[test]
+fn a_flagged_loop_too_light_to_name_is_tried_without() {
+    for (name, calibrated, true_loops) in [
+        ("CSAIL.g2o", None, 128),
+        ("intel.g2o", None, 785),
+        ("intel.g2o", Some(1.0), 785),
+    ] {
+        let case = format!("{name} {calibrated:?}");
+        let Some((r, wrong)) = corrupted_and_decided(name, &scattered(), 1_000_016, calibrated)
+        else {
+            return;
+        };
+        assert_eq!(true_loops_kept(&r, &wrong).0, true_loops, "{case}");
+        let chosen = (r.robust.starts.iter()).find(|s| s.chosen);
+        assert_eq!(
+            chosen.map(|s| s.start),
+            Some(Start::WithoutOutlying),
+            "{case}: {:?}",
+            r.robust.starts
+        );
+        assert!(r.robust.outlying.is_empty(), "{case}");
+        assert_eq!(r.status(), MapStatus::Ok, "{case}");
+        // Without the recheck (`--expert no-recheck`) the aliases stay, and
+        // the outlying check names all but that one.
+        let by = without_recheck();
+        let (plain, _) =
+            corrupted_and_decided_by(name, &scattered(), 1_000_016, calibrated, &by).expect("read");
+        let aliases = (plain.loops.iter().zip(&wrong)).filter(|(l, w)| l.accepted && **w);
+        let named = (plain.robust.outlying.iter())
+            .map(|o| o.loops.len())
+            .sum::<usize>();
+        assert_eq!(
+            aliases.count(),
+            named + 1,
+            "{case}: {:?}",
+            plain.robust.outlying
+        );
+    }
+}
+
 /// Where `start` ended in the report `r` (it ran).
 fn start_of(r: &Report, start: Start) -> &StartEnd {
     let starts = &r.robust.starts;

@@ -568,27 +568,28 @@ fn unseen_aliased_replays() {
 
 /// The same replays on seeds 73–120, which no rule of the update was
 /// found on nor checked against before it was written, at another interval
-/// (every 17 poses): 192 replays, about two minutes in release. 4 differ
+/// (every 17 poses): 192 replays, about two minutes in release. 3 differ
 /// from the batch job, each at one or two updates, all of the kinds
 /// docs/method.md §7b describes: the batch job's decisions did not settle
 /// and it keeps a true loop the update leaves out (sphere seed 117, groups
-/// of 5, at 391 poses), the batch job's kernel start ends lower and leaves
-/// out a true loop beyond the reach of its fit (grid seed 86, groups of
-/// 10, at 374), a young grid whose batch job holds two true loops back by
-/// their counts (grid seed 99, groups of 10, at 170 and 187), and a true
-/// loop the batch job's fit puts beyond the true loops' reach and the
-/// update's does not (grid seed 107, groups of 5, at 272). Over every step
-/// the updates reject 400 true loops and the batch jobs 405, and both
-/// accept 88 aliases. Fails if more replays differ, or if the true loops
-/// rejected or the aliases accepted grow.
+/// of 5, at 391 poses), a young grid whose batch job holds two true loops
+/// back by their counts (grid seed 99, groups of 10, at 170 and 187), and
+/// a true loop the batch job's fit puts beyond the true loops' reach and
+/// the update's does not (grid seed 107, groups of 5, at 272). Over every
+/// step the updates reject 404 true loops and the batch jobs 408, and both
+/// accept 88 aliases (4 replays differed, 400 and 405 true loops, before
+/// flagged loops too light to name were tried without, docs/method.md
+/// §7: grid seed 86 with groups of 10 no longer differs at 374). Fails if
+/// more replays differ, or if the true loops rejected or the aliases
+/// accepted grow.
 #[test]
 #[ignore]
 fn fresh_aliased_replays() {
     let (mismatching, totals) = aliased_replays(73..=120, 17);
     let [(ut, uw), (bt, bw)] = totals;
-    assert!(mismatching.len() <= 4, "{mismatching:?}");
+    assert!(mismatching.len() <= 3, "{mismatching:?}");
     assert!(uw <= 88 && bw <= 88, "aliases accepted: {totals:?}");
-    assert!(ut <= 400 && bt <= 405, "{totals:?}");
+    assert!(ut <= 404 && bt <= 408, "{totals:?}");
 }
 
 /// One replay of [`aliased_replays`]: the world, the seed, the group size.

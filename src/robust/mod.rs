@@ -321,6 +321,10 @@ pub struct Outcome {
     /// EM: the keystone of a passing map with no outlying candidates
     /// ([`doubt::keystone`]), for [`starts::recheck`] to try without.
     keystone: Option<Vec<usize>>,
+    /// EM: the clusters of accepted loops the outlying check flags whose
+    /// removal moves the map too little to name them, but enough for
+    /// [`starts::recheck`] to try without ([`doubt::RECHECK_MOVE`]).
+    below_warning: Vec<Vec<usize>>,
     /// EM: the sizes of the clusters' moves at the map kept, from the
     /// decisions' evaluation of it, with the set it judged
     /// ([`doubt::Moves`]).
@@ -354,6 +358,7 @@ impl Outcome {
             held_back: Vec::new(),
             outlying: Vec::new(),
             keystone: None,
+            below_warning: Vec::new(),
             moves: None,
             offsets: None,
         }
@@ -566,6 +571,7 @@ fn doubts<P: Pose<D>, const D: usize>(
     out: &mut Outcome,
 ) {
     out.keystone = None;
+    out.below_warning = Vec::new();
     let test = (job.test)(session.graph, weights);
     let settled = !out.unsettled && !out.reasons.contains(&Reason::Unsettled);
     let finished = !out.cut_short && !session.exhausted();
@@ -603,11 +609,13 @@ fn doubts<P: Pose<D>, const D: usize>(
             Vec::new()
         });
     let tests = (job.layers, t.alpha, out.doubtful.as_slice());
-    out.outlying = doubt::outlying(session, weights, ends, (&out.innovations, model), tests)
-        .unwrap_or_else(|e| {
-            advise("outlying candidates", e);
-            Vec::new()
-        });
+    (out.outlying, out.below_warning) =
+        doubt::outlying(session, weights, ends, (&out.innovations, model), tests).unwrap_or_else(
+            |e| {
+                advise("outlying candidates", e);
+                (Vec::new(), Vec::new())
+            },
+        );
     if out.outlying.is_empty() && job.layers.keystone {
         let known = (out.moves.as_ref())
             .filter(|(set, _)| *set == accepted)

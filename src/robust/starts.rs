@@ -113,7 +113,10 @@
 //! holds out what it takes ([`recheck`]). An alias the map bent to fit
 //! leaves a map that falls back without it, and the two ends are ranked
 //! by `J` as the starts' are; the update does the same at its end
-//! ([`super::resume`]). Where the check names nothing, the end meets the
+//! ([`super::resume`]). So does a loop the check flags whose removal moves
+//! the map too little to name it, but more than the map may be off
+//! ([`super::doubt::RECHECK_MOVE`]), held out with the loops already
+//! rejected as outlying. Where the check flags nothing, the end meets the
 //! end without its keystone ([`super::doubt::keystone`]) instead: the
 //! accepted cluster the map rests on most, which a group of aliases that
 //! bent a map with few loops can be. That end replaces the kept one only
@@ -607,8 +610,9 @@ fn unquestioned<P: Clone>(end: &End<P>) -> bool {
 }
 
 /// What the end kept is tried without, if anything: the loops its
-/// outlying check named, else its keystone (module doc), each where its
-/// layer is on.
+/// outlying check named, else those it flagged below the warning
+/// ([`super::doubt::RECHECK_MOVE`]), else its keystone (module doc), each
+/// where its layer is on.
 fn to_recheck<P: Pose<D>, const D: usize>(
     job: &Job<'_, P, D>,
     kept: &Outcome,
@@ -616,6 +620,14 @@ fn to_recheck<P: Pose<D>, const D: usize>(
     if job.layers.recheck && !kept.outlying.is_empty() {
         let named = kept.outlying.iter().flat_map(|o| o.loops.clone()).collect();
         return Some((Start::WithoutOutlying, named));
+    }
+    // Flagged loops too close to the map's error to name: tried without,
+    // the loops already rejected as outlying held out with them (else the
+    // trial would weigh again what an earlier one took out).
+    if job.layers.recheck && !kept.below_warning.is_empty() {
+        let rejected = (0..kept.reasons.len()).filter(|&k| kept.reasons[k] == Reason::Outlying);
+        let named = kept.below_warning.iter().flatten().copied().chain(rejected);
+        return Some((Start::WithoutOutlying, named.collect()));
     }
     let keystone = kept.keystone.clone().filter(|_| job.layers.keystone)?;
     Some((Start::WithoutKeystone, keystone))
