@@ -116,8 +116,8 @@
 //! ([`super::resume`]). So does a loop the check flags whose removal moves
 //! the map too little to name it, but more than the map may be off
 //! ([`super::doubt::RECHECK_MOVE`]), held out with the loops already
-//! rejected as outlying. Where the check flags nothing, the end meets the
-//! end without its keystone ([`super::doubt::keystone`]) instead: the
+//! rejected as outlying. Where the check names and tries nothing, the end
+//! meets the end without its keystone ([`super::doubt::keystone`]) instead: the
 //! accepted cluster the map rests on most, which a group of aliases that
 //! bent a map with few loops can be. That end replaces the kept one only
 //! where it ranks first, accepts as many candidates, and nothing
