@@ -107,27 +107,26 @@
 //!
 //! The end kept meets one more end where its outlying check
 //! ([`super::doubt`]) names accepted loops — beyond the true loops' own
-//! scale, and moving the map — in a map that passes with settled
-//! decisions, the end every start above stands on: EM's decisions again
-//! from the map solved without them, holding them out as the χ² search
-//! holds out what it takes ([`recheck`]). An alias the map bent to fit
-//! leaves a map that falls back without it, and the two ends are ranked
-//! by `J` as the starts' are; the update does the same at its end
-//! ([`super::resume`]). So does a loop the check flags whose removal moves
-//! the map too little to name it, but more than the map may be off
-//! ([`super::doubt::RECHECK_MOVE`]), held out with the loops already
-//! rejected as outlying. Where the check names and tries nothing, the end
-//! meets the end without its keystone ([`super::doubt::keystone`]) instead: the
-//! accepted cluster the map rests on most, which a group of aliases that
-//! bent a map with few loops can be. That end replaces the kept one only
-//! where it ranks first, accepts as many candidates, and nothing
-//! questions it (it passes, settled, and names no doubtful cluster, loop
-//! held back or outlying loop): taken out as a whole, a cluster of true
-//! loops at a tension lowers the fit by more than their price, and a
-//! group of aliases that agree with each other fits as a place seen
-//! twice would. EM's decisions from the map without the keystone start
-//! where the keystone bent it, and the true loops it pushed out need not
-//! come back from there; so, where nothing questions the end kept, the
+//! scale, and moving the map — in a map that passes with settled decisions,
+//! the end every start above stands on: EM's decisions again from the map
+//! solved without them, holding them out as the χ² search holds out what it
+//! takes ([`recheck`]). An alias the map bent to fit leaves a map that
+//! falls back without it, and the two ends are ranked by `J` as the starts'
+//! are; the update does the same at its end ([`super::resume`]). So does a
+//! loop the check flags whose removal moves the map too little to name it,
+//! but more than the map may be off ([`super::doubt::RECHECK_MOVE`]), held
+//! out with the loops already rejected as outlying. Where the check names
+//! and tries nothing, the end meets the end without its keystone
+//! ([`super::doubt::keystone`]) instead: the accepted cluster the map rests
+//! on most, which a group of aliases that bent a map with few loops can be.
+//! That end replaces the kept one only where it ranks first, accepts as
+//! many candidates, and nothing questions it (it passes, settled, and names
+//! no doubtful cluster, loop held back or outlying loop): taken out as a
+//! whole, a cluster of true loops at a tension lowers the fit by more than
+//! their price, and a group of aliases that agree with each other fits as a
+//! place seen twice would. EM's decisions from the map without the keystone
+//! start where the keystone bent it, and the true loops it pushed out need
+//! not come back from there; so, where nothing questions the end kept, the
 //! annealed start runs again too, on the chordal relaxation without the
 //! keystone ([`annealed_without`]), and the better of the two ends that
 //! meets those conditions is the one that competes.
