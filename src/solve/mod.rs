@@ -86,12 +86,10 @@ pub struct SolveSettings {
     /// default; incremental updates, which start next to the optimum, use
     /// it to save the iteration that would only confirm convergence).
     pub model_tolerance: Option<f64>,
-    /// Also stop after a damped LM step (λ > 0) that lowered the objective
-    /// by less than this share of it: LM crawling along a curved valley,
-    /// where each step is cut short by the damping. Not convergence
-    /// ([`StopReason::Crawling`]); off by default (EM's decisions use it
-    /// for accepted sets that have not settled yet).
-    pub crawl_tolerance: Option<f64>,
+    /// Also stop after a step that only crawls ([`Crawl`]). Not
+    /// convergence ([`StopReason::Crawling`]); off by default (EM's
+    /// decisions use it for accepted sets that have not settled yet).
+    pub crawl_tolerance: Option<Crawl>,
     /// Take chord steps: after an undamped step, the next one is solved
     /// with the same factor against the new gradient, and the matrix is
     /// factorised again only where that step falls short
@@ -119,6 +117,23 @@ pub struct SolveSettings {
     /// global pool is neither used nor configured). The same input, options
     /// and number of threads give the same bits.
     pub threads: usize,
+}
+
+/// When a step only crawls ([`SolveSettings::crawl_tolerance`]): each a
+/// share of the objective.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Crawl {
+    /// A damped LM step (λ > 0) that lowered the objective by less than
+    /// this: LM crawling along a curved valley, each step cut short by the
+    /// damping.
+    pub damped: f64,
+    /// A Gauss–Newton step (undamped, not a chord step) that lowered it by
+    /// less than this and by at least half of what the Gauss–Newton step
+    /// before it did: converging linearly, as Gauss–Newton does where the
+    /// residuals stay large, each step a nearly constant share of the
+    /// last, where near a small-residual optimum it converges
+    /// quadratically.
+    pub linear: f64,
 }
 
 impl Default for SolveSettings {
@@ -623,6 +638,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let mut damping = Damping::undamped();
         let mut chord = Chord::default();
         self.remaining = Remaining::default();
+        // The relative decrease of the last Gauss–Newton (undamped, not
+        // chord) step, to tell linear convergence from quadratic.
+        let mut last_decrease = None;
         let stop = loop {
             if let Some(reason) = self.stop_before_step(objective, &progress, observer) {
                 break reason;
@@ -663,7 +681,14 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             summary.history.push(record);
             observer.iteration(&record);
             self.remaining.after::<D>(&self.step, step.reused_factor);
-            if let Some(reason) = self.stop_after_step(previous, objective, step.lambda) {
+            let newton = step.lambda == 0.0 && !step.reused_factor;
+            let before = std::mem::replace(
+                &mut last_decrease,
+                newton.then(|| (previous - objective) / previous),
+            );
+            let newton_before = newton.then_some(before).flatten();
+            let change = (previous, objective);
+            if let Some(reason) = self.stop_after_step(change, step.lambda, newton_before) {
                 if !step.reused_factor || self.remaining.within(self.options.end_step) {
                     break reason;
                 }
@@ -701,15 +726,26 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// The reason to stop after a step of damping `lambda` that took the
-    /// objective from `previous` to `objective`, if any: LM crawling (a
-    /// damped step below [`SolveSettings::crawl_tolerance`]), or a relative
-    /// decrease below the tolerance or foreseen by the model to within
+    /// objective from `previous` to `objective`, if any: a crawl
+    /// ([`SolveSettings::crawl_tolerance`]: a damped step, or a
+    /// Gauss–Newton step whose decrease is at least half of `before`, the
+    /// Gauss–Newton step's before it), or a relative decrease below
+    /// the tolerance or foreseen by the model to within
     /// [`SolveSettings::model_tolerance`] — convergence where the model is
     /// trusted, else a stall.
-    fn stop_after_step(&self, previous: f64, objective: f64, lambda: f64) -> Option<StopReason> {
+    fn stop_after_step(
+        &self,
+        (previous, objective): (f64, f64),
+        lambda: f64,
+        before: Option<f64>,
+    ) -> Option<StopReason> {
         let decrease = ((previous - objective) / previous).abs();
         let small = decrease < self.options.relative_tolerance;
-        if !small && lambda > 0.0 && self.options.crawl_tolerance.is_some_and(|t| decrease < t) {
+        let crawl = self.options.crawl_tolerance.is_some_and(|t| {
+            let linear = before.is_some_and(|b| decrease >= 0.5 * b);
+            (lambda > 0.0 && decrease < t.damped) || (linear && decrease < t.linear)
+        });
+        if !small && crawl {
             return Some(StopReason::Crawling);
         }
         (small || self.model_agreed(previous, objective)).then(|| {

@@ -2,7 +2,7 @@
 //! end solves many times (a step per reweighting, a solve per decision),
 //! and `--max-iters` / `--time-limit` bound all of them together.
 
-use super::{Observer, Optimizer, SolveError, SolveSettings, StopReason, Summary};
+use super::{Crawl, Observer, Optimizer, SolveError, SolveSettings, StopReason, Summary};
 use crate::geometry::Pose;
 use crate::graph::Graph;
 use std::time::{Duration, Instant};
@@ -215,14 +215,13 @@ impl<'a, P: Pose<D>, const D: usize> Session<'a, P, D> {
         Ok(())
     }
 
-    /// [`Self::converge`], stopping also once LM crawls: a damped step
-    /// lowers the objective by less than `tolerance` of it
+    /// [`Self::converge`], stopping also once a step crawls by `tolerance`
     /// ([`SolveSettings::crawl_tolerance`]). Returns whether the run
     /// converged (then not crawling).
     pub fn converge_unless_crawling(
         &mut self,
         weights: &[f64],
-        tolerance: f64,
+        tolerance: Crawl,
     ) -> Result<bool, SolveError> {
         let own = self.options.crawl_tolerance;
         self.options.crawl_tolerance = Some(tolerance);

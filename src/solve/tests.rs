@@ -810,7 +810,7 @@ mod simulated {
     }
 
     #[test]
-    fn a_crawl_ends_the_run_only_when_asked_and_only_under_damping() {
+    fn a_damped_crawl_ends_the_run_only_when_asked() {
         // A far start: the first undamped step is rejected and LM goes on
         // damped, each step lowering the objective a little.
         let options = SolveSettings {
@@ -820,7 +820,10 @@ mod simulated {
         let s = optimize(&mut far_start(0, 1e3), &options).unwrap();
         assert!(s.history.iter().any(|r| r.lambda > 0.0), "{s:?}");
         let crawl = |t: f64| SolveSettings {
-            crawl_tolerance: Some(t),
+            crawl_tolerance: Some(Crawl {
+                damped: t,
+                linear: t,
+            }),
             ..options.clone()
         };
         let s = optimize(&mut far_start(0, 1e3), &crawl(0.5)).unwrap();
@@ -828,10 +831,36 @@ mod simulated {
         assert!(!s.converged() && s.iterations >= 1);
         let last = s.history.last().unwrap();
         assert!(last.lambda > 0.0);
-        // Undamped steps are never a crawl: Gauss–Newton converges.
+        // Gauss–Newton converging quadratically is never a crawl.
         let s = optimize(&mut square(0.3, 1), &crawl(0.5)).unwrap();
         assert!(s.converged(), "{s:?}");
         assert!(s.history.iter().all(|r| r.lambda == 0.0));
+    }
+
+    #[test]
+    fn gauss_newton_converging_linearly_is_a_crawl_only_when_asked() {
+        let g = square(0.3, 1);
+        let settings = |crawl_tolerance| SolveSettings {
+            crawl_tolerance,
+            ..Default::default()
+        };
+        let tolerance = Crawl {
+            damped: 0.0,
+            linear: 1e-2,
+        };
+        let asked = Optimizer::new(&g, None, settings(Some(tolerance))).unwrap();
+        // 0.5 % after 0.8 %: the decreases shrink by less than half.
+        let step = (100.0, 99.5);
+        let crawl = Some(StopReason::Crawling);
+        assert_eq!(asked.stop_after_step(step, 0.0, Some(0.008)), crawl);
+        assert_eq!(asked.stop_after_step(step, 0.0, Some(0.01)), crawl);
+        // After 1.1 %: quadratic, or the first Gauss–Newton step: go on.
+        assert_eq!(asked.stop_after_step(step, 0.0, Some(0.011)), None);
+        assert_eq!(asked.stop_after_step(step, 0.0, None), None);
+        // 2 % is no crawl, however it shrinks.
+        assert_eq!(asked.stop_after_step((100.0, 98.0), 0.0, Some(0.03)), None);
+        let not_asked = Optimizer::new(&g, None, settings(None)).unwrap();
+        assert_eq!(not_asked.stop_after_step(step, 0.0, Some(0.008)), None);
     }
 
     #[test]
