@@ -728,6 +728,8 @@ def main():
         return
     if any(n < 1 for n in args.every):
         ap.error("--every takes positive integers")
+    if args.no_clean and not args.aliased:
+        ap.error("--no-clean leaves only the aliased case: add --aliased")
     options = {}
     for kv in args.pgo_option:
         k, _, v = kv.partition("=")
