@@ -119,6 +119,12 @@ pub struct SolveSettings {
     pub threads: usize,
 }
 
+/// The least share of the last Gauss–Newton step's gain that the next
+/// step's gain keeps where Gauss–Newton converges linearly ([`Crawl`]):
+/// near a small-residual optimum, where it converges quadratically, each
+/// gain is a small share of the last; ½ lies between.
+const LINEAR_CONVERGENCE: f64 = 0.5;
+
 /// When a step only crawls ([`SolveSettings::crawl_tolerance`]): each a
 /// share of the objective.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -128,11 +134,10 @@ pub struct Crawl {
     /// damping.
     pub damped: f64,
     /// A Gauss–Newton step (undamped, not a chord step) that lowered it by
-    /// less than this and by at least half of what the Gauss–Newton step
-    /// before it did: converging linearly, as Gauss–Newton does where the
-    /// residuals stay large, each step a nearly constant share of the
-    /// last, where near a small-residual optimum it converges
-    /// quadratically.
+    /// less than this and by at least [`LINEAR_CONVERGENCE`] of what the
+    /// Gauss–Newton step before it did: converging linearly, as
+    /// Gauss–Newton does where the residuals stay large, each step a nearly
+    /// constant share of the last.
     pub linear: f64,
 }
 
@@ -638,9 +643,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let mut damping = Damping::undamped();
         let mut chord = Chord::default();
         self.remaining = Remaining::default();
-        // The relative decrease of the last Gauss–Newton (undamped, not
-        // chord) step, to tell linear convergence from quadratic.
-        let mut last_decrease = None;
+        // The relative gain of the last step if it was a Gauss–Newton one
+        // (undamped, not chord), to tell linear convergence from quadratic.
+        let mut newton_gain = None;
         let stop = loop {
             if let Some(reason) = self.stop_before_step(objective, &progress, observer) {
                 break reason;
@@ -682,13 +687,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             observer.iteration(&record);
             self.remaining.after::<D>(&self.step, step.reused_factor);
             let newton = step.lambda == 0.0 && !step.reused_factor;
-            let before = std::mem::replace(
-                &mut last_decrease,
-                newton.then(|| (previous - objective) / previous),
-            );
-            let newton_before = newton.then_some(before).flatten();
-            let change = (previous, objective);
-            if let Some(reason) = self.stop_after_step(change, step.lambda, newton_before) {
+            let gain = newton.then(|| (previous - objective) / previous);
+            let before = std::mem::replace(&mut newton_gain, gain).filter(|_| newton);
+            if let Some(reason) = self.stop_after_step((previous, objective), step.lambda, before) {
                 if !step.reused_factor || self.remaining.within(self.options.end_step) {
                     break reason;
                 }
@@ -728,8 +729,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// The reason to stop after a step of damping `lambda` that took the
     /// objective from `previous` to `objective`, if any: a crawl
     /// ([`SolveSettings::crawl_tolerance`]: a damped step, or a
-    /// Gauss–Newton step whose decrease is at least half of `before`, the
-    /// Gauss–Newton step's before it), or a relative decrease below
+    /// Gauss–Newton step whose decrease is at least [`LINEAR_CONVERGENCE`]
+    /// of `before`, the Gauss–Newton step's before it), or a relative
+    /// decrease below
     /// the tolerance or foreseen by the model to within
     /// [`SolveSettings::model_tolerance`] — convergence where the model is
     /// trusted, else a stall.
@@ -742,7 +744,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let decrease = ((previous - objective) / previous).abs();
         let small = decrease < self.options.relative_tolerance;
         let crawl = self.options.crawl_tolerance.is_some_and(|t| {
-            let linear = before.is_some_and(|b| decrease >= 0.5 * b);
+            let linear = before.is_some_and(|b| decrease >= LINEAR_CONVERGENCE * b);
             (lambda > 0.0 && decrease < t.damped) || (linear && decrease < t.linear)
         });
         if !small && crawl {
