@@ -18,7 +18,10 @@
 //!
 //! Each iteration then only refills the slots, copies them (with the
 //! damping) into the factor's panels, factorises — the independent subtrees
-//! in parallel — and runs the two triangular solves.
+//! in parallel — and runs the two triangular solves. The system of a graph
+//! grown by poses and edges appended (an incremental update) starts from
+//! the last one's [`Layout`]: the old blocks keep their positions, only the
+//! new edges are placed and only the rows they add to the factor analysed.
 //!
 //! Covariances: [`BlockSystem::propagate_group_solved`] gives `A·H⁻¹·Aᵀ`
 //! for the rows of one or several edges by a sparse solve;
@@ -29,6 +32,7 @@
 //! costs less for a group of edges.
 
 mod group;
+mod layout;
 mod parallel;
 mod supernodal;
 
@@ -39,9 +43,9 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::SymbolicSparseColMatRef;
 use faer::sparse::linalg::amd;
 pub use group::{EdgeJacobian, GroupScratch};
+pub use layout::Layout;
 use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
-pub use supernodal::Structure;
 use supernodal::{Adjacency, Symbolic};
 
 /// Errors of the linear solver.
@@ -74,7 +78,7 @@ const DIAGONAL_FLOOR: f64 = 1e-9;
 
 /// The blocks one edge adds to: the elimination positions of its two
 /// vertices and its off-diagonal slot.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 struct EdgeSlot {
     i: u32,
     j: u32,
@@ -101,10 +105,12 @@ pub struct BlockSystem<const D: usize> {
     /// Diagonal blocks of `H` by position (column-major, lower triangle).
     diag: Vec<f64>,
     /// Off-diagonal blocks of `H` (rows: the later block), grouped by the
-    /// position of their column block: `off[off_ptr[p]..off_ptr[p + 1]]`
-    /// (in units of `D²`).
+    /// position of their column block, `later`'s: the blocks of column `p`
+    /// from `later.starts()[p]` (in units of `D²`).
     off: Vec<f64>,
-    off_ptr: Vec<usize>,
+    /// The later neighbours of each position: the rows of its column's
+    /// off-diagonal blocks.
+    later: Adjacency,
     /// The variable block of each off-diagonal block's rows.
     off_row: Vec<u32>,
     /// Where each diagonal and off-diagonal block starts in the factor.
@@ -147,48 +153,36 @@ impl<const D: usize> BlockSystem<D> {
     }
 
     /// Like [`Self::new`] with a given elimination position of each block;
-    /// with `grown`, the factor structure of an earlier system whose blocks
-    /// hold the first positions, extended to the new ones where every edge
-    /// between those blocks is in it ([`Structure`]), else analysed afresh.
+    /// with `grown`, the [`Layout`] of an earlier system whose blocks hold
+    /// the first positions: its edges, the first ones, are not placed again
+    /// where they join the same positions and the new ones join new blocks,
+    /// and its factor structure is extended to the new blocks where every
+    /// edge between old blocks is in it; else analysed afresh. Either way
+    /// the system is the same.
     pub fn with_positions(
         n_blocks: usize,
         edges: &[(Option<usize>, Option<usize>)],
         parallelism: Parallelism,
         position: Vec<usize>,
-        grown: Option<&Structure>,
+        grown: Option<&Layout>,
     ) -> Result<Self, LinearError> {
         if n_blocks >= NONE as usize {
             return Err(LinearError::Factorization(format!(
                 "{n_blocks} variable blocks are too many"
             )));
         }
-        let pairs = edges
-            .iter()
-            .filter_map(|&(i, j)| Some((position[i?], position[j?])));
-        let later = Adjacency::from_pairs(n_blocks, pairs);
+        let (later, slots, symbolic) = Self::placed(n_blocks, edges, &position, grown);
         let n_off = later.starts()[n_blocks];
         if n_off >= NONE as usize {
             return Err(LinearError::Factorization(format!(
                 "{n_off} off-diagonal blocks are too many"
             )));
         }
-        let slots = edges
-            .iter()
-            .map(|&(i, j)| edge_slot(i, j, &position, &later))
-            .collect();
-        let symbolic = match grown.and_then(|g| Symbolic::<D>::extended(g, &later)) {
+        let symbolic = match symbolic {
             Some(extended) => extended,
             None => Symbolic::<D>::new(&later)?,
         };
-        let diag_dest = (0..n_blocks)
-            .map(|p| symbolic.block_offset(p, p).0)
-            .collect();
-        let off_dest = later
-            .iter()
-            .enumerate()
-            .flat_map(|(p, l)| l.iter().map(move |&q| (q, p)))
-            .map(|(q, p)| symbolic.block_offset(q, p).0)
-            .collect();
+        let (diag_dest, off_dest) = symbolic.destinations(&later);
         let mut block_at = vec![0u32; n_blocks];
         for (block, &p) in position.iter().enumerate() {
             block_at[p] = block as u32;
@@ -201,7 +195,7 @@ impl<const D: usize> BlockSystem<D> {
             edges: slots,
             diag: vec![0.0; n_blocks * D * D],
             off: vec![0.0; n_off * D * D],
-            off_ptr: later.into_starts(),
+            later,
             off_row,
             diag_dest,
             off_dest,
@@ -215,6 +209,32 @@ impl<const D: usize> BlockSystem<D> {
             factor_current: false,
             parallelism,
         })
+    }
+
+    /// The later neighbours of each position, each edge's slots and, where
+    /// `grown`'s factor structure extends to them, the factor's structure
+    /// ([`Self::with_positions`]): the new edges placed into `grown`'s
+    /// layout where it extends, else every edge.
+    fn placed(
+        n_blocks: usize,
+        edges: &[(Option<usize>, Option<usize>)],
+        position: &[usize],
+        grown: Option<&Layout>,
+    ) -> (Adjacency, Vec<EdgeSlot>, Option<Symbolic<D>>) {
+        if let Some((g, ext)) = grown.and_then(|g| Some((g, g.extend(position, edges)?))) {
+            let symbolic = Symbolic::<D>::extended_by(&g.structure, &ext.later, &ext.entries);
+            return (ext.later, ext.slots, symbolic);
+        }
+        let pairs = edges
+            .iter()
+            .filter_map(|&(i, j)| Some((position[i?], position[j?])));
+        let later = Adjacency::from_pairs(n_blocks, pairs);
+        let slots = edges
+            .iter()
+            .map(|&(i, j)| edge_slot(i, j, position, &later))
+            .collect();
+        let symbolic = grown.and_then(|g| Symbolic::<D>::extended(&g.structure, &later));
+        (later, slots, symbolic)
     }
 
     /// Where assembly and factorisation run.
@@ -239,7 +259,7 @@ impl<const D: usize> BlockSystem<D> {
 
     /// Non-zeros of the lower triangle of `H`.
     pub fn nnz_hessian(&self) -> usize {
-        self.n_blocks * D * (D + 1) / 2 + self.off_ptr[self.n_blocks] * D * D
+        self.n_blocks * D * (D + 1) / 2 + self.later.starts()[self.n_blocks] * D * D
     }
 
     /// Values stored for the Cholesky factor (its dense supernodal panels).
@@ -290,10 +310,14 @@ impl<const D: usize> BlockSystem<D> {
         (col_ptr, rows, values)
     }
 
-    /// The supernodes of the factor and their block rows, for a grown
-    /// system's [`Self::with_positions`].
-    pub fn structure(&self) -> Structure {
-        self.symbolic.structure()
+    /// The pattern (the factor's structure, the blocks of `H`, each edge's
+    /// blocks), for a grown system's [`Self::with_positions`].
+    pub fn layout(&self) -> Layout {
+        Layout {
+            structure: self.symbolic.structure(),
+            later: self.later.clone(),
+            slots: self.edges.clone(),
+        }
     }
 
     /// Frees the factor's values (the next [`Self::factorize`] allocates
@@ -308,13 +332,14 @@ impl<const D: usize> BlockSystem<D> {
         std::mem::take(&mut self.factor)
     }
 
-    /// Gives the first factorisation `buffer`'s allocation (an earlier
-    /// system's [`Self::take_factor_allocation`]) to fill, rather than
-    /// memory the system maps afresh — page by page, at a fault each. Does
-    /// nothing once the system has a factor.
-    pub fn reuse_factor_allocation(&mut self, mut buffer: Vec<f64>) {
+    /// Gives the first factorisation `buffer` (an earlier system's
+    /// [`Self::take_factor_allocation`]) to fill, rather than memory the
+    /// system maps afresh — page by page, at a fault each. Its values are
+    /// not read: each panel is zeroed as the factorisation reaches it,
+    /// while it is in cache, rather than all of them in one pass before.
+    /// Does nothing once the system has a factor.
+    pub fn reuse_factor_allocation(&mut self, buffer: Vec<f64>) {
         if self.factor.is_empty() {
-            buffer.clear();
             self.factor = buffer;
         }
     }
@@ -483,17 +508,20 @@ impl<const D: usize> BlockSystem<D> {
             }
         }
         let floor = DIAGONAL_FLOOR * max_diag;
-        // A fresh allocation is zeroed here, and its panels need not be.
+        // A fresh allocation is zeroed here, and its panels need not be;
+        // a reused one ([`Self::reuse_factor_allocation`]) is only fitted
+        // to the length, its panels zeroed one by one.
         let zeroed = self.factor.is_empty();
-        if zeroed {
-            let len = self.symbolic.len_values();
+        let len = self.symbolic.len_values();
+        if self.factor.len() != len {
+            let more = len.saturating_sub(self.factor.len());
             self.factor
-                .try_reserve_exact(len)
+                .try_reserve_exact(more)
                 .map_err(|_| LinearError::Factorization("out of memory for the factor".into()))?;
             self.factor.resize(len, 0.0);
         }
         let sym = &self.symbolic;
-        let (diag, off, off_ptr) = (&self.diag, &self.off, &self.off_ptr);
+        let (diag, off, off_ptr) = (&self.diag, &self.off, self.later.starts());
         let (diag_dest, off_dest) = (&self.diag_dest, &self.off_dest);
         let load = |s: usize, panel: &mut [f64]| {
             let (cols, start, ld) = sym.supernode_range(s);
@@ -692,7 +720,7 @@ impl<const D: usize> BlockSystem<D> {
                     sum += 2.0 * xp[r] * h[c * D + r] * xp[c];
                 }
             }
-            for k in self.off_ptr[p]..self.off_ptr[p + 1] {
+            for k in self.later.starts()[p]..self.later.starts()[p + 1] {
                 let (xq, h) = (x(self.off_row[k] as usize), &self.off[k * D * D..][..D * D]);
                 // Rows of the later block, columns of this one, column-major.
                 for c in 0..D {

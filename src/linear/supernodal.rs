@@ -126,7 +126,7 @@ pub(super) struct Symbolic<const D: usize> {
 /// The lower triangle's pattern of a block matrix by columns: the block
 /// rows `q > p` of each block column `p`, increasing (its later neighbours
 /// in the elimination order), all in one array.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub(super) struct Adjacency {
     ptr: Vec<usize>,
     rows: Vec<usize>,
@@ -183,6 +183,27 @@ impl Adjacency {
         Self::from_pairs(lists.len(), pairs)
     }
 
+    /// This pattern grown to `n` block columns by `entries` (`(column,
+    /// row)`, increasing, none in it already, each row at or after its
+    /// number of columns): each column's new rows follow its old ones.
+    pub(super) fn appended(&self, n: usize, entries: &[(usize, usize)]) -> Self {
+        let n_old = self.len();
+        let mut ptr = Vec::with_capacity(n + 1);
+        let mut rows = Vec::with_capacity(self.rows.len() + entries.len());
+        let mut new = entries.iter().peekable();
+        ptr.push(0);
+        for c in 0..n {
+            if c < n_old {
+                rows.extend_from_slice(&self[c]);
+            }
+            while let Some(&(_, r)) = new.next_if(|&&(col, _)| col == c) {
+                rows.push(r);
+            }
+            ptr.push(rows.len());
+        }
+        Self { ptr, rows }
+    }
+
     /// Block columns.
     pub(super) fn len(&self) -> usize {
         self.ptr.len().saturating_sub(1)
@@ -191,11 +212,6 @@ impl Adjacency {
     /// Where each column's rows start in the entries (and the end).
     pub(super) fn starts(&self) -> &[usize] {
         &self.ptr
-    }
-
-    /// [`Self::starts`], the rest dropped.
-    pub(super) fn into_starts(self) -> Vec<usize> {
-        self.ptr
     }
 
     /// Each column's rows, in column order.
@@ -214,7 +230,7 @@ impl std::ops::Index<usize> for Adjacency {
 
 /// A factor's supernodes (`begin`, with the end) and the block rows below
 /// each one's diagonal block (`rows[row_ptr[s]..row_ptr[s + 1]]`).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Structure {
     begin: Vec<usize>,
     row_ptr: Vec<usize>,
@@ -234,15 +250,11 @@ impl Structure {
     fn added_rows(&self, later: &Adjacency) -> Option<Vec<Vec<u32>>> {
         let ns = self.begin.len() - 1;
         let n_old = self.begin[ns];
-        let mut supernode_of = vec![0u32; n_old];
-        for s in 0..ns {
-            supernode_of[self.begin[s]..self.begin[s + 1]].fill(s as u32);
-        }
-        let mut added: Vec<Vec<u32>> = vec![Vec::new(); ns];
-        for s in 0..ns {
+        let supernode_of = self.supernode_of();
+        let mut own: Vec<Vec<u32>> = vec![Vec::new(); ns];
+        for (s, a) in own.iter_mut().enumerate() {
             let end = self.begin[s + 1];
             let below = &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]];
-            let mut a = std::mem::take(&mut added[s]);
             for p in self.begin[s]..end {
                 for &q in &later[p] {
                     if q >= n_old {
@@ -252,14 +264,48 @@ impl Structure {
                     }
                 }
             }
+        }
+        Some(self.passed_up(own, &supernode_of))
+    }
+
+    /// [`Self::added_rows`] of a grown matrix whose entries beyond this
+    /// factor's matrix are `entries` (`(column, row)`, each row at or after
+    /// the old size): only those are read.
+    fn added_by(&self, entries: &[(usize, usize)]) -> Vec<Vec<u32>> {
+        let ns = self.begin.len() - 1;
+        let n_old = self.begin[ns];
+        let supernode_of = self.supernode_of();
+        let mut own: Vec<Vec<u32>> = vec![Vec::new(); ns];
+        for &(c, r) in entries.iter().filter(|&&(c, _)| c < n_old) {
+            own[supernode_of[c] as usize].push(r as u32);
+        }
+        self.passed_up(own, &supernode_of)
+    }
+
+    /// Each old supernode's new rows from those of its own columns
+    /// (`own`): its children's are its too, as they all lie below its
+    /// columns (children come before their parents).
+    fn passed_up(&self, mut added: Vec<Vec<u32>>, supernode_of: &[u32]) -> Vec<Vec<u32>> {
+        for s in 0..added.len() {
+            let mut a = std::mem::take(&mut added[s]);
             a.sort_unstable();
             a.dedup();
-            if let Some(&r) = below.first() {
+            if let Some(&r) = self.rows[self.row_ptr[s]..self.row_ptr[s + 1]].first() {
                 added[supernode_of[r as usize] as usize].extend_from_slice(&a);
             }
             added[s] = a;
         }
-        Some(added)
+        added
+    }
+
+    /// The supernode of each block column.
+    fn supernode_of(&self) -> Vec<u32> {
+        let ns = self.begin.len() - 1;
+        let mut supernode_of = vec![0u32; self.begin[ns]];
+        for s in 0..ns {
+            supernode_of[self.begin[s]..self.begin[s + 1]].fill(s as u32);
+        }
+        supernode_of
     }
 }
 
@@ -437,15 +483,37 @@ impl<const D: usize> Symbolic<D> {
     /// analysis afresh, which is what a kept elimination order with poses
     /// appended would otherwise cost at every update.
     pub(super) fn extended(prev: &Structure, later: &Adjacency) -> Option<Self> {
-        let n_old = *prev.begin.last()?;
-        let n = later.len();
-        // Nothing appended: a pattern rebuilt without some edges (loops a
-        // robust method removed) is analysed afresh, for the fill it sheds.
-        if n_old == 0 || n <= n_old {
-            return None;
-        }
+        Self::appends(prev, later)?;
         let added = prev.added_rows(later)?;
-        let (begin_new, rows_new) = new_supernodes(n_old, later, prev, &added);
+        Some(Self::grown(prev, later, &added))
+    }
+
+    /// [`Self::extended`] where the entries of `later` beyond `prev`'s
+    /// matrix are known: `entries` (`(column, row)`, each row at or after
+    /// `prev`'s size), so that the old columns are not read again.
+    pub(super) fn extended_by(
+        prev: &Structure,
+        later: &Adjacency,
+        entries: &[(usize, usize)],
+    ) -> Option<Self> {
+        Self::appends(prev, later)?;
+        Some(Self::grown(prev, later, &prev.added_by(entries)))
+    }
+
+    /// `Some` if `later` appends block columns to `prev`'s. Nothing
+    /// appended: a pattern rebuilt without some edges (loops a robust
+    /// method removed) is analysed afresh, for the fill it sheds.
+    fn appends(prev: &Structure, later: &Adjacency) -> Option<()> {
+        let n_old = *prev.begin.last()?;
+        (n_old > 0 && later.len() > n_old).then_some(())
+    }
+
+    /// The factor structure of `prev` grown to `later`, the old
+    /// supernodes gaining the rows `added`.
+    fn grown(prev: &Structure, later: &Adjacency, added: &[Vec<u32>]) -> Self {
+        let n_old = *prev.begin.last().unwrap_or(&0);
+        let n = later.len();
+        let (begin_new, rows_new) = new_supernodes(n_old, later, prev, added);
         let mut begin = prev.begin.clone();
         begin.pop();
         begin.extend(begin_new);
@@ -461,7 +529,7 @@ impl<const D: usize> Symbolic<D> {
             rows.extend(r);
             row_ptr.push(rows.len());
         }
-        Some(Self::from_structure(begin, row_ptr, rows, UPDATE_SCRATCH))
+        Self::from_structure(begin, row_ptr, rows, UPDATE_SCRATCH)
     }
 
     /// Everything else from the supernodes and their patterns.
@@ -718,12 +786,44 @@ impl<const D: usize> Symbolic<D> {
     /// Supernode of block column `b` and where, in that supernode's panel,
     /// block `(row, b)` starts (`row ≥ b`, in the pattern): the offset of its
     /// first entry and the panel's leading dimension.
+    #[cfg(test)]
     pub(super) fn block_offset(&self, row: usize, b: usize) -> (usize, usize) {
         // Cannot fail for a block of the pattern.
         let local = self
             .local_row(row, b)
             .unwrap_or_else(|first_below| first_below);
         self.offset(b, local)
+    }
+
+    /// Where each diagonal block of the matrix of `later` (its pattern)
+    /// starts in the factor's values, and each of its off-diagonal blocks,
+    /// column by column (the offset of each block's first entry), with one
+    /// walk down each column's rows.
+    pub(super) fn destinations(&self, later: &Adjacency) -> (Vec<usize>, Vec<usize>) {
+        let n = later.len();
+        let mut diag = Vec::with_capacity(n);
+        let mut off = Vec::with_capacity(later.starts()[n]);
+        for p in 0..n {
+            let s = self.supernode_of[p] as usize;
+            let g = self.panel(s);
+            let below = &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]];
+            diag.push(self.offset(p, D * (p - g.b0)).0);
+            let mut i = 0;
+            for &q in &later[p] {
+                let local = if q < g.b0 + g.w {
+                    D * (q - g.b0)
+                } else {
+                    // Both increase, and every row of the pattern is one of
+                    // the factor's.
+                    while i < below.len() && (below[i] as usize) < q {
+                        i += 1;
+                    }
+                    D * (g.w + i)
+                };
+                off.push(self.offset(p, local).0);
+            }
+        }
+        (diag, off)
     }
 
     /// The first scalar row of block row `row` in the panel of block column

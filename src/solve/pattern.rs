@@ -5,7 +5,7 @@
 use super::{Optimizer, SolveError};
 use crate::geometry::Pose;
 use crate::graph::Graph;
-use crate::linear::{BlockSystem, LinearError, Parallelism, Structure};
+use crate::linear::{BlockSystem, Layout, LinearError, Parallelism};
 use std::sync::Arc;
 
 /// How much more an earlier elimination order may cost than the
@@ -29,9 +29,9 @@ const ORDER_SLACK: f64 = 0.1;
 #[derive(Clone, Debug, Default)]
 pub struct Ordering {
     rank: Vec<u32>,
-    /// The factor structure of the system this order was taken from, for
-    /// one of the same graph grown ([`BlockSystem::with_positions`]).
-    structure: Arc<Structure>,
+    /// The pattern of the system this order was taken from, for one of
+    /// the same graph grown ([`BlockSystem::with_positions`]).
+    layout: Arc<Layout>,
     values_per_block: f64,
     path_values: f64,
     /// Whether the paths' cost counts (innovations will be computed).
@@ -62,7 +62,7 @@ impl Ordering {
         let (position, old) = self.positions(vertex_of);
         // The old structure extends when every one of its blocks is still
         // a variable (they then keep their positions).
-        let grown = (old == self.structure.len()).then_some(&*self.structure);
+        let grown = (old == self.layout.len()).then_some(&*self.layout);
         let kept =
             BlockSystem::with_positions(n_blocks, pairs, parallelism.clone(), position, grown)?;
         let within = |cost: f64, fresh: f64| cost <= (1.0 + ORDER_SLACK) * fresh;
@@ -147,7 +147,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         for (&v, &p) in self.vertex_of.iter().zip(system.positions()) {
             ordering.rank[v] = p as u32;
         }
-        ordering.structure = Arc::new(system.structure());
+        ordering.layout = Arc::new(system.layout());
         Ok(system)
     }
 
