@@ -504,12 +504,14 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// map and decisions as [`PoseGraph::optimize`] of the graph as it now
     /// is, reached from the last update's. The graph keeps that update's
     /// poses, decisions, report (with the gate's fit, the start of the
-    /// next one), elimination order, the last factorisation's allocation
-    /// and the prepared poses and measurements (its memory: the poses, a
-    /// byte per edge, 4 bytes per pose, about 100 bytes per loop
-    /// candidate, the factor's values, which the next factorisation fills
-    /// instead of fresh memory, and 64 bytes per pose and 40 per edge in
-    /// SE(2), 184 and 128 in SE(3)); a new pose is composed along trusted
+    /// next one), elimination order and linear system's layout, the last
+    /// factorisation's allocation and the prepared poses and measurements
+    /// (its memory: the poses, a byte per edge, 4 bytes per pose, the
+    /// layout's 16 bytes per edge, 8 per pose and per pair of poses an
+    /// edge joins and 4 per block row of the factor's supernodes, about
+    /// 100 bytes per loop candidate, the factor's values, which the next
+    /// factorisation fills instead of fresh memory, and 64 bytes per pose
+    /// and 40 per edge in SE(2), 184 and 128 in SE(3)); a new pose is composed along trusted
     /// edges from them. Only as much is solved as the additions
     /// need: nothing when nothing was added, no factorisation when the new
     /// poses hang on the map by one trusted edge each (odometry), else

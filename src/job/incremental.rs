@@ -83,10 +83,12 @@ pub const CAPPED_TOLERANCE: f64 = 1e-4;
 /// candidate edge was accepted, the last report (returned again when
 /// nothing was added), the elimination order and what the last optimiser
 /// spares the next ([`Spare`]). Its memory is that of the poses, one byte
-/// per edge, four bytes per pose (the order), the report (about 100 bytes
-/// per loop candidate), the factor's values (8 bytes each) and the
-/// prepared poses and measurements (SE(2): 64 bytes per pose and 40 per
-/// edge; SE(3): 184 and 128).
+/// per edge, four bytes per pose (the order), the linear system's layout
+/// for the next one to grow from (16 bytes per edge, 8 per pose and per
+/// pair of poses an edge joins, 4 per block row of the factor's
+/// supernodes), the report (about 100 bytes per loop candidate), the
+/// factor's values (8 bytes each) and the prepared poses and measurements
+/// (SE(2): 64 bytes per pose and 40 per edge; SE(3): 184 and 128).
 #[derive(Clone, Debug)]
 pub(crate) struct Warm<P: Pose<D>, const D: usize> {
     poses: Vec<P>,
