@@ -4,7 +4,8 @@ and to pgo's incremental update (`PoseGraph.update()` of the Python module),
 side by side in one run.
 
 usage: .venv/bin/python scripts/bench_replay.py [--only manhattan city10000] [--every 1 10 100]
-           [--tools isam2 pgo] [--aliased] [--no-clean] [--quick] [--max-poses N] [--pgo-option KEY=VALUE ...]
+           [--tools isam2 pgo] [--aliased] [--no-clean] [--quick] [--max-poses N] [--repeat R]
+           [--pgo-option KEY=VALUE ...]
            [--pgo target/release/pgo] [--work bench-out/replay] [--out bench/results/replay.json]
            [--svg bench/results/replay_latency.svg] [--plot-only]
 
@@ -16,6 +17,9 @@ iSAM2 runs alone, as with --tools isam2. It needs the
 release binary (`cargo build --release`) for the batch references and for
 `pgo corrupt`. CI does not run it. --quick: manhattan only, N = 10 and 100,
 written to bench-out/replay-quick.json unless --out says otherwise.
+--repeat R: each dataset and N R times, the tools in turn in each round, each
+row with its round (bench/results/replay_rounds.json: the spread of the ratios
+on a shared machine).
 
 Replay (the same for both tools)
   * Poses in file order (the order of the VERTEX_SE2 lines); each edge is
@@ -91,6 +95,7 @@ Writes --out (JSON) and, when matplotlib can be imported, --svg (latency
 per step; --plot-only redraws it from --out). Prints one line per run.
 """
 import argparse
+import itertools
 import json
 import math
 import os
@@ -710,6 +715,9 @@ def main():
     ap.add_argument("--no-clean", action="store_true", help="only the aliased case")
     ap.add_argument("--quick", action="store_true", help="manhattan only, N = 10 and 100")
     ap.add_argument("--max-poses", type=int, default=None, help="replay only the first N poses (a test)")
+    ap.add_argument("--repeat", type=int, default=1, metavar="R",
+                    help="run each dataset and N R times, the tools in turn in each round "
+                         "(each row says its round): the spread of the ratios on a noisy machine")
     ap.add_argument("--plot-only", action="store_true", help="redraw --svg from --out and exit")
     ap.add_argument("--pgo-option", action="append", default=[], metavar="KEY=VALUE",
                     help="an option for every g.update() and g.optimize() (e.g. threads=1)")
@@ -728,6 +736,8 @@ def main():
         return
     if any(n < 1 for n in args.every):
         ap.error("--every takes positive integers")
+    if args.repeat < 1:
+        ap.error("--repeat takes a positive integer")
     if args.no_clean and not args.aliased:
         ap.error("--no-clean leaves only the aliased case: add --aliased")
     options = {}
@@ -776,15 +786,16 @@ def main():
         ref = batch_reference(args, clean, refs)
         log("%s: %d poses, %d edges; batch chi2 %.9g (peerlib %.9g)" % (
             name, len(data.order), len(data.edges), ref["chi2"], ref["chi2_check"]["peerlib"]))
-        for every in args.every:
-            for tool in args.tools:
-                row = run_case(args, name, data, ref, tool, every, options)
-                row["batch_chi2_check"] = ref["chi2_check"]
-                doc["cases"].append(row)
-                log("%-18s N=%-4d %-6s %s" % (name, every, tool, brief(row)))
-                doc["total_s"] = time.perf_counter() - t_start
-                os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-                write_json(doc, args.out)
+        for every, rnd, tool in itertools.product(args.every, range(args.repeat), args.tools):
+            row = run_case(args, name, data, ref, tool, every, options)
+            row["batch_chi2_check"] = ref["chi2_check"]
+            if args.repeat > 1:
+                row["round"] = rnd
+            doc["cases"].append(row)
+            log("%-18s N=%-4d %-6s %s" % (name, every, tool, brief(row)))
+            doc["total_s"] = time.perf_counter() - t_start
+            os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+            write_json(doc, args.out)
     doc["complete"] = True
     doc["total_s"] = time.perf_counter() - t_start
     write_json(doc, args.out)
