@@ -133,6 +133,10 @@ pub struct BlockSystem<const D: usize> {
     /// Whether `factor` is the factorisation of the `H` assembled now (an
     /// assembly since makes it the factor of an earlier `H`).
     factor_current: bool,
+    /// Whether `H` and `b` are all zero (as built, or cleared with nothing
+    /// added since): [`Self::clear`] then has nothing to zero — an
+    /// update's system is assembled once, just after it is built.
+    zero: bool,
     /// Where assembly and factorisation run.
     parallelism: Parallelism,
 }
@@ -207,6 +211,7 @@ impl<const D: usize> BlockSystem<D> {
             symbolic,
             factor: Vec::new(),
             factor_current: false,
+            zero: true,
             parallelism,
         })
     }
@@ -372,9 +377,12 @@ impl<const D: usize> BlockSystem<D> {
     /// Sets `H` and `b` to zero before assembly.
     pub fn clear(&mut self) {
         self.factor_current = false;
-        self.diag.fill(0.0);
-        self.off.fill(0.0);
-        self.gradient.fill(0.0);
+        if !self.zero {
+            self.diag.fill(0.0);
+            self.off.fill(0.0);
+            self.gradient.fill(0.0);
+            self.zero = true;
+        }
     }
 
     /// Adds edge `k`'s contribution: `H_ii = J_iᵀΩJ_i`, `H_ij = J_iᵀΩJ_j`,
@@ -389,6 +397,7 @@ impl<const D: usize> BlockSystem<D> {
         b_i: &SVector<f64, D>,
         b_j: &SVector<f64, D>,
     ) {
+        self.zero = false;
         let slot = self.edges[k];
         if slot.i != NONE {
             self.add_diagonal(slot.i as usize, h_ii, b_i);
@@ -422,6 +431,7 @@ impl<const D: usize> BlockSystem<D> {
             }
             return;
         }
+        self.zero = false;
         let n = self.n_blocks;
         let diag = SharedSlice(self.diag.as_mut_ptr());
         let off = SharedSlice(self.off.as_mut_ptr());
@@ -470,6 +480,7 @@ impl<const D: usize> BlockSystem<D> {
 
     /// Adds edge `k`'s contribution to `b` only.
     pub fn add_edge_gradient(&mut self, k: usize, b_i: &SVector<f64, D>, b_j: &SVector<f64, D>) {
+        self.zero = false;
         let slot = self.edges[k];
         for (p, b) in [(slot.i, b_i), (slot.j, b_j)] {
             if p != NONE {
@@ -1043,6 +1054,28 @@ mod tests {
                 "seed {seed}: {predicted} vs {model}"
             );
         }
+    }
+
+    #[test]
+    fn a_system_cleared_after_an_assembly_is_assembled_as_a_fresh_one() {
+        let pairs: Vec<(Option<usize>, Option<usize>)> = (1..8)
+            .map(|k| (Some(k - 1), Some(k)))
+            .chain([(Some(0), Some(5)), (Some(2), None)])
+            .collect();
+        let build = || BlockSystem::<2>::new(8, &pairs, Parallelism::sequential()).unwrap();
+        let (mut used, mut fresh) = (build(), build());
+        // Other terms and a gradient first, then the same terms as `fresh`'s.
+        assemble_random(&mut used, &pairs, &mut StdRng::seed_from_u64(1));
+        used.add_edge_gradient(0, &Vector2::new(1.0, 2.0), &Vector2::new(3.0, 4.0));
+        let again = assemble_random(&mut used, &pairs, &mut StdRng::seed_from_u64(2));
+        let first = assemble_random(&mut fresh, &pairs, &mut StdRng::seed_from_u64(2));
+        assert_eq!(again, first);
+        assert_eq!(used.diag, fresh.diag);
+        assert_eq!(used.off, fresh.off);
+        assert_eq!(used.gradient, fresh.gradient);
+        fresh.clear();
+        let values = fresh.diag.iter().chain(&fresh.off).chain(&fresh.gradient);
+        assert!(values.copied().all(|x| x == 0.0));
     }
 
     #[test]
