@@ -15,7 +15,9 @@
 //! the graph at that point (untimed): how far its χ² is above the batch
 //! job's, and its positions (as a share of the map's size) and rotations
 //! from the batch job's, each update's with `-v`, with the loops only one
-//! of the two accepts.
+//! of the two accepts. `--hash` prints, after every update, a hash of
+//! the bits of its poses and χ²: two builds (of one toolchain) that print
+//! the same lines gave the same map at every update.
 //!
 //! Prints one line per update (poses, how it was solved, milliseconds) and
 //! the earlier decisions it changed (and, for a whole job, why) with `-v`,
@@ -101,18 +103,21 @@ struct Args {
     every: usize,
     options: Options,
     verbose: bool,
+    /// Print a hash of each update's map.
+    hash: bool,
     /// Measure every this many updates' gap to the batch optimum (0: none).
     gap_every: usize,
 }
 
 const USAGE: &str = "usage: replay FILE.g2o [EVERY_N_POSES] [--update-iters K] \
-                     [--set NAME=VALUE]… [--gap-every M] [-v]";
+                     [--set NAME=VALUE]… [--gap-every M] [--hash] [-v]";
 
 fn parse_args() -> Result<Args, Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let verbose = args.iter().any(|a| a == "-v");
+    let hash = args.iter().any(|a| a == "--hash");
     let (mut options, mut gap_every, mut rest) = (Options::default(), 0, Vec::new());
-    let mut it = args.iter().filter(|a| *a != "-v");
+    let mut it = args.iter().filter(|a| *a != "-v" && *a != "--hash");
     while let Some(a) = it.next() {
         let mut value = || it.next().ok_or(format!("{a} needs a value"));
         match a.as_str() {
@@ -133,6 +138,7 @@ fn parse_args() -> Result<Args, Box<dyn std::error::Error>> {
         every: every.map_or(Ok(1), |s| s.parse())?,
         options,
         verbose,
+        hash,
         gap_every,
     })
 }
@@ -181,6 +187,9 @@ fn update(
     let solution = graph.update(&args.options)?;
     let ms = t.elapsed().as_secs_f64() * 1e3;
     tally.times.push(ms);
+    if args.hash {
+        writeln!(out, "hash {poses} {:016x}", map_hash(&solution))?;
+    }
     let inc = solution.incremental();
     let name = match inc.map_or(UpdateSolve::Batch, |i| i.solve) {
         UpdateSolve::Batch => "batch",
@@ -405,6 +414,17 @@ fn accepted_apart(a: &AnySolution, b: &AnySolution) -> (Vec<Ends>, Vec<Ends>) {
 /// The largest distance between a position of `a` and the same pose's of
 /// `b`, the diagonal of `b`'s positions' bounding box, and the largest
 /// angle between a rotation of `a` and the same pose's of `b`.
+/// A hash of the bits of `solution`'s poses and χ².
+fn map_hash(solution: &AnySolution) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    for x in solution.poses_flat() {
+        x.to_bits().hash(&mut h);
+    }
+    solution.chi2().to_bits().hash(&mut h);
+    h.finish()
+}
+
 fn poses_apart(a: &AnySolution, b: &AnySolution) -> (f64, f64, f64) {
     let (width, dims) = (b.pose_width(), if b.pose_width() == 3 { 2 } else { 3 });
     let (pa, pb) = (a.poses_flat(), b.poses_flat());

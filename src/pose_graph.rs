@@ -511,9 +511,9 @@ impl<P: GraphPose<D>, const D: usize> PoseGraph<P, D> {
     /// edge joins and 4 per block row of the factor's supernodes, about
     /// 100 bytes per loop candidate, the factor's values, which the next
     /// factorisation fills instead of fresh memory, and 64 bytes per pose
-    /// and 40 per edge in SE(2), 184 and 128 in SE(3)); a new pose is composed along trusted
-    /// edges from them. Only as much is solved as the additions
-    /// need: nothing when nothing was added, no factorisation when the new
+    /// and 40 per edge in SE(2), 184 and 128 in SE(3)); a new pose is
+    /// composed along trusted edges from them. Only as much is solved as
+    /// the additions need: nothing when nothing was added, no factorisation when the new
     /// poses hang on the map by one trusted edge each (odometry), else
     /// EM's decisions from the last ones ([`crate::UpdateSolve`]). The report's
     /// `incremental` part says which, and which earlier decisions changed.

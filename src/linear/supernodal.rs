@@ -300,13 +300,19 @@ impl Structure {
 
     /// The supernode of each block column.
     fn supernode_of(&self) -> Vec<u32> {
-        let ns = self.begin.len() - 1;
-        let mut supernode_of = vec![0u32; self.begin[ns]];
-        for s in 0..ns {
-            supernode_of[self.begin[s]..self.begin[s + 1]].fill(s as u32);
-        }
-        supernode_of
+        supernode_of(&self.begin)
     }
+}
+
+/// The supernode of each block column, for supernodes starting at `begin`
+/// (with the end).
+fn supernode_of(begin: &[usize]) -> Vec<u32> {
+    let ns = begin.len() - 1;
+    let mut of = vec![0u32; begin[ns]];
+    for s in 0..ns {
+        of[begin[s]..begin[s + 1]].fill(s as u32);
+    }
+    of
 }
 
 /// The supernodes of the new columns `n_old..` of a grown factor: each
@@ -539,11 +545,7 @@ impl<const D: usize> Symbolic<D> {
         rows: Vec<u32>,
         update_scratch: usize,
     ) -> Self {
-        let ns = begin.len() - 1;
-        let mut supernode_of = vec![0u32; begin[ns]];
-        for s in 0..ns {
-            supernode_of[begin[s]..begin[s + 1]].fill(s as u32);
-        }
+        let supernode_of = supernode_of(&begin);
         let mut symbolic = Self {
             begin,
             row_ptr,
