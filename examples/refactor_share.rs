@@ -17,9 +17,21 @@
 //! the changed paths summed over the steps as a share of the flops of
 //! whole factorisations (pgo's insides, through the hidden
 //! `pgo::internals` hook: no stability promise).
+//!
+//! With `--capped THETA[,THETA…]` it also measures, for each `THETA`, what
+//! a capped update (`update-iters` 1) would redo if it kept each pose's
+//! part of the factor until that pose had moved by more than `THETA` (the
+//! largest component of its tangent-space move, metres and radians, as
+//! iSAM2's relinearisation threshold, 0.1 by default, is read): the file is
+//! replayed through `PoseGraph::update` capped at one iteration, and at
+//! each step the changed blocks are the new poses, the old poses the new
+//! edges reach, and every pose that moved by more than `THETA` since its
+//! block was last counted as changed, with every pose an edge joins it to
+//! (whose Jacobian, and so whose block of `H`, that move changes). Blocks refreshed only as ancestors on those paths
+//! are still counted as stale, so the share is an upper bound.
 
-use pgo::Pose;
 use pgo::internals::{AnyGraph, Graph, Optimizer, ReadOptions, SolveSettings, read};
+use pgo::{GraphPose, Options, PoseGraph};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -27,7 +39,17 @@ fn main() {
         eprintln!("usage: refactor_share FILE.g2o N [N ...]");
         std::process::exit(2);
     };
-    let every: Vec<usize> = args[2..].iter().filter_map(|s| s.parse().ok()).collect();
+    let mut every: Vec<usize> = Vec::new();
+    let mut thresholds: Vec<Option<f64>> = vec![None];
+    let mut rest = args[2..].iter();
+    while let Some(a) = rest.next() {
+        if a == "--capped" {
+            let list = rest.next().map(String::as_str).unwrap_or("");
+            thresholds.extend(list.split(',').filter_map(|t| t.parse().ok()).map(Some));
+        } else if let Ok(n) = a.parse() {
+            every.push(n);
+        }
+    }
     let file = match read(std::path::Path::new(path), ReadOptions::default()) {
         Ok(file) => file,
         Err(e) => {
@@ -36,21 +58,31 @@ fn main() {
         }
     };
     for &n in &every {
-        let (steps, fresh, share) = match &file.graph {
-            AnyGraph::Planar(g) => replay(g, n.max(1)),
-            AnyGraph::Spatial(g) => replay(g, n.max(1)),
-        };
-        println!(
-            "{path} every {n} poses: {steps} steps factorise, {fresh} of them ordered afresh; \
-             the changed paths hold {:.1} % of the factorisations' flops",
-            100.0 * share
-        );
+        for &theta in &thresholds {
+            let (steps, fresh, share) = match &file.graph {
+                AnyGraph::Planar(g) => replay(g, n.max(1), theta),
+                AnyGraph::Spatial(g) => replay(g, n.max(1), theta),
+            };
+            let how = match theta {
+                None => String::new(),
+                Some(t) => format!(" (capped, poses kept until they move by {t})"),
+            };
+            println!(
+                "{path} every {n} poses{how}: {steps} steps factorise, {fresh} of them ordered \
+                 afresh; the changed paths hold {:.1} % of the factorisations' flops",
+                100.0 * share
+            );
+        }
     }
 }
 
 /// Steps, steps ordered afresh, and the flops of the changed paths over
 /// those of whole factorisations, summed over the steps.
-fn replay<P: Pose<D>, const D: usize>(full: &Graph<P, D>, every: usize) -> (usize, usize, f64) {
+fn replay<P: GraphPose<D>, const D: usize>(
+    full: &Graph<P, D>,
+    every: usize,
+    theta: Option<f64>,
+) -> (usize, usize, f64) {
     let n = full.num_vertices();
     // The step at which each edge joins: once its later end exists.
     let mut edges: Vec<usize> = (0..full.edges.len()).collect();
@@ -60,6 +92,11 @@ fn replay<P: Pose<D>, const D: usize>(full: &Graph<P, D>, every: usize) -> (usiz
     let (mut next_edge, mut steps, mut fresh) = (0, 0, 0);
     let (mut redone, mut whole) = (0.0, 0.0);
     let mut last_positions: Vec<usize> = Vec::new();
+    // The capped replay (with `theta`): its graph, options, and the pose of
+    // each vertex when its block was last counted as changed.
+    let mut capped = theta.map(|_| (PoseGraph::<P, D>::new(), Vec::<Option<P>>::new()));
+    let mut options = Options::default();
+    options.solver.update_iterations = Some(1);
     let ends = (every..n).step_by(every).chain(std::iter::once(n));
     // The graph at the last step that solved.
     let (mut old_vertices, mut old_edges) = (0, 0);
@@ -68,6 +105,9 @@ fn replay<P: Pose<D>, const D: usize>(full: &Graph<P, D>, every: usize) -> (usiz
             graph
                 .add_vertex(full.id(v), full.poses[v])
                 .expect("vertices of a file are distinct");
+            if let Some((pg, _)) = &mut capped {
+                pg.add_pose(full.id(v), full.poses[v]).expect("distinct");
+            }
         }
         while next_edge < edges.len() {
             let e = &full.edges[edges[next_edge]];
@@ -83,8 +123,19 @@ fn replay<P: Pose<D>, const D: usize>(full: &Graph<P, D>, every: usize) -> (usiz
                     None,
                 )
                 .expect("the ends were added");
+            if let Some((pg, _)) = &mut capped {
+                (pg.add_edge(full.id(e.from), full.id(e.to), e.measurement, e.information))
+                    .expect("the ends were added");
+            }
             next_edge += 1;
         }
+        // The capped map after this step's update, by vertex index.
+        let moved_to: Option<Vec<P>> = capped.as_mut().map(|(pg, _)| {
+            let solution = pg.update(&options).expect("the replay's update solves");
+            (0..graph.num_vertices())
+                .map(|v| *solution.pose(full.id(v)).expect("every pose is in the map"))
+                .collect()
+        });
         // New poses each hung on the map by one edge (odometry to a new
         // keyframe): an update composes them and factorises nothing.
         if graph.edges.len() - old_edges <= graph.num_vertices() - old_vertices && old_edges > 0 {
@@ -107,6 +158,35 @@ fn replay<P: Pose<D>, const D: usize>(full: &Graph<P, D>, every: usize) -> (usiz
             for v in [e.from, e.to] {
                 if v < old_vertices && !gauge.contains(&v) {
                     changed.push(block_of(v));
+                }
+            }
+        }
+        if let (Some((_, kept_at)), Some(now), Some(theta)) = (&mut capped, &moved_to, theta) {
+            kept_at.resize(graph.num_vertices(), None);
+            let is_block = |v: usize| !gauge.contains(&v);
+            let mut moved = vec![false; graph.num_vertices()];
+            for v in 0..old_vertices {
+                if let Some(at) = kept_at[v] {
+                    let d = P::error(&at, &now[v], &P::identity());
+                    moved[v] = is_block(v) && d.amax() > theta;
+                }
+            }
+            // An edge at a moved pose changes both its ends' Jacobians: the
+            // diagonal block of `H` at its other end changes too.
+            for e in &graph.edges {
+                for (a, b) in [(e.from, e.to), (e.to, e.from)] {
+                    if moved[a] && is_block(b) {
+                        changed.push(block_of(b));
+                    }
+                }
+            }
+            changed.extend((0..old_vertices).filter(|&v| moved[v]).map(block_of));
+            changed.sort_unstable();
+            changed.dedup();
+            for v in 0..graph.num_vertices() {
+                if is_block(v) && (v >= old_vertices || changed.binary_search(&block_of(v)).is_ok())
+                {
+                    kept_at[v] = Some(now[v]);
                 }
             }
         }

@@ -95,6 +95,15 @@ pub struct SelectedInverse {
     values: Vec<f64>,
 }
 
+/// The structure of a factor that a system grown from its system can keep
+/// ([`BlockSystem::kept_factor`], [`BlockSystem::refactorize`]).
+#[derive(Clone, Debug, Default)]
+pub struct KeptFactor {
+    begin: Vec<usize>,
+    val_ptr: Vec<usize>,
+    lambda: f64,
+}
+
 /// The normal equations of a pose graph with `D`-dimensional blocks, and
 /// their factorisation.
 pub struct BlockSystem<const D: usize> {
@@ -510,6 +519,78 @@ impl<const D: usize> BlockSystem<D> {
         if self.n_blocks == 0 {
             return Ok(());
         }
+        let floor = self.damping_floor();
+        // A fresh allocation is zeroed here, and its panels need not be;
+        // a reused one ([`Self::reuse_factor_allocation`]) is only fitted
+        // to the length, its panels zeroed one by one.
+        let zeroed = self.factor.is_empty();
+        self.fit_factor()?;
+        let mut factor = std::mem::take(&mut self.factor);
+        let load = |s: usize, panel: &mut [f64]| self.load_panel(s, panel, lambda, floor);
+        let factorized = (self.symbolic).factorize(&mut factor, zeroed, &load, &self.parallelism);
+        self.factor = factor;
+        self.factorized(factorized)
+    }
+
+    /// [`Self::factorize`] at `λ = 0` that forms again only the panels a
+    /// change of `H` since `kept` reaches: `kept` is this system's
+    /// allocation's factor ([`Self::kept_factor`] of the system this one
+    /// grew from, [`Self::reuse_factor_allocation`]), and `changed` the
+    /// variable blocks whose rows and columns of `H` changed since — new
+    /// blocks count as changed. The panels of every other supernode are
+    /// moved to their places in this factor as they are; those on the
+    /// changed blocks' paths to the root of the elimination tree are
+    /// formed from this `H` and the panels below them. Where `H` did
+    /// change elsewhere, the factor is that of a matrix whose columns
+    /// there are the earlier `H`'s. Returns the supernodes formed again,
+    /// or `None` where the factor cannot be kept (another structure, a
+    /// damped or multi-threaded factorisation, no factor): then nothing
+    /// was done. A pivot that is not positive leaves no factor, as
+    /// [`Self::factorize`] does.
+    pub fn refactorize(
+        &mut self,
+        kept: &KeptFactor,
+        changed: &[usize],
+    ) -> Result<Option<usize>, LinearError> {
+        let usable = kept.lambda == 0.0
+            && !self.parallelism.is_parallel()
+            && self.n_blocks > 0
+            && self.factor.len() == kept.val_ptr.last().copied().unwrap_or(usize::MAX)
+            && self.symbolic.keeps(&kept.begin);
+        if !usable {
+            return Ok(None);
+        }
+        self.lambda = 0.0;
+        self.factor_current = false;
+        let floor = self.damping_floor();
+        self.fit_factor()?;
+        let positions = changed.iter().map(|&b| self.position[b]);
+        let mut formed = self.symbolic.affected(positions);
+        self.symbolic
+            .keep_panels(&mut self.factor, &kept.val_ptr, &mut formed);
+        let count = formed.iter().filter(|&&f| f).count();
+        let mut factor = std::mem::take(&mut self.factor);
+        let load = |s: usize, panel: &mut [f64]| self.load_panel(s, panel, 0.0, floor);
+        let factorized = (self.symbolic).factorize_only(&mut factor, &formed, &load);
+        self.factor = factor;
+        self.factorized(factorized).map(|()| Some(count))
+    }
+
+    /// What a system grown from this one needs to keep its factor
+    /// ([`Self::refactorize`]): the supernodes' first columns, their panels'
+    /// offsets and the damping; `None` without a factor of the `H`
+    /// assembled now.
+    pub fn kept_factor(&self) -> Option<KeptFactor> {
+        (self.factor_current && !self.factor.is_empty()).then(|| KeptFactor {
+            begin: self.symbolic.begins().to_vec(),
+            val_ptr: self.symbolic.value_offsets().to_vec(),
+            lambda: self.lambda,
+        })
+    }
+
+    /// `DIAGONAL_FLOOR · max diag H`, the least diagonal entry the damping
+    /// scales (recording the undamped diagonal).
+    fn damping_floor(&mut self) -> f64 {
         let mut max_diag = 0.0f64;
         for p in 0..self.n_blocks {
             for a in 0..D {
@@ -518,11 +599,11 @@ impl<const D: usize> BlockSystem<D> {
                 max_diag = max_diag.max(d);
             }
         }
-        let floor = DIAGONAL_FLOOR * max_diag;
-        // A fresh allocation is zeroed here, and its panels need not be;
-        // a reused one ([`Self::reuse_factor_allocation`]) is only fitted
-        // to the length, its panels zeroed one by one.
-        let zeroed = self.factor.is_empty();
+        DIAGONAL_FLOOR * max_diag
+    }
+
+    /// Fits the factor's allocation to the structure's length.
+    fn fit_factor(&mut self) -> Result<(), LinearError> {
         let len = self.symbolic.len_values();
         if self.factor.len() != len {
             let more = len.saturating_sub(self.factor.len());
@@ -531,32 +612,39 @@ impl<const D: usize> BlockSystem<D> {
                 .map_err(|_| LinearError::Factorization("out of memory for the factor".into()))?;
             self.factor.resize(len, 0.0);
         }
-        let sym = &self.symbolic;
+        Ok(())
+    }
+
+    /// Writes `H + λ·diag H` (the diagonal floored at `floor`) into
+    /// supernode `s`'s zeroed panel.
+    fn load_panel(&self, s: usize, panel: &mut [f64], lambda: f64, floor: f64) {
         let (diag, off, off_ptr) = (&self.diag, &self.off, self.later.starts());
-        let (diag_dest, off_dest) = (&self.diag_dest, &self.off_dest);
-        let load = |s: usize, panel: &mut [f64]| {
-            let (cols, start, ld) = sym.supernode_range(s);
-            for p in cols {
-                let dst = &mut panel[diag_dest[p] - start..];
-                let src = &diag[p * D * D..][..D * D];
-                for c in 0..D {
-                    for r in c..D {
-                        dst[c * ld + r] = src[c * D + r];
-                    }
-                    if lambda > 0.0 {
-                        dst[c * ld + c] += lambda * src[c * D + c].max(floor);
-                    }
+        let (cols, start, ld) = self.symbolic.supernode_range(s);
+        for p in cols {
+            let dst = &mut panel[self.diag_dest[p] - start..];
+            let src = &diag[p * D * D..][..D * D];
+            for c in 0..D {
+                for r in c..D {
+                    dst[c * ld + r] = src[c * D + r];
                 }
-                for k in off_ptr[p]..off_ptr[p + 1] {
-                    let dst = &mut panel[off_dest[k] - start..];
-                    let src = &off[k * D * D..][..D * D];
-                    for c in 0..D {
-                        dst[c * ld..c * ld + D].copy_from_slice(&src[c * D..c * D + D]);
-                    }
+                if lambda > 0.0 {
+                    dst[c * ld + c] += lambda * src[c * D + c].max(floor);
                 }
             }
-        };
-        match sym.factorize(&mut self.factor, zeroed, &load, &self.parallelism) {
+            for k in off_ptr[p]..off_ptr[p + 1] {
+                let dst = &mut panel[self.off_dest[k] - start..];
+                let src = &off[k * D * D..][..D * D];
+                for c in 0..D {
+                    dst[c * ld..c * ld + D].copy_from_slice(&src[c * D..c * D + D]);
+                }
+            }
+        }
+    }
+
+    /// Records a factorisation's outcome: the factor is current, or the
+    /// block whose pivot was not positive.
+    fn factorized(&mut self, outcome: Result<(), usize>) -> Result<(), LinearError> {
+        match outcome {
             Ok(()) => {
                 self.factor_current = true;
                 Ok(())

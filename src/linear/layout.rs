@@ -95,7 +95,7 @@ impl Layout {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{BlockSystem, Parallelism, fill_reducing_order};
+    use super::super::{BlockSystem, KeptFactor, Parallelism, fill_reducing_order};
     use super::*;
     use rand::{Rng, SeedableRng, rngs::StdRng};
 
@@ -211,5 +211,76 @@ mod tests {
             assert!(old.extend(&position, &edges).is_none(), "seed {seed}");
         }
         assert!(refused > 0);
+    }
+
+    /// Adds to `system` a positive-definite contribution of every edge,
+    /// each drawn from its own seed (the same edge the same numbers), edge
+    /// `moved` (a pose moved there) stiffer.
+    fn assemble(system: &mut BlockSystem<2>, edges: &Edges, moved: usize) {
+        use nalgebra::{Matrix2, Vector2};
+        system.clear();
+        for (k, _) in edges.iter().enumerate() {
+            let mut rng = StdRng::seed_from_u64(k as u64);
+            let a = Matrix2::from_fn(|_, _| rng.random_range(-1.0..1.0));
+            let stiff = if k == moved { 2.0 } else { 1.0 };
+            let h = a * a.transpose() + Matrix2::identity() * stiff;
+            let b = Vector2::from_fn(|_, _| rng.random_range(-1.0..1.0));
+            system.add_edge(k, &h, &(-h * 0.5), &h, &b, &(-b));
+        }
+    }
+
+    #[test]
+    fn a_kept_factor_formed_again_where_h_changed_is_the_whole_factorisation() {
+        let seq = Parallelism::sequential;
+        let mut kept_some = 0;
+        for seed in 0..20 {
+            let (n, more) = (20 + seed as usize, 1 + seed as usize % 7);
+            let (old_edges, edges) = grown_graph(seed, n, more);
+            let old_position = fill_reducing_order(n, &old_edges).unwrap();
+            let mut old =
+                BlockSystem::<2>::with_positions(n, &old_edges, seq(), old_position.clone(), None)
+                    .unwrap();
+            assemble(&mut old, &old_edges, usize::MAX);
+            old.factorize(0.0).unwrap();
+            let kept = old.kept_factor().unwrap();
+            let mut position = old_position;
+            position.extend(n..n + more);
+            let layout = old.layout();
+            let grown = || {
+                BlockSystem::<2>::with_positions(
+                    n + more,
+                    &edges,
+                    seq(),
+                    position.clone(),
+                    Some(&layout),
+                )
+                .unwrap()
+            };
+            // The new blocks, the old ones the new edges reach and the ends
+            // of an old edge linearised again changed.
+            let moved = seed as usize % old_edges.len();
+            let mut changed: Vec<usize> = (n..n + more).collect();
+            for &(i, j) in edges[old_edges.len()..].iter().chain([&edges[moved]]) {
+                changed.extend(i.into_iter().chain(j));
+            }
+            let mut whole = grown();
+            assemble(&mut whole, &edges, moved);
+            whole.factorize(0.0).unwrap();
+            let mut partial = grown();
+            partial.reuse_factor_allocation(old.take_factor_allocation());
+            assemble(&mut partial, &edges, moved);
+            let formed = partial.refactorize(&kept, &changed).unwrap().unwrap();
+            assert_eq!(partial.factor, whole.factor, "seed {seed}: the same bits");
+            if formed < partial.symbolic.supernodes() {
+                kept_some += 1;
+            }
+            // Another damping or structure: nothing kept, nothing done.
+            let damped = KeptFactor {
+                lambda: 1e-3,
+                ..kept.clone()
+            };
+            assert_eq!(grown().refactorize(&damped, &changed).unwrap(), None);
+        }
+        assert!(kept_some > 0, "some panels were kept");
     }
 }

@@ -758,7 +758,6 @@ impl<const D: usize> Symbolic<D> {
     /// other panel comes out of a factorisation the same bits, since a
     /// panel is formed from its own columns of `H` and its descendants'
     /// panels alone.
-    #[cfg(any(test, feature = "internals"))]
     pub(super) fn affected(&self, positions: impl IntoIterator<Item = usize>) -> Vec<bool> {
         let mut mark = vec![false; self.supernodes()];
         for p in positions {
@@ -772,6 +771,81 @@ impl<const D: usize> Symbolic<D> {
             }
         }
         mark
+    }
+
+    /// The first block column of each supernode, and the end.
+    pub(super) fn begins(&self) -> &[usize] {
+        &self.begin
+    }
+
+    /// Where each supernode's panel starts in the values, and the end.
+    pub(super) fn value_offsets(&self) -> &[usize] {
+        &self.val_ptr
+    }
+
+    /// Whether this structure begins with the supernodes of an earlier one
+    /// whose first columns were `begin` (its supernodes, then new ones):
+    /// a structure grown from it ([`Self::extended_by`]).
+    pub(super) fn keeps(&self, begin: &[usize]) -> bool {
+        let old = begin.len().saturating_sub(1);
+        old > 0 && old <= self.supernodes() && self.begin[..old] == begin[..old]
+    }
+
+    /// Moves the panels of an earlier factor of a structure this one
+    /// [`Self::keeps`] (`values` holds them at `old_ptr`'s offsets) to
+    /// their places in this one, except those `formed` marks; marks as
+    /// well every supernode whose panel is not the same size as before
+    /// (it gained rows) and every new one. `values` must already have this
+    /// structure's length.
+    pub(super) fn keep_panels(&self, values: &mut [f64], old_ptr: &[usize], formed: &mut [bool]) {
+        let old = old_ptr.len() - 1;
+        formed[old..].fill(true);
+        for s in (0..old).rev() {
+            let len = old_ptr[s + 1] - old_ptr[s];
+            if self.val_ptr[s + 1] - self.val_ptr[s] != len {
+                formed[s] = true;
+            }
+            if !formed[s] {
+                // Panels only grow: each moves up, past none not yet moved.
+                values.copy_within(old_ptr[s]..old_ptr[s + 1], self.val_ptr[s]);
+            }
+        }
+        // A supernode formed again changes its ancestors' panels.
+        for s in 0..self.supernodes() {
+            if formed[s] && self.parent[s] != u32::MAX {
+                formed[self.parent[s] as usize] = true;
+            }
+        }
+    }
+
+    /// Factorises only the supernodes `formed` marks, in this thread, in
+    /// elimination order, each from its panel of `load` and the panels of
+    /// its descendants as `values` holds them. Returns the first block
+    /// column whose pivot is not positive.
+    pub(super) fn factorize_only(
+        &self,
+        values: &mut [f64],
+        formed: &[bool],
+        load: &(dyn Fn(usize, &mut [f64]) + Sync),
+    ) -> Result<(), usize> {
+        assert_eq!(values.len(), self.len_values());
+        let failed = AtomicUsize::new(usize::MAX);
+        let shared = Shared {
+            values: values.as_mut_ptr(),
+            zeroed: false,
+        };
+        for s in (0..self.supernodes()).filter(|&s| formed[s]) {
+            // SAFETY: one thread, each supernode once, in elimination
+            // order: every descendant is formed before (or kept).
+            unsafe { self.factor_node(s, Par::Seq, &shared, load, &failed) };
+            if failed.load(Ordering::Relaxed) != usize::MAX {
+                break;
+            }
+        }
+        match failed.into_inner() {
+            usize::MAX => Ok(()),
+            b => Err(b),
+        }
     }
 
     /// The floating-point operations of forming only the

@@ -39,6 +39,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             self.update_pattern(graph, Some(weights))?;
             self.factorized = true;
             self.linearize(graph, Some(weights));
+            self.kept = None;
             match self.system.factorize(0.0) {
                 Ok(()) => {}
                 Err(LinearError::NotPositiveDefinite { block }) => {

@@ -15,6 +15,7 @@ mod chord;
 mod gn;
 pub mod init;
 mod innovation;
+mod keep;
 mod lm;
 mod normal;
 mod pattern;
@@ -110,6 +111,13 @@ pub struct SolveSettings {
     /// LM damping `λ` (relative to the diagonal of `H`) after the first
     /// rejected step; until then λ = 0.
     pub initial_lambda: f64,
+    /// Keep the last factorisation's panels that no change of `H` reaches
+    /// (a capped update's, [`keep`](self::keep)): a block counts as changed
+    /// where it is new, a new edge reaches it, or an edge joins it to a
+    /// pose that moved by more than this (the largest component of its
+    /// tangent-space move) since its block was last formed. `None`: every
+    /// factorisation is whole.
+    pub keep_factor: Option<f64>,
     /// Threads of the parallel work (linearisation, the objective at trial
     /// points, assembly and numeric factorisation): 0 and 1 run all of it in
     /// the calling thread and start no thread; N ≥ 2 runs it on a private
@@ -154,6 +162,7 @@ impl Default for SolveSettings {
             end_step: None,
             time_limit: None,
             initial_lambda: 1e-6,
+            keep_factor: None,
             threads: 0,
         }
     }
@@ -434,6 +443,10 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
     parallelism: Parallelism,
     /// The order kept across a growing graph's solves, if any.
     ordering: Option<Ordering>,
+    /// The last factorisation, for a later capped update to keep
+    /// ([`SolveSettings::keep_factor`]), and what the last assembly found.
+    kept: Option<keep::Kept<P>>,
+    plan: Option<keep::Plan<P>>,
 }
 
 /// What an optimiser hands to the next one of the same graph grown by
@@ -445,6 +458,7 @@ pub struct Optimizer<P: Pose<D>, const D: usize> {
 /// state starts without one.
 pub struct Spare<P: Pose<D>, const D: usize> {
     factor: Vec<f64>,
+    kept: Option<keep::Kept<P>>,
     measurements: Vec<P::Prepared>,
     prepared: Vec<(P, P::Prepared)>,
 }
@@ -453,6 +467,7 @@ impl<P: Pose<D>, const D: usize> Default for Spare<P, D> {
     fn default() -> Self {
         Self {
             factor: Vec::new(),
+            kept: None,
             measurements: Vec::new(),
             prepared: Vec::new(),
         }
@@ -539,6 +554,8 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             measurements: Vec::new(),
             prepared: Vec::new(),
             parallelism,
+            kept: None,
+            plan: None,
         };
         optimizer.system = optimizer.pattern(graph, &variable)?;
         optimizer.max_nnz_factor = optimizer.system.nnz_factor();
@@ -551,6 +568,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         self.forget_factored();
         Spare {
             factor: self.system.take_factor_allocation(),
+            kept: self.kept.take(),
             measurements: std::mem::take(&mut self.measurements),
             prepared: std::mem::take(&mut self.prepared),
         }
@@ -562,6 +580,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     pub fn reuse_spare(&mut self, spare: Spare<P, D>) {
         self.forget_factored();
         self.system.reuse_factor_allocation(spare.factor);
+        self.kept = spare.kept;
         self.measurements = spare.measurements;
         self.prepared = spare.prepared;
     }

@@ -78,6 +78,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// [`Self::linearize`] where the parallel work belongs.
     fn assemble(&mut self, graph: &Graph<P, D>, weights: Option<&[f64]>) -> f64 {
         self.forget_factored();
+        self.plan_keeping(graph, weights);
         self.system.clear();
         let parallel = self.parallelism.is_parallel();
         if prepare(&graph.poses, &mut self.prepared, parallel) {
@@ -172,7 +173,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     ) -> Result<Solved, SolveError> {
         progress.summary.factorizations += 1;
         self.forget_factored();
-        let factorized = self.system.factorize(lambda);
+        let factorized = if lambda == 0.0 && self.factorize_keeping() {
+            Ok(())
+        } else {
+            let whole = self.system.factorize(lambda);
+            self.kept_after_factorization(lambda);
+            whole
+        };
         self.factorized = true;
         progress.lap(|t| &mut t.factorize_s);
         match factorized {
