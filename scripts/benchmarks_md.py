@@ -983,16 +983,18 @@ REPLAY = {
         "to the next by more than the smaller gaps between the tools (iSAM2's manhattan at "
         "N = 10 took 1.50 s, 0.81 s and 1.17 s in three runs of one evening, its city10000 "
         "at N = 1 124 s, 104 s and 123 s): compare the tools within a run, where they ran "
-        "back to back. Even so the ratio of city10000 every pose moves from run to run: "
-        "pgo-capped took 0.64× iSAM2's time (83.3 s against 129.7 s) and 0.93× (91.5 s "
-        "against 98.4 s, the run below) in two runs an hour apart on one day, the first on "
-        "the build before the grown layout of the profile below. It also grows with the "
+        "back to back. Even so the ratio of city10000 every pose moved from run to run on "
+        "the builds before the kept factor below: pgo-capped took 0.64× iSAM2's time (83.3 s "
+        "against 129.7 s) and 0.93× (91.5 s against 98.4 s) in two runs an hour apart on one "
+        "day. It also grew with the "
         "map: over the first 4,000 poses of city10000 every pose (`scripts/bench_replay.py "
         "--only city10000 --every 1 --tools isam2 pgo-capped --max-poses 4000`, three runs "
-        "back to back) pgo-capped took 0.42×, 0.39× and 0.44× iSAM2's time. A capped "
-        "update factorises the whole map once, and that grows with the map; iSAM2 "
-        "refactorises only the cliques a step touches (refactorising only the changed paths "
-        "would redo 43 % of the flops on city10000 every pose, below)."),
+        "back to back) pgo-capped took 0.42×, 0.39× and 0.44× iSAM2's time: a capped "
+        "update factorised the whole map once, and that grows with the map, where iSAM2 "
+        "refactorises only the cliques a step touches. A capped update now keeps the last "
+        "factor's panels where no pose moved by more than 10⁻² and forms again only the "
+        "paths to the root of what changed (docs/method.md §7b; below), and over all of "
+        "city10000 every pose takes 0.42–0.48× iSAM2's time in the rounds below."),
     "aliased_intro": (
         "The aliased case: manhattan corrupted by `pgo corrupt --wrong 100 --wrong-mode "
         "aliased --group-size 5 --true-like-counts 0.5 --seed 1` (100 wrong candidates i–j "
@@ -1002,7 +1004,10 @@ REPLAY = {
         "candidate). Precision = accepted true / accepted, recall = accepted true / true "
         "candidates added so far, at the end and (precision) at its lowest over the steps; "
         "map error against the optimum of the clean graph; \"= batch\": whether pgo's final "
-        "accepted set equals that of a batch `optimize()` of the same graph."),
+        "accepted set equals that of a batch `optimize()` of the same graph. The aliased rows "
+        "of this run were made again after the clean ones, on the build that plans a kept "
+        "factor only at a solve's first assembly (`.venv/bin/python scripts/bench_replay.py "
+        "--aliased --no-clean`, its cases put in place of the first run's)."),
     "clean_profile": (
         "Where a clean update's time goes, sampled over the Rust replay of manhattan every 10 "
         "poses (`CARGO_PROFILE_RELEASE_DEBUG=true cargo build --release --example replay`, then "
@@ -1033,7 +1038,17 @@ REPLAY = {
         "while every other pose keeps the linearisation point it had (iSAM2 relinearises a "
         "pose once it has moved by more than a threshold); an update that ends at the batch "
         "job's map could use such a factor only for steps with the exact gradient, as its "
-        "chord steps do, which converge more slowly than Gauss–Newton's. Capped at one "
+        "chord steps do, which converge more slowly than Gauss–Newton's. A capped update, "
+        "which promises a latency and not the batch map, now does keep such a factor: its "
+        "panels where no pose moved by more than 10⁻² since they were formed, the "
+        "supernodes on the changed blocks' paths formed again (docs/method.md §7b; "
+        "`refactor_share … --capped 0.1,0.01,0.001`: 41 % of whole factorisations' flops on "
+        "manhattan every pose at 10⁻², 49 % on city10000, upper bounds). In the rounds of "
+        "the replay (`scripts/bench_replay.py --tools isam2 pgo-capped --repeat 3`, below), "
+        "pgo-capped every pose went from 0.49–0.55× iSAM2's time to 0.39–0.42× on manhattan "
+        "and from 0.60–0.73× to 0.42–0.48× on city10000 (the run before: the same command on "
+        "the build before, its `bench/results/replay_rounds.json` in the repository's "
+        "history), every replay ending at the batch map. Capped at one "
         "iteration per solve and every pose, counted in instructions (`valgrind "
         "--tool=callgrind target/release/examples/replay "
         "../shared/datasets/manhattanOlson3500-g2o.g2o 1 --update-iters 1 --set threads=1`, "
@@ -1144,9 +1159,11 @@ REPLAY = {
         "The same replays with iSAM2 and pgo-capped only, three rounds, the tools in turn in "
         "each round (iSAM2, then pgo-capped), so that each ratio compares two runs made "
         "back to back: how far one run's ratio can be trusted on this shared machine. In "
-        "this run iSAM2's city10000 every pose took 106 s, 137 s and 147 s, and pgo-capped "
-        "78 s, 85 s and 89 s; the median ratio is at most 0.6× everywhere but there "
-        "(0.62×, its rounds 0.60–0.73×)."),
+        "this run iSAM2's city10000 every pose took 135 s, 159 s and 144 s, and pgo-capped "
+        "57 s, 69 s and 69 s (0.42–0.48×; 0.60–0.73× in the run before a capped update "
+        "kept its factor's untouched panels, docs/method.md §7b); the median ratio is at most "
+        "0.61× everywhere, and that on manhattan every 100 poses, whose 35 updates take "
+        "0.2–0.4 s in all."),
     "default_cmd": ".venv/bin/python scripts/bench_replay.py --aliased",
 }
 

@@ -168,7 +168,9 @@ pub struct SolverOptions {
     /// capped solve whose step the Gauss–Newton model foresaw to within an
     /// update's tolerance counts as converged, so that poses added by
     /// odometry alone are composed onto its map; an update that adds
-    /// nothing still finishes it. Loop
+    /// nothing still finishes it. A capped solve's first factorisation
+    /// keeps the last one's panels where no pose moved by more than 10⁻²
+    /// (docs/method.md §7b), as iSAM2 keeps its cliques. Loop
     /// candidates that EM decides are always solved to convergence (EM
     /// judges each by its innovation at the optimum). Without it every
     /// update converges to the map a batch job would find. `pgo optimize`

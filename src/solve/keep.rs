@@ -48,9 +48,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// factor carried over, if the setting is on and the factor is of the
     /// same graph before it grew (the same variable blocks in the same
     /// places, the same weights on its edges).
+    /// Only an optimiser's first assembly plans: a solve that factorises
+    /// more than once (EM's rounds, damped trials) keeps nothing, so that
+    /// the many assemblies of an update with loop candidates cost no copy.
     pub(super) fn plan_keeping(&mut self, graph: &Graph<P, D>, weights: Option<&[f64]>) {
         self.plan = None;
-        let Some(theta) = self.options.keep_factor else {
+        let Some(theta) = self.options.keep_factor.filter(|_| !self.factorized) else {
+            self.kept = None;
             return;
         };
         let mut plan = Plan {
