@@ -834,17 +834,29 @@ impl<const D: usize> Symbolic<D> {
             values: values.as_mut_ptr(),
             zeroed: false,
         };
-        for s in (0..self.supernodes()).filter(|&s| formed[s]) {
-            // SAFETY: one thread, each supernode once, in elimination
-            // order: every descendant is formed before (or kept).
-            unsafe { self.factor_node(s, Par::Seq, &shared, load, &failed) };
-            if failed.load(Ordering::Relaxed) != usize::MAX {
-                break;
-            }
-        }
+        self.factor_in_order(&shared, load, &failed, |s| formed[s]);
         match failed.into_inner() {
             usize::MAX => Ok(()),
             b => Err(b),
+        }
+    }
+
+    /// Factorises the supernodes `s` with `which(s)` in this thread, in
+    /// elimination order (every descendant formed before, or kept), until
+    /// a pivot fails.
+    fn factor_in_order(
+        &self,
+        shared: &Shared,
+        load: &(dyn Fn(usize, &mut [f64]) + Sync),
+        failed: &AtomicUsize,
+        which: impl Fn(usize) -> bool,
+    ) {
+        for s in (0..self.supernodes()).filter(|&s| which(s)) {
+            // SAFETY: one thread, each supernode once, in elimination order.
+            unsafe { self.factor_node(s, Par::Seq, shared, load, failed) };
+            if failed.load(Ordering::Relaxed) != usize::MAX {
+                break;
+            }
         }
     }
 
@@ -977,13 +989,7 @@ impl<const D: usize> Symbolic<D> {
         };
         let threads = parallelism.threads();
         if threads == 1 || ns < 2 {
-            for s in 0..ns {
-                // SAFETY: one thread, each supernode once, in elimination order.
-                unsafe { self.factor_node(s, Par::Seq, &shared, load, &failed) };
-                if failed.load(Ordering::Relaxed) != usize::MAX {
-                    break;
-                }
-            }
+            self.factor_in_order(&shared, load, &failed, |_| true);
         } else {
             // Subtrees below this much work run sequentially in one task.
             let grain = grain.unwrap_or_else(|| (self.flops / (16 * threads) as f64).max(2e5));

@@ -56,11 +56,16 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 inverse: None,
             });
         }
-        let mut block = vec![None; graph.num_vertices()];
+        Ok(self.blocks_of(graph.num_vertices()))
+    }
+
+    /// The variable block of each of `n` vertices (`None`: fixed).
+    pub(super) fn blocks_of(&self, n: usize) -> Vec<Option<usize>> {
+        let mut block = vec![None; n];
         for (b, &v) in self.vertex_of.iter().enumerate() {
             block[v] = Some(b);
         }
-        Ok(block)
+        block
     }
 
     /// The selected inverse of the last [`Self::factor_at`]'s factorisation,

@@ -48,6 +48,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// factor carried over, if the setting is on and the factor is of the
     /// same graph before it grew (the same variable blocks in the same
     /// places, the same weights on its edges).
+    ///
     /// Only an optimiser's first assembly plans: a solve that factorises
     /// more than once (EM's rounds, damped trials) keeps nothing, so that
     /// the many assemblies of an update with loop candidates cost no copy.
@@ -88,10 +89,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         if !(same_weights && same_blocks && graph.edges.len() >= kept.edges) {
             return None;
         }
-        let mut block = vec![None; graph.num_vertices()];
-        for (b, &v) in self.vertex_of.iter().enumerate() {
-            block[v] = Some(b);
-        }
+        let block = self.blocks_of(graph.num_vertices());
         let moved: Vec<bool> = (0..graph.num_vertices())
             .map(|v| match kept.at.get(v).copied().flatten() {
                 Some(at) => P::error(&at, &graph.poses[v], &P::identity()).amax() > theta,
