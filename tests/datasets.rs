@@ -211,7 +211,8 @@ fn q5_unusual_tags_fix_mixture_edges_and_skipped_tags() {
     for k in 1..8 {
         text += &format!("\nEDGE_SE3:QUAT {} {k} {identity}", k - 1);
     }
-    let chained = write(&temp_dir("q5"), "example_with_vertices.g2o", &text);
+    let q5 = temp_dir("q5");
+    let chained = write(&q5, "example_with_vertices.g2o", &text);
     let s = at_given_poses(&AnyPoseGraph::read_g2o(chained).unwrap());
     assert_eq!(s.report().skipped_tags.get("VERTEX_TRACKXYZ"), Some(&8));
     let Some(Ok(g)) = read("sphere2500-maxmix-n100-grp10.g2o") else {
@@ -445,7 +446,8 @@ fn aliased_torus(n: u64, (true_like, seed): (f64, u64)) -> Option<(PoseGraph3, V
     torus.compose_missing_poses();
     let rng = &mut StdRng::seed_from_u64(seed);
     let corruption = pgo_sim::corrupt(&torus, &aliased, rng).expect("corrupt");
-    let file = temp_dir("aliased-torus").join("torus.g2o");
+    let dir = temp_dir("aliased-torus");
+    let file = dir.join("torus.g2o");
     corruption.graph.write_g2o(&file).expect("write");
     let read = PoseGraph3::read_g2o(&file).expect("read");
     let (young, kept) = prefix(&read, n);
@@ -730,7 +732,8 @@ fn corrupted_planar(
     graph.compose_missing_poses();
     let rng = &mut StdRng::seed_from_u64(seed);
     let corruption = pgo_sim::corrupt(&graph, options, rng).expect("corrupt");
-    let file = temp_dir(&format!("corrupted-planar-{name}-{seed}")).join("m.g2o");
+    let dir = temp_dir(&format!("corrupted-planar-{name}-{seed}"));
+    let file = dir.join("m.g2o");
     corruption.graph.write_g2o(&file).expect("write");
     let read = PoseGraph2::read_g2o(&file).expect("read");
     Some((read, corruption.wrong))

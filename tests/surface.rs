@@ -13,11 +13,14 @@ use pgo::{
 use std::path::{Path, PathBuf};
 
 mod common;
-use common::{sample, temp_dir, write};
+use common::{TempDir, sample, temp_dir, write};
 
-/// `text` in a file `name` of a fresh temporary directory.
-fn temp_file(name: &str, text: &str) -> PathBuf {
-    write(&temp_dir(name), name, text)
+/// `text` in a file `name` of a fresh temporary directory: the directory
+/// (removed when dropped) and the file's path.
+fn temp_file(name: &str, text: &str) -> (TempDir, PathBuf) {
+    let dir = temp_dir(name);
+    let file = write(&dir, name, text);
+    (dir, file)
 }
 
 const I3: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
@@ -82,7 +85,7 @@ fn one_of_each_kind() -> Vec<(Error, ErrorKind)> {
             ErrorKind::Io,
         ),
         (
-            AnyPoseGraph::read_g2o(temp_file("bad.g2o", "VERTEX_SE2 0 0 0\n")).unwrap_err(),
+            AnyPoseGraph::read_g2o(temp_file("bad.g2o", "VERTEX_SE2 0 0 0\n").1).unwrap_err(),
             ErrorKind::Parse,
         ),
         (
@@ -177,7 +180,7 @@ fn messages_name_settings_in_each_surfaces_words() {
 
     // A file's: the reader's own message (the command line's flag) for
     // the command line, the binding's function otherwise.
-    let file = temp_file(
+    let (_dir, file) = temp_file(
         "indefinite.g2o",
         "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 -1 0 0 1 0 1\n",
     );
@@ -310,7 +313,7 @@ fn a_huge_or_tiny_quaternion_is_normalised_not_called_zero() {
         .unwrap_err();
     assert_eq!(e.to_string(), "vertex 2: is not finite");
     // As the reader does.
-    let file = temp_file(
+    let (_dir, file) = temp_file(
         "huge_quaternion.g2o",
         "VERTEX_SE3:QUAT 0 1 2 3 0 0 1e200 1e200\n",
     );
@@ -353,7 +356,7 @@ fn information_out_of_range_is_refused_where_it_enters() {
 
     // A file's, when it is read for a job (the reader itself takes any
     // finite scale: the simulator's files reach 10^±300).
-    let file = temp_file(
+    let (_dir, file) = temp_file(
         "tiny_information.g2o",
         "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1e-120 0 0 1e-120 0 1e-120\n",
     );

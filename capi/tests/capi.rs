@@ -400,8 +400,11 @@ fn files_that_cannot_be_read_or_written_are_io_and_parse_errors() {
             PgoStatus::PgoErrIo,
             "missing.g2o",
         );
-        let dir = std::env::temp_dir().join(format!("pgo-capi-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = tempfile::Builder::new()
+            .prefix("pgo-capi-")
+            .tempdir()
+            .unwrap();
+        let dir = dir.path();
         let bad = dir.join("bad.g2o");
         std::fs::write(&bad, "VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 1 oops\n").unwrap();
         assert_fails(
@@ -432,7 +435,6 @@ fn files_that_cannot_be_read_or_written_are_io_and_parse_errors() {
         pgo_graph_free(empty);
         pgo_graph_free(g);
         pgo_graph_free(chain);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }
 
@@ -489,8 +491,11 @@ fn the_ids_of_a_graph_read_from_a_file_are_listed() {
 #[test]
 fn a_file_s_information_is_repaired_when_asked_and_messages_say_how() {
     unsafe {
-        let dir = std::env::temp_dir().join(format!("pgo-capi-repair-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = tempfile::Builder::new()
+            .prefix("pgo-capi-repair-")
+            .tempdir()
+            .unwrap();
+        let dir = dir.path();
         let indefinite = dir.join("indefinite.g2o");
         std::fs::write(
             &indefinite,
@@ -533,7 +538,6 @@ fn a_file_s_information_is_repaired_when_asked_and_messages_say_how() {
             "diagonal entry (0, 0) = 1e-120, outside the range pgo computes with",
         );
         pgo_graph_free(g);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }
 

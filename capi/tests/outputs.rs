@@ -35,12 +35,12 @@ fn assert_fails(status: PgoStatus, expected: PgoStatus, needle: &str) {
     assert!(message.contains(needle), "{message:?} lacks {needle:?}");
 }
 
-/// A fresh temporary directory.
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("pgo-capi-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh temporary directory, removed when dropped.
+fn temp_dir(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("pgo-capi-{name}-"))
+        .tempdir()
+        .unwrap()
 }
 
 /// The numbers of each line of a file.
@@ -66,7 +66,8 @@ unsafe fn optimised(path: &Path) -> (*mut PgoGraph, *mut PgoResult) {
 
 #[test]
 fn a_file_s_map_and_trajectories_are_written_by_its_ids() {
-    let dir = temp_dir("outputs");
+    let scratch = temp_dir("outputs");
+    let dir = scratch.path();
     unsafe {
         for (name, width) in [("grid2d.g2o", 3), ("sphere3d.g2o", 7)] {
             let mut g = ptr::null_mut();
@@ -112,12 +113,12 @@ fn a_file_s_map_and_trajectories_are_written_by_its_ids() {
             pgo_graph_free(g);
         }
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn a_graph_built_in_memory_writes_its_map() {
-    let dir = temp_dir("outputs-memory");
+    let scratch = temp_dir("outputs-memory");
+    let dir = scratch.path();
     unsafe {
         let mut g = ptr::null_mut();
         ok(pgo_graph_new(2, &mut g));
@@ -157,12 +158,12 @@ fn a_graph_built_in_memory_writes_its_map() {
         pgo_result_free(r);
         pgo_graph_free(g);
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn bad_paths_and_results_are_refused_and_leave_nothing() {
-    let dir = temp_dir("outputs-bad");
+    let scratch = temp_dir("outputs-bad");
+    let dir = scratch.path();
     unsafe {
         let (g, r) = optimised(&sample("grid2d.g2o"));
         let writers: [(&str, unsafe extern "C" fn(_, _) -> _); 3] = [
@@ -180,7 +181,7 @@ fn bad_paths_and_results_are_refused_and_leave_nothing() {
             assert!(!dir.join("missing").exists(), "{name}");
             // A directory is no file: refused and left as it was.
             assert_fails(
-                write(r, c_path(&dir).as_ptr()),
+                write(r, c_path(dir).as_ptr()),
                 PgoStatus::PgoErrIo,
                 "directory",
             );
@@ -195,16 +196,16 @@ fn bad_paths_and_results_are_refused_and_leave_nothing() {
                 "result is NULL",
             );
         }
-        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
+        assert_eq!(std::fs::read_dir(dir).unwrap().count(), 0);
         pgo_result_free(r);
         pgo_graph_free(g);
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn the_pictures_of_a_file_are_written_into_a_directory_made_for_them() {
-    let dir = temp_dir("plots");
+    let scratch = temp_dir("plots");
+    let dir = scratch.path();
     unsafe {
         let (g, r) = optimised(&sample("grid2d.g2o"));
         let pictures = dir.join("made").join("pictures");
@@ -249,5 +250,4 @@ fn the_pictures_of_a_file_are_written_into_a_directory_made_for_them() {
         pgo_result_free(r);
         pgo_graph_free(g);
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }

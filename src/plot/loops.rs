@@ -280,9 +280,11 @@ mod tests {
     }
 
     fn draw(name: &str, points: &[LoopPoint], model: &LoopModel) -> Result<String, PlotError> {
-        let dir = std::env::temp_dir().join(format!("pgo-plot-loops-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join(name);
+        let dir = tempfile::Builder::new()
+            .prefix("pgo-plot-loops-")
+            .tempdir()
+            .unwrap();
+        let path = dir.path().join(name);
         plot_loops(&path, points, 0, model)?;
         Ok(std::fs::read_to_string(path).unwrap())
     }

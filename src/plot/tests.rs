@@ -12,11 +12,12 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, LogNormal};
 
-/// A fresh directory for one test's files.
-fn test_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("pgo-plot-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh directory for one test's files, removed when dropped.
+fn test_dir(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("pgo-plot-{name}-"))
+        .tempdir()
+        .unwrap()
 }
 
 /// Text as plotters' SVG backend writes it.
@@ -55,7 +56,8 @@ fn counts_plot_shows_the_fit_and_the_threshold() {
     let fit = learn_threshold(&counts, &MixtureOptions::default());
     assert!(!fit.is_degenerate(), "{:?}", fit.degeneracy);
     let t = fit.threshold.clone().unwrap();
-    let path = test_dir("counts").join("counts.svg");
+    let dir = test_dir("counts");
+    let path = dir.path().join("counts.svg");
     plot_counts(&path, &counts, &fit).unwrap();
     let svg = read_svg(&path);
     let label = threshold_label(t.count, t.normalized);
@@ -84,7 +86,8 @@ fn a_spike_of_saturated_counts_is_clipped_and_said_so() {
     let fit = learn_threshold(&counts, &MixtureOptions::default());
     let m = fit.mixture.clone().unwrap();
     assert!(m.sigma[1] < 0.01, "{m:?}");
-    let path = test_dir("spike").join("spike.svg");
+    let dir = test_dir("spike");
+    let path = dir.path().join("spike.svg");
     plot_counts(&path, &counts, &fit).unwrap();
     let svg = read_svg(&path);
     assert!(svg.contains("curves clipped at 2.5× the tallest bar"));
@@ -132,7 +135,7 @@ fn degenerate_fits_say_why() {
     let fit = learn_threshold(&counts, &picky);
     let reason = fit.degeneracy.clone().unwrap();
     assert!(matches!(reason, Degeneracy::Overlapping { .. }));
-    let path = dir.join("overlapping.svg");
+    let path = dir.path().join("overlapping.svg");
     plot_counts(&path, &counts, &fit).unwrap();
     let svg = read_svg(&path);
     assert!(svg.contains(&escaped(&format!("Degenerate fit: {reason}"))));
@@ -143,7 +146,7 @@ fn degenerate_fits_say_why() {
     let counts = vec![12; 30];
     let fit = learn_threshold(&counts, &MixtureOptions::default());
     assert!(fit.mixture.is_none());
-    let path = dir.join("all-equal.svg");
+    let path = dir.path().join("all-equal.svg");
     plot_counts(&path, &counts, &fit).unwrap();
     let svg = read_svg(&path);
     let reason = fit.degeneracy.unwrap().to_string();
@@ -162,13 +165,13 @@ fn empty_and_zero_counts_plot_without_panicking() {
         ("one", vec![u64::MAX]),
     ] {
         let fit = learn_threshold(&counts, &MixtureOptions::default());
-        let path = dir.join(format!("{name}.svg"));
+        let path = dir.path().join(format!("{name}.svg"));
         plot_counts(&path, &counts, &fit).unwrap();
         let svg = read_svg(&path);
         let reason = fit.degeneracy.unwrap().to_string();
         assert!(svg.contains(&escaped(&reason)), "{name}: {reason}");
     }
-    let svg = read_svg(&dir.join("zeros.svg"));
+    let svg = read_svg(&dir.path().join("zeros.svg"));
     assert!(svg.contains("no non-zero counts to show"));
     assert!(svg.contains("3 zero counts not shown"));
 }
@@ -177,7 +180,8 @@ fn empty_and_zero_counts_plot_without_panicking() {
 fn counts_that_are_not_the_fits_are_refused() {
     let counts = realistic_counts(5);
     let fit = learn_threshold(&counts, &MixtureOptions::default());
-    let path = test_dir("mismatch").join("counts.svg");
+    let dir = test_dir("mismatch");
+    let path = dir.path().join("counts.svg");
     let err = plot_counts(&path, &counts[1..], &fit).unwrap_err();
     assert!(matches!(err, PlotError::InvalidInput { .. }), "{err}");
     assert!(err.to_string().contains(&path.display().to_string()));
@@ -187,7 +191,7 @@ fn counts_that_are_not_the_fits_are_refused() {
 #[test]
 fn unwritable_paths_name_the_file() {
     let dir = test_dir("unwritable");
-    let path = dir.join("no-such-directory").join("plot.svg");
+    let path = dir.path().join("no-such-directory").join("plot.svg");
     let counts = realistic_counts(6);
     let fit = learn_threshold(&counts, &MixtureOptions::default());
     let err = plot_counts(&path, &counts, &fit).unwrap_err();
@@ -262,7 +266,8 @@ fn trajectory_plot_has_both_panels_the_counts_and_kept_loops_on_top() {
             weight: 0.2,
         },
     ];
-    let path = test_dir("trajectory").join("trajectory.svg");
+    let dir = test_dir("trajectory");
+    let path = dir.path().join("trajectory.svg");
     plot_trajectory(&path, &before, &after, &odometry, &loops, "A square, twice").unwrap();
     let svg = read_svg(&path);
     for text in [
@@ -324,12 +329,12 @@ fn loop_colours_run_from_red_to_green() {
 #[test]
 fn degenerate_trajectories_plot_without_panicking() {
     let dir = test_dir("degenerate-trajectory");
-    let path = dir.join("empty.svg");
+    let path = dir.path().join("empty.svg");
     plot_trajectory(&path, &[], &[], &[], &[], "nothing").unwrap();
     let svg = read_svg(&path);
     assert!(svg.contains("no poses") && svg.contains("accepted 0 loops, rejected 0"));
 
-    let path = dir.join("single.svg");
+    let path = dir.path().join("single.svg");
     plot_trajectory(&path, &[[3.0, 4.0]], &[[3.0, 4.0]], &[], &[], "one").unwrap();
     assert!(read_svg(&path).contains("1 pose, 0 odometry edges"));
 
@@ -347,7 +352,7 @@ fn degenerate_trajectories_plot_without_panicking() {
         to: 0,
         weight: f64::NAN,
     }];
-    let path = dir.join("nan.svg");
+    let path = dir.path().join("nan.svg");
     plot_trajectory(&path, &before, &after, &odometry, &loops, "nan").unwrap();
     assert!(read_svg(&path).contains("accepted 0 loops, rejected 1"));
     // A straight line: zero extent in y.
@@ -355,7 +360,7 @@ fn degenerate_trajectories_plot_without_panicking() {
 
     // Coordinates at the ends of f64.
     let huge = [[-1e308, 0.0], [1e308, -1e308], [f64::MAX, f64::MIN]];
-    let path = dir.join("huge.svg");
+    let path = dir.path().join("huge.svg");
     plot_trajectory(&path, &huge, &huge, &[(0, 1), (1, 2)], &[], "huge").unwrap();
     read_svg(&path);
 }
@@ -363,7 +368,7 @@ fn degenerate_trajectories_plot_without_panicking() {
 #[test]
 fn bad_trajectory_inputs_are_clear_errors() {
     let dir = test_dir("bad-trajectory");
-    let path = dir.join("bad.svg");
+    let path = dir.path().join("bad.svg");
     let p = [[0.0, 0.0], [1.0, 0.0]];
     let err = plot_trajectory(&path, &p, &p[..1], &[], &[], "t").unwrap_err();
     assert!(
@@ -453,7 +458,8 @@ fn ranges_have_equal_scales() {
     }
     // The panels' plotting areas get equal scales too.
     let (before, after) = square_loop(100);
-    let path = test_dir("aspect").join("aspect.svg");
+    let dir = test_dir("aspect");
+    let path = dir.path().join("aspect.svg");
     plot_trajectory(&path, &before, &after, &[], &[], "aspect").unwrap();
 }
 
@@ -475,7 +481,8 @@ fn large_trajectories_are_sampled_and_stay_small() {
             weight: if k % 4 == 0 { 0.0 } else { 1.0 },
         })
         .collect();
-    let path = test_dir("large").join("large.svg");
+    let dir = test_dir("large");
+    let path = dir.path().join("large.svg");
     let start = std::time::Instant::now();
     plot_trajectory(&path, &before, &after, &odometry, &loops, "large").unwrap();
     let elapsed = start.elapsed();

@@ -78,13 +78,13 @@ mod tests {
     use crate::nalgebra::{Matrix3, Matrix6, UnitQuaternion, Vector3};
     use crate::plot::PlotError;
     use crate::{AnyPoseGraph, Error, Options, Pose, PoseGraph2, PoseGraph3, Se2, Se3};
-    use std::path::PathBuf;
 
-    /// A fresh directory for one test's pictures.
-    fn dir(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("pgo-plots-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        dir
+    /// A fresh directory for one test's pictures, removed when dropped.
+    fn dir(name: &str) -> tempfile::TempDir {
+        tempfile::Builder::new()
+            .prefix(&format!("pgo-plots-{name}-"))
+            .tempdir()
+            .unwrap()
     }
 
     fn read(path: &std::path::Path) -> String {
@@ -100,7 +100,8 @@ mod tests {
             .unwrap()
             .optimize(&Options::default())
             .unwrap();
-        let dir = dir("sample").join("made");
+        let root = dir("sample");
+        let dir = root.path().join("made");
         let written = solution.write_plots(&dir).unwrap();
         let names: Vec<_> = (written.iter())
             .map(|p| p.strip_prefix(&dir).unwrap().to_str().unwrap())
@@ -133,7 +134,8 @@ mod tests {
             graph.add_edge(k - 1, k, step, Matrix6::identity()).unwrap();
         }
         let solution = graph.optimize(&Options::default()).unwrap();
-        let written = solution.write_plots(dir("memory")).unwrap();
+        let memory = dir("memory");
+        let written = solution.write_plots(memory.path().join("made")).unwrap();
         assert_eq!(written.len(), 1);
         let svg = read(&written[0]);
         assert!(svg.contains("pose graph (3D: seen from above, x and y)"));
@@ -149,8 +151,7 @@ mod tests {
         graph.add_edge(0, 1, step, Matrix3::identity()).unwrap();
         let solution = graph.optimize(&Options::default()).unwrap();
         let base = dir("file");
-        std::fs::create_dir_all(&base).unwrap();
-        let file = base.join("a-file");
+        let file = base.path().join("a-file");
         std::fs::write(&file, "x").unwrap();
         let err = solution.write_plots(file.join("pictures")).unwrap_err();
         assert!(matches!(err, PlotError::Write { .. }), "{err}");

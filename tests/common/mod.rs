@@ -26,8 +26,11 @@ pub fn sample(name: &str) -> PathBuf {
 /// A fresh, empty temporary directory, named after the test file's crate,
 /// the process, `name` and a count of the calls so far: tests run in
 /// parallel, and two that ask for the same `name` get two directories, so
-/// that neither can wipe the other's files.
-pub fn temp_dir(name: &str) -> PathBuf {
+/// that neither can wipe the other's files. It is removed, with what the
+/// test wrote in it, when the returned guard is dropped — unless the test
+/// is failing (panicking), when it stays for inspection and its path is
+/// printed.
+pub fn temp_dir(name: &str) -> TempDir {
     static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let d = std::env::temp_dir().join(format!(
@@ -37,7 +40,33 @@ pub fn temp_dir(name: &str) -> PathBuf {
     ));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).expect("create temp dir");
-    d
+    TempDir(d)
+}
+
+/// A test's temporary directory ([`temp_dir`]); derefs to its path.
+pub struct TempDir(PathBuf);
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for TempDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            eprintln!("kept the failing test's files in {}", self.0.display());
+        } else {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
 }
 
 /// Writes `text` to `dir/name` and returns the path.

@@ -5,7 +5,7 @@ use std::process::{Command, Output};
 // The library's test fixtures: temporary directories, files, datasets.
 #[path = "../../../tests/common/mod.rs"]
 mod fixtures;
-pub use fixtures::{datasets, temp_dir, write};
+pub use fixtures::{TempDir, datasets, temp_dir, write};
 
 /// Runs the `pgo` binary with `args`.
 pub fn pgo(args: &[&str]) -> Output {

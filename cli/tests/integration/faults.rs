@@ -425,7 +425,7 @@ fn full_tmpfs(graph: &str) {
     let err = stderr(&done);
     let left = std::fs::read_to_string(&out);
     let names = std::fs::read_dir(&dir).map(|d| d.count()).unwrap_or(0);
-    let _ = std::process::Command::new("umount").arg(&dir).status();
+    let _ = std::process::Command::new("umount").arg(&*dir).status();
     assert_eq!(done.status.code(), Some(1), "{err}");
     assert!(err.contains("No space left on device"), "{err}");
     assert_eq!(left.expect("old"), "old\n");

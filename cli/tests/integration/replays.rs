@@ -3,7 +3,7 @@
 //! job's, and an update whose EM decisions swing from the last update's
 //! runs the whole job instead.
 
-use crate::common::{datasets, pgo, stderr, temp_dir};
+use crate::common::{TempDir, datasets, pgo, stderr, temp_dir};
 use pgo::{AnyPoseGraph, Options, UpdateSolve};
 use std::path::{Path, PathBuf};
 
@@ -25,11 +25,13 @@ fn numbers(t: &[&str]) -> Vec<f64> {
 }
 
 /// The dataset `name` with 100 aliased candidates in groups of 5, half of
-/// them with true-loop-like counts (`pgo corrupt` with `seed`), or `None`
-/// without the datasets.
-fn aliased(name: &str, seed: u64) -> Option<PathBuf> {
+/// them with true-loop-like counts (`pgo corrupt` with `seed`): the
+/// temporary directory that holds it and its path; `None` without the
+/// datasets.
+fn aliased(name: &str, seed: u64) -> Option<(TempDir, PathBuf)> {
     let dir = datasets()?;
-    let file = temp_dir("replays").join(format!("{name}-aliased-{seed}.g2o"));
+    let work = temp_dir("replays");
+    let file = work.join(format!("{name}-aliased-{seed}.g2o"));
     let src = dir.join(format!("{name}.g2o"));
     let seed = seed.to_string();
     let out = pgo(&[
@@ -49,7 +51,7 @@ fn aliased(name: &str, seed: u64) -> Option<PathBuf> {
         &seed,
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
-    Some(file)
+    Some((work, file))
 }
 
 /// A g2o file's vertices (id, numbers) and edge lines (split).
@@ -117,7 +119,7 @@ fn add_ending_in(
 /// the true loops next to it rejected.
 #[test]
 fn an_aliased_intel_replay_ends_with_the_batch_decisions() {
-    let Some(file) = aliased("intel", 1_000_002) else {
+    let Some((_work, file)) = aliased("intel", 1_000_002) else {
         return;
     };
     let (poses, edges) = read(&file, 2);
@@ -158,7 +160,7 @@ fn an_aliased_intel_replay_ends_with_the_batch_decisions() {
 /// at the exact map of the linearisation, none does.)
 #[test]
 fn updates_of_an_aliased_sphere_resume_em_or_say_why_and_end_at_the_batch_map() {
-    let Some(file) = aliased("sphere2500", 1_000_001) else {
+    let Some((_work, file)) = aliased("sphere2500", 1_000_001) else {
         return;
     };
     let (poses, edges) = read(&file, 3);
