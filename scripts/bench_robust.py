@@ -90,8 +90,10 @@ ROOT = os.path.dirname(HERE)
 CLEAN = ["intel", "manhattan", "city10000", "sphere2500", "parking-garage", "torus3D",
          # real maps beyond the five: few loops (MIT: 20), two sessions
          # (ais2klinik), an office and drives (CSAIL, kitti_00; kitti_02 and
-         # kitti_05 with 43 and 66 loops), a 3D building
-         "MIT", "ais2klinik", "CSAIL", "kitti_00", "cubicle", "kitti_02", "kitti_05"]
+         # kitti_05 with 43 and 66 loops), a 3D building; Vertigo's
+         # simulated ring (26 loops) and ringCity
+         "MIT", "ais2klinik", "CSAIL", "kitti_00", "cubicle", "kitti_02", "kitti_05",
+         "ring", "ringCity"]
 MAXMIX_BASES = ["manhattanOlson3500", "manhattanG2O3500", "city10000", "sphere2500"]
 MAXMIX_KINDS = ["n1000-randm", "n1000-local", "n100-grp10", "n100-lgr10"]
 PGO_TOOLS = {

@@ -139,9 +139,10 @@ pub struct Layers {
     /// reach, whatever its posterior ([`schedule::verdict`], reason
     /// `outlying`); off: the posterior alone decides.
     pub reach: bool,
-    /// Try the end kept without the loops its outlying check names, and
-    /// keep the better end ([`starts::recheck`]); off: they are only
-    /// named (`outlying`, exit status 5).
+    /// Try the end kept without the loops its outlying check names, or
+    /// else without each cluster its doubt check names, and keep the
+    /// better end ([`starts::recheck`]); off: they are only named
+    /// (`outlying`, `doubtful`, exit status 5).
     pub recheck: bool,
     /// Try the end kept without its keystone — the accepted cluster whose
     /// removal would move the map most, by more than

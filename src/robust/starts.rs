@@ -116,9 +116,18 @@
 //! loop the check flags whose removal moves the map too little to name it,
 //! but more than the map may be off ([`super::doubt::RECHECK_MOVE`]), held
 //! out with the loops already rejected as outlying. Where the check names
-//! and tries nothing, the end meets the end without its keystone
-//! ([`super::doubt::keystone`]) instead: the accepted cluster the map rests
-//! on most, which a group of aliases that bent a map with few loops can be.
+//! and tries nothing, the end meets the end without each cluster its
+//! doubt check names ([`super::doubt::doubtful`]: accepted loops that err
+//! by one offset beyond their own noise, whose removal would move the
+//! map), and the end without its keystone ([`super::doubt::keystone`]):
+//! the accepted cluster the map rests on most, which a group of aliases
+//! that bent a map with few loops can be (a doubtful cluster that is the
+//! keystone is tried as the keystone). An end without a doubtful cluster
+//! replaces the kept one only where it ranks first and nothing questions
+//! it: it must resolve the doubt, not trade it for another (a ring whose
+//! true loops all close it at one place bends cheaply to a group of
+//! aliases, and both clusters err by a common offset; without the group
+//! the true loops fit).
 //! That end replaces the kept one only where it ranks first, accepts as
 //! many candidates, and nothing questions it (it passes, settled, and names
 //! no doubtful cluster, loop held back or outlying loop): taken out as a
@@ -164,6 +173,9 @@ pub enum Start {
     /// EM's decisions from the end kept, with the loops it named
     /// `outlying` ([`super::doubt`]) taken out.
     WithoutOutlying,
+    /// EM's decisions from the end kept, with one of the clusters it named
+    /// `doubtful` ([`super::doubt`]) taken out.
+    WithoutDoubtful,
     /// EM's decisions from the end kept, with its keystone
     /// ([`super::doubt::keystone`]) taken out.
     WithoutKeystone,
@@ -486,12 +498,13 @@ fn best_of<P: Clone>(ends: &mut [End<P>], c: f64) -> usize {
 /// and the aliases that fitted the bent map no longer fit. Leaving out a
 /// true loop within the true loops' reach lowers the fit by less than
 /// `J`'s price for it, and the end with it stays. Where the check names
-/// none, the same without the end's keystone, once per end kept, and,
-/// where nothing questions the end kept, the annealed start again without
-/// it ([`trials_without`]); the better of
-/// those two ends that also accepts as many candidates and is questioned
-/// by nothing wins where it ranks first (module doc). Returns the outcome
-/// of the end kept, its doubts found.
+/// none, the same without each cluster named doubtful and without the
+/// end's keystone, once per end kept, and, where nothing questions the end
+/// kept, the annealed start again without the keystone
+/// ([`trials_without`]); an end without a doubtful cluster that nothing
+/// questions, and an end without the keystone that also accepts as many
+/// candidates and is questioned by nothing, win where they rank first
+/// (module doc). Returns the outcome of the end kept, its doubts found.
 pub fn recheck<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
@@ -499,14 +512,14 @@ pub fn recheck<P: ChordalInit<D>, const D: usize>(
     mut kept: Outcome,
 ) -> Result<Outcome, SolveError> {
     let mut tried: Vec<Vec<bool>> = Vec::new();
-    while let Some((which, named)) = to_recheck(job, &kept).filter(|_| !session.exhausted()) {
+    while let Some(trial) = to_recheck(job, &kept).filter(|_| !session.exhausted()) {
         let mut starts = std::mem::take(&mut kept.starts);
         let start = (starts.iter().find(|s| s.chosen)).map_or(Start::Annealed, |s| s.start);
         let (summary, _) = summary(session.graph, weights, job, start);
         let mut before = End::keep(session.graph, weights, job, (summary, kept));
         tried.push(held(&before.weights));
         let questioned = !unquestioned(&before);
-        let mut trials = trials_without(session, weights, job, (which, &named, questioned))?;
+        let mut trials = trials_without(session, weights, job, (&trial, questioned))?;
         let s2 = (before.scale.into_iter())
             .chain(trials.iter().filter_map(|t| t.scale))
             .reduce(f64::min)
@@ -528,12 +541,18 @@ pub fn recheck<P: ChordalInit<D>, const D: usize>(
         }
         // The end without a keystone answers whether it kept other loops
         // out: it must put back as many as it takes out, and nothing may
-        // question it (module doc).
+        // question it; the end without a doubtful cluster must resolve the
+        // doubt: nothing may question it (module doc).
         let answers = |t: &End<P>| {
             !t.out.cut_short
                 && !tried.contains(&held(&t.weights))
-                && (which != Start::WithoutKeystone
-                    || t.summary.accepted >= before.summary.accepted && unquestioned(t))
+                && match t.summary.start {
+                    Start::WithoutKeystone | Start::AnnealedWithoutKeystone => {
+                        t.summary.accepted >= before.summary.accepted && unquestioned(t)
+                    }
+                    Start::WithoutDoubtful => unquestioned(t),
+                    _ => true,
+                }
         };
         let win = (0..trials.len())
             .filter(|&k| answers(&trials[k]) && trials[k].better_than(&before))
@@ -569,29 +588,39 @@ pub fn recheck<P: ChordalInit<D>, const D: usize>(
 }
 
 /// The ends that meet the end kept in [`recheck`]: EM's decisions from its
-/// map without the candidates `named` ([`without`]); where they are its
-/// keystone and nothing questions the end kept (not `questioned`), also
-/// the annealed start again without them ([`annealed_without`]), each with
-/// its own checks at its map. An end its checks question warns as it
-/// is: the annealed start without its keystone could end at a lower `J`
-/// with more aliases than it held, questioned by nothing (MIT with groups
-/// of 5 at revisited places, seed 40, calibrated: five aliases named
-/// doubtful, exit 5, would become ten, exit 0).
+/// map without each set of candidates the `trial` names ([`without`]);
+/// where one is its keystone and nothing questions the end kept (not
+/// `questioned`), also the annealed start again without it
+/// ([`annealed_without`]). The ends without a keystone or a doubtful
+/// cluster get their own checks at their maps (they win only where nothing
+/// questions them). An end its checks question warns as it is: the
+/// annealed start without its keystone could end at a lower `J` with more
+/// aliases than it held, questioned by nothing (MIT with groups of 5 at
+/// revisited places, seed 40, calibrated: five aliases named doubtful,
+/// exit 5, would become ten, exit 0).
 fn trials_without<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
     job: &Job<'_, P, D>,
-    (which, named, questioned): (Start, &[usize], bool),
+    (trial, questioned): (&[(Start, Vec<usize>)], bool),
 ) -> Result<Vec<End<P>>, SolveError> {
-    let mut trials = vec![without(session, weights, job, (which, named))?];
-    if which != Start::WithoutKeystone {
-        return Ok(trials);
-    }
-    super::doubts(session, weights, job, &mut trials[0].out);
-    if !questioned && !session.exhausted() {
-        let mut fresh = annealed_without(session, weights, job, named)?;
-        super::doubts(session, weights, job, &mut fresh.out);
-        trials.push(fresh);
+    let mut trials = Vec::with_capacity(trial.len() + 1);
+    for (which, named) in trial {
+        if !trials.is_empty() && session.exhausted() {
+            break;
+        }
+        let mut end = without(session, weights, job, (*which, named))?;
+        if *which == Start::WithoutOutlying {
+            trials.push(end);
+            continue;
+        }
+        super::doubts(session, weights, job, &mut end.out);
+        trials.push(end);
+        if *which == Start::WithoutKeystone && !questioned && !session.exhausted() {
+            let mut fresh = annealed_without(session, weights, job, named)?;
+            super::doubts(session, weights, job, &mut fresh.out);
+            trials.push(fresh);
+        }
     }
     Ok(trials)
 }
@@ -608,17 +637,18 @@ fn unquestioned<P: Clone>(end: &End<P>) -> bool {
         && out.outlying.is_empty()
 }
 
-/// What the end kept is tried without, if anything: the loops its
-/// outlying check named, else those it flagged below the warning
-/// ([`super::doubt::RECHECK_MOVE`]), else its keystone (module doc), each
-/// where its layer is on.
+/// What the end kept is tried without, if anything, each set of
+/// candidates as the start it makes: the loops its outlying check named,
+/// else those it flagged below the warning
+/// ([`super::doubt::RECHECK_MOVE`]), else each cluster it named doubtful
+/// and its keystone (module doc), each where its layer is on.
 fn to_recheck<P: Pose<D>, const D: usize>(
     job: &Job<'_, P, D>,
     kept: &Outcome,
-) -> Option<(Start, Vec<usize>)> {
+) -> Option<Vec<(Start, Vec<usize>)>> {
     if job.layers.recheck && !kept.outlying.is_empty() {
         let named = kept.outlying.iter().flat_map(|o| o.loops.clone()).collect();
-        return Some((Start::WithoutOutlying, named));
+        return Some(vec![(Start::WithoutOutlying, named)]);
     }
     // Flagged loops too close to the map's error to name: tried without,
     // the loops already rejected as outlying held out with them (else the
@@ -626,10 +656,17 @@ fn to_recheck<P: Pose<D>, const D: usize>(
     if job.layers.recheck && !kept.below_warning.is_empty() {
         let rejected = (0..kept.reasons.len()).filter(|&k| kept.reasons[k] == Reason::Outlying);
         let named = kept.below_warning.iter().flatten().copied().chain(rejected);
-        return Some((Start::WithoutOutlying, named.collect()));
+        return Some(vec![(Start::WithoutOutlying, named.collect())]);
     }
-    let keystone = kept.keystone.clone().filter(|_| job.layers.keystone)?;
-    Some((Start::WithoutKeystone, keystone))
+    let keystone = kept.keystone.clone().filter(|_| job.layers.keystone);
+    // A doubtful cluster that is also the keystone is tried as the
+    // keystone, by the stricter rule.
+    let mut trial: Vec<_> = (kept.doubtful.iter())
+        .filter(|d| job.layers.recheck && keystone.as_ref() != Some(&d.loops))
+        .map(|d| (Start::WithoutDoubtful, d.loops.clone()))
+        .collect();
+    trial.extend(keystone.map(|k| (Start::WithoutKeystone, k)));
+    (!trial.is_empty()).then_some(trial)
 }
 
 /// The end of EM's decisions from the map in the session's graph solved
