@@ -527,3 +527,70 @@ fn a_graph_the_job_cannot_run_on_is_refused() {
     bad.solver.threads = 2;
     assert!(g.optimize(&bad).is_ok(), "two threads of its own");
 }
+
+/// A second session joined to the first only by a loop candidate the gate
+/// drops: the initial guess places it by that candidate, and the job holds
+/// it there while the loop decisions (which start some accepted sets from
+/// their chordal relaxation) go on without it, instead of failing because
+/// the accepted set leaves it apart from the gauge. Session one drives
+/// three laps of a 20-pose circle (40 true loops with high counts, 10
+/// wrong ones with low counts); session two is a straight chain of 20
+/// poses.
+#[test]
+fn a_session_joined_only_by_a_dropped_candidate_is_held_where_it_was_placed() {
+    let info = Matrix3::from_diagonal(&[100.0, 100.0, 1000.0].into());
+    let lap = 20;
+    let on_circle = |k: u64| {
+        let a = std::f64::consts::TAU * (k % lap) as f64 / lap as f64;
+        Se2::new(
+            5.0 * a.cos(),
+            5.0 * a.sin(),
+            a + std::f64::consts::FRAC_PI_2,
+        )
+    };
+    let mut g = PoseGraph2::new();
+    for k in 0..3 * lap {
+        g.add_pose(k, on_circle(k)).unwrap();
+    }
+    let between = |a: &Se2, b: &Se2| a.inverse().compose(b);
+    for k in 1..3 * lap {
+        let z = between(&on_circle(k - 1), &on_circle(k));
+        g.add_edge(k - 1, k, z, info).unwrap();
+    }
+    for k in 0..2 * lap {
+        let count = 150 + (k * 37) % 100;
+        g.add_loop_candidate(k, k + lap, Se2::identity(), info, Some(count))
+            .unwrap();
+    }
+    for k in 0..10 {
+        let z = Se2::new(3.0 + k as f64, -2.0, 1.0);
+        g.add_loop_candidate(k, k + 25, z, info, Some(8 + k))
+            .unwrap();
+    }
+    let second = 1000;
+    for k in 0..20 {
+        g.add_pose(second + k, Se2::new(k as f64, 20.0, 0.0))
+            .unwrap();
+    }
+    for k in 1..20 {
+        g.add_edge(second + k - 1, second + k, Se2::new(1.0, 0.0, 0.0), info)
+            .unwrap();
+    }
+    let join = Se2::new(0.0, 10.0, 0.0);
+    g.add_loop_candidate(5, second, join, info, Some(9))
+        .unwrap();
+    let s = g.optimize(&Options::default()).unwrap();
+    let joining = s.loops().last().unwrap();
+    assert!(!joining.kept && !joining.accepted, "{joining:?}");
+    let true_loops = s.loops()[..2 * lap as usize].iter();
+    assert!(true_loops.clone().all(|l| l.accepted), "{:?}", s.loops());
+    // Session two keeps its own shape where the dropped candidate put it.
+    let placed = s.pose(5).unwrap().compose(&join);
+    let start = s.pose(second).unwrap();
+    assert!((start.x - placed.x).abs() < 1e-6 && (start.y - placed.y).abs() < 1e-6);
+    let step = between(start, s.pose(second + 19).unwrap());
+    assert!(
+        (step.x - 19.0).abs() < 1e-9 && step.y.abs() < 1e-9,
+        "{step:?}"
+    );
+}

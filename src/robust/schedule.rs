@@ -203,13 +203,24 @@ pub fn anneal<P: Pose<D>, const D: usize>(
 /// The annealing on the chordal relaxation: each E-step is followed by a
 /// chordal solve (rotations, then translations; two linear solves) with the
 /// candidates at their weights, from scratch — a convex stand-in for the
-/// map that is cheap to solve and that no earlier map biases.
+/// map that is cheap to solve and that no earlier map biases. Where the
+/// edges it weighs leave part of the map apart from the gauge (a session
+/// joined only by candidates the gate dropped), no relaxation places that
+/// part, and the annealing runs on the map itself ([`anneal`]), which
+/// holds the part where the initial guess put it.
 pub fn anneal_chordal<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &mut [f64],
     candidates: &[Candidate],
     c: f64,
 ) -> Result<Annealed, SolveError> {
+    if !session
+        .graph
+        .unconstrained_vertices(Some(weights))
+        .is_empty()
+    {
+        return anneal(session, weights, candidates, c);
+    }
     let mut annealing = Annealing::new(candidates, c);
     let mut out = Annealed::default();
     if annealing.kept.is_empty() {
@@ -856,6 +867,10 @@ pub fn propose<P: Pose<D>, const D: usize>(
 /// Starts the solve of an accepted set (`weights` 1 or 0) from its chordal
 /// relaxation when that fits it better (lower `Σ eᵀΩe` over its edges) than
 /// the map before; returns whether it did, else leaves the map as it was.
+/// A set whose edges leave part of the map apart from the gauge (the
+/// sessions of a multi-session map joined only by loops it rejects) has no
+/// relaxation that places that part: the map before stays, and the solve
+/// holds the part where it is ([`crate::solve`]).
 ///
 /// The map before is the last decision's (or the annealing's last
 /// relaxation, at the Cauchy weights), and neither start is better
@@ -876,6 +891,13 @@ pub(super) fn relaxed_start<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &[f64],
 ) -> Result<bool, SolveError> {
+    if !session
+        .graph
+        .unconstrained_vertices(Some(weights))
+        .is_empty()
+    {
+        return Ok(false);
+    }
     let fit = |g: &Graph<P, D>| g.chi2_where(|k| weights[k] > 0.0);
     let before = session.graph.poses.clone();
     let at = fit(session.graph);
