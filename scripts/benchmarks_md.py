@@ -708,7 +708,7 @@ FRESH_CMD = (
     "--out bench/results/exploration_fresh/s${s}_MIT_${tag}.json; done; done")
 
 RINGS_CMD = (
-    "for s in 1 2 3; do for tag in anywhere scattered; do case $tag in "
+    "for s in $(seq 1 10); do for tag in anywhere scattered; do case $tag in "
     "anywhere) a='--alias-group-size 10 --alias-true-like 0.5';; "
     "scattered) a='--alias-group-size 1 --alias-true-like 1.0';; esac; "
     ".venv/bin/python scripts/bench_robust.py --policies aliased --alias-place anywhere "
@@ -741,7 +741,7 @@ BEYOND = [("exploration_scattered", "Scattered aliases whose counts tell nothing
           ("exploration_rings", "A ring with one revisited place", RINGS_CMD,
            "Vertigo's simulated ring (434 poses; its 26 true loops all close the ring at one "
            "place) with 30 aliases placed anywhere, in groups of 10 with half the groups' counts "
-           "true-like, or one by one with every count true-like, seeds 1–3; and ringCity (2,361 "
+           "true-like, or one by one with every count true-like, seeds 1–10; and ringCity (2,361 "
            "poses, 901 true loops) with 300 aliases in groups of 10, seeds 1 and 2. A ring bends "
            "cheaply: a group of aliases across it costs the odometry little. On ring seed 2 "
            "(groups, published information) pgo accepted one group with the true loops, 33.9 % off "
