@@ -127,10 +127,10 @@
 //! it: it must resolve the doubt, not trade it for another (a ring whose
 //! true loops all close it at one place bends cheaply to a group of
 //! aliases, and both clusters err by a common offset; without the group
-//! the true loops fit).
-//! That end replaces the kept one only where it ranks first, accepts as
-//! many candidates, and nothing questions it (it passes, settled, and names
-//! no doubtful cluster, loop held back or outlying loop): taken out as a
+//! the true loops fit). The end without the keystone replaces the kept
+//! one only where it ranks first, accepts as many candidates, and nothing
+//! questions it (it passes, settled, and names no doubtful cluster, loop
+//! held back or outlying loop): taken out as a
 //! whole, a cluster of true loops at a tension lowers the fit by more than
 //! their price, and a group of aliases that agree with each other fits as a
 //! place seen twice would. EM's decisions from the map without the keystone
