@@ -745,7 +745,8 @@ BEYOND = [("exploration_scattered", "Scattered aliases whose counts tell nothing
            "poses, 901 true loops) with 300 aliases in groups of 10, seeds 1 and 2. A ring bends "
            "cheaply: a group of aliases across it costs the odometry little. On ring seed 2 "
            "(groups, published information) pgo accepted one group with the true loops, 33.9 % off "
-           "with both clusters named doubtful (exit 5), until an end without a doubtful cluster met "
+           "with both clusters named doubtful (exit 5), as it still does with `--pgo-flags \"--expert "
+           "no-recheck\"`, until an end without a doubtful cluster met "
            "the end kept (docs/method.md §7, \"Without a doubtful cluster\")")]
 
 

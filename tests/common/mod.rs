@@ -23,48 +23,43 @@ pub fn sample(name: &str) -> PathBuf {
     repository().join("g2o_samples").join(name)
 }
 
-/// A fresh, empty temporary directory, named after the test file's crate,
-/// the process, `name` and a count of the calls so far: tests run in
-/// parallel, and two that ask for the same `name` get two directories, so
-/// that neither can wipe the other's files. It is removed, with what the
-/// test wrote in it, when the returned guard is dropped — unless the test
-/// is failing (panicking), when it stays for inspection and its path is
-/// printed.
+/// A fresh, empty temporary directory named after the test file's crate
+/// and `name` (tempfile makes each one unique, so tests that run in
+/// parallel never share one). It is removed, with what the test wrote in
+/// it, when the returned guard is dropped — unless the test is failing
+/// (panicking), when it stays for inspection and its path is printed.
 pub fn temp_dir(name: &str) -> TempDir {
-    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let d = std::env::temp_dir().join(format!(
-        "pgo-{}-{}-{call}-{name}",
-        env!("CARGO_CRATE_NAME"),
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("create temp dir");
-    TempDir(d)
+    let dir = tempfile::Builder::new()
+        .prefix(&format!("pgo-{}-{name}-", env!("CARGO_CRATE_NAME")))
+        .tempdir()
+        .expect("create temp dir");
+    TempDir(dir)
 }
 
 /// A test's temporary directory ([`temp_dir`]); derefs to its path.
-pub struct TempDir(PathBuf);
+pub struct TempDir(tempfile::TempDir);
 
 impl std::ops::Deref for TempDir {
     type Target = Path;
     fn deref(&self) -> &Path {
-        &self.0
+        self.0.path()
     }
 }
 
 impl AsRef<Path> for TempDir {
     fn as_ref(&self) -> &Path {
-        &self.0
+        self.0.path()
     }
 }
 
 impl Drop for TempDir {
     fn drop(&mut self) {
         if std::thread::panicking() {
-            eprintln!("kept the failing test's files in {}", self.0.display());
-        } else {
-            let _ = std::fs::remove_dir_all(&self.0);
+            self.0.disable_cleanup(true);
+            eprintln!(
+                "kept the failing test's files in {}",
+                self.0.path().display()
+            );
         }
     }
 }
