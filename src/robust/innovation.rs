@@ -27,8 +27,9 @@
 //! `S` is also singular to rounding when the map without the cluster joins
 //! its ends only through a chain far looser than the loops (`S ≈
 //! Σ·C⁻¹·Σ` for a chain of covariance `C ≫ Σ`): `Σ_A − M_AA` cancels. Such
-//! a cluster is not left unchecked: [`through_wide_chains`] solves the map
-//! without it and judges its members against that map as candidates
+//! a cluster is not left unchecked: [`through_wide_chains`] moves the map
+//! to the one without it by one Gauss–Newton step (to first order, as the
+//! formulas above) and judges its members against that map as candidates
 //! outside it, where nothing cancels.
 //!
 //! [`BlockSystem::propagate_group_solved`]: crate::linear::BlockSystem::propagate_group_solved
@@ -502,11 +503,14 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
 /// the candidates `edges`; `accepted[k]`: the map in the session was
 /// solved with candidate `k`, the edges of non-zero `weights`) that `innov`
 /// left without one although edges of the map outside the cluster join
-/// both ends of each member (module doc): the map without the cluster is
-/// solved, its members are judged against it as candidates outside the
-/// map, and the joint statistic is the drop of `Σ eᵀΩe` between the two
-/// maps. The session's map is put back (the optimiser's factorisation is
-/// the last map's: an evaluation factorises its own).
+/// both ends of each member (module doc): the map is moved to the one
+/// without the cluster by one Gauss–Newton step (the first-order map the
+/// formulas give every other cluster; the evaluation then reads the errors
+/// at the exact map of its linearisation), its members are judged against
+/// it as candidates outside the map, and the joint statistic is the drop of
+/// `Σ eᵀΩe` between the two maps. The session's map is put back (the
+/// optimiser's factorisation is the last map's: an evaluation factorises
+/// its own).
 /// Clusters that nothing else joins keep `None`: their prior decides.
 pub fn through_wide_chains<P: Pose<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
@@ -530,7 +534,10 @@ pub fn through_wide_chains<P: Pose<D>, const D: usize>(
         let members = &clusters[c];
         let mut without = weights.to_vec();
         members.iter().for_each(|&k| without[edges[k]] = 0.0);
-        session.converge(&without)?;
+        // One step: a solve to convergence costs three to four
+        // factorisations, for each such cluster of each evaluation.
+        let (ran, _) = session.capped(1, |s| s.converge(&without));
+        ran?;
         let dropped = with - session.graph.chi2_where(|i| without[i] > 0.0);
         let outside = vec![false; accepted.len()];
         let judged = Evaluation::for_clusters(
