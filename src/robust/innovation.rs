@@ -27,10 +27,10 @@
 //! `S` is also singular to rounding when the map without the cluster joins
 //! its ends only through a chain far looser than the loops (`S ≈
 //! Σ·C⁻¹·Σ` for a chain of covariance `C ≫ Σ`): `Σ_A − M_AA` cancels. Such
-//! a cluster is not left unchecked: [`through_wide_chains`] moves the map
-//! to the one without it by one Gauss–Newton step (to first order, as the
-//! formulas above) and judges its members against that map as candidates
-//! outside it, where nothing cancels.
+//! a cluster is not left unchecked: [`through_wide_chains`] factorises the
+//! system without it, and judges its members against the map without it
+//! (one Gauss–Newton step away: first order, as the formulas above) as
+//! candidates outside it, where nothing cancels.
 //!
 //! [`BlockSystem::propagate_group_solved`]: crate::linear::BlockSystem::propagate_group_solved
 
@@ -503,15 +503,16 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
 /// the candidates `edges`; `accepted[k]`: the map in the session was
 /// solved with candidate `k`, the edges of non-zero `weights`) that `innov`
 /// left without one although edges of the map outside the cluster join
-/// both ends of each member (module doc): the map is moved to the one
-/// without the cluster by one Gauss–Newton step (the first-order map the
-/// formulas give every other cluster; the evaluation then reads the errors
-/// at the exact map of its linearisation), its members are judged against
-/// it as candidates outside the map, and the joint statistic is the drop of
-/// `Σ eᵀΩe` between the two maps. The session's map is put back (the
-/// optimiser's factorisation is the last map's: an evaluation factorises
-/// its own).
-/// Clusters that nothing else joins keep `None`: their prior decides.
+/// both ends of each member (module doc). The system without the cluster
+/// is factorised at the map; its Gauss–Newton step `δ` gives the map
+/// without the cluster to first order, as the formulas give it every other
+/// cluster. The members are judged as candidates outside that map (the
+/// evaluation reads their errors at it, `e + J·δ`), and the joint
+/// statistic is the drop of `Σ eᵀΩe` to it: the cluster's own terms and
+/// the decrease the step predicts for the rest. The session's map does not
+/// move (the optimiser's factorisation is then the last cluster's: an
+/// evaluation factorises its own). Clusters that nothing else joins keep
+/// `None`: their prior decides.
 pub fn through_wide_chains<P: Pose<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &[f64],
@@ -525,35 +526,23 @@ pub fn through_wide_chains<P: Pose<D>, const D: usize>(
         })
         .filter(|&c| joined_without(session.graph, weights, edges, &clusters[c]))
         .collect();
-    if open.is_empty() {
-        return Ok(());
-    }
-    let poses = session.graph.poses.clone();
     let with = session.graph.chi2_where(|i| weights[i] > 0.0);
+    let outside = vec![false; accepted.len()];
     for c in open {
-        let members = &clusters[c];
+        let members = std::slice::from_ref(&clusters[c]);
         let mut without = weights.to_vec();
-        members.iter().for_each(|&k| without[edges[k]] = 0.0);
-        // One step: a solve to convergence costs three to four
-        // factorisations, for each such cluster of each evaluation.
-        let (ran, _) = session.capped(1, |s| s.converge(&without));
-        ran?;
-        let dropped = with - session.graph.chi2_where(|i| without[i] > 0.0);
-        let outside = vec![false; accepted.len()];
-        let judged = Evaluation::for_clusters(
-            session.optimizer,
-            session.graph,
-            &without,
-            (edges, std::slice::from_ref(members)),
-        )?
-        .judging_within_clusters(false)
-        .innovations(edges, &outside, std::slice::from_ref(members), true);
-        for &k in members {
+        members[0].iter().for_each(|&k| without[edges[k]] = 0.0);
+        let own = with - session.graph.chi2_where(|i| without[i] > 0.0);
+        let mut eval =
+            Evaluation::for_clusters(session.optimizer, session.graph, &without, (edges, members))?
+                .judging_within_clusters(false);
+        let relaxed = eval.optimizer.system().predicted_decrease(&eval.step);
+        let judged = eval.innovations(edges, &outside, members, true);
+        for &k in &members[0] {
             innov.nu2[k] = judged.nu2[k];
             innov.exact[k] = true;
         }
-        innov.joint[c] = Some(dropped.max(0.0));
-        session.graph.poses.copy_from_slice(&poses);
+        innov.joint[c] = Some((own + relaxed).max(0.0));
     }
     Ok(())
 }

@@ -738,6 +738,47 @@ fn a_cluster_over_a_wide_chain_is_checked_against_it() {
     }
 }
 
+/// The joint statistic of a cluster over a wide chain is the drop of
+/// `Σ eᵀΩe` to the map without it, which the system without the cluster
+/// predicts from the map with it (the map itself does not move): it
+/// matches the drop to the map solved without the pair.
+#[test]
+fn a_wide_chains_cluster_is_given_the_drop_to_the_map_without_it() {
+    let (mut g, candidates) = walk_with(&[(1, 13, true), (2, 14, true)]);
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    let mut weights = vec![1.0; g.edges.len()];
+    let link = (g.edges.iter())
+        .position(|e| (e.from, e.to) == (6, 7))
+        .unwrap();
+    g.edges[link].information *= 1e-13;
+    let (accepted, clusters) = (vec![true; 2], vec![vec![0, 1]]);
+    with_session(
+        &mut g,
+        &mut weights,
+        SolveSettings::default(),
+        |mut s, w| {
+            s.converge(w).unwrap();
+            let poses = s.graph.poses.clone();
+            let mut innov = Evaluation::new(s.optimizer, s.graph, w)
+                .unwrap()
+                .innovations(&edges, &accepted, &clusters, true);
+            assert_eq!(innov.joint[0], None, "S cancels to rounding");
+            through_wide_chains(&mut s, w, (&edges, &accepted, &clusters), &mut innov).unwrap();
+            assert!(s.graph.poses == poses, "the map does not move");
+            let joint = innov.joint[0].expect("the chain joins the ends");
+            let with = s.graph.chi2_where(|i| w[i] > 0.0);
+            let mut without = w.to_vec();
+            edges.iter().for_each(|&e| without[e] = 0.0);
+            s.converge(&without).unwrap();
+            let drop = with - s.graph.chi2_where(|i| without[i] > 0.0);
+            assert!(
+                drop > 0.0 && (joint - drop).abs() <= 1e-3 * drop,
+                "{joint} {drop}"
+            );
+        },
+    );
+}
+
 /// The deleted residuals of a cluster over a loose chain (10¹⁰ times looser
 /// than the loops) are read at the exact map of the factorised
 /// linearisation: at the map LM stopped at, the step left to it — within
