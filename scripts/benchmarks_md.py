@@ -720,6 +720,13 @@ RINGS_CMD = (
     "--no-maxmix --scales calibrated published --seed $s --only ringCity --timeout 300 "
     "--work bench-out/exploration_rings --out bench/results/exploration_rings/s${s}_ringCity_anywhere.json; done")
 
+CUBICLE_CMD = (
+    ".venv/bin/python scripts/bench_robust.py --tools pgo \"GTSAM huber\" \"GTSAM cauchy\" \"GTSAM dcs\" "
+    "\"GTSAM gnc\" \"g2o cauchy\" \"g2o dcs\" \"GTSAM cauchy+gate\" \"GTSAM gnc+gate\" "
+    "--policies aliased --alias-place anywhere --alias-offset 5,50 --alias-by-group --alias-group-size 10 "
+    "--alias-true-like 0.5 --outliers 300 --no-maxmix --scales published --seed 1 --only cubicle "
+    "--timeout 1200 --work bench-out/exploration_cubicle --out bench/results/exploration_cubicle/s1_cubicle.json")
+
 BEYOND = [("exploration_scattered", "Scattered aliases whose counts tell nothing", SCATTERED_CMD,
            "300 aliases placed anywhere one by one (groups of 1), every count drawn like a true "
            "loop's, seeds 13–17, on six real 2D maps (MIT: 20 true loops against 300 aliases; "

@@ -672,6 +672,22 @@ fn deciding(layers: &Layers, relax: bool, swing: Swing) -> Deciding<'_> {
     }
 }
 
+/// The walk of [`pair_over_a_chain`]: the graph, the pair's edges and the
+/// weights (the link left out where `chain` is 0).
+fn pair_walk(chain: f64) -> (Graph<Se2, 3>, Vec<usize>, Vec<f64>) {
+    let (mut g, candidates) = walk_with(&[(1, 13, true), (2, 14, true)]);
+    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
+    let mut weights = vec![1.0; g.edges.len()];
+    let link = (g.edges.iter())
+        .position(|e| (e.from, e.to) == (6, 7))
+        .unwrap();
+    g.edges[link].information *= chain;
+    if chain == 0.0 {
+        weights[link] = 0.0;
+    }
+    (g, edges, weights)
+}
+
 /// The walk with the cluster of loops (1, 13) and (2, 14) — a wrong pair,
 /// off by the same (3, −2, 1) — in the map, and the odometry edge 6–7 of
 /// information `chain` (0: left out of the map). Returns the innovations
@@ -685,16 +701,7 @@ fn pair_over_a_chain(chain: f64) -> [(Option<f64>, Option<f64>); 2] {
 /// innovation against the map solved without the pair, whatever the
 /// formulas gave.
 fn pair_over_a_chain_refitted(chain: f64, refit: bool) -> [(Option<f64>, Option<f64>); 2] {
-    let (mut g, candidates) = walk_with(&[(1, 13, true), (2, 14, true)]);
-    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
-    let mut weights = vec![1.0; g.edges.len()];
-    let link = (g.edges.iter())
-        .position(|e| (e.from, e.to) == (6, 7))
-        .unwrap();
-    g.edges[link].information *= chain;
-    if chain == 0.0 {
-        weights[link] = 0.0;
-    }
+    let (mut g, edges, mut weights) = pair_walk(chain);
     let accepted = vec![true; 2];
     let clusters = vec![vec![0, 1]];
     with_session(
@@ -744,13 +751,7 @@ fn a_cluster_over_a_wide_chain_is_checked_against_it() {
 /// matches the drop to the map solved without the pair.
 #[test]
 fn a_wide_chains_cluster_is_given_the_drop_to_the_map_without_it() {
-    let (mut g, candidates) = walk_with(&[(1, 13, true), (2, 14, true)]);
-    let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
-    let mut weights = vec![1.0; g.edges.len()];
-    let link = (g.edges.iter())
-        .position(|e| (e.from, e.to) == (6, 7))
-        .unwrap();
-    g.edges[link].information *= 1e-13;
+    let (mut g, edges, mut weights) = pair_walk(1e-13);
     let (accepted, clusters) = (vec![true; 2], vec![vec![0, 1]]);
     with_session(
         &mut g,
