@@ -526,6 +526,9 @@ pub fn through_wide_chains<P: Pose<D>, const D: usize>(
         })
         .filter(|&c| joined_without(session.graph, weights, edges, &clusters[c]))
         .collect();
+    if open.is_empty() {
+        return Ok(());
+    }
     let with = session.graph.chi2_where(|i| weights[i] > 0.0);
     let outside = vec![false; accepted.len()];
     for c in open {
