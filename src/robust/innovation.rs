@@ -529,19 +529,20 @@ pub fn through_wide_chains<P: Pose<D>, const D: usize>(
     if open.is_empty() {
         return Ok(());
     }
-    let with = session.graph.chi2_where(|i| weights[i] > 0.0);
     let outside = vec![false; accepted.len()];
     for c in open {
-        let members = std::slice::from_ref(&clusters[c]);
+        let (cluster, members) = (&clusters[c], std::slice::from_ref(&clusters[c]));
         let mut without = weights.to_vec();
-        members[0].iter().for_each(|&k| without[edges[k]] = 0.0);
-        let own = with - session.graph.chi2_where(|i| without[i] > 0.0);
+        cluster.iter().for_each(|&k| without[edges[k]] = 0.0);
+        let own = session
+            .graph
+            .chi2_where(|i| weights[i] > 0.0 && without[i] == 0.0);
         let mut eval =
             Evaluation::for_clusters(session.optimizer, session.graph, &without, (edges, members))?
                 .judging_within_clusters(false);
         let relaxed = eval.optimizer.system().predicted_decrease(&eval.step);
         let judged = eval.innovations(edges, &outside, members, true);
-        for &k in &members[0] {
+        for &k in cluster {
             innov.nu2[k] = judged.nu2[k];
             innov.exact[k] = true;
         }

@@ -214,11 +214,7 @@ pub fn anneal_chordal<P: ChordalInit<D>, const D: usize>(
     candidates: &[Candidate],
     c: f64,
 ) -> Result<Annealed, SolveError> {
-    if !session
-        .graph
-        .unconstrained_vertices(Some(weights))
-        .is_empty()
-    {
+    if leaves_part_apart(session.graph, weights) {
         return anneal(session, weights, candidates, c);
     }
     let mut annealing = Annealing::new(candidates, c);
@@ -864,6 +860,13 @@ pub fn propose<P: Pose<D>, const D: usize>(
     Ok(joined.len())
 }
 
+/// Whether the edges of non-zero `weights` leave part of the map apart from
+/// the gauge (a session joined only by candidates they leave out): no
+/// chordal relaxation of them places that part.
+fn leaves_part_apart<P: Pose<D>, const D: usize>(graph: &Graph<P, D>, weights: &[f64]) -> bool {
+    !graph.unconstrained_vertices(Some(weights)).is_empty()
+}
+
 /// Starts the solve of an accepted set (`weights` 1 or 0) from its chordal
 /// relaxation when that fits it better (lower `Σ eᵀΩe` over its edges) than
 /// the map before; returns whether it did, else leaves the map as it was.
@@ -891,11 +894,7 @@ pub(super) fn relaxed_start<P: ChordalInit<D>, const D: usize>(
     session: &mut Session<'_, P, D>,
     weights: &[f64],
 ) -> Result<bool, SolveError> {
-    if !session
-        .graph
-        .unconstrained_vertices(Some(weights))
-        .is_empty()
-    {
+    if leaves_part_apart(session.graph, weights) {
         return Ok(false);
     }
     let fit = |g: &Graph<P, D>| g.chi2_where(|k| weights[k] > 0.0);
