@@ -99,6 +99,11 @@ pub struct Innovations {
     /// The candidates the map was solved with, as the evaluation judged
     /// them.
     pub accepted: Vec<bool>,
+    /// By how much `Σ eᵀΩe` drops from the map to the exact least-squares
+    /// map of its linearisation, where the errors are read: what a
+    /// factorisation of the map without a cluster predicts beyond the
+    /// cluster's own drop ([`through_wide_chains`]).
+    pub remaining: f64,
 }
 
 impl Innovations {
@@ -219,6 +224,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             moves: Vec::with_capacity(clusters.len()),
             spread: self.largest_marginal(),
             accepted: accepted.to_vec(),
+            remaining: self.optimizer.system().predicted_decrease(&self.step),
         };
         // In the map first, then the others.
         let groups: Vec<(Vec<usize>, usize)> = (clusters.iter())
@@ -546,9 +552,49 @@ pub fn through_wide_chains<P: Pose<D>, const D: usize>(
             innov.nu2[k] = judged.nu2[k];
             innov.exact[k] = true;
         }
-        innov.joint[c] = Some((own + relaxed).max(0.0));
+        // Both drops are to exact maps: the system without the cluster's
+        // from the map, less the map's own to the exact one.
+        innov.joint[c] = Some((own + relaxed - innov.remaining).max(0.0));
     }
     Ok(())
+}
+
+/// Candidates outside the map whose ends it joins only through unchecked
+/// clusters (members in the map, `ν²` `None`: the cluster alone ties part
+/// of the map) are unchecked too: their `ν²` set to `None`, their prior
+/// deciding. Judged against the part an unchecked cluster placed, they
+/// would speak against it with its own placement, however right they are
+/// and however wrong it is; in the map with both, each is judged against
+/// the other.
+pub fn beside_unchecked<P: Pose<D>, const D: usize>(
+    graph: &Graph<P, D>,
+    weights: &[f64],
+    (edges, accepted, clusters): (&[usize], &[bool], &[Vec<usize>]),
+    innov: &mut Innovations,
+) {
+    let mut unchecked = vec![false; graph.edges.len()];
+    (clusters.iter())
+        .filter(|c| c.iter().any(|&k| accepted[k]) && c.iter().all(|&k| innov.nu2[k].is_none()))
+        .for_each(|c| c.iter().for_each(|&k| unchecked[edges[k]] = true));
+    if !unchecked.contains(&true) {
+        return;
+    }
+    let mut parts = UnionFind::new(graph.poses.len());
+    let gauge = graph.gauge();
+    gauge.windows(2).for_each(|w| {
+        parts.union(w[0], w[1]);
+    });
+    for (i, e) in graph.edges.iter().enumerate() {
+        if weights[i] > 0.0 && !unchecked[i] {
+            parts.union(e.from, e.to);
+        }
+    }
+    for (k, &i) in edges.iter().enumerate() {
+        let e = &graph.edges[i];
+        if !accepted[k] && parts.find(e.from) != parts.find(e.to) {
+            innov.nu2[k] = None;
+        }
+    }
 }
 
 /// Whether the edges of non-zero `weights` outside `members` (indices into

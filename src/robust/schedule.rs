@@ -20,7 +20,7 @@
 //!    map returned is the least-squares map of the accepted loops.
 
 use super::clusters;
-use super::innovation::{Evaluation, Innovations, through_wide_chains};
+use super::innovation::{Evaluation, Innovations, beside_unchecked, through_wide_chains};
 use super::kernels::{GNC_MU_STEP, cauchy_weight};
 use super::model::{Evidence, LoopModel, Scale};
 use super::{Candidate, Layers};
@@ -434,6 +434,7 @@ impl Decided {
         drop(eval);
         let clusters = (edges, self.accepted.as_slice(), self.clusters.as_slice());
         through_wide_chains(session, weights, clusters, &mut innov)?;
+        beside_unchecked(session.graph, weights, clusters, &mut innov);
         let fit = Instant::now();
         let (model, next) = judge(
             candidates,

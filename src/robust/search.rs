@@ -47,7 +47,7 @@
 //! keeping the end that fails least would throw away true loops to shrink
 //! `D²`.
 
-use super::innovation::{Evaluation, through_wide_chains};
+use super::innovation::{Evaluation, beside_unchecked, through_wide_chains};
 use super::schedule::{self, Decided, Deciding, left_out, objective, relaxed_start};
 use super::{Candidate, Layers};
 use crate::geometry::Pose;
@@ -264,6 +264,7 @@ pub fn explain<P: Pose<D>, const D: usize>(
             decided.clusters.as_slice(),
         );
         through_wide_chains(session, weights, clusters, &mut decided.innovations)?;
+        beside_unchecked(session.graph, weights, clusters, &mut decided.innovations);
         session.evaluated_since(start);
     }
 }
