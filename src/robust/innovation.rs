@@ -32,6 +32,10 @@
 //! (one Gauss–Newton step away: first order, as the formulas above) as
 //! candidates outside it, where nothing cancels.
 //!
+//! A candidate outside the map whose ends the map joins only through such
+//! unchecked clusters is unchecked too ([`beside_unchecked`]): against the
+//! part an unchecked cluster placed it would be judged by that placement.
+//!
 //! [`BlockSystem::propagate_group_solved`]: crate::linear::BlockSystem::propagate_group_solved
 
 use super::Candidate;
