@@ -297,21 +297,32 @@ impl<P: Pose<D>, const D: usize> Graph<P, D> {
     /// unique solution. Edges whose weight (one per edge) is zero do not
     /// count.
     pub fn unconstrained_vertices(&self, weights: Option<&[f64]>) -> Vec<usize> {
-        // Union–find over the edges: one array, where lists of neighbours
-        // would allocate one vector per vertex.
-        let n = self.ids.len();
-        let mut parts = UnionFind::new(n);
+        let mut parts = self.parts(|k| weights.is_none_or(|w| w[k] != 0.0));
+        let Some(&anchor) = self.gauge().first() else {
+            return Vec::new();
+        };
+        let anchor = parts.find(anchor);
+        (0..self.ids.len())
+            .filter(|&k| parts.find(k) != anchor)
+            .collect()
+    }
+
+    /// The parts of the graph that the edges `joins` accepts (by index)
+    /// make, the gauge's vertices counted as one part: union–find, one
+    /// array, where lists of neighbours would allocate one vector per
+    /// vertex.
+    pub(crate) fn parts(&self, joins: impl Fn(usize) -> bool) -> UnionFind {
+        let mut parts = UnionFind::new(self.ids.len());
+        let gauge = self.gauge();
+        gauge.windows(2).for_each(|w| {
+            parts.union(w[0], w[1]);
+        });
         for (k, e) in self.edges.iter().enumerate() {
-            if weights.is_some_and(|w| w[k] == 0.0) {
-                continue;
+            if joins(k) {
+                parts.union(e.from, e.to);
             }
-            parts.union(e.from, e.to);
         }
-        let mut anchored = vec![false; n];
-        for g in self.gauge() {
-            anchored[parts.find(g)] = true;
-        }
-        (0..n).filter(|&k| !anchored[parts.find(k)]).collect()
+        parts
     }
 }
 

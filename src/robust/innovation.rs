@@ -42,7 +42,6 @@ use super::Candidate;
 use super::model::Evidence;
 use crate::geometry::Pose;
 use crate::graph::Graph;
-use crate::graph::UnionFind;
 use crate::linear::{EdgeJacobian, GroupScratch, Parallelism, SelectedInverse};
 use crate::solve::{Optimizer, Session, SolveError};
 use faer::Par;
@@ -530,10 +529,7 @@ pub fn through_wide_chains<P: Pose<D>, const D: usize>(
     innov: &mut Innovations,
 ) -> Result<(), SolveError> {
     let open: Vec<usize> = (0..clusters.len())
-        .filter(|&c| {
-            let members = &clusters[c];
-            members.iter().any(|&k| accepted[k]) && members.iter().all(|&k| innov.nu2[k].is_none())
-        })
+        .filter(|&c| unchecked(&clusters[c], accepted, innov))
         .filter(|&c| joined_without(session.graph, weights, edges, &clusters[c]))
         .collect();
     if open.is_empty() {
@@ -576,29 +572,26 @@ pub fn beside_unchecked<P: Pose<D>, const D: usize>(
     (edges, accepted, clusters): (&[usize], &[bool], &[Vec<usize>]),
     innov: &mut Innovations,
 ) {
-    let mut unchecked = vec![false; graph.edges.len()];
+    let mut held_by_prior = vec![false; graph.edges.len()];
     (clusters.iter())
-        .filter(|c| c.iter().any(|&k| accepted[k]) && c.iter().all(|&k| innov.nu2[k].is_none()))
-        .for_each(|c| c.iter().for_each(|&k| unchecked[edges[k]] = true));
-    if !unchecked.contains(&true) {
+        .filter(|c| unchecked(c, accepted, innov))
+        .for_each(|c| c.iter().for_each(|&k| held_by_prior[edges[k]] = true));
+    if !held_by_prior.contains(&true) {
         return;
     }
-    let mut parts = UnionFind::new(graph.poses.len());
-    let gauge = graph.gauge();
-    gauge.windows(2).for_each(|w| {
-        parts.union(w[0], w[1]);
-    });
-    for (i, e) in graph.edges.iter().enumerate() {
-        if weights[i] > 0.0 && !unchecked[i] {
-            parts.union(e.from, e.to);
-        }
-    }
+    let mut parts = graph.parts(|i| weights[i] > 0.0 && !held_by_prior[i]);
     for (k, &i) in edges.iter().enumerate() {
         let e = &graph.edges[i];
         if !accepted[k] && parts.find(e.from) != parts.find(e.to) {
             innov.nu2[k] = None;
         }
     }
+}
+
+/// Whether the cluster `members` is unchecked in `innov`: some of it in the
+/// map (`accepted`), and no member given a `ν²`.
+fn unchecked(members: &[usize], accepted: &[bool], innov: &Innovations) -> bool {
+    members.iter().any(|&k| accepted[k]) && members.iter().all(|&k| innov.nu2[k].is_none())
 }
 
 /// Whether the edges of non-zero `weights` outside `members` (indices into
@@ -610,17 +603,8 @@ fn joined_without<P: Pose<D>, const D: usize>(
     edges: &[usize],
     members: &[usize],
 ) -> bool {
-    let mut parts = UnionFind::new(graph.poses.len());
-    let gauge = graph.gauge();
-    gauge.windows(2).for_each(|w| {
-        parts.union(w[0], w[1]);
-    });
     let cluster: Vec<usize> = members.iter().map(|&k| edges[k]).collect();
-    for (i, e) in graph.edges.iter().enumerate() {
-        if weights[i] > 0.0 && !cluster.contains(&i) {
-            parts.union(e.from, e.to);
-        }
-    }
+    let mut parts = graph.parts(|i| weights[i] > 0.0 && !cluster.contains(&i));
     cluster.iter().all(|&i| {
         let e = &graph.edges[i];
         parts.find(e.from) == parts.find(e.to)

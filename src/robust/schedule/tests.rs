@@ -423,9 +423,7 @@ fn evaluate_all(
     decided: &mut Decided,
 ) {
     let edges: Vec<usize> = candidates.iter().map(|c| c.edge).collect();
-    decided.innovations = Evaluation::new(s.optimizer, s.graph, w)
-        .unwrap()
-        .innovations(&edges, &decided.accepted, &decided.clusters, true);
+    decided.innovations = innovations_at(s, w, (&edges, &decided.accepted, &decided.clusters));
 }
 
 /// The χ² search from the session's map and `decided` (their innovations
@@ -673,6 +671,18 @@ fn deciding(layers: &Layers, relax: bool, swing: Swing) -> Deciding<'_> {
     }
 }
 
+/// The exact innovations of the candidates `edges` grouped by `clusters`
+/// at the session's map (`accepted`: solved with).
+fn innovations_at(
+    s: &mut Session<'_, Se2, 3>,
+    w: &[f64],
+    (edges, accepted, clusters): (&[usize], &[bool], &[Vec<usize>]),
+) -> Innovations {
+    Evaluation::new(s.optimizer, s.graph, w)
+        .unwrap()
+        .innovations(edges, accepted, clusters, true)
+}
+
 /// The walk of [`pair_over_a_chain`]: the graph, the pair's edges and the
 /// weights (the link left out where `chain` is 0).
 fn pair_walk(chain: f64) -> (Graph<Se2, 3>, Vec<usize>, Vec<f64>) {
@@ -721,9 +731,7 @@ fn pair_over_a_chain_refitted(chain: f64, refit: bool) -> [(Option<f64>, Option<
         SolveSettings::default(),
         |mut s, w| {
             s.converge(w).unwrap();
-            let before = Evaluation::new(s.optimizer, s.graph, w)
-                .unwrap()
-                .innovations(&edges, &accepted, &clusters, true);
+            let before = innovations_at(&mut s, w, (&edges, &accepted, &clusters));
             let mut after = before.clone();
             if refit {
                 after.nu2 = vec![None; 2];
@@ -771,9 +779,7 @@ fn a_wide_chains_cluster_is_given_the_drop_to_the_map_without_it() {
         |mut s, w| {
             s.converge(w).unwrap();
             let poses = s.graph.poses.clone();
-            let mut innov = Evaluation::new(s.optimizer, s.graph, w)
-                .unwrap()
-                .innovations(&edges, &accepted, &clusters, true);
+            let mut innov = innovations_at(&mut s, w, (&edges, &accepted, &clusters));
             assert_eq!(innov.joint[0], None, "S cancels to rounding");
             through_wide_chains(&mut s, w, (&edges, &accepted, &clusters), &mut innov).unwrap();
             assert!(s.graph.poses == poses, "the map does not move");
@@ -808,9 +814,7 @@ fn a_candidate_beside_an_unchecked_cluster_is_unchecked() {
         }
         with_session(g, weights, SolveSettings::default(), |mut s, w| {
             s.converge(w).unwrap();
-            let mut innov = Evaluation::new(s.optimizer, s.graph, w)
-                .unwrap()
-                .innovations(&edges, accepted, &clusters, true);
+            let mut innov = innovations_at(&mut s, w, (&edges, accepted, &clusters));
             let against_the_pair = innov.nu2.clone();
             beside_unchecked(s.graph, w, (&edges, accepted, &clusters), &mut innov);
             (against_the_pair, innov.nu2)
@@ -844,9 +848,7 @@ fn a_wide_chains_cluster_short_of_the_optimum_is_given_the_same_drop() {
         };
         with_session(&mut g, &mut weights, short, |mut s, w| {
             let _ = s.converge(w);
-            let mut innov = Evaluation::new(s.optimizer, s.graph, w)
-                .unwrap()
-                .innovations(&edges, &accepted, &clusters, true);
+            let mut innov = innovations_at(&mut s, w, (&edges, &accepted, &clusters));
             assert_eq!(innov.joint, [None], "S cancels to rounding");
             through_wide_chains(&mut s, w, (&edges, &accepted, &clusters), &mut innov).unwrap();
             (innov.joint[0].unwrap(), innov.remaining)
