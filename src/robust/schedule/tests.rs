@@ -471,6 +471,48 @@ fn the_chi2_search_takes_out_the_wrong_loop_that_explains_a_failed_test() {
 }
 
 #[test]
+fn the_map_the_search_ends_with_is_solved_to_the_job_tolerance() {
+    // A removal's map is solved only until LM crawls (a set the search is
+    // still taking loops out of fails its test); the map that passes is
+    // solved to the job's tolerance before the search ends with it.
+    let ((removed, stop), _) = on_search_case(false, |mut s, w, candidates, _, mut decided| {
+        evaluate_all(&mut s, w, candidates, &mut decided);
+        let layers = Layers::default();
+        let search =
+            super::super::search::explain(&mut s, w, candidates, &mut decided, &layers, &chi2_test);
+        let removed = search.unwrap().unwrap().removed.len();
+        (removed, s.finish(false).unwrap().stop_reason)
+    });
+    assert_eq!(removed, 1);
+    assert!(stop.converged(), "{stop:?}");
+}
+
+#[test]
+fn a_search_that_ends_where_its_solve_crawled_solves_the_map_on() {
+    // The last removal's solve stopped at a crawl (here: at once, at any
+    // decrease): the search's end carries it on to the job's tolerance,
+    // and leaves a map that converged alone as it is.
+    use crate::solve::Crawl;
+    let ((crawled, stop, again), _) = on_search_case(false, |mut s, w, _, _, _| {
+        w[w.len() - 1] = 0.0;
+        let everything = Crawl {
+            damped: f64::INFINITY,
+            linear: f64::INFINITY,
+        };
+        let crawled = !s.converge_unless_crawling(w, everything).unwrap();
+        let search = super::super::search::Search::default();
+        super::super::search::finished(&mut s, w, crawled, search).unwrap();
+        let after = s.iterations();
+        super::super::search::finished(&mut s, w, false, Default::default()).unwrap();
+        let again = s.iterations() - after;
+        (crawled, s.finish(false).unwrap().stop_reason, again)
+    });
+    assert!(crawled);
+    assert!(stop.converged(), "{stop:?}");
+    assert_eq!(again, 0);
+}
+
+#[test]
 fn a_wrong_loop_in_a_cluster_of_true_ones_is_taken_out_alone() {
     // The wrong loop shares a cluster with a true one (an alias a few poses
     // off joins the true loops of its place). The cluster explains the
