@@ -763,6 +763,40 @@ pub(crate) struct Updated<P: Pose<D>, const D: usize> {
     pub initial: Option<Vec<P>>,
 }
 
+/// Why the whole job runs instead of the update that reported `r` (its
+/// warm state having `examined` the loops beyond the stated information
+/// it lists), if it does: an exact update (not capped: that promises a
+/// latency, not the batch map) whose map the batch job could end
+/// elsewhere. The batch job would seek EM's second start (the map fails
+/// the test, the decisions did not settle, or the model disagrees with
+/// the information as stated where no whole job has looked), or the warm
+/// decisions hold loops back that its annealing may accept.
+fn whole_job_instead(
+    r: &Report,
+    examined: &[(VertexId, VertexId)],
+    config: &Settings<'_>,
+) -> Option<&'static str> {
+    let exact = config.options.robust.method == RobustMethod::Em
+        && config.options.solver.update_iterations.is_none();
+    if !exact {
+        None
+    } else if r.chi2_test.as_ref().is_some_and(|t| !t.passed) {
+        Some(FAILED)
+    } else if r.robust.unsettled {
+        Some(UNSETTLED)
+    } else if (r.robust.model.as_ref()).is_some_and(|m| m.wrong_within_kernel()) {
+        Some(WITHIN_KERNEL)
+    } else if (beyond_stated(r).iter()).any(|l| !examined.contains(l)) {
+        Some(BEYOND_STATED)
+    } else if !r.robust.held_back.is_empty() {
+        Some(HELD_BACK)
+    } else if on_knife_edge(r) {
+        Some(KNIFE_EDGE)
+    } else {
+        None
+    }
+}
+
 /// An update of the caller's `graph` (with the vertices no line defined,
 /// `missing`) from `last`, the last update's state — or, `Err(reason)`,
 /// none to resume from: the whole job, its report saying why. The whole
@@ -802,35 +836,8 @@ pub(crate) fn update<P: G2oPose<D> + ChordalInit<D>, const D: usize>(
     match last {
         Ok(warm) => {
             let (mut solved, mut updated) = (graph.clone(), report.clone());
-            // An exact update (not capped: that promises a latency, not
-            // the batch map) whose map the batch job could end elsewhere:
-            // it would seek EM's second start (the map fails the test, the
-            // decisions did not settle, or the model disagrees with the
-            // information as stated where no whole job has looked), or the
-            // warm decisions hold loops back that its annealing may accept.
-            let whole_job = |r: &Report, examined: &[(VertexId, VertexId)]| {
-                let exact = config.options.robust.method == RobustMethod::Em
-                    && config.options.solver.update_iterations.is_none();
-                if !exact {
-                    None
-                } else if r.chi2_test.as_ref().is_some_and(|t| !t.passed) {
-                    Some(FAILED)
-                } else if r.robust.unsettled {
-                    Some(UNSETTLED)
-                } else if (r.robust.model.as_ref()).is_some_and(|m| m.wrong_within_kernel()) {
-                    Some(WITHIN_KERNEL)
-                } else if (beyond_stated(r).iter()).any(|l| !examined.contains(l)) {
-                    Some(BEYOND_STATED)
-                } else if !r.robust.held_back.is_empty() {
-                    Some(HELD_BACK)
-                } else if on_knife_edge(r) {
-                    Some(KNIFE_EDGE)
-                } else {
-                    None
-                }
-            };
             match update_graph(&mut solved, warm, config, &mut updated, observer)? {
-                Ok(next) => match whole_job(&updated, &next.examined) {
+                Ok(next) => match whole_job_instead(&updated, &next.examined, config) {
                     Some(reason) => {
                         let why = |g: &Graph<P, D>, r: &Report| after_fallback(g, warm, r, reason);
                         whole(report, observer, (&why, warm.ordering.clone()))

@@ -366,6 +366,33 @@ impl Decided {
         session.converge_unless_crawling(weights, crawl)
     }
 
+    /// Whatever ended the decisions: the set kept is the one in `weights`
+    /// (after [`MAX_DECISIONS`], the one the map was solved with, not the
+    /// last one judged), its map solved to the job's tolerance unless it
+    /// `converged` there, and judged at its own map if that is not the one
+    /// of the set `judged` last.
+    fn end<P: ChordalInit<D>, const D: usize>(
+        &mut self,
+        session: &mut Session<'_, P, D>,
+        weights: &[f64],
+        (candidates, edges): (&[Candidate], &[usize]),
+        how: &Deciding<'_>,
+        (converged, judged): (bool, &[bool]),
+        solved: &mut SetSolved<'_, P, D>,
+    ) -> Result<(), SolveError> {
+        for (a, &k) in self.accepted.iter_mut().zip(edges) {
+            *a = weights[k] == 1.0;
+        }
+        if !converged && !self.cut_short && !self.swung {
+            session.converge(weights)?;
+            solved(session.graph, weights, &self.accepted);
+        }
+        if self.accepted != judged && !self.cut_short && !self.swung && how.layers.decisions {
+            self.judge_at_own_map(session, weights, (candidates, edges), how)?;
+        }
+        Ok(())
+    }
+
     /// The set kept, from a cycle, judged at its own map (it was last
     /// judged on another set's): the report's innovations, posteriors and
     /// reasons are those ([`Decided::at_own_map`]); what the job does next
@@ -551,19 +578,14 @@ pub fn decide<P: ChordalInit<D>, const D: usize>(
         // The decisions after the half step neither settled nor cycled.
         converged &= !keep_best(&[(set, 0.0)], &edges, weights);
     }
-    // Whatever ended the decisions, the set kept is the one in `weights`
-    // (after MAX_DECISIONS, the one the map was solved with, not the last
-    // one judged), and its map is solved to the job's tolerance.
-    for (a, &k) in out.accepted.iter_mut().zip(&edges) {
-        *a = weights[k] == 1.0;
-    }
-    if !converged && !out.cut_short && !out.swung {
-        session.converge(weights)?;
-        solved(session.graph, weights, &out.accepted);
-    }
-    if out.accepted != judged && !out.cut_short && !out.swung && layers.decisions {
-        out.judge_at_own_map(session, weights, (candidates, &edges), how)?;
-    }
+    out.end(
+        session,
+        weights,
+        (candidates, &edges),
+        how,
+        (converged, &judged),
+        solved,
+    )?;
     Ok(out)
 }
 

@@ -312,6 +312,16 @@ struct Progress {
 }
 
 impl Progress {
+    /// Counts the taken `step` as one iteration more, in the history and
+    /// for the `observer`.
+    fn record(&mut self, step: &Step, observer: &mut dyn Observer) {
+        let summary = &mut self.summary;
+        summary.iterations += 1;
+        let record = step.record(summary.iterations, self.watch.elapsed());
+        summary.history.push(record);
+        observer.iteration(&record);
+    }
+
     /// The summary of a run that stopped for `reason` at `objective`.
     fn finish(mut self, reason: StopReason, objective: f64) -> Summary {
         self.summary.final_objective = objective;
@@ -669,20 +679,13 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             if let Some(reason) = self.stop_before_step(objective, &progress, observer) {
                 break reason;
             }
-            let outcome = match chord.ready {
-                true => self.chord_step(graph, weights, objective, &mut progress),
-                false => None,
-            };
-            let outcome = match outcome {
-                Some(outcome) => outcome,
-                None => self.method_step(
-                    (graph, weights),
-                    objective,
-                    &mut damping,
-                    &mut progress,
-                    observer,
-                )?,
-            };
+            let outcome = self.next_step(
+                (graph, weights),
+                (objective, chord.ready),
+                &mut damping,
+                &mut progress,
+                observer,
+            )?;
             let step = match outcome {
                 StepOutcome::Taken(step) => step,
                 StepOutcome::Negligible if self.lightly_damped() => break StopReason::SmallStep,
@@ -699,11 +702,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
                 best_objective = objective;
                 self.best.clone_from(&graph.poses);
             }
-            let summary = &mut progress.summary;
-            summary.iterations += 1;
-            let record = step.record(summary.iterations, progress.watch.elapsed());
-            summary.history.push(record);
-            observer.iteration(&record);
+            progress.record(&step, observer);
             self.remaining.after::<D>(&self.step, step.reused_factor);
             let newton = step.lambda == 0.0 && !step.reused_factor;
             let gain = newton.then(|| (previous - objective) / previous);
@@ -726,6 +725,27 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             objective = best_objective;
         }
         Ok(progress.finish(stop, objective))
+    }
+
+    /// The next step from the current linearisation at `objective`: a chord
+    /// step with the last factor where one is `ready` and taken, else the
+    /// method's ([`Self::method_step`]).
+    fn next_step(
+        &mut self,
+        (graph, weights): (&Graph<P, D>, Option<&[f64]>),
+        (objective, ready): (f64, bool),
+        damping: &mut Damping,
+        progress: &mut Progress,
+        observer: &mut dyn Observer,
+    ) -> Result<StepOutcome, SolveError> {
+        let chord = match ready {
+            true => self.chord_step(graph, weights, objective, progress),
+            false => None,
+        };
+        match chord {
+            Some(outcome) => Ok(outcome),
+            None => self.method_step((graph, weights), objective, damping, progress, observer),
+        }
     }
 
     /// The method's step from the current linearisation at `objective`
