@@ -439,6 +439,31 @@ impl Decided {
         Ok(())
     }
 
+    /// The innovations of the candidates (with their `edges`) at the map in
+    /// the session's graph, the set in `weights` and these decisions'
+    /// clusters: exact where the formulas hold, through a wide chain where
+    /// they cancel, unchecked beside an unchecked cluster; and the
+    /// parallelism they ran with.
+    pub(super) fn innovations_at_map<P: Pose<D>, const D: usize>(
+        &self,
+        session: &mut Session<'_, P, D>,
+        weights: &[f64],
+        edges: &[usize],
+    ) -> Result<(Innovations, Parallelism), SolveError> {
+        let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?
+            .judging_within_clusters(self.within);
+        // Exact innovations: a lower bound (a lone candidate outside the map)
+        // is not the evidence the model describes, and a wrong loop's bound
+        // can sit among the true loops' innovations.
+        let mut innov = eval.innovations(edges, &self.accepted, &self.clusters, true);
+        let parallelism = eval.parallelism().clone();
+        drop(eval);
+        let clusters = (edges, self.accepted.as_slice(), self.clusters.as_slice());
+        through_wide_chains(session, weights, clusters, &mut innov)?;
+        beside_unchecked(session.graph, weights, clusters, &mut innov);
+        Ok((innov, parallelism))
+    }
+
     /// One evaluation of the map in the session's graph (the least-squares
     /// map of the set in `weights`): the innovations of the `candidates`
     /// (with their `edges`) and the loop model, kept in these decisions;
@@ -451,17 +476,7 @@ impl Decided {
         how: &Deciding<'_>,
     ) -> Result<Vec<bool>, SolveError> {
         let start = Instant::now();
-        let mut eval = Evaluation::new(session.optimizer, session.graph, weights)?
-            .judging_within_clusters(self.within);
-        // Exact innovations: a lower bound (a lone candidate outside the map)
-        // is not the evidence the model describes, and a wrong loop's bound
-        // can sit among the true loops' innovations.
-        let mut innov = eval.innovations(edges, &self.accepted, &self.clusters, true);
-        let parallelism = eval.parallelism().clone();
-        drop(eval);
-        let clusters = (edges, self.accepted.as_slice(), self.clusters.as_slice());
-        through_wide_chains(session, weights, clusters, &mut innov)?;
-        beside_unchecked(session.graph, weights, clusters, &mut innov);
+        let (innov, parallelism) = self.innovations_at_map(session, weights, edges)?;
         let fit = Instant::now();
         let (model, next) = judge(
             candidates,

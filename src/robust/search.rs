@@ -49,7 +49,7 @@
 //! keeping the end that fails least would throw away true loops to shrink
 //! `D²`.
 
-use super::innovation::{Evaluation, beside_unchecked, through_wide_chains};
+use super::innovation::Evaluation;
 use super::schedule::{self, Decided, Deciding, left_out, objective, relaxed_start};
 use super::{Candidate, Layers};
 use crate::geometry::Pose;
@@ -316,16 +316,7 @@ fn judge_again<P: Pose<D>, const D: usize>(
     edges: &[usize],
 ) -> Result<(), SolveError> {
     let start = Instant::now();
-    decided.innovations = Evaluation::new(session.optimizer, session.graph, weights)?
-        .judging_within_clusters(decided.within)
-        .innovations(edges, &decided.accepted, &decided.clusters, true);
-    let clusters = (
-        edges,
-        decided.accepted.as_slice(),
-        decided.clusters.as_slice(),
-    );
-    through_wide_chains(session, weights, clusters, &mut decided.innovations)?;
-    beside_unchecked(session.graph, weights, clusters, &mut decided.innovations);
+    decided.innovations = decided.innovations_at_map(session, weights, edges)?.0;
     session.evaluated_since(start);
     Ok(())
 }

@@ -471,23 +471,6 @@ fn the_chi2_search_takes_out_the_wrong_loop_that_explains_a_failed_test() {
 }
 
 #[test]
-fn the_map_the_search_ends_with_is_solved_to_the_job_tolerance() {
-    // A removal's map is solved only until LM crawls (a set the search is
-    // still taking loops out of fails its test); the map that passes is
-    // solved to the job's tolerance before the search ends with it.
-    let ((removed, stop), _) = on_search_case(false, |mut s, w, candidates, _, mut decided| {
-        evaluate_all(&mut s, w, candidates, &mut decided);
-        let layers = Layers::default();
-        let search =
-            super::super::search::explain(&mut s, w, candidates, &mut decided, &layers, &chi2_test);
-        let removed = search.unwrap().unwrap().removed.len();
-        (removed, s.finish(false).unwrap().stop_reason)
-    });
-    assert_eq!(removed, 1);
-    assert!(stop.converged(), "{stop:?}");
-}
-
-#[test]
 fn a_search_that_ends_where_its_solve_crawled_solves_the_map_on() {
     // The last removal's solve stopped at a crawl (here: at once, at any
     // decrease): the search's end carries it on to the job's tolerance,
