@@ -61,6 +61,12 @@ pub trait Pose<const D: usize>:
     /// The position of the pose (z = 0 for SE(2)).
     fn position(&self) -> Vector3<f64>;
 
+    /// How far [`Pose::retract`] by `delta` (or by `−delta`) moves the
+    /// pose's position, whatever the pose: the length of `delta`'s
+    /// translation part, which the pose's rotation turns without
+    /// stretching.
+    fn position_shift(delta: &SVector<f64, D>) -> f64;
+
     /// The pose with what every edge at it recomputes otherwise (the sine
     /// and cosine of an angle, a rotation matrix), for evaluating many edges.
     type Prepared: Copy + Clone + std::fmt::Debug + Send + Sync + 'static;

@@ -109,6 +109,18 @@ proptest! {
     }
 
     #[test]
+    fn position_shift_is_how_far_retract_moves_the_position(
+        a in se2(), b in se3(), r in rotation_vector(), t in (-1.0..1.0f64, -1.0..1.0f64, -1.0..1.0f64),
+    ) {
+        let d2 = Vector3::new(t.0, t.1, r.z);
+        let moved = (a.retract(&d2).position() - a.position()).norm();
+        prop_assert!((Se2::position_shift(&d2) - moved).abs() < 1e-12);
+        let d3 = Vector6::new(t.0, t.1, t.2, r.x, r.y, r.z);
+        let moved = (b.retract(&d3).position() - b.position()).norm();
+        prop_assert!((Se3::position_shift(&d3) - moved).abs() < 1e-12);
+    }
+
+    #[test]
     fn se3_jacobians_match_finite_differences(xi in se3(), xj in se3(), z in se3()) {
         // The error flips sign with the quaternion at a residual angle of π
         // (g2o's w ≥ 0 convention): finite differences straddling it are

@@ -105,6 +105,10 @@ impl Pose<3> for Se2 {
         Vector3::new(self.x, self.y, 0.0)
     }
 
+    fn position_shift(delta: &Vector3<f64>) -> f64 {
+        delta.x.hypot(delta.y)
+    }
+
     type Prepared = Se2Prepared;
 
     fn prepare(&self) -> Se2Prepared {

@@ -157,6 +157,10 @@ impl Pose<6> for Se3 {
         self.translation
     }
 
+    fn position_shift(delta: &Vector6<f64>) -> f64 {
+        delta.fixed_rows::<3>(0).norm()
+    }
+
     type Prepared = Se3Prepared;
 
     fn prepare(&self) -> Se3Prepared {

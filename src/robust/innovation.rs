@@ -67,10 +67,19 @@ use std::sync::{Arc, Mutex};
 /// manhattan and intel, whose factorisations are smaller); 8 lies between.
 pub const SELECTED_INVERSE_COST: f64 = 8.0;
 
-/// Gradients solved in one pass over the factor by
-/// [`Evaluation::largest_moves`]: each pass reads the factor once and
-/// holds two copies of the map's variables per gradient (10⁶ poses in 3D:
-/// 96 MB each), so four keep that within a fifth of such a factor's size.
+/// The memory one pass of [`Evaluation::largest_moves`] may hold, in
+/// bytes, where a fifth of the factor's values is less: each pass reads
+/// the factor once and holds two copies of the map's variables per
+/// gradient. 32 MB solve a keystone's
+/// [`super::doubt::KEYSTONE_CANDIDATES`] in one pass up to about 2·10⁴
+/// poses in 2D (manhattan: 5.4 MB), where eight passes of four took
+/// twice the instructions (docs/benchmarks.md, "Where the whole aliased
+/// replay's time goes"); a pass over 10⁶ poses in 3D (96 MB per
+/// gradient) stays within a fifth of such a factor's size.
+pub const MOVES_MEMORY: usize = 32 << 20;
+
+/// The fewest gradients solved in one pass, whatever the memory: 4 on
+/// 10⁶ poses in 3D hold 384 MB, a fifth of that factor.
 pub const MOVES_AT_ONCE: usize = 4;
 
 /// What the innovations of one evaluation found.
@@ -353,12 +362,23 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         self.largest_moves(&[g.to_vec()])[0]
     }
 
-    /// [`Self::largest_move`] of each of the gradients `gs`, solved
-    /// [`MOVES_AT_ONCE`] to a pass over the factor.
+    /// [`Self::largest_move`] of each of the gradients `gs`, as many to a
+    /// pass over the factor as [`Self::moves_per_pass`] allows.
     pub fn largest_moves(&mut self, gs: &[Vec<f64>]) -> Vec<f64> {
-        (gs.chunks(MOVES_AT_ONCE))
+        (gs.chunks(self.moves_per_pass()))
             .flat_map(|chunk| self.moves_at_once(chunk))
             .collect()
+    }
+
+    /// The gradients one pass of [`Self::largest_moves`] solves: as many
+    /// as the larger of [`MOVES_MEMORY`] and a fifth of the factor's values
+    /// hold, two copies of the map's variables each, and at least
+    /// [`MOVES_AT_ONCE`].
+    fn moves_per_pass(&self) -> usize {
+        let bytes = std::mem::size_of::<f64>();
+        let budget = MOVES_MEMORY.max(self.optimizer.system().nnz_factor() * bytes / 5);
+        let per_gradient = 2 * self.step.len().max(1) * bytes;
+        (budget / per_gradient).max(MOVES_AT_ONCE)
     }
 
     /// [`Self::largest_moves`] of `gs` in one pass over the factor.
@@ -369,17 +389,12 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         let mut delta: Vec<f64> = gs.concat();
         // The system's solve gives −H⁻¹·g from its factorisation of H.
         self.optimizer.solve_factored(&mut delta, gs.len());
-        let graph = self.graph;
         let n = self.step.len();
         (0..gs.len())
             .map(|c| {
                 let delta = &delta[c * n..(c + 1) * n];
-                (graph.poses.iter().zip(&self.block))
-                    .filter_map(|(pose, b)| {
-                        let b = (*b)?;
-                        let step = SVector::<f64, D>::from_fn(|a, _| -delta[b * D + a]);
-                        Some((pose.retract(&step).position() - pose.position()).norm())
-                    })
+                (self.block.iter().flatten())
+                    .map(|&b| P::position_shift(&SVector::from_column_slice(&delta[b * D..][..D])))
                     .fold(0.0, f64::max)
             })
             .collect()
