@@ -171,8 +171,18 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         weights: &[f64],
     ) -> Result<Self, SolveError> {
         let block = optimizer.factor_at(graph, weights)?;
+        Ok(Self::at(optimizer, graph, block))
+    }
+
+    /// The evaluation of the factorisation the optimiser holds, of vertices
+    /// in the variable blocks `block`.
+    fn at(
+        optimizer: &'a mut Optimizer<P, D>,
+        graph: &'a Graph<P, D>,
+        block: Vec<Option<usize>>,
+    ) -> Self {
         let step = optimizer.remaining_step();
-        Ok(Self {
+        Self {
             optimizer,
             graph,
             block,
@@ -180,7 +190,7 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
             inverse: None,
             scratch: Mutex::default(),
             within: true,
-        })
+        }
     }
 
     /// Judges a cluster's members also against the map with the members
@@ -202,18 +212,39 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         weights: &[f64],
         (edges, clusters): (&[usize], &[Vec<usize>]),
     ) -> Result<Self, SolveError> {
-        let mut eval = Self::factored(optimizer, graph, weights)?;
-        let system = eval.optimizer.system();
+        let eval = Self::factored(optimizer, graph, weights)?;
+        Ok(eval.inverse_if_cheaper(edges, clusters))
+    }
+
+    /// [`Evaluation::for_clusters`] of the map without a few of the edges
+    /// the optimiser last factorised, or with a few taken back (their
+    /// `weights` changed), factorised once in the pattern it holds, only
+    /// what the change reaches formed again ([`Optimizer::factor_without`]).
+    pub fn for_clusters_without(
+        optimizer: &'a mut Optimizer<P, D>,
+        graph: &'a Graph<P, D>,
+        weights: &[f64],
+        (edges, clusters): (&[usize], &[Vec<usize>]),
+    ) -> Result<Self, SolveError> {
+        let block = optimizer.factor_without(graph, weights)?;
+        Ok(Self::at(optimizer, graph, block).inverse_if_cheaper(edges, clusters))
+    }
+
+    /// This evaluation with the selected inverse where the sparse solves
+    /// of `clusters` (of the candidates `edges`) would cost more
+    /// ([`SELECTED_INVERSE_COST`]).
+    fn inverse_if_cheaper(mut self, edges: &[usize], clusters: &[Vec<usize>]) -> Self {
+        let system = self.optimizer.system();
         let mut scratch = GroupScratch::default();
         let solves: usize = (clusters.iter())
-            .map(|c| system.group_solve_cost(&eval.linearise(edges, c).jacobians, &mut scratch))
+            .map(|c| system.group_solve_cost(&self.linearise(edges, c).jacobians, &mut scratch))
             .sum();
         // A factorisation's multiply–adds: half its floating-point operations.
         let inverse_cost = SELECTED_INVERSE_COST * system.factor_stats().1 / 2.0;
         if solves as f64 >= inverse_cost {
-            eval.inverse = Some(eval.optimizer.selected_inverse());
+            self.inverse = Some(self.optimizer.selected_inverse());
         }
-        Ok(eval)
+        self
     }
 
     /// The innovations of candidates `edges` (edge indices; `accepted[k]`:
@@ -558,8 +589,9 @@ pub fn through_wide_chains<P: Pose<D>, const D: usize>(
         let own = session
             .graph
             .chi2_where(|i| weights[i] > 0.0 && without[i] == 0.0);
+        let (optimizer, graph) = (&mut *session.optimizer, &*session.graph);
         let mut eval =
-            Evaluation::for_clusters(session.optimizer, session.graph, &without, (edges, members))?
+            Evaluation::for_clusters_without(optimizer, graph, &without, (edges, members))?
                 .judging_within_clusters(false);
         let relaxed = eval.optimizer.system().predicted_decrease(&eval.step);
         let judged = eval.innovations(edges, &outside, members, true);

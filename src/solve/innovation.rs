@@ -8,8 +8,8 @@
 use super::{Optimizer, SolveError};
 use crate::geometry::Pose;
 use crate::graph::Graph;
-use crate::linear::LinearError;
 use crate::linear::SelectedInverse;
+use crate::linear::{KeptFactor, LinearError};
 #[cfg(test)]
 use nalgebra::SMatrix;
 use std::sync::Arc;
@@ -26,6 +26,33 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         graph: &Graph<P, D>,
         weights: &[f64],
     ) -> Result<Vec<Option<usize>>, SolveError> {
+        self.factor_in_pattern(graph, weights, false)
+    }
+
+    /// [`Optimizer::factor_at`] of the map with a few of the edges of the
+    /// last factorisation left out or taken back (their weights changed),
+    /// once: in the pattern the system holds, the edges of zero weight
+    /// left in it (unless vertices leave the variables), and only the
+    /// factor's panels on the changed edges' ends' paths to the root of
+    /// the elimination tree formed again ([`BlockSystem::refactorize`]:
+    /// every other panel is the same to the bit). Single-threaded, as that
+    /// refactorisation is; with threads the whole factor is formed.
+    ///
+    /// [`BlockSystem::refactorize`]: crate::linear::BlockSystem::refactorize
+    pub(crate) fn factor_without(
+        &mut self,
+        graph: &Graph<P, D>,
+        weights: &[f64],
+    ) -> Result<Vec<Option<usize>>, SolveError> {
+        self.factor_in_pattern(graph, weights, true)
+    }
+
+    fn factor_in_pattern(
+        &mut self,
+        graph: &Graph<P, D>,
+        weights: &[f64],
+        keep: bool,
+    ) -> Result<Vec<Option<usize>>, SolveError> {
         if weights.len() != graph.edges.len() {
             return Err(SolveError::WeightCount {
                 weights: weights.len(),
@@ -36,11 +63,28 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         let gauge = graph.gauge();
         let held = (self.factored_at.as_ref()).is_some_and(|f| f.is_at(graph, weights, &gauge));
         if !held {
-            self.update_pattern(graph, Some(weights))?;
+            let kept = keep
+                .then(|| self.kept_beside(graph, weights, &gauge))
+                .flatten();
+            let rebuilt = self.update_pattern(graph, Some(weights), keep)?;
             self.factorized = true;
             self.linearize(graph, Some(weights));
             self.kept = None;
-            match self.system.factorize(0.0) {
+            let changed = |vertices: Vec<usize>| -> Vec<usize> {
+                (vertices.iter())
+                    .filter_map(|v| self.vertex_of.binary_search(v).ok())
+                    .collect()
+            };
+            let refactorized = match kept.filter(|_| !rebuilt) {
+                Some((factor, vertices)) => self.system.refactorize(&factor, &changed(vertices)),
+                None => Ok(None),
+            };
+            let factorized = match refactorized {
+                Ok(Some(_)) => Ok(()),
+                Ok(None) => self.system.factorize(0.0),
+                Err(e) => Err(e),
+            };
+            match factorized {
                 Ok(()) => {}
                 Err(LinearError::NotPositiveDefinite { block }) => {
                     return Err(SolveError::NotPositiveDefinite {
@@ -57,6 +101,31 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             });
         }
         Ok(self.blocks_of(graph.num_vertices()))
+    }
+
+    /// The factor the system holds, where it was made at the graph's poses
+    /// and `gauge` with other `weights` at some edges, and those edges'
+    /// ends (vertices).
+    fn kept_beside(
+        &self,
+        graph: &Graph<P, D>,
+        weights: &[f64],
+        gauge: &[usize],
+    ) -> Option<(KeptFactor, Vec<usize>)> {
+        let at = self.factored_at.as_ref()?;
+        let same =
+            at.poses == graph.poses && at.gauge == gauge && at.weights.len() == weights.len();
+        if !same {
+            return None;
+        }
+        let factor = self.system.kept_factor()?;
+        let mut ends: Vec<usize> = (0..weights.len())
+            .filter(|&k| at.weights[k] != weights[k])
+            .flat_map(|k| [graph.edges[k].from, graph.edges[k].to])
+            .collect();
+        ends.sort_unstable();
+        ends.dedup();
+        Some((factor, ends))
     }
 
     /// The variable block of each of `n` vertices (`None`: fixed).

@@ -651,7 +651,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     ) -> Result<Summary, SolveError> {
         self.check_edge_count(graph, weights)?;
         self.match_threads()?;
-        self.update_pattern(graph, weights)?;
+        self.update_pattern(graph, weights, false)?;
         let mut progress = Progress {
             summary: Summary::new(self.options.method),
             watch: Stopwatch::start(),

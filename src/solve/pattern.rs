@@ -166,11 +166,17 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     /// run. Vertices that the edges of non-zero weight no longer connect to
     /// the gauge (a part of the map joined only by rejected loops) are held
     /// at their poses until an edge joins them again.
+    /// With `keep_unused` (one factorisation of the map with a few edges
+    /// left out, [`Optimizer::factor_without`]) edges of zero weight stay
+    /// in the pattern unless vertices leave the variables: no later
+    /// factorisation would repay the build. Returns whether it built the
+    /// pattern anew.
     pub(super) fn update_pattern(
         &mut self,
         graph: &Graph<P, D>,
         weights: Option<&[f64]>,
-    ) -> Result<(), SolveError> {
+        keep_unused: bool,
+    ) -> Result<bool, SolveError> {
         let needed = |k: usize| weights.is_none_or(|w| w[k] != 0.0);
         let missing = (0..self.in_pattern.len()).any(|k| !self.in_pattern[k] && needed(k));
         let unused = (0..self.in_pattern.len()).any(|k| self.in_pattern[k] && !needed(k));
@@ -183,8 +189,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             cut_off = Some(cut);
             any
         };
-        if !(missing || unused && (self.factorized || newly_cut_off())) {
-            return Ok(());
+        let rebuilt = self.factorized && !keep_unused;
+        if !(missing || unused && (rebuilt || newly_cut_off())) {
+            return Ok(false);
         }
         let cut_off = cut_off.unwrap_or_else(|| graph.unconstrained_vertices(weights));
         for k in 0..self.in_pattern.len() {
@@ -198,7 +205,7 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         self.system.release_factor();
         self.system = self.pattern(graph, &variable)?;
         self.max_nnz_factor = self.max_nnz_factor.max(self.system.nnz_factor());
-        Ok(())
+        Ok(true)
     }
 
     /// The variable block of each vertex: every vertex but the gauge and
