@@ -423,9 +423,8 @@ impl<'a, P: Pose<D>, const D: usize> Evaluation<'a, P, D> {
         let n = self.step.len();
         (0..gs.len())
             .map(|c| {
-                let delta = &delta[c * n..(c + 1) * n];
-                (self.block.iter().flatten())
-                    .map(|&b| P::position_shift(&SVector::from_column_slice(&delta[b * D..][..D])))
+                (delta[c * n..(c + 1) * n].chunks_exact(D))
+                    .map(|block| P::position_shift(&SVector::from_column_slice(block)))
                     .fold(0.0, f64::max)
             })
             .collect()

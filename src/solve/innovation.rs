@@ -70,20 +70,14 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             self.factorized = true;
             self.linearize(graph, Some(weights));
             self.kept = None;
-            let changed = |vertices: Vec<usize>| -> Vec<usize> {
-                (vertices.iter())
-                    .filter_map(|v| self.vertex_of.binary_search(v).ok())
-                    .collect()
-            };
             let refactorized = match kept.filter(|_| !rebuilt) {
-                Some((factor, vertices)) => self.system.refactorize(&factor, &changed(vertices)),
+                Some((factor, changed)) => self.system.refactorize(&factor, &changed),
                 None => Ok(None),
             };
-            let factorized = match refactorized {
-                Ok(Some(_)) => Ok(()),
-                Ok(None) => self.system.factorize(0.0),
-                Err(e) => Err(e),
-            };
+            let factorized = refactorized.and_then(|formed| match formed {
+                Some(_) => Ok(()),
+                None => self.system.factorize(0.0),
+            });
             match factorized {
                 Ok(()) => {}
                 Err(LinearError::NotPositiveDefinite { block }) => {
@@ -104,8 +98,9 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
     }
 
     /// The factor the system holds, where it was made at the graph's poses
-    /// and `gauge` with other `weights` at some edges, and those edges'
-    /// ends (vertices).
+    /// and `gauge` with other `weights` at some edges, and the variable
+    /// blocks of those edges' ends (in the pattern held: a pattern built
+    /// anew does not keep the factor).
     fn kept_beside(
         &self,
         graph: &Graph<P, D>,
@@ -119,13 +114,14 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
             return None;
         }
         let factor = self.system.kept_factor()?;
-        let mut ends: Vec<usize> = (0..weights.len())
+        let mut changed: Vec<usize> = (0..weights.len())
             .filter(|&k| at.weights[k] != weights[k])
             .flat_map(|k| [graph.edges[k].from, graph.edges[k].to])
+            .filter_map(|v| self.vertex_of.binary_search(&v).ok())
             .collect();
-        ends.sort_unstable();
-        ends.dedup();
-        Some((factor, ends))
+        changed.sort_unstable();
+        changed.dedup();
+        Some((factor, changed))
     }
 
     /// The variable block of each of `n` vertices (`None`: fixed).

@@ -738,9 +738,10 @@ impl<P: Pose<D>, const D: usize> Optimizer<P, D> {
         progress: &mut Progress,
         observer: &mut dyn Observer,
     ) -> Result<StepOutcome, SolveError> {
-        let chord = match ready {
-            true => self.chord_step(graph, weights, objective, progress),
-            false => None,
+        let chord = if ready {
+            self.chord_step(graph, weights, objective, progress)
+        } else {
+            None
         };
         match chord {
             Some(outcome) => Ok(outcome),
